@@ -1,0 +1,402 @@
+#include "fog_command.h"
+
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <mutex>
+
+#include "batch.h"
+#include "mr/mr.h"
+#include "mr/scene_json.h"
+#include "progress.h"
+
+namespace fs = std::filesystem;
+
+namespace mr::cli {
+
+namespace {
+
+// Everything resolved from the options once, before the batch starts.
+struct FogPlan {
+  ColorConfig color = ColorConfig::builtin();
+  FogScene scene;
+  DepthOptions depth;
+  PixelType pixel_type = PixelType::automatic;
+};
+
+enum class Outcome { done, skipped, failed };
+
+struct Job {
+  fs::path photo, depth, output, aovs_output;  // aovs_output empty: none / same as output
+};
+
+constexpr const char* kDepthExtensions[] = {".exr", ".tif", ".tiff", ".pfm", ".png"};
+
+fs::path find_depth(const FogCommandOptions& o, const fs::path& photo) {
+  if (!o.depth.empty()) return is_pattern(o.depth) ? expand_pattern(o.depth, photo) : fs::path(o.depth);
+  // Default: <dir>/<stem>_depth.<ext> with the first extension that exists.
+  std::error_code ec;
+  for (const char* ext : kDepthExtensions) {
+    fs::path candidate = expand_pattern(std::string("{dir}/{stem}_depth") + ext, photo);
+    if (fs::exists(candidate, ec)) return candidate;
+  }
+  return expand_pattern("{dir}/{stem}_depth.exr", photo);
+}
+
+FogPlan make_plan(const FogCommandOptions& o) {
+  FogPlan plan;
+  plan.color = ColorConfig::from_environment(o.ocio_config);
+  for (const std::string* cs : {&o.input_colorspace, &o.output_colorspace})
+    if (!cs->empty() && !plan.color.has_colorspace(*cs))
+      throw Error(ErrorCode::invalid_argument, "colour space '" + *cs + "' is not in OCIO config " +
+                                                   plan.color.source());
+  if (!o.visibility.empty() && !o.density.empty())
+    throw Error(ErrorCode::invalid_argument, "--visibility and --density are exclusive");
+  FogScene& scene = plan.scene;
+  if (!o.scene_path.empty()) scene = load_scene(o.scene_path);
+  try {
+    if (!o.density.empty()) {
+      scene.medium.sigma_t_per_m = parse_rgb(o.density);
+    } else if (!o.visibility.empty() || o.scene_path.empty()) {
+      const float sigma = float(extinction_from_visibility(parse_distance_m(o.visibility.empty() ? "150m" : o.visibility)));
+      scene.medium.sigma_t_per_m = {sigma, sigma, sigma};
+    }
+    if (o.airlight != "auto") scene.lighting.sky_radiance = parse_rgb(o.airlight);
+    else if (o.scene_path.empty()) scene.lighting.sky_radiance.reset();
+    if (!o.albedo.empty()) scene.medium.albedo = parse_rgb(o.albedo);
+    if (o.g) scene.medium.g = *o.g;
+    if (!o.height_fog.empty()) {
+      const auto v = parse_numbers(o.height_fog, 2, "--height-fog base,scale");
+      scene.medium.height_fog = Medium::HeightFog{v[0], v[1]};
+    }
+    if (!o.layer.empty()) {
+      const auto v = parse_numbers(o.layer, 2, "--layer bottom,top");
+      scene.medium.layer_bottom_m = v[0];
+      scene.medium.layer_top_m = v[1];
+    }
+    if (!o.noise.empty()) {
+      const std::size_t n = std::count(o.noise.begin(), o.noise.end(), ',') + 1;
+      const auto v = parse_numbers(o.noise, n, "--noise amplitude[,scale[,octaves[,seed]]]");
+      if (n > 4) throw std::invalid_argument("--noise takes at most 4 numbers");
+      scene.medium.noise.amplitude = v[0];
+      if (n > 1) scene.medium.noise.scale_m = v[1];
+      if (n > 2) scene.medium.noise.octaves = int(v[2]);
+      if (n > 3) scene.medium.noise.seed = std::uint32_t(v[3]);
+    }
+    const bool sun_given = o.sun_azimuth_deg || o.sun_elevation_deg || !o.sun_direction.empty() ||
+                           !o.sun_irradiance.empty() || o.sun_radius_deg;
+    if (sun_given) {
+      Sun sun = scene.lighting.sun.value_or(Sun{});
+      if (!o.sun_direction.empty()) {
+        const auto v = parse_numbers(o.sun_direction, 3, "--sun-dir x,y,z");
+        sun.direction_to_sun = {v[0], v[1], v[2]};
+      } else if (o.sun_azimuth_deg || o.sun_elevation_deg) {
+        if (!o.sun_azimuth_deg || !o.sun_elevation_deg)
+          throw std::invalid_argument("--sun-azimuth and --sun-elevation go together");
+        sun.direction_to_sun = direction_from_azimuth_elevation(*o.sun_azimuth_deg, *o.sun_elevation_deg);
+      }
+      if (!o.sun_irradiance.empty()) sun.irradiance = parse_rgb(o.sun_irradiance);
+      if (o.sun_radius_deg) sun.angular_radius_deg = *o.sun_radius_deg;
+      scene.lighting.sun = sun;
+    }
+    for (const std::string& text : o.lamps) {
+      // "x,y,z;R,G,B[;dx,dy,dz;inner,outer]"
+      std::vector<std::string> parts;
+      std::size_t pos = 0;
+      while (pos <= text.size()) {
+        std::size_t semi = text.find(';', pos);
+        if (semi == std::string::npos) semi = text.size();
+        parts.push_back(text.substr(pos, semi - pos));
+        pos = semi + 1;
+      }
+      if (parts.size() != 2 && parts.size() != 4)
+        throw std::invalid_argument("--lamp '" + text + "': expected x,y,z;R,G,B[;dx,dy,dz;inner,outer]");
+      Lamp lamp;
+      const auto p = parse_numbers(parts[0], 3, "--lamp position");
+      lamp.position_m = {p[0], p[1], p[2]};
+      lamp.intensity_per_sr = parse_rgb(parts[1]);
+      if (parts.size() == 4) {
+        const auto d = parse_numbers(parts[2], 3, "--lamp spot direction");
+        const auto a = parse_numbers(parts[3], 2, "--lamp spot angles");
+        lamp.spot_direction = {d[0], d[1], d[2]};
+        lamp.inner_angle_deg = a[0];
+        lamp.outer_angle_deg = a[1];
+      }
+      scene.lighting.lamps.push_back(lamp);
+    }
+  } catch (const std::invalid_argument& e) {
+    throw Error(ErrorCode::invalid_argument, e.what());
+  }
+  if (o.camera_height_m) scene.pose.position_m.y = *o.camera_height_m;
+  if (o.pitch_deg) scene.pose.pitch_deg = *o.pitch_deg;
+  if (o.roll_deg) scene.pose.roll_deg = *o.roll_deg;
+  if (o.yaw_deg) scene.pose.yaw_deg = *o.yaw_deg;
+  if (o.seed) scene.render.seed = *o.seed;
+  if (o.march_steps) scene.render.march_steps = *o.march_steps;
+  if (o.no_shadows) scene.render.volumetric_shadows = false;
+  if (!o.quality.empty()) {
+    if (o.quality == "draft") scene.render.quality = Quality::draft;
+    else if (o.quality == "normal") scene.render.quality = Quality::normal;
+    else if (o.quality == "final") scene.render.quality = Quality::final;
+    else throw Error(ErrorCode::invalid_argument, "--quality '" + o.quality + "': expected draft, normal or final");
+  }
+  // Photos in parallel already use the cores; each render gets what its arena allows.
+  validate_scene(scene);
+  if (!o.save_scene_path.empty()) save_scene(o.save_scene_path, scene);
+
+  if (o.depth_kind == "distance") plan.depth.kind = DepthKind::distance;
+  else if (o.depth_kind == "z") plan.depth.kind = DepthKind::planar_z;
+  else if (o.depth_kind == "disparity") plan.depth.kind = DepthKind::disparity;
+  else throw Error(ErrorCode::invalid_argument, "--depth-kind '" + o.depth_kind + "': expected distance, z or disparity");
+  plan.depth.scale = o.depth_scale;
+  plan.depth.baseline_m = o.baseline_m;
+  plan.depth.doffs_px = o.doffs_px;
+  if (plan.depth.kind == DepthKind::disparity && !(o.baseline_m > 0))
+    throw Error(ErrorCode::invalid_argument, "--depth-kind disparity needs --baseline (metres)");
+  if (!(o.depth_scale > 0) || !std::isfinite(o.depth_scale))
+    throw Error(ErrorCode::invalid_argument, "--depth-scale must be positive");
+  plan.pixel_type = parse_pixel_type(o.bit_depth);
+  if (!o.format.empty() && !is_writable_image_extension("x." + o.format))
+    throw Error(ErrorCode::invalid_argument, "--format '" + o.format + "' is not a writable image format");
+  return plan;
+}
+
+Camera make_camera(const FogCommandOptions& o, const Image& photo) {
+  if (o.focal_px) return Camera::from_focal_px(photo.width(), photo.height(), *o.focal_px);
+  if (o.fov_deg) return Camera::from_horizontal_fov(photo.width(), photo.height(), *o.fov_deg);
+  return Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
+}
+
+Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job, Reporter& report,
+                const std::atomic<bool>& interrupted) {
+  std::error_code ec;
+  const bool want_aovs_file = !job.aovs_output.empty();
+  if (!o.overwrite && fs::exists(job.output, ec) && (!want_aovs_file || fs::exists(job.aovs_output, ec)))
+    return Outcome::skipped;
+  for (const fs::path* out : {&job.output, &job.aovs_output}) {
+    if (out->empty()) continue;
+    for (const fs::path* in : {&job.photo, &job.depth})
+      if (same_file(*out, *in))
+        throw Error(ErrorCode::invalid_argument, job.photo.string() + ": output " + out->string() +
+                                                     " is an input file; refusing to overwrite it");
+  }
+  ReadOptions read;
+  read.colorspace = o.input_colorspace;
+  read.color = &plan.color;
+  const Image photo = read_image(job.photo, read);
+  const ImageFileInfo info = probe_image(job.photo);
+  const Camera camera = make_camera(o, photo);
+  const DepthMap depth = read_depth(job.depth, camera, plan.depth);
+  if (depth.no_surface_pixels > 0) {
+    const double pct = 100.0 * double(depth.no_surface_pixels) / double(depth.distance_m.pixel_count());
+    char text[64];
+    std::snprintf(text, sizeof text, "%.1f", pct);
+    report.warning(job.depth.string() + ": " + std::to_string(depth.no_surface_pixels) + " pixels (" +
+                   text + " %) have no surface (NaN, inf, 0 or negative): treated as sky");
+  }
+  ScatteringLayers aovs;
+  const FogLayers layers = fog(photo, depth.distance_m, camera, plan.scene, &aovs);
+  if (interrupted) return Outcome::failed;
+
+  WriteOptions write;
+  write.color = &plan.color;
+  write.colorspace = o.output_colorspace;
+  write.pixel_type = plan.pixel_type;
+  const std::string out_ext = job.output.extension().string();
+  const bool exr_out = out_ext == ".exr" || out_ext == ".EXR";
+  if (write.pixel_type == PixelType::automatic) {
+    // Keep the input's precision where the output format can hold it.
+    if (exr_out) write.pixel_type = info.pixel_type == PixelType::float32 ? PixelType::float32 : PixelType::half;
+    else if (info.pixel_type == PixelType::uint16 && (out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff"))
+      write.pixel_type = PixelType::uint16;
+  }
+  // R,G,B + transmittance.RGB + inscatter.RGB + depth.Z + sun_visibility.Y + optical_depth.RGB
+  auto write_layers = [&](const fs::path& path, PixelType type) {
+    const Image composite_rgb = layers.composite.select_channels(std::array{0, 1, 2});
+    const ExrLayer exr[] = {{"", &composite_rgb},
+                            {"transmittance", &layers.transmittance},
+                            {"inscatter", &layers.inscatter},
+                            {"depth", &depth.distance_m, true},
+                            {"sun_visibility", &aovs.sun_visibility, true},
+                            {"optical_depth", &aovs.optical_depth, true}};
+    write_exr_layers(path, exr, photo.metadata(), type);
+  };
+  if (o.aovs && exr_out) {
+    if (!o.output_colorspace.empty())
+      report.warning(job.output.string() + ": layered EXR output is scene-linear; --output-colorspace ignored");
+    write_layers(job.output, write.pixel_type == PixelType::float32 ? PixelType::float32 : PixelType::half);
+  } else {
+    write_image(job.output, layers.composite, write);
+    if (want_aovs_file) write_layers(job.aovs_output, PixelType::half);
+  }
+  return Outcome::done;
+}
+
+}  // namespace
+
+CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
+  CLI::App* cmd = app.add_subcommand(
+      "fog", "Fog photos using their depth maps: single scattering of sun, sky and lamps");
+  cmd->add_option("inputs", o.inputs,
+                  "Photos: files, folders or globs (in folders and globs, *_depth, *_disparity "
+                  "and *_aovs files are not photos)")
+      ->required();
+  cmd->add_option("--depth", o.depth,
+                  "Depth map: a pattern with {dir} {stem} {name} {ext}, or one file for all "
+                  "[default: {dir}/{stem}_depth.{exr,tif,tiff,pfm,png}, first that exists]");
+  cmd->add_option("--depth-kind", o.depth_kind, "distance (along the ray), z (planar) or disparity")
+      ->capture_default_str();
+  cmd->add_option("--depth-scale", o.depth_scale,
+                  "Multiplies stored depth values (integer files: raw codes), e.g. 0.001 for mm")
+      ->capture_default_str();
+  cmd->add_option("--baseline", o.baseline_m, "Stereo baseline in metres (disparity maps)");
+  cmd->add_option("--doffs", o.doffs_px, "Disparity offset in pixels (Middlebury 'doffs')");
+  auto* fov = cmd->add_option("--fov", o.fov_deg, "Horizontal field of view in degrees [default: EXIF, else 60]");
+  cmd->add_option("--focal-px", o.focal_px, "Focal length in pixels")->excludes(fov);
+  auto* vis = cmd->add_option("--visibility", o.visibility,
+                              "Meteorological visibility, e.g. 150m or 1.2km (sigma = 3.912 / V) [default: 150m]");
+  cmd->add_option("--density", o.density, "Extinction coefficient in 1/m: one value or R,G,B")->excludes(vis);
+  cmd->add_option("--airlight", o.airlight,
+                  "Fog colour, scene-linear: 'auto' (dark channel prior), one value or R,G,B")
+      ->capture_default_str();
+  cmd->add_option("-o,--out-dir", o.out_dir, "Output folder (created if missing)")->capture_default_str();
+  cmd->add_option("--suffix", o.suffix, "Appended to each output's name")->capture_default_str();
+  cmd->add_option("--format", o.format, "Output format by extension: jpg, png, tif, exr, ... [default: the input's]");
+  cmd->add_option("--bit-depth", o.bit_depth, "8, 16, half, float or auto (the input's where possible)")
+      ->capture_default_str();
+  cmd->add_flag("--aovs", o.aovs,
+                "Also write layers R,G,B + transmittance.RGB + inscatter.RGB + depth.Z "
+                "(into the output if it is .exr, else into <name>_aovs.exr)");
+  cmd->add_option("-j,--threads", o.threads, "Worker threads [default: all cores]")->check(CLI::NonNegativeNumber);
+  cmd->add_flag("-q,--quiet", o.quiet, "Print errors and the summary only");
+  cmd->add_flag("--overwrite", o.overwrite, "Redo photos whose outputs exist (default: skip them)");
+  cmd->add_option("--scene", o.scene_path, "Scene JSON (docs/scene.md); options below override it");
+  cmd->add_option("--save-scene", o.save_scene_path, "Write the resolved scene JSON here");
+  cmd->add_option("--quality", o.quality, "draft, normal or final [default: normal]");
+  cmd->add_option("--sun-azimuth", o.sun_azimuth_deg, "Sun azimuth, degrees (0 = the camera's forward at yaw 0, 90 = right)");
+  cmd->add_option("--sun-elevation", o.sun_elevation_deg, "Sun elevation above the horizon, degrees");
+  cmd->add_option("--sun-dir", o.sun_direction, "Direction to the sun x,y,z (world: +Y up)");
+  cmd->add_option("--sun-irradiance", o.sun_irradiance, "Sun irradiance above the fog: v or R,G,B [default: 3]");
+  cmd->add_option("--sun-radius", o.sun_radius_deg, "Sun's angular radius, degrees (soft shafts) [default: 0.27]");
+  cmd->add_option("--lamp", o.lamps, "A lamp: x,y,z;R,G,B (position m; intensity per sr), spot: add ;dx,dy,dz;inner,outer (degrees). Repeatable");
+  cmd->add_option("--height-fog", o.height_fog, "Exponential height fog: base,scale (m); density exp(-(y - base) / scale)");
+  cmd->add_option("--layer", o.layer, "Fog only between heights bottom,top (m)");
+  cmd->add_option("--albedo", o.albedo, "Single-scattering albedo: v or R,G,B [default: 1]");
+  cmd->add_option("--g", o.g, "Henyey-Greenstein asymmetry in (-1, 1) [default: 0]");
+  cmd->add_option("--noise", o.noise, "Wisps: amplitude[,scale m[,octaves[,seed]]]");
+  cmd->add_option("--camera-height", o.camera_height_m, "Camera height above the ground, m [default: 1.6]");
+  cmd->add_option("--pitch", o.pitch_deg, "Camera pitch, degrees (positive looks up)");
+  cmd->add_option("--roll", o.roll_deg, "Camera roll, degrees");
+  cmd->add_option("--yaw", o.yaw_deg, "Camera yaw, degrees");
+  cmd->add_option("--seed", o.seed, "Jitter / noise seed");
+  cmd->add_option("--march-steps", o.march_steps, "View-ray steps (overrides the quality preset)");
+  cmd->add_flag("--no-shadows", o.no_shadows, "No volumetric shadows (lights are never blocked)");
+  cmd->add_option("--ocio-config", o.ocio_config, "OpenColorIO config [default: $OCIO, else the built-in one]");
+  cmd->add_option("--input-colorspace", o.input_colorspace,
+                  "Colour space of the photos [default: sRGB for 8/16-bit, scene-linear for float]");
+  cmd->add_option("--output-colorspace", o.output_colorspace,
+                  "Colour space of the outputs [default: sRGB for 8/16-bit, scene-linear for float]");
+  return cmd;
+}
+
+int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interrupted) {
+  const auto start = std::chrono::steady_clock::now();
+  FogPlan plan;
+  try {
+    plan = make_plan(o);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "ERROR: %s\n", e.what());
+    return 2;
+  }
+
+  // Jobs: photo -> depth, outputs. Depth maps named on the command line are not photos.
+  std::vector<fs::path> photos = expand_inputs(o.inputs, {"_depth", "_disparity", "_aovs"});
+  std::vector<Job> jobs;
+  {
+    std::vector<fs::path> depths;
+    for (const auto& p : photos) depths.push_back(find_depth(o, p));
+    const fs::path out_dir(o.out_dir);
+    for (std::size_t i = 0; i < photos.size(); ++i) {
+      const fs::path& p = photos[i];
+      bool is_depth = false;
+      for (const auto& d : depths) is_depth = is_depth || p.lexically_normal() == d.lexically_normal();
+      // Our own earlier outputs in the same folder are not inputs.
+      const bool is_output = p.stem().string().ends_with(o.suffix) && !o.suffix.empty() &&
+                             same_file(p.parent_path().empty() ? "." : p.parent_path(), out_dir);
+      if (is_depth || is_output) continue;
+      const std::string ext = o.format.empty() ? p.extension().string() : "." + o.format;
+      Job job{p, depths[i], out_dir / (p.stem().string() + o.suffix + ext), {}};
+      if (o.aovs && ext != ".exr" && ext != ".EXR")
+        job.aovs_output = out_dir / (p.stem().string() + o.suffix + "_aovs.exr");
+      jobs.push_back(std::move(job));
+    }
+  }
+  if (jobs.empty()) {
+    std::fprintf(stderr, "ERROR: no input photos found in: %s\n",
+                 CLI::detail::join(o.inputs, " ").c_str());
+    return 2;
+  }
+  std::error_code ec;
+  fs::create_directories(o.out_dir, ec);
+  if (!fs::is_directory(o.out_dir, ec)) {
+    std::fprintf(stderr, "ERROR: %s: cannot create output folder\n", o.out_dir.c_str());
+    return 2;
+  }
+
+  Reporter report(jobs.size(), o.quiet);
+  std::atomic<std::size_t> done{0}, skipped{0}, failed{0}, interrupted_jobs{0};
+  std::mutex failures_mutex;
+  std::vector<std::string> failures;
+  const int threads = o.threads > 0 ? o.threads : tbb::this_task_arena::max_concurrency();
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+  tbb::task_arena arena(threads);
+  arena.execute([&] {
+    // Photos in parallel (grain 1) overlap one photo's decode with another's compute.
+    tbb::parallel_for(std::size_t(0), jobs.size(), [&](std::size_t i) {
+      const Job& job = jobs[i];
+      if (interrupted) {
+        ++interrupted_jobs;
+        return;
+      }
+      Outcome outcome;
+      try {
+        outcome = run_job(o, plan, job, report, interrupted);
+        if (outcome == Outcome::failed) ++interrupted_jobs;
+      } catch (const std::exception& e) {
+        // mr::Error names the file; anything else (bad_alloc) gets the photo's name.
+        std::string msg = dynamic_cast<const Error*>(&e) ? e.what() : job.photo.string() + ": " + e.what();
+        report.error(msg);
+        std::lock_guard lock(failures_mutex);
+        failures.push_back(std::move(msg));
+        outcome = Outcome::failed;
+        ++failed;
+      }
+      if (outcome == Outcome::done) ++done;
+      if (outcome == Outcome::skipped) ++skipped;
+      report.advance(job.photo.filename().string());
+    });
+  });
+  report.finish();
+
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::fprintf(stderr, "mr fog: %zu done, %zu skipped (outputs exist), %zu failed", done.load(),
+               skipped.load(), failed.load());
+  if (interrupted_jobs) std::fprintf(stderr, ", %zu not started (interrupted)", interrupted_jobs.load());
+  std::fprintf(stderr, " in %.1f s; outputs in %s\n", seconds, o.out_dir.c_str());
+  if (!failures.empty() && failures.size() < jobs.size() && !o.quiet) {
+    std::fprintf(stderr, "failed:\n");
+    for (const auto& f : failures) std::fprintf(stderr, "  %s\n", f.c_str());
+  }
+  if (interrupted) return 130;
+  return failed ? 1 : 0;
+}
+
+}  // namespace mr::cli

@@ -1,0 +1,65 @@
+// `mr fog`: fog a batch of photos with their depth maps.
+#pragma once
+
+#include <atomic>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace CLI {
+class App;
+}
+
+namespace mr::cli {
+
+struct FogCommandOptions {
+  std::vector<std::string> inputs;
+  std::string depth;  ///< pattern with {dir} {stem} {name} {ext}, or one file; empty: search
+  std::string depth_kind = "distance";
+  double depth_scale = 1.0;
+  double baseline_m = 0;
+  double doffs_px = 0;
+  std::optional<double> fov_deg;
+  std::optional<double> focal_px;
+  std::string visibility;  ///< "150m"
+  std::string density;     ///< extinction 1/m, "0.02" or "R,G,B"
+  std::string airlight = "auto";
+  std::string out_dir = "fogged";
+  std::string suffix = "_fog";
+  std::string format;  ///< output extension without dot; empty: the input's
+  std::string bit_depth = "auto";
+  bool aovs = false;
+  int threads = 0;  ///< 0: all cores
+  bool quiet = false;
+  bool overwrite = false;
+  // The physical model (issue 3); an empty string / nullopt leaves the scene's value.
+  std::string scene_path;       ///< --scene scene.json
+  std::string save_scene_path;  ///< --save-scene: write the resolved scene
+  std::string quality;
+  std::optional<double> sun_azimuth_deg, sun_elevation_deg;
+  std::string sun_direction;    ///< "x,y,z"
+  std::string sun_irradiance;   ///< "v" or "R,G,B"
+  std::optional<double> sun_radius_deg;
+  std::vector<std::string> lamps;  ///< "x,y,z;R,G,B[;dx,dy,dz;inner,outer]"
+  std::string height_fog;       ///< "base,scale"
+  std::string layer;            ///< "bottom,top"
+  std::string albedo;
+  std::optional<double> g;
+  std::string noise;            ///< "amplitude[,scale[,octaves[,seed]]]"
+  std::optional<double> camera_height_m, pitch_deg, roll_deg, yaw_deg;
+  std::optional<unsigned> seed;
+  std::optional<int> march_steps;
+  bool no_shadows = false;
+  std::string ocio_config;
+  std::string input_colorspace;
+  std::string output_colorspace;
+};
+
+/// Adds the `fog` subcommand to `app`; `options` must outlive parsing.
+CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& options);
+
+/// Runs the batch. Returns the exit code: 0 all done or skipped, 1 some failed, 2 bad options,
+/// 130 interrupted. Checks `interrupted` between files.
+int run_fog_command(const FogCommandOptions& options, const std::atomic<bool>& interrupted);
+
+}  // namespace mr::cli

@@ -1,0 +1,41 @@
+// The `mr` command line: batch front end of libmr.
+#include <csignal>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <cstdio>
+
+#include "fog_command.h"
+#include "mr/version.h"
+
+namespace {
+
+std::atomic<bool> g_interrupted{false};
+
+extern "C" void on_signal(int) {
+  // First Ctrl-C: finish the files in flight (their outputs are written atomically), start no
+  // more. A second one kills the process the default way; temporary files are hidden dotfiles.
+  g_interrupted = true;
+  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGTERM, SIG_DFL);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"mr: physically based fog for photographs (libmr " + std::string(mr::version()) + ")"};
+  app.set_version_flag("--version", std::string("mr ") + mr::version());
+  app.require_subcommand(1);
+  mr::cli::FogCommandOptions fog_options;
+  CLI::App* fog = mr::cli::add_fog_command(app, fog_options);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? 0 : 2;  // usage errors exit 2
+  }
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  if (fog->parsed()) return mr::cli::run_fog_command(fog_options, g_interrupted);
+  return 2;
+}

@@ -1,0 +1,48 @@
+// Depth input: metric distance maps from depth or disparity files.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+
+#include "mr/camera.h"
+#include "mr/image.h"
+
+namespace mr {
+
+/// What the values in a depth file mean.
+enum class DepthKind {
+  distance,   ///< Euclidean distance from the camera along the pixel's ray
+  planar_z,   ///< z-depth (distance to the camera plane); converted using the camera
+  disparity,  ///< stereo disparity in pixels: z = focal_px * baseline_m / (d + doffs)
+};
+
+struct DepthOptions {
+  DepthKind kind = DepthKind::distance;
+  /// Multiplies the stored values first. Integer files (8/16-bit PNG/TIFF) are read as their
+  /// raw integer values (0..65535), so e.g. 0.001 turns millimetres into metres; for
+  /// disparity, the reciprocal of the file's disparity scale (Middlebury third size: 1/3).
+  double scale = 1.0;
+  double baseline_m = 0;  ///< disparity only: stereo baseline in metres (> 0)
+  double doffs_px = 0;    ///< disparity only: x-difference of the principal points (Middlebury)
+};
+
+/// A metric distance map: one channel ("Z"), metres along each pixel's ray.
+/// Pixels with no surface (sky) hold +infinity.
+struct DepthMap {
+  Image distance_m;
+  std::size_t no_surface_pixels = 0;  ///< pixels whose stored value was NaN, inf, 0 or < 0
+};
+
+/// Reads a depth file (float EXR/TIFF/PFM, 16-bit PNG/TIFF, ...; channel "Z", "depth.Z", "Y"
+/// or the first) and converts it to distance along the ray with `camera` (whose focal length
+/// is also the disparity focal length). Throws mr::Error: io / corrupt_input naming the file;
+/// size_mismatch naming both sizes if it differs from the camera's; invalid_argument for
+/// absurd options (scale <= 0, disparity without baseline).
+DepthMap read_depth(const std::filesystem::path& path, const Camera& camera,
+                    const DepthOptions& options = {});
+
+/// Converts stored values (already multiplied by scale) in place; exposed for tests and for
+/// depth that does not come from a file.
+DepthMap depth_to_distance(Image stored, const Camera& camera, const DepthOptions& options);
+
+}  // namespace mr

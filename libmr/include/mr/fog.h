@@ -1,0 +1,47 @@
+// mr::fog: put fog into a photo with its depth map.
+#pragma once
+
+#include <array>
+#include <optional>
+
+#include "mr/image.h"
+
+namespace mr {
+
+using Rgb = std::array<float, 3>;
+
+/// Koschmieder: extinction coefficient (1/m) for a meteorological visibility (m), the distance
+/// at which a black object's contrast against the horizon sky falls to 2 %: 3.912 / V.
+/// Throws mr::Error(invalid_argument) unless V is finite and > 0.
+double extinction_from_visibility(double visibility_m);
+
+/// Parameters of homogeneous fog lit only by the sky (the Koschmieder model).
+struct FogParams {
+  Rgb sigma_t_per_m{0.01f, 0.01f, 0.01f};  ///< extinction coefficient, 1/m, per channel, >= 0
+  /// Airlight (fog colour, the radiance of an infinitely deep fog), scene-linear.
+  /// nullopt: estimated from the photo (estimate_airlight).
+  std::optional<Rgb> airlight;
+};
+
+/// The layers of a fogged photo, all the photo's size, scene-linear float.
+struct FogLayers {
+  Image composite;      ///< C = I * T + R (R,G,B)
+  Image transmittance;  ///< T (R,G,B), in [0, 1]
+  Image inscatter;      ///< R (R,G,B): light scattered into the view ray by the fog
+  Rgb airlight{};       ///< the airlight used (given or estimated)
+};
+
+/// Homogeneous fog under sky light: T = exp(-sigma_t d), R = A (1 - T), C = I T + R.
+/// `photo`: scene-linear, >= 3 channels (the first three are used; alpha is carried).
+/// `distance_m`: one channel, metres along the ray; +inf (sky) gives T = 0, C = A.
+/// Throws mr::Error: size_mismatch (naming both sizes), invalid_argument (negative or
+/// non-finite sigma or airlight, NaN distance).
+FogLayers fog(const Image& photo, const Image& distance_m, const FogParams& params);
+
+/// Airlight estimated from a scene-linear photo with the dark channel prior (He et al. 2009,
+/// as used for Foggy Cityscapes): the dark channel is the per-pixel minimum of R,G,B, min-filtered
+/// over a 15x15 window (scaled with the image size); the airlight is the mean colour of the
+/// brightest 0.1 % of dark-channel pixels. Throws mr::Error(invalid_argument) on an empty image.
+Rgb estimate_airlight(const Image& photo);
+
+}  // namespace mr

@@ -1,0 +1,88 @@
+// Image files: reading and writing through OpenImageIO, colour through OpenColorIO.
+#pragma once
+
+#include <filesystem>
+#include <span>
+#include <string>
+
+#include "mr/color.h"
+#include "mr/image.h"
+
+namespace mr {
+
+/// How pixels are stored in a file.
+enum class PixelType { automatic, uint8, uint16, half, float32 };
+
+/// Parses "8", "16", "half", "float" (also "uint8", "uint16", "32", "f16", "f32").
+/// Throws mr::Error(invalid_argument) otherwise.
+PixelType parse_pixel_type(const std::string& text);
+const char* to_string(PixelType type) noexcept;
+
+/// What a file holds, without decoding the pixels.
+struct ImageFileInfo {
+  int width = 0, height = 0, channels = 0;
+  PixelType pixel_type = PixelType::float32;  ///< as stored (integer types other than 8/16 map
+                                              ///< to float32)
+  std::string format;                         ///< OIIO format name: "jpeg", "openexr", ...
+};
+
+/// Reads the header of an image file. Throws mr::Error(io) naming the file if it cannot be
+/// opened or is not an image.
+ImageFileInfo probe_image(const std::filesystem::path& path);
+
+struct ReadOptions {
+  /// Colour space of the file's pixels. Empty: the file's own tag (oiio:ColorSpace) if the
+  /// config knows it, else sRGB for 8/16-bit integer files and scene_linear for float files.
+  std::string colorspace;
+  /// Convert to scene-linear (true) or return the stored values as floats (false; integer
+  /// files normalised to [0, 1]).
+  bool to_scene_linear = true;
+  /// Colour config; nullptr: ColorConfig::from_environment().
+  const ColorConfig* color = nullptr;
+  /// Fail with corrupt_input if any pixel is NaN or infinite.
+  bool reject_non_finite = true;
+};
+
+/// Reads a whole image (first subimage, all channels) as float32 with its metadata.
+/// Throws mr::Error: io (missing, unreadable, not an image), corrupt_input (truncated,
+/// non-finite pixels), color. The message names the file.
+Image read_image(const std::filesystem::path& path, const ReadOptions& options = {});
+
+struct WriteOptions {
+  /// Stored pixel type. automatic: float32 for EXR/HDR/PFM, uint16 for TIFF, else uint8.
+  PixelType pixel_type = PixelType::automatic;
+  /// Colour space to encode into. Empty: sRGB for integer pixel types, scene_linear for float.
+  std::string colorspace;
+  const ColorConfig* color = nullptr;  ///< nullptr: ColorConfig::from_environment()
+  int jpeg_quality = 95;               ///< 1..100
+  /// Replace an existing file. When false, an existing file is an error (io).
+  bool overwrite = true;
+};
+
+/// Writes `image` (scene-linear, 1..4 channels, the first three as colour) to `path`, format
+/// from the extension, metadata (EXIF, ...) carried over. Atomic: the pixels go to a temporary
+/// file in the same folder which is renamed over `path` only when complete; on any failure the
+/// temporary file is removed and `path` is untouched. Throws mr::Error(io | invalid_argument).
+void write_image(const std::filesystem::path& path, const Image& image,
+                 const WriteOptions& options = {});
+
+/// One layer of a multi-layer EXR. Channels are named "<layer>.<channel>", or just "<channel>"
+/// when `name` is empty (the main R,G,B layer).
+struct ExrLayer {
+  std::string name;       ///< "", "transmittance", "inscatter", "depth", ...
+  const Image* image;     ///< its channel_names() give the channel part ("R","G","B" / "Z")
+  bool is_data = false;   ///< data layers (depth) are never colour-converted
+};
+
+/// Writes the layers into one OpenEXR file that oiiotool, Nuke and Blender read as layers
+/// (e.g. R,G,B + transmittance.R/G/B + inscatter.R/G/B + depth.Z). All layers must have the
+/// same size. Colour layers are written in scene-linear. Atomic like write_image.
+void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLayer> layers,
+                      const Metadata& metadata, PixelType pixel_type = PixelType::half);
+
+/// True if `path` has an extension OpenImageIO can write.
+bool is_writable_image_extension(const std::filesystem::path& path);
+/// True if `path` has an extension OpenImageIO can read.
+bool is_readable_image_extension(const std::filesystem::path& path);
+
+}  // namespace mr

@@ -1,0 +1,15 @@
+// libmr: the whole public API.
+#pragma once
+
+#include "mr/camera.h"
+#include "mr/color.h"
+#include "mr/depth.h"
+#include "mr/error.h"
+#include "mr/fog.h"
+#include "mr/image.h"
+#include "mr/io.h"
+#include "mr/metadata.h"
+#include "mr/scattering.h"
+#include "mr/scene.h"
+#include "mr/scene_json.h"
+#include "mr/version.h"

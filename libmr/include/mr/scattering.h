@@ -1,0 +1,50 @@
+// Physically based single scattering (DESIGN.md section 3): transmittance and in-scatter maps
+// of a photo with its depth, under sun, sky and lamps, with volumetric shadows from the photo's
+// own geometry; and the composite C = I * T + R.
+#pragma once
+
+#include "mr/camera.h"
+#include "mr/fog.h"
+#include "mr/image.h"
+#include "mr/scene.h"
+
+namespace mr {
+
+/// The core's output, all the photo's size.
+struct ScatteringLayers {
+  Image transmittance;   ///< T (R,G,B): tau(camera, surface) * S(surface), in [0, 1]
+  Image inscatter;       ///< R (R,G,B): single-scattered light along the view ray
+  Image sun_visibility;  ///< 1 channel: fraction of the sun's disk seen from the surface (AOV;
+                         ///< 1 for sky pixels or without a sun)
+  Image optical_depth;   ///< R,G,B: optical depth from the camera to the surface (AOV; inf
+                         ///< for sky in unbounded fog)
+  Rgb sky_radiance{};    ///< the sky radiance used (given or estimated from the photo)
+  struct Timings {
+    double mesh_s = 0;      ///< depth -> occluder mesh
+    double bvh_s = 0;       ///< Embree scene build
+    double scatter_s = 0;   ///< marching (including the sparse-grid pass)
+    double total_s = 0;
+    std::size_t exact_pixels = 0;         ///< pixels marched exactly
+    std::size_t interpolated_pixels = 0;  ///< pixels filled by gradient interpolation
+    std::size_t shadow_rays = 0;
+  } timings;
+};
+
+/// Renders T and R for `photo` (scene-linear RGB; used only to estimate the sky radiance when
+/// the scene does not give it) with `distance_m` (1 channel, metres along each ray; +inf = sky)
+/// seen by `camera` from `scene.pose`. Deterministic for a scene (including its seed).
+/// Throws mr::Error: invalid_argument for a bad scene (naming the field, see validate_scene),
+/// size_mismatch, invalid_argument for NaN distances.
+ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
+                                   const Camera& camera, const FogScene& scene);
+
+/// render_scattering followed by the composite C = I * T + R (alpha carried).
+/// The returned FogLayers' `airlight` holds the sky radiance used.
+FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
+              const FogScene& scene, ScatteringLayers* layers_out = nullptr);
+
+/// Checks every field of a scene and throws mr::Error(invalid_argument) naming the first bad
+/// one by its path ("medium.g", "lighting.lamps[2].position_m") and what was found.
+void validate_scene(const FogScene& scene);
+
+}  // namespace mr

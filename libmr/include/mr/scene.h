@@ -1,0 +1,130 @@
+// mr::FogScene: everything the scattering core needs besides the photo and its depth:
+// where the camera stands, the medium, the lights, and how carefully to render.
+//
+// World frame: metres, +Y up, the ground (for photos) at y = 0. With yaw = pitch = roll = 0 the
+// camera looks along +Z, image x points along +X and image y along -Y (image rows go down).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <vector>
+
+#include "mr/camera.h"
+
+namespace mr {
+
+using Rgb = std::array<float, 3>;
+
+struct Vec3 {
+  double x = 0, y = 0, z = 0;
+};
+
+/// Where the camera stands and how it is turned, in the world frame.
+struct CameraPose {
+  Vec3 position_m{0, 1.6, 0};
+  double yaw_deg = 0;    ///< heading: positive turns the view to the right (toward +X)
+  double pitch_deg = 0;  ///< positive tilts the view up
+  double roll_deg = 0;   ///< positive rotates the camera clockwise about its view axis, as seen
+                         ///< from behind (the horizon then tilts counter-clockwise in the image)
+
+  /// The camera's unit axes in the world: forward, right (image +x), up (image -y).
+  /// forward = (sin(yaw) cos(pitch), sin(pitch), cos(yaw) cos(pitch));
+  /// right0 = (cos(yaw), 0, -sin(yaw)); up0 = cross(forward, right0);
+  /// right = cos(roll) right0 - sin(roll) up0; up = sin(roll) right0 + cos(roll) up0.
+  std::array<Vec3, 3> axes() const;
+  /// Unit world direction through the centre of pixel (x, y):
+  /// normalize(u right - v up + forward), u = (x + 0.5 - cx) / f, v = (y + 0.5 - cy) / f.
+  Vec3 ray_direction(const Camera& camera, double x, double y) const;
+};
+
+/// A world direction from azimuth (degrees, 0 = +Z, 90 = +X) and elevation above the
+/// horizon (degrees): (cos(el) sin(az), sin(el), cos(el) cos(az)).
+Vec3 direction_from_azimuth_elevation(double azimuth_deg, double elevation_deg);
+
+/// The participating medium (DESIGN.md section 3).
+/// Extinction sigma_t(x) = sigma_t * rho(x), scattering sigma_s = albedo * sigma_t.
+struct Medium {
+  Rgb sigma_t_per_m{0.0261f, 0.0261f, 0.0261f};  ///< at density 1 (150 m visibility)
+  Rgb albedo{1, 1, 1};                           ///< in [0, 1]
+  double g = 0;  ///< Henyey-Greenstein asymmetry, in (-1, 1); > 0 scatters forward
+
+  /// Exponential height fog: rho(x) = exp(-(x.y - base_height_m) / scale_height_m).
+  /// Without it the density is 1 everywhere (inside the layer).
+  struct HeightFog {
+    double base_height_m = 0;
+    double scale_height_m = 20;  ///< > 0
+  };
+  std::optional<HeightFog> height_fog;
+  /// Density is 0 outside base <= y <= top (world heights). Defaults: unbounded.
+  double layer_bottom_m = -std::numeric_limits<double>::infinity();
+  double layer_top_m = std::numeric_limits<double>::infinity();
+
+  /// Wisps: rho is multiplied by max(0, 1 + amplitude * fbm(x / scale_m)), fbm a sum of
+  /// `octaves` octaves of gradient noise in [-1, 1], deterministic for a seed. The noise
+  /// modulates the view ray only; light paths use the smooth density (see README).
+  struct Noise {
+    double amplitude = 0;  ///< in [0, 1]; 0 = off
+    double scale_m = 10;   ///< size of the largest wisps
+    int octaves = 4;       ///< 1..8
+    std::uint32_t seed = 1;
+  } noise;
+};
+
+/// Sunlight: parallel rays from `direction_to_sun` with `irradiance` (scene-linear units per
+/// unit area, perpendicular to the rays) above the fog layer.
+struct Sun {
+  Vec3 direction_to_sun{0, 1, 0};  ///< normalised by the core
+  Rgb irradiance{3, 3, 3};
+  double angular_radius_deg = 0.27;  ///< > 0 gives soft shaft edges (penumbra)
+};
+
+/// A point lamp, optionally a spot: radiant intensity I (per steradian), irradiance at x is
+/// I / |p - x|^2, attenuated by the fog between p and x and blocked by the scene.
+struct Lamp {
+  Vec3 position_m;
+  Rgb intensity_per_sr{100, 90, 70};
+  /// Spot lamps: the cone's axis and half-angles. Full intensity within inner_angle_deg,
+  /// smoothly falling to 0 at outer_angle_deg (at most 180). outer_angle_deg == 180: a point lamp.
+  Vec3 spot_direction{0, -1, 0};
+  double inner_angle_deg = 180;
+  double outer_angle_deg = 180;
+};
+
+struct Lighting {
+  std::optional<Sun> sun;
+  /// Isotropic sky radiance L_sky lighting the fog (and standing in for its multiple
+  /// scattering). nullopt: estimated from the photo (the Koschmieder airlight estimate).
+  std::optional<Rgb> sky_radiance;
+  std::vector<Lamp> lamps;
+};
+
+enum class Quality { draft, normal, final };
+enum class Backend { automatic, cpu };
+
+/// How the core renders. Quality presets set the march steps and the gradient-acceleration
+/// grid; explicit fields override them (0 = from the preset).
+struct RenderSettings {
+  Quality quality = Quality::normal;
+  Backend backend = Backend::automatic;
+  int march_steps = 0;          ///< view-ray steps per pixel (lamps and shafts add more)
+  int grid_step = 0;            ///< sparse-sample spacing in pixels, 1..3 (1: every pixel exact)
+  bool gradient_acceleration = true;
+  bool volumetric_shadows = true;  ///< trace the occluder mesh (false: lights never blocked)
+  bool light_path_attenuation = true;  ///< fog dims light on its way in (false: for tests)
+  double max_distance_m = 0;  ///< how far sky rays march; 0 = automatic (transmittance 1e-4
+                              ///< or leaving the layer, at most 100 km)
+  std::uint32_t seed = 1;     ///< jitter seed; equal seeds give identical images
+  int threads = 0;            ///< 0: all cores
+};
+
+/// A whole fog scene (the JSON scene document, docs/scene.md, holds the same).
+struct FogScene {
+  CameraPose pose;
+  Medium medium;
+  Lighting lighting;
+  RenderSettings render;
+};
+
+}  // namespace mr

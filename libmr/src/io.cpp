@@ -1,0 +1,413 @@
+#include "mr/io.h"
+
+#include <OpenImageIO/imageio.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <set>
+
+#include "atomic_file.h"
+#include "mr/error.h"
+#include "oiio_bridge.h"
+
+namespace mr {
+
+namespace {
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+
+PixelType from_oiio(OIIO::TypeDesc t) {
+  switch (t.basetype) {
+    case OIIO::TypeDesc::UINT8:
+    case OIIO::TypeDesc::INT8: return PixelType::uint8;
+    case OIIO::TypeDesc::UINT16:
+    case OIIO::TypeDesc::INT16: return PixelType::uint16;
+    case OIIO::TypeDesc::HALF: return PixelType::half;
+    default: return PixelType::float32;
+  }
+}
+
+OIIO::TypeDesc to_oiio(PixelType t) {
+  switch (t) {
+    case PixelType::uint8: return OIIO::TypeDesc::UINT8;
+    case PixelType::uint16: return OIIO::TypeDesc::UINT16;
+    case PixelType::half: return OIIO::TypeDesc::HALF;
+    default: return OIIO::TypeDesc::FLOAT;
+  }
+}
+
+bool is_integer(PixelType t) { return t == PixelType::uint8 || t == PixelType::uint16; }
+
+// Pixel types each writer can store without silently converting. Formats not listed take all.
+bool format_supports(const std::string& format, PixelType t) {
+  static const std::map<std::string, std::set<PixelType>> kSupported = {
+      {"jpeg", {PixelType::uint8}},
+      {"bmp", {PixelType::uint8}},
+      {"targa", {PixelType::uint8}},
+      {"webp", {PixelType::uint8}},
+      {"png", {PixelType::uint8, PixelType::uint16}},
+      {"openexr", {PixelType::half, PixelType::float32}},
+      {"hdr", {PixelType::float32}},
+      {"pnm", {PixelType::uint8, PixelType::uint16, PixelType::float32}},
+  };
+  auto it = kSupported.find(format);
+  return it == kSupported.end() || it->second.count(t) > 0;
+}
+
+PixelType automatic_pixel_type(const std::string& format) {
+  if (format == "openexr" || format == "hdr") return PixelType::float32;
+  if (format == "tiff") return PixelType::uint16;
+  return PixelType::uint8;
+}
+
+const ColorConfig& config_or_default(const ColorConfig* given, ColorConfig& storage) {
+  if (given) return *given;
+  storage = ColorConfig::from_environment();
+  return storage;
+}
+
+std::unique_ptr<OIIO::ImageInput> open_input(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec))
+    throw Error(ErrorCode::io, path.string() + ": no such file");
+  if (std::filesystem::is_directory(path, ec))
+    throw Error(ErrorCode::io, path.string() + ": is a folder, not an image");
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) {
+    std::string msg = OIIO::geterror();
+    if (msg.empty()) msg = "unknown reason";
+    throw Error(ErrorCode::io, path.string() + ": not a readable image (" + msg + ")");
+  }
+  const auto& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 || spec.depth > 1)
+    throw Error(ErrorCode::corrupt_input,
+                path.string() + ": unsupported image shape " + std::to_string(spec.width) + "x" +
+                    std::to_string(spec.height) + "x" + std::to_string(spec.nchannels) +
+                    " (depth " + std::to_string(spec.depth) + ")");
+  return in;
+}
+
+std::size_t count_non_finite(const Image& image) {
+  const auto px = image.pixels();
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, px.size(), 1 << 16), std::size_t(0),
+      [&](const tbb::blocked_range<std::size_t>& r, std::size_t n) {
+        for (std::size_t i = r.begin(); i < r.end(); ++i) n += !std::isfinite(px[i]);
+        return n;
+      },
+      std::plus<>());
+}
+
+// Grey images become RGB (alpha kept) so that colour code downstream sees three channels.
+Image expand_grey(const Image& grey) {
+  const bool alpha = grey.channels() == 2;
+  Image rgb = Image::uninitialized(grey.width(), grey.height(), alpha ? 4 : 3);
+  for (std::size_t i = 0; i < grey.pixel_count(); ++i) {
+    const float* s = grey.data() + i * grey.channels();
+    float* d = rgb.data() + i * rgb.channels();
+    d[0] = d[1] = d[2] = s[0];
+    if (alpha) d[3] = s[1];
+  }
+  rgb.metadata() = grey.metadata();
+  return rgb;
+}
+
+// Attributes that describe the input file's encoding, not the picture: never carried over.
+void drop_encoding_attributes(OIIO::ParamValueList& attrs) {
+  for (const char* name : {"oiio:BitsPerSample", "oiio:ColorSpace", "oiio:Gamma", "Compression",
+                           "CompressionQuality", "oiio:UnassociatedAlpha", "tiff:RowsPerStrip",
+                           "tiff:Compression", "tiff:PhotometricInterpretation",
+                           "tiff:PlanarConfiguration", "png:compressionLevel", "ICCProfile",
+                           "jpeg:subsampling", "openexr:chunkCount", "openexr:lineOrder",
+                           // OIIO 2.4 reads these EXIF tags but cannot write them back (it
+                           // prints a debug line); both describe the encoding or are constant.
+                           "Exif:YCbCrSubsampling", "GPS:VersionID"})
+    attrs.remove(name);
+}
+
+void write_buf(const std::filesystem::path& path, const OIIO::ImageSpec& spec,
+               OIIO::TypeDesc data_type, const void* data, bool overwrite) {
+  std::error_code ec;
+  const auto folder = path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path();
+  if (!std::filesystem::is_directory(folder, ec))
+    throw Error(ErrorCode::io, path.string() + ": output folder " + folder.string() +
+                                   " does not exist");
+  if (!overwrite && std::filesystem::exists(path, ec))
+    throw Error(ErrorCode::io, path.string() + ": exists already (not overwriting)");
+  auto out = OIIO::ImageOutput::create(path.string());
+  if (!out) throw Error(ErrorCode::invalid_argument, path.string() + ": " + OIIO::geterror());
+  detail::AtomicFile file(path);
+  if (!out->open(file.temp_path().string(), spec))
+    throw Error(ErrorCode::io, path.string() + ": cannot write: " + out->geterror());
+  const bool wrote = out->write_image(data_type, data);
+  const bool closed = out->close();
+  if (!wrote || !closed)
+    throw Error(ErrorCode::io, path.string() + ": writing failed: " + out->geterror());
+  file.commit(overwrite);
+}
+
+}  // namespace
+
+PixelType parse_pixel_type(const std::string& text) {
+  const std::string t = lower(text);
+  if (t == "8" || t == "uint8") return PixelType::uint8;
+  if (t == "16" || t == "uint16") return PixelType::uint16;
+  if (t == "half" || t == "f16") return PixelType::half;
+  if (t == "float" || t == "32" || t == "f32" || t == "float32") return PixelType::float32;
+  if (t == "auto" || t == "automatic") return PixelType::automatic;
+  throw Error(ErrorCode::invalid_argument,
+              "bit depth '" + text + "': expected 8, 16, half or float");
+}
+
+const char* to_string(PixelType type) noexcept {
+  switch (type) {
+    case PixelType::automatic: return "auto";
+    case PixelType::uint8: return "8";
+    case PixelType::uint16: return "16";
+    case PixelType::half: return "half";
+    case PixelType::float32: return "float";
+  }
+  return "?";
+}
+
+ImageFileInfo probe_image(const std::filesystem::path& path) {
+  auto in = open_input(path);
+  const auto& spec = in->spec();
+  return {spec.width, spec.height, spec.nchannels, from_oiio(spec.format), in->format_name()};
+}
+
+Image read_image(const std::filesystem::path& path, const ReadOptions& options) {
+  auto in = open_input(path);
+  const OIIO::ImageSpec spec = in->spec();
+  const PixelType stored = from_oiio(spec.format);
+
+  ColorConfig storage = ColorConfig::builtin();
+  const ColorConfig& config = config_or_default(options.color, storage);
+  std::string from = options.colorspace;
+  if (options.to_scene_linear) {
+    if (from.empty()) {
+      const std::string tag = spec.get_string_attribute("oiio:ColorSpace");
+      if (config.has_colorspace(tag) && !config.is_data(tag))
+        from = tag;
+      else
+        from = is_integer(stored) ? colorspace::srgb : colorspace::scene_linear;
+    } else if (!config.has_colorspace(from)) {
+      throw Error(ErrorCode::color, path.string() + ": unknown input colour space '" + from +
+                                        "' in OCIO config " + config.source());
+    }
+  }
+  auto read_pixels = [&](OIIO::TypeDesc type, void* data) {
+    if (!in->read_image(0, 0, 0, spec.nchannels, type, data) || in->has_error()) {
+      const std::string msg = in->geterror();
+      throw Error(ErrorCode::corrupt_input, path.string() + ": cannot decode pixels (" +
+                                                (msg.empty() ? "truncated?" : msg) + ")");
+    }
+  };
+
+  Image image = Image::uninitialized(spec.width, spec.height, spec.nchannels, spec.channelnames);
+  const int n = spec.nchannels;
+  if (options.to_scene_linear && is_integer(stored) && n >= 3) {
+    // Integer codes go through OCIO's lookup table straight into floats: no pow per value.
+    const int bits = stored == PixelType::uint8 ? 8 : 16;
+    const std::size_t bytes = std::size_t(bits / 8);
+    std::vector<unsigned char> codes(image.pixels().size() * bytes);
+    read_pixels(bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16, codes.data());
+    const std::ptrdiff_t in_px = std::ptrdiff_t(n * bytes), out_px = std::ptrdiff_t(n * sizeof(float));
+    config.convert_pixels(codes.data(), bits, in_px, in_px * spec.width, image.data(), 32, out_px,
+                          out_px * spec.width, spec.width, spec.height, from, colorspace::scene_linear);
+    if (n > 3) {  // alpha and other extra channels: normalised codes
+      const double scale = 1.0 / (bits == 8 ? 255.0 : 65535.0);
+      const auto* c8 = codes.data();
+      const auto* c16 = reinterpret_cast<const std::uint16_t*>(codes.data());
+      for (std::size_t i = 0; i < image.pixel_count(); ++i)
+        for (int c = 3; c < n; ++c) {
+          const std::size_t k = i * n + c;
+          image.pixels()[k] = float((bits == 8 ? c8[k] : c16[k]) * scale);
+        }
+    }
+  } else {
+    read_pixels(OIIO::TypeDesc::FLOAT, image.data());
+    if (options.reject_non_finite)
+      if (std::size_t bad = count_non_finite(image))
+        throw Error(ErrorCode::corrupt_input, path.string() + ": " + std::to_string(bad) +
+                                                  " pixel values are NaN or infinite");
+    if (options.to_scene_linear) {
+      if (n < 3) image = expand_grey(image);
+      config.convert(image.view(), from, colorspace::scene_linear);
+    }
+  }
+  in->close();
+  image.metadata().impl().attributes = spec.extra_attribs;
+  if (options.to_scene_linear) drop_encoding_attributes(image.metadata().impl().attributes);
+  return image;
+}
+
+void write_image(const std::filesystem::path& path, const Image& image,
+                 const WriteOptions& options) {
+  if (image.empty()) throw Error(ErrorCode::invalid_argument, path.string() + ": image is empty");
+  if (image.channels() > 4)
+    throw Error(ErrorCode::invalid_argument,
+                path.string() + ": write_image takes 1 to 4 channels, image has " +
+                    std::to_string(image.channels()) + " (use write_exr_layers)");
+  if (options.jpeg_quality < 1 || options.jpeg_quality > 100)
+    throw Error(ErrorCode::invalid_argument,
+                "jpeg quality " + std::to_string(options.jpeg_quality) + " is not in 1..100");
+  auto probe = OIIO::ImageOutput::create(path.string());
+  if (!probe)
+    throw Error(ErrorCode::invalid_argument,
+                path.string() + ": no image format for extension '" + path.extension().string() + "'");
+  const std::string format = probe->format_name();
+  probe.reset();
+
+  const PixelType type = options.pixel_type == PixelType::automatic ? automatic_pixel_type(format)
+                                                                    : options.pixel_type;
+  if (!format_supports(format, type))
+    throw Error(ErrorCode::invalid_argument, path.string() + ": " + format + " files cannot store " +
+                                                 to_string(type) + "-bit pixels");
+
+  ColorConfig storage = ColorConfig::builtin();
+  const ColorConfig& config = config_or_default(options.color, storage);
+  const std::string to =
+      !options.colorspace.empty() ? options.colorspace
+                                  : (is_integer(type) ? colorspace::srgb : colorspace::scene_linear);
+  if (!config.has_colorspace(to))
+    throw Error(ErrorCode::color, path.string() + ": unknown output colour space '" + to +
+                                      "' in OCIO config " + config.source());
+
+  // Encode: integer files get OCIO's clamped, rounded integer output directly.
+  const int n = image.channels();
+  const float* pixels = image.data();
+  OIIO::TypeDesc data_type = OIIO::TypeDesc::FLOAT;
+  const void* data = pixels;
+  Image encoded;
+  std::vector<unsigned char> codes;
+  if (n >= 3 && is_integer(type)) {
+    const int bits = type == PixelType::uint8 ? 8 : 16;
+    const std::size_t bytes = std::size_t(bits / 8);
+    codes.resize(image.pixels().size() * bytes);
+    const std::ptrdiff_t in_px = std::ptrdiff_t(n * sizeof(float)), out_px = std::ptrdiff_t(n * bytes);
+    config.convert_pixels(pixels, 32, in_px, in_px * image.width(), codes.data(), bits, out_px,
+                          out_px * image.width(), image.width(), image.height(),
+                          colorspace::scene_linear, to);
+    const double max_code = bits == 8 ? 255.0 : 65535.0;
+    auto* c16 = reinterpret_cast<std::uint16_t*>(codes.data());
+    for (std::size_t i = 0; i < image.pixel_count(); ++i)
+      for (int c = 3; c < n; ++c) {
+        const std::size_t k = i * n + c;
+        const double v = std::lround(std::clamp(double(pixels[k]), 0.0, 1.0) * max_code);
+        if (bits == 8) codes[k] = static_cast<unsigned char>(v);
+        else c16[k] = static_cast<std::uint16_t>(v);
+      }
+    data_type = bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16;
+    data = codes.data();
+  } else if (n >= 3) {
+    encoded = image;
+    config.convert(encoded.view(), colorspace::scene_linear, to);
+    data = encoded.data();
+  }
+
+  OIIO::ImageSpec spec(image.width(), image.height(), image.channels(), to_oiio(type));
+  spec.channelnames = image.channel_names();
+  if (image.channels() == 4) spec.alpha_channel = 3;
+  spec.extra_attribs = image.metadata().impl().attributes;
+  drop_encoding_attributes(spec.extra_attribs);
+  spec.attribute("oiio:ColorSpace", to);
+  if (format == "jpeg") {
+    spec.attribute("Compression", "jpeg:" + std::to_string(options.jpeg_quality));
+    // Full-resolution chroma: fog changes colour smoothly and 4:2:0 smears hue edges.
+    spec.attribute("jpeg:subsampling", "4:4:4");
+  }
+  if (format == "openexr") spec.attribute("Compression", "zip");
+  if (format == "tiff") spec.attribute("Compression", "zip");
+  write_buf(path, spec, data_type, data, options.overwrite);
+}
+
+void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLayer> layers,
+                      const Metadata& metadata, PixelType pixel_type) {
+  if (layers.empty()) throw Error(ErrorCode::invalid_argument, path.string() + ": no layers");
+  if (pixel_type != PixelType::half && pixel_type != PixelType::float32)
+    throw Error(ErrorCode::invalid_argument,
+                path.string() + ": EXR layers are half or float, not " + std::string(to_string(pixel_type)));
+  const int width = layers[0].image->width(), height = layers[0].image->height();
+  std::vector<std::string> names;
+  for (const ExrLayer& layer : layers) {
+    const Image& im = *layer.image;
+    if (im.width() != width || im.height() != height)
+      throw Error(ErrorCode::size_mismatch,
+                  path.string() + ": layer '" + layer.name + "' is " + std::to_string(im.width()) +
+                      "x" + std::to_string(im.height()) + ", expected " + std::to_string(width) +
+                      "x" + std::to_string(height));
+    for (const std::string& c : im.channel_names())
+      names.push_back(layer.name.empty() ? c : layer.name + "." + c);
+  }
+  const int total = int(names.size());
+  std::vector<float> interleaved(std::size_t(width) * height * total);
+  int offset = 0;
+  for (const ExrLayer& layer : layers) {
+    const Image& im = *layer.image;
+    const int n = im.channels();
+    for (std::size_t i = 0; i < im.pixel_count(); ++i)
+      for (int c = 0; c < n; ++c) interleaved[i * total + offset + c] = im.data()[i * n + c];
+    offset += n;
+  }
+  OIIO::ImageSpec spec(width, height, total, to_oiio(pixel_type));
+  spec.channelnames = names;
+  // Data layers (depth) must not be rounded to half: keep them float.
+  spec.channelformats.assign(total, to_oiio(pixel_type));
+  offset = 0;
+  for (const ExrLayer& layer : layers) {
+    if (layer.is_data)
+      for (int c = 0; c < layer.image->channels(); ++c)
+        spec.channelformats[offset + c] = OIIO::TypeDesc::FLOAT;
+    offset += layer.image->channels();
+  }
+  spec.extra_attribs = metadata.impl().attributes;
+  drop_encoding_attributes(spec.extra_attribs);
+  spec.attribute("oiio:ColorSpace", "Linear");  // OIIO's tag for scene-linear Rec.709
+  spec.attribute("Compression", "zip");
+  if (path.extension() != ".exr" && path.extension() != ".EXR")
+    throw Error(ErrorCode::invalid_argument, path.string() + ": layered output must be .exr");
+  write_buf(path, spec, OIIO::TypeDesc::FLOAT, interleaved.data(), true);
+}
+
+bool is_readable_image_extension(const std::filesystem::path& path) {
+  static const std::set<std::string> extensions = [] {
+    std::set<std::string> out;
+    // "tiff:tif,tiff;jpeg:jpg,jpeg;..."
+    const std::string list = OIIO::get_string_attribute("extension_list");
+    std::size_t pos = 0;
+    while (pos < list.size()) {
+      std::size_t end = list.find(';', pos);
+      if (end == std::string::npos) end = list.size();
+      std::string entry = list.substr(pos, end - pos);
+      std::size_t colon = entry.find(':');
+      std::string exts = colon == std::string::npos ? entry : entry.substr(colon + 1);
+      std::size_t p = 0;
+      while (p <= exts.size()) {
+        std::size_t comma = exts.find(',', p);
+        if (comma == std::string::npos) comma = exts.size();
+        if (comma > p) out.insert(lower(exts.substr(p, comma - p)));
+        p = comma + 1;
+      }
+      pos = end + 1;
+    }
+    return out;
+  }();
+  std::string ext = lower(path.extension().string());
+  return ext.size() > 1 && extensions.count(ext.substr(1)) > 0;
+}
+
+bool is_writable_image_extension(const std::filesystem::path& path) {
+  if (!is_readable_image_extension(path)) return false;
+  return OIIO::ImageOutput::create(path.string()) != nullptr;
+}
+
+}  // namespace mr

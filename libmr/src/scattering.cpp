@@ -1,0 +1,159 @@
+// The scattering core's public entry points: validation, the occluder geometry, backend
+// dispatch (one place decides which backend runs), and the composite.
+#include "mr/scattering.h"
+
+#include <tbb/task_arena.h>
+
+#include <chrono>
+#include <optional>
+#include <cmath>
+#include <string>
+
+#include "mr/error.h"
+#include "photo/airlight.h"
+#include "photo/composite.h"
+#include "render/embree_scene.h"
+#include "render/occluder_mesh.h"
+#include "render/scattering_cpu.h"
+
+namespace mr {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+// A lamp a little behind the visible surface at its pixel is inside the reconstructed geometry
+// (the mesh is a thin shell of what the camera sees): its light would leak or vanish.
+void check_lamps_outside_geometry(const Image& distance_m, const Camera& camera, const FogScene& scene) {
+  const auto [forward, right, up] = scene.pose.axes();
+  for (std::size_t i = 0; i < scene.lighting.lamps.size(); ++i) {
+    const Vec3& p = scene.lighting.lamps[i].position_m;
+    const Vec3 rel{p.x - scene.pose.position_m.x, p.y - scene.pose.position_m.y,
+                   p.z - scene.pose.position_m.z};
+    const double z = rel.x * forward.x + rel.y * forward.y + rel.z * forward.z;
+    if (z <= 0) continue;  // behind the camera
+    const double u = (rel.x * right.x + rel.y * right.y + rel.z * right.z) / z;
+    const double v = -(rel.x * up.x + rel.y * up.y + rel.z * up.z) / z;
+    const int px = int(std::floor(camera.cx + u * camera.focal_px));
+    const int py = int(std::floor(camera.cy + v * camera.focal_px));
+    if (px < 0 || py < 0 || px >= camera.width || py >= camera.height) continue;
+    const double lamp_distance = std::sqrt(rel.x * rel.x + rel.y * rel.y + rel.z * rel.z);
+    const double surface = distance_m.at(px, py, 0);
+    const double depth_behind = lamp_distance - surface;
+    if (std::isfinite(surface) && depth_behind > 0.01 * surface && depth_behind < 0.1 * surface)
+      throw Error(ErrorCode::invalid_argument,
+                  "lighting.lamps[" + std::to_string(i) + "].position_m is inside the scene's geometry: " +
+                      std::to_string(depth_behind) + " m behind the surface seen at pixel (" +
+                      std::to_string(px) + "," + std::to_string(py) + ")");
+  }
+}
+
+}  // namespace
+
+ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
+                                   const Camera& camera, const FogScene& scene) {
+  const auto start = Clock::now();
+  validate_scene(scene);
+  if (distance_m.empty() || distance_m.channels() != 1)
+    throw Error(ErrorCode::invalid_argument, "render_scattering: the depth map is missing or has " +
+                                                 std::to_string(distance_m.channels()) +
+                                                 " channels (expected 1)");
+  if (distance_m.width() != camera.width || distance_m.height() != camera.height)
+    throw Error(ErrorCode::size_mismatch,
+                "render_scattering: depth map is " + size_text(distance_m.width(), distance_m.height()) +
+                    ", camera is " + size_text(camera.width, camera.height));
+  for (float d : distance_m.pixels())
+    if (std::isnan(d) || d <= 0)
+      throw Error(ErrorCode::invalid_argument,
+                  "render_scattering: distance map holds NaN, zero or negative values "
+                  "(use +inf for sky; mr::read_depth converts them)");
+  const bool need_sky_estimate = !scene.lighting.sky_radiance.has_value();
+  if (need_sky_estimate &&
+      (photo.empty() || photo.channels() < 3 || photo.width() != camera.width || photo.height() != camera.height))
+    throw Error(ErrorCode::invalid_argument,
+                "render_scattering: the sky radiance is 'auto' but no photo of the camera's size "
+                "was given to estimate it from");
+  check_lamps_outside_geometry(distance_m, camera, scene);
+
+  ScatteringLayers out;
+  out.sky_radiance = need_sky_estimate ? photo::estimate_airlight_dark_channel(photo.view())
+                                       : *scene.lighting.sky_radiance;
+  const int w = camera.width, h = camera.height;
+  out.transmittance = Image::uninitialized(w, h, 3);
+  out.inscatter = Image::uninitialized(w, h, 3);
+  out.sun_visibility = Image::uninitialized(w, h, 1, {"Y"});
+  out.optical_depth = Image::uninitialized(w, h, 3);
+
+  tbb::task_arena arena(scene.render.threads > 0 ? scene.render.threads
+                                                 : tbb::task_arena::automatic);
+  arena.execute([&] {
+    const bool lights = scene.lighting.sun || !scene.lighting.lamps.empty();
+    Image normals;
+    std::optional<render::OccluderScene> occluders;
+    if (lights) {
+      auto t = Clock::now();
+      normals = render::estimate_normals(distance_m.view(), camera, scene.pose);
+      if (scene.render.volumetric_shadows) {
+        render::TriangleMesh mesh =
+            render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose);
+        out.timings.mesh_s = seconds_since(t);
+        t = Clock::now();
+        if (mesh.triangle_count() > 0) occluders.emplace(std::move(mesh));
+        out.timings.bvh_s = seconds_since(t);
+      } else {
+        out.timings.mesh_s = seconds_since(t);
+      }
+    }
+    // Backend dispatch: the CPU reference is the only backend so far (Backend::automatic -> cpu).
+    render::CoreInputs in;
+    in.camera = &camera;
+    in.scene = &scene;
+    in.distance_m = distance_m.view();
+    if (!normals.empty()) in.normals = normals.view();
+    in.occluders = occluders ? &*occluders : nullptr;
+    in.sky_radiance = out.sky_radiance;
+    render::CoreOutputs core{out.transmittance.view(), out.inscatter.view(),
+                             out.sun_visibility.view(), out.optical_depth.view()};
+    const auto t = Clock::now();
+    render::render_scattering_cpu(in, core);
+    out.timings.scatter_s = seconds_since(t);
+    out.timings.exact_pixels = core.exact_pixels;
+    out.timings.interpolated_pixels = core.interpolated_pixels;
+    out.timings.shadow_rays = core.shadow_rays;
+  });
+  out.timings.total_s = seconds_since(start);
+  return out;
+}
+
+FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
+              const FogScene& scene, ScatteringLayers* layers_out) {
+  if (photo.empty() || photo.channels() < 3)
+    throw Error(ErrorCode::invalid_argument,
+                "fog: photo must have at least 3 channels, has " + std::to_string(photo.channels()));
+  if (photo.width() != distance_m.width() || photo.height() != distance_m.height())
+    throw Error(ErrorCode::size_mismatch,
+                "fog: depth map is " + size_text(distance_m.width(), distance_m.height()) +
+                    ", photo is " + size_text(photo.width(), photo.height()));
+  ScatteringLayers layers = render_scattering(photo, distance_m, camera, scene);
+  FogLayers out;
+  out.airlight = layers.sky_radiance;
+  out.composite = Image::uninitialized(photo.width(), photo.height(), photo.channels(), photo.channel_names());
+  out.composite.metadata() = photo.metadata();
+  photo::composite(photo.view(), layers.transmittance.view(), layers.inscatter.view(), out.composite.view());
+  out.transmittance = std::move(layers.transmittance);
+  out.inscatter = std::move(layers.inscatter);
+  if (layers_out) {
+    layers_out->sun_visibility = std::move(layers.sun_visibility);
+    layers_out->optical_depth = std::move(layers.optical_depth);
+    layers_out->sky_radiance = layers.sky_radiance;
+    layers_out->timings = layers.timings;
+  }
+  return out;
+}
+
+}  // namespace mr

@@ -1,0 +1,779 @@
+// The JSON scene document (docs/scene.md): reading with errors that point at the offending
+// value, writing that reads back exactly, and atomic saving.
+#include "mr/scene_json.h"
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "atomic_file.h"
+#include "mr/error.h"
+#include "mr/fog.h"
+#include "mr/scattering.h"
+
+namespace mr {
+
+namespace {
+
+namespace fs = std::filesystem;
+// Ordered: documents are written in the structs' order, and errors about several bad keys
+// report the first one in reading order.
+using Json = nlohmann::ordered_json;
+using Keys = std::initializer_list<std::string_view>;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// ------------------------------------------------------------------------------------------
+// Reading
+// ------------------------------------------------------------------------------------------
+
+// A key as a JSON pointer reference token (RFC 6901): '~' -> "~0", '/' -> "~1". Control
+// characters (a key may hold an escaped newline) are shown JSON-escaped to keep messages on
+// one line.
+std::string pointer_token(std::string_view key) {
+  std::string t;
+  for (char c : key) {
+    if (c == '~') {
+      t += "~0";
+    } else if (c == '/') {
+      t += "~1";
+    } else if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x",
+                    static_cast<unsigned>(static_cast<unsigned char>(c)));
+      t += buf;
+    } else {
+      t += c;
+    }
+  }
+  return t;
+}
+
+// Short, one-line text of a string value for messages; cut at a UTF-8 character boundary.
+std::string quoted_excerpt(const Json& j) {
+  std::string s = j.dump();  // quoted, control characters escaped: always one line
+  constexpr std::size_t kMax = 40;
+  if (s.size() > kMax) {
+    std::size_t n = kMax;
+    while (n > 0 && (static_cast<unsigned char>(s[n]) & 0xC0) == 0x80) --n;
+    s = s.substr(0, n) + "...";
+  }
+  return s;
+}
+
+// "found ..." part of a message: what the value is, with the value itself when it is short.
+std::string describe(const Json& j) {
+  switch (j.type()) {
+    case Json::value_t::null:
+      return "null";
+    case Json::value_t::boolean:
+      return std::string("a boolean (") + (j.get<bool>() ? "true" : "false") + ")";
+    case Json::value_t::number_integer:
+    case Json::value_t::number_unsigned:
+    case Json::value_t::number_float:
+      return "a number (" + j.dump() + ")";
+    case Json::value_t::string:
+      return "a string (" + quoted_excerpt(j) + ")";
+    case Json::value_t::array:
+      if (j.empty()) return "an empty array";
+      return "an array of " + std::to_string(j.size()) + (j.size() == 1 ? " element" : " elements");
+    case Json::value_t::object:
+      return "an object";
+    default:
+      return "an unsupported value";
+  }
+}
+
+// Levenshtein distance, case-insensitive: for "did you mean" on unknown keys.
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diag = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
+                        std::tolower(static_cast<unsigned char>(b[j - 1]));
+      const std::size_t next = std::min({row[j] + 1, row[j - 1] + 1, diag + (same ? 0 : 1)});
+      diag = row[j];
+      row[j] = next;
+    }
+  }
+  return row[b.size()];
+}
+
+// 1-based line and column (in characters, not bytes) of byte offset `offset` in `text`.
+std::pair<std::size_t, std::size_t> line_column(const std::string& text, std::size_t offset) {
+  offset = std::min(offset, text.size());
+  std::size_t line = 1, column = 1;
+  for (std::size_t i = 0; i < offset; ++i) {
+    if (text[i] == '\n') {
+      ++line;
+      column = 1;
+    } else if ((static_cast<unsigned char>(text[i]) & 0xC0) != 0x80) {  // skip UTF-8 tails
+      ++column;
+    }
+  }
+  return {line, column};
+}
+
+// nlohmann's message without its "[json.exception.parse_error.101] parse error at line 3,
+// column 14: " prefix: we state the position ourselves, once.
+std::string parse_problem(const std::string& what) {
+  std::string s = what;
+  if (const auto b = s.find("] "); s.rfind("[json.exception.", 0) == 0 && b != std::string::npos)
+    s = s.substr(b + 2);
+  if (s.rfind("parse error", 0) == 0) {
+    if (const auto colon = s.find(": "); colon != std::string::npos) s = s.substr(colon + 2);
+  }
+  return s;
+}
+
+// "line L, column C" of a syntax error. nlohmann's byte count ends at the last character it
+// read, which is the end of the offending token ("0.5" in `"g" 0.5`): step back to the token's
+// start, where a reader's eye looks for the mistake.
+std::string position_text(const std::string& text, std::size_t bytes_read,
+                          const std::string& problem) {
+  std::size_t i = std::min(bytes_read > 0 ? bytes_read - 1 : 0, text.size());
+  auto token_char = [&text](std::size_t k) {
+    const unsigned char c = static_cast<unsigned char>(text[k]);
+    return std::isalnum(c) || c == '.' || c == '+' || c == '-';
+  };
+  // "tru}": the lexer stops on the '}' that broke the literal; the literal starts before it.
+  if (problem.find("invalid literal") != std::string::npos && i > 0 && i < text.size() &&
+      !token_char(i) && token_char(i - 1))
+    --i;
+  if (i < text.size() && token_char(i))
+    while (i > 0 && token_char(i - 1)) --i;
+  const auto [line, column] = line_column(text, i);
+  return "line " + std::to_string(line) + ", column " + std::to_string(column);
+}
+
+class Reader {
+ public:
+  explicit Reader(std::string source) : source_(std::move(source)) {}
+
+  /// Throws "source: /json/pointer: problem" (or "source: problem" for the whole document).
+  [[noreturn]] void fail(const std::string& pointer, const std::string& problem) const {
+    throw Error(ErrorCode::invalid_argument,
+                source_ + ": " + (pointer.empty() ? "" : pointer + ": ") + problem);
+  }
+
+  [[noreturn]] void expected(const std::string& pointer, const std::string& what,
+                             const Json& found) const {
+    fail(pointer, "expected " + what + ", found " + describe(found));
+  }
+
+  void object(const Json& j, const std::string& pointer) const {
+    if (!j.is_object()) expected(pointer, "an object", j);
+  }
+
+  /// Unknown keys are errors: in a hand-edited file they are almost always typos, and a
+  /// silently ignored "albdo" would render the wrong fog without a word.
+  void check_keys(const Json& obj, const std::string& pointer, Keys known) const {
+    for (const auto& [key, value] : obj.items()) {
+      if (std::find(known.begin(), known.end(), key) != known.end()) continue;
+      std::string_view best;
+      std::size_t best_distance = std::numeric_limits<std::size_t>::max();
+      for (std::string_view k : known) {
+        const std::size_t d = edit_distance(key, k);
+        if (d < best_distance) best_distance = d, best = k;
+      }
+      std::string hint;
+      if (best_distance <= std::max<std::size_t>(2, key.size() / 4)) {
+        hint = "; did you mean \"" + std::string(best) + "\"?";
+      } else {
+        hint = "; expected one of: ";
+        for (std::string_view k : known) hint += (k == *known.begin() ? "" : ", ") + std::string(k);
+      }
+      fail(pointer + "/" + pointer_token(key), "unknown key" + hint);
+    }
+  }
+
+  /// A finite number. (JSON has no NaN or infinity; numbers beyond a double fail to parse.)
+  double number(const Json& j, const std::string& pointer) const {
+    if (!j.is_number()) expected(pointer, "a number", j);
+    return j.get<double>();
+  }
+
+  /// A number stored as float (colour channels): must fit, or it would become infinity.
+  float single(const Json& j, const std::string& pointer) const {
+    const double v = number(j, pointer);
+    if (std::abs(v) > std::numeric_limits<float>::max())
+      fail(pointer, j.dump() + " is too large for a single-precision value");
+    return static_cast<float>(v);
+  }
+
+  /// An integer in [lo, hi] (the C++ type's range; the meaning's range is validate_scene's).
+  /// 4.0 is accepted as 4: some JSON writers emit every number as a float.
+  long long integer(const Json& j, const std::string& pointer, long long lo, long long hi) const {
+    const std::string range = "an integer from " + std::to_string(lo) + " to " + std::to_string(hi);
+    if (j.is_number_unsigned()) {
+      const auto v = j.get<unsigned long long>();
+      if (v > static_cast<unsigned long long>(hi)) expected(pointer, range, j);
+      return static_cast<long long>(v);
+    }
+    if (j.is_number_integer()) {
+      const auto v = j.get<long long>();
+      if (v < lo || v > hi) expected(pointer, range, j);
+      return v;
+    }
+    if (j.is_number_float()) {
+      const double v = j.get<double>();
+      if (std::floor(v) != v || v < static_cast<double>(lo) || v > static_cast<double>(hi))
+        expected(pointer, range, j);
+      return static_cast<long long>(v);
+    }
+    expected(pointer, range, j);
+  }
+
+  bool boolean(const Json& j, const std::string& pointer) const {
+    if (!j.is_boolean()) expected(pointer, "true or false", j);
+    return j.get<bool>();
+  }
+
+  Vec3 vec3(const Json& j, const std::string& pointer) const {
+    if (!j.is_array() || j.size() != 3) expected(pointer, "an array of 3 numbers", j);
+    return {number(j[0], pointer + "/0"), number(j[1], pointer + "/1"),
+            number(j[2], pointer + "/2")};
+  }
+
+  /// A colour: [r, g, b], or one number for grey.
+  Rgb rgb(const Json& j, const std::string& pointer) const {
+    if (j.is_number()) {
+      const float v = single(j, pointer);
+      return {v, v, v};
+    }
+    if (!j.is_array() || j.size() != 3)
+      expected(pointer, "a number or an array of 3 numbers [r, g, b]", j);
+    return {single(j[0], pointer + "/0"), single(j[1], pointer + "/1"),
+            single(j[2], pointer + "/2")};
+  }
+
+  /// A string that must be one of `choices`; returns its index.
+  std::size_t choice(const Json& j, const std::string& pointer, Keys choices) const {
+    std::string list;
+    for (std::string_view c : choices)
+      list += (list.empty() ? "\"" : ", \"") + std::string(c) + "\"";
+    if (j.is_string()) {
+      const auto& s = j.get_ref<const std::string&>();
+      const auto it = std::find(choices.begin(), choices.end(), s);
+      if (it != choices.end()) return static_cast<std::size_t>(it - choices.begin());
+    }
+    expected(pointer, "one of " + list, j);
+  }
+
+ private:
+  std::string source_;
+};
+
+const Json* member(const Json& obj, const char* key) {
+  const auto it = obj.find(key);
+  return it == obj.end() ? nullptr : &*it;
+}
+
+// Parses the text, rejecting duplicate keys (the parser would silently keep one of them) and
+// turning syntax errors into "source: line L, column C: problem".
+Json parse_text(const std::string& text, const Reader& r) {
+  struct Frame {
+    bool is_array = false;
+    std::size_t index = 0;       // arrays: the element being read
+    std::string key;             // objects: the member being read
+    std::set<std::string> keys;  // a set: documents with huge objects must not cost n^2
+  };
+  std::vector<Frame> stack;
+  auto pointer = [&stack](std::size_t depth) {
+    std::string p;
+    for (std::size_t i = 0; i < depth; ++i)
+      p += "/" + (stack[i].is_array ? std::to_string(stack[i].index) : pointer_token(stack[i].key));
+    return p;
+  };
+  auto element_done = [&stack] {
+    if (!stack.empty() && stack.back().is_array) ++stack.back().index;
+  };
+  using Event = Json::parse_event_t;
+  auto callback = [&](int, Event event, Json& parsed) {
+    switch (event) {
+      case Event::object_start:
+      case Event::array_start:
+        stack.push_back({event == Event::array_start, 0, {}, {}});
+        break;
+      case Event::key: {
+        Frame& f = stack.back();
+        f.key = parsed.get<std::string>();
+        if (!f.keys.insert(f.key).second) r.fail(pointer(stack.size()), "duplicate key");
+        break;
+      }
+      case Event::object_end:
+      case Event::array_end:
+        stack.pop_back();
+        element_done();
+        break;
+      case Event::value:
+        element_done();
+        break;
+    }
+    return true;
+  };
+  try {
+    return Json::parse(text, callback);
+  } catch (const Json::parse_error& e) {
+    const std::string problem = parse_problem(e.what());
+    r.fail("", position_text(text, e.byte, problem) + ": " + problem);
+  } catch (const Json::exception& e) {
+    // Number overflow (1e400) carries no position: name the JSON path being read instead.
+    r.fail(pointer(stack.size()), parse_problem(e.what()));
+  }
+}
+
+Medium read_medium(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(j, p,
+               {"sigma_t_per_m", "visibility_m", "albedo", "g", "height_fog", "layer_bottom_m",
+                "layer_top_m", "noise"});
+  Medium m;
+  const Json* sigma = member(j, "sigma_t_per_m");
+  const Json* visibility = member(j, "visibility_m");
+  if (sigma && visibility)
+    r.fail(p,
+           "give either sigma_t_per_m or visibility_m, not both (visibility_m sets sigma_t_per_m)");
+  if (sigma) m.sigma_t_per_m = r.rgb(*sigma, p + "/sigma_t_per_m");
+  if (visibility) {
+    // Koschmieder: sigma_t = 3.912 / V. Per channel when given as [r, g, b].
+    const std::string vp = p + "/visibility_m";
+    std::array<double, 3> v{};
+    if (visibility->is_number()) {
+      v.fill(r.number(*visibility, vp));
+    } else if (visibility->is_array() && visibility->size() == 3) {
+      for (std::size_t i = 0; i < 3; ++i)
+        v[i] = r.number((*visibility)[i], vp + "/" + std::to_string(i));
+    } else {
+      r.expected(vp, "a number or an array of 3 numbers (metres)", *visibility);
+    }
+    for (std::size_t i = 0; i < 3; ++i) {
+      const std::string ep = visibility->is_array() ? vp + "/" + std::to_string(i) : vp;
+      if (!(v[i] > 0))
+        r.fail(ep, "visibility must be > 0 metres, found " +
+                       (visibility->is_array() ? (*visibility)[i] : *visibility).dump());
+      m.sigma_t_per_m[i] = static_cast<float>(extinction_from_visibility(v[i]));
+    }
+  }
+  if (const Json* a = member(j, "albedo")) m.albedo = r.rgb(*a, p + "/albedo");
+  if (const Json* g = member(j, "g")) m.g = r.number(*g, p + "/g");
+  if (const Json* h = member(j, "height_fog"); h && !h->is_null()) {
+    const std::string hp = p + "/height_fog";
+    if (!h->is_object()) r.expected(hp, "null or an object", *h);
+    r.check_keys(*h, hp, {"base_height_m", "scale_height_m"});
+    Medium::HeightFog fog;
+    if (const Json* b = member(*h, "base_height_m"))
+      fog.base_height_m = r.number(*b, hp + "/base_height_m");
+    if (const Json* s = member(*h, "scale_height_m"))
+      fog.scale_height_m = r.number(*s, hp + "/scale_height_m");
+    m.height_fog = fog;
+  }
+  // null = unbounded on that side (JSON has no infinity).
+  if (const Json* b = member(j, "layer_bottom_m"))
+    m.layer_bottom_m = b->is_null() ? -kInf : r.number(*b, p + "/layer_bottom_m");
+  if (const Json* t = member(j, "layer_top_m"))
+    m.layer_top_m = t->is_null() ? kInf : r.number(*t, p + "/layer_top_m");
+  if (const Json* n = member(j, "noise")) {
+    const std::string np = p + "/noise";
+    r.object(*n, np);
+    r.check_keys(*n, np, {"amplitude", "scale_m", "octaves", "seed"});
+    if (const Json* v = member(*n, "amplitude"))
+      m.noise.amplitude = r.number(*v, np + "/amplitude");
+    if (const Json* v = member(*n, "scale_m")) m.noise.scale_m = r.number(*v, np + "/scale_m");
+    if (const Json* v = member(*n, "octaves"))
+      m.noise.octaves = static_cast<int>(r.integer(
+          *v, np + "/octaves", std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
+    if (const Json* v = member(*n, "seed"))
+      m.noise.seed = static_cast<std::uint32_t>(
+          r.integer(*v, np + "/seed", 0, std::numeric_limits<std::uint32_t>::max()));
+  }
+  return m;
+}
+
+Sun read_sun(const Json& j, const std::string& p, const Reader& r) {
+  if (!j.is_object()) r.expected(p, "null or an object", j);
+  r.check_keys(
+      j, p,
+      {"direction_to_sun", "azimuth_deg", "elevation_deg", "irradiance", "angular_radius_deg"});
+  Sun sun;
+  const Json* dir = member(j, "direction_to_sun");
+  const Json* az = member(j, "azimuth_deg");
+  const Json* el = member(j, "elevation_deg");
+  if (dir && (az || el))
+    r.fail(p, "give either direction_to_sun or azimuth_deg + elevation_deg, not both");
+  if (dir) sun.direction_to_sun = r.vec3(*dir, p + "/direction_to_sun");
+  if (az || el) {
+    if (!az) r.fail(p, "elevation_deg needs azimuth_deg beside it");
+    if (!el) r.fail(p, "azimuth_deg needs elevation_deg beside it");
+    const double azimuth = r.number(*az, p + "/azimuth_deg");
+    const double elevation = r.number(*el, p + "/elevation_deg");
+    if (!(elevation >= -90 && elevation <= 90))
+      r.fail(p + "/elevation_deg", el->dump() + ": must be in [-90, 90]");
+    sun.direction_to_sun = direction_from_azimuth_elevation(azimuth, elevation);
+  }
+  if (const Json* v = member(j, "irradiance")) sun.irradiance = r.rgb(*v, p + "/irradiance");
+  if (const Json* v = member(j, "angular_radius_deg"))
+    sun.angular_radius_deg = r.number(*v, p + "/angular_radius_deg");
+  return sun;
+}
+
+Lamp read_lamp(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(
+      j, p,
+      {"position_m", "intensity_per_sr", "spot_direction", "inner_angle_deg", "outer_angle_deg"});
+  Lamp lamp;
+  if (const Json* v = member(j, "position_m")) lamp.position_m = r.vec3(*v, p + "/position_m");
+  if (const Json* v = member(j, "intensity_per_sr"))
+    lamp.intensity_per_sr = r.rgb(*v, p + "/intensity_per_sr");
+  if (const Json* v = member(j, "spot_direction"))
+    lamp.spot_direction = r.vec3(*v, p + "/spot_direction");
+  if (const Json* v = member(j, "inner_angle_deg"))
+    lamp.inner_angle_deg = r.number(*v, p + "/inner_angle_deg");
+  if (const Json* v = member(j, "outer_angle_deg"))
+    lamp.outer_angle_deg = r.number(*v, p + "/outer_angle_deg");
+  return lamp;
+}
+
+Lighting read_lighting(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(j, p, {"sun", "sky_radiance", "lamps"});
+  Lighting l;
+  if (const Json* s = member(j, "sun"); s && !s->is_null()) l.sun = read_sun(*s, p + "/sun", r);
+  if (const Json* s = member(j, "sky_radiance")) {
+    // null or "auto": estimated from the photo.
+    if (s->is_string()) {
+      if (s->get_ref<const std::string&>() != "auto")
+        r.expected(p + "/sky_radiance", "\"auto\", null, a number or an array of 3 numbers", *s);
+    } else if (!s->is_null()) {
+      l.sky_radiance = r.rgb(*s, p + "/sky_radiance");
+    }
+  }
+  if (const Json* lamps = member(j, "lamps")) {
+    const std::string lp = p + "/lamps";
+    if (!lamps->is_array()) r.expected(lp, "an array of lamp objects", *lamps);
+    for (std::size_t i = 0; i < lamps->size(); ++i)
+      l.lamps.push_back(read_lamp((*lamps)[i], lp + "/" + std::to_string(i), r));
+  }
+  return l;
+}
+
+CameraPose read_pose(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(j, p, {"position_m", "yaw_deg", "pitch_deg", "roll_deg"});
+  CameraPose pose;
+  if (const Json* v = member(j, "position_m")) pose.position_m = r.vec3(*v, p + "/position_m");
+  if (const Json* v = member(j, "yaw_deg")) pose.yaw_deg = r.number(*v, p + "/yaw_deg");
+  if (const Json* v = member(j, "pitch_deg")) pose.pitch_deg = r.number(*v, p + "/pitch_deg");
+  if (const Json* v = member(j, "roll_deg")) pose.roll_deg = r.number(*v, p + "/roll_deg");
+  return pose;
+}
+
+RenderSettings read_render(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(
+      j, p,
+      {"quality", "backend", "march_steps", "grid_step", "gradient_acceleration",
+       "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads"});
+  constexpr long long kIntMin = std::numeric_limits<int>::min();
+  constexpr long long kIntMax = std::numeric_limits<int>::max();
+  RenderSettings s;
+  if (const Json* v = member(j, "quality"))
+    s.quality = static_cast<Quality>(r.choice(*v, p + "/quality", {"draft", "normal", "final"}));
+  if (const Json* v = member(j, "backend"))
+    s.backend =
+        r.choice(*v, p + "/backend", {"auto", "cpu"}) == 0 ? Backend::automatic : Backend::cpu;
+  if (const Json* v = member(j, "march_steps"))
+    s.march_steps = static_cast<int>(r.integer(*v, p + "/march_steps", kIntMin, kIntMax));
+  if (const Json* v = member(j, "grid_step"))
+    s.grid_step = static_cast<int>(r.integer(*v, p + "/grid_step", kIntMin, kIntMax));
+  if (const Json* v = member(j, "gradient_acceleration"))
+    s.gradient_acceleration = r.boolean(*v, p + "/gradient_acceleration");
+  if (const Json* v = member(j, "volumetric_shadows"))
+    s.volumetric_shadows = r.boolean(*v, p + "/volumetric_shadows");
+  if (const Json* v = member(j, "light_path_attenuation"))
+    s.light_path_attenuation = r.boolean(*v, p + "/light_path_attenuation");
+  if (const Json* v = member(j, "max_distance_m"))
+    s.max_distance_m = r.number(*v, p + "/max_distance_m");
+  if (const Json* v = member(j, "seed"))
+    s.seed = static_cast<std::uint32_t>(
+        r.integer(*v, p + "/seed", 0, std::numeric_limits<std::uint32_t>::max()));
+  if (const Json* v = member(j, "threads"))
+    s.threads = static_cast<int>(r.integer(*v, p + "/threads", kIntMin, kIntMax));
+  return s;
+}
+
+FogScene read_document(const Json& doc, const Reader& r) {
+  if (!doc.is_object())
+    r.fail("", "expected a JSON object at the top level, found " + describe(doc));
+  // Format and version first: a JSON file that is not a scene (or a newer one) should say so,
+  // not complain about its first unknown key.
+  const Json* format = member(doc, "format");
+  if (!format)
+    r.fail("/format", std::string("missing; a scene document starts with \"format\": \"") +
+                          kSceneFormatName + "\"");
+  if (!format->is_string() || format->get_ref<const std::string&>() != kSceneFormatName)
+    r.expected("/format", std::string("\"") + kSceneFormatName + "\"", *format);
+  const std::string supported = kSceneFormatVersion == 1
+                                    ? "version 1"
+                                    : "versions 1 to " + std::to_string(kSceneFormatVersion);
+  const Json* version = member(doc, "version");
+  if (!version) r.fail("/version", "missing; this libmr reads " + supported);
+  const long long v = r.integer(*version, "/version", std::numeric_limits<int>::min(),
+                                std::numeric_limits<int>::max());
+  if (v > kSceneFormatVersion)
+    r.fail("/version", "version " + std::to_string(v) +
+                           " is newer than this libmr supports (it reads " + supported +
+                           "); upgrade libmr to read this scene");
+  if (v < 1)
+    r.fail("/version",
+           "version " + std::to_string(v) + " does not exist; this libmr reads " + supported);
+
+  r.check_keys(doc, "", {"format", "version", "camera_pose", "medium", "lighting", "render"});
+  FogScene s;
+  if (const Json* j = member(doc, "camera_pose")) s.pose = read_pose(*j, "/camera_pose", r);
+  if (const Json* j = member(doc, "medium")) s.medium = read_medium(*j, "/medium", r);
+  if (const Json* j = member(doc, "lighting")) s.lighting = read_lighting(*j, "/lighting", r);
+  if (const Json* j = member(doc, "render")) s.render = read_render(*j, "/render", r);
+  return s;
+}
+
+// The JSON pointer of the value validate_scene complained about, from its C++ path
+// ("lighting.lamps[2].position_m.y" -> "/lighting/lamps/2/position_m/1"), cut to the part that
+// exists in the document (a colour given as one number, a default left out).
+std::string json_pointer_for(const std::string& cpp_path, const Json& doc) {
+  std::vector<std::string> tokens;
+  std::string word;
+  auto flush = [&] {
+    if (!word.empty()) tokens.push_back(word);
+    word.clear();
+  };
+  for (char c : cpp_path) {
+    if (c == '.' || c == '[' || c == ']')
+      flush();
+    else
+      word += c;
+  }
+  flush();
+  for (std::string& t : tokens) {
+    if (t == "x") t = "0";
+    if (t == "y") t = "1";
+    if (t == "z") t = "2";
+  }
+  if (!tokens.empty() && tokens[0] == "pose") tokens[0] = "camera_pose";
+  // sigma_t set through visibility_m: point at what the user wrote.
+  if (tokens.size() >= 2 && tokens[0] == "medium" && tokens[1] == "sigma_t_per_m") {
+    const Json* m = member(doc, "medium");
+    if (m && m->is_object() && member(*m, "visibility_m")) tokens[1] = "visibility_m";
+  }
+  std::string pointer;
+  const Json* node = &doc;
+  for (const std::string& t : tokens) {
+    const Json* next = nullptr;
+    if (node->is_object()) {
+      next = member(*node, t.c_str());
+    } else if (node->is_array() && !t.empty() &&
+               std::all_of(t.begin(), t.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+      const std::size_t i = std::stoul(t);
+      if (i < node->size()) next = &(*node)[i];
+    }
+    if (!next) break;
+    pointer += "/" + pointer_token(t);
+    node = next;
+  }
+  return pointer;
+}
+
+// ------------------------------------------------------------------------------------------
+// Writing
+// ------------------------------------------------------------------------------------------
+
+// The shortest decimal that reads back as the same float ("0.0261", not the double expansion
+// "0.026100000366568565"), as the double JSON readers will parse it to. Reading goes text ->
+// double -> float, and that double rounding could in principle land on the neighbouring float
+// (no case was found in a scan of every 7th float): then write the float's exact double value,
+// which always reads back exactly.
+double float_for_json(float f) {
+  char buf[64];
+  const auto end = std::to_chars(buf, buf + sizeof buf, f).ptr;
+  double d = 0;
+  std::from_chars(buf, end, d);
+  return static_cast<float>(d) == f ? d : static_cast<double>(f);
+}
+
+Json rgb_json(const Rgb& c) {
+  return Json::array({float_for_json(c[0]), float_for_json(c[1]), float_for_json(c[2])});
+}
+Json vec3_json(const Vec3& v) {
+  return Json::array({v.x, v.y, v.z});
+}
+Json bound_json(double v) {
+  return std::isinf(v) ? Json(nullptr) : Json(v);
+}
+
+Json to_document(const FogScene& s) {
+  Json doc = Json::object();
+  doc["format"] = kSceneFormatName;
+  doc["version"] = kSceneFormatVersion;
+
+  Json& pose = doc["camera_pose"] = Json::object();
+  pose["position_m"] = vec3_json(s.pose.position_m);
+  pose["yaw_deg"] = s.pose.yaw_deg;
+  pose["pitch_deg"] = s.pose.pitch_deg;
+  pose["roll_deg"] = s.pose.roll_deg;
+
+  const Medium& m = s.medium;
+  Json& medium = doc["medium"] = Json::object();
+  medium["sigma_t_per_m"] = rgb_json(m.sigma_t_per_m);
+  medium["albedo"] = rgb_json(m.albedo);
+  medium["g"] = m.g;
+  medium["height_fog"] = m.height_fog ? Json{{"base_height_m", m.height_fog->base_height_m},
+                                             {"scale_height_m", m.height_fog->scale_height_m}}
+                                      : Json(nullptr);
+  medium["layer_bottom_m"] = bound_json(m.layer_bottom_m);
+  medium["layer_top_m"] = bound_json(m.layer_top_m);
+  medium["noise"] = Json{{"amplitude", m.noise.amplitude},
+                         {"scale_m", m.noise.scale_m},
+                         {"octaves", m.noise.octaves},
+                         {"seed", m.noise.seed}};
+
+  const Lighting& l = s.lighting;
+  Json& lighting = doc["lighting"] = Json::object();
+  lighting["sun"] = l.sun ? Json{{"direction_to_sun", vec3_json(l.sun->direction_to_sun)},
+                                 {"irradiance", rgb_json(l.sun->irradiance)},
+                                 {"angular_radius_deg", l.sun->angular_radius_deg}}
+                          : Json(nullptr);
+  lighting["sky_radiance"] = l.sky_radiance ? rgb_json(*l.sky_radiance) : Json("auto");
+  Json lamps = Json::array();
+  for (const Lamp& lamp : l.lamps)
+    lamps.push_back(Json{{"position_m", vec3_json(lamp.position_m)},
+                         {"intensity_per_sr", rgb_json(lamp.intensity_per_sr)},
+                         {"spot_direction", vec3_json(lamp.spot_direction)},
+                         {"inner_angle_deg", lamp.inner_angle_deg},
+                         {"outer_angle_deg", lamp.outer_angle_deg}});
+  lighting["lamps"] = std::move(lamps);
+
+  const RenderSettings& r = s.render;
+  static constexpr const char* kQuality[] = {"draft", "normal", "final"};
+  doc["render"] = Json{{"quality", kQuality[static_cast<int>(r.quality)]},
+                       {"backend", r.backend == Backend::cpu ? "cpu" : "auto"},
+                       {"march_steps", r.march_steps},
+                       {"grid_step", r.grid_step},
+                       {"gradient_acceleration", r.gradient_acceleration},
+                       {"volumetric_shadows", r.volumetric_shadows},
+                       {"light_path_attenuation", r.light_path_attenuation},
+                       {"max_distance_m", r.max_distance_m},
+                       {"seed", r.seed},
+                       {"threads", r.threads}};
+  return doc;
+}
+
+// Pretty printing like dump(2), except that arrays of plain values stay on one line
+// ("position_m": [0.0, 1.6, 0.0]), which keeps vectors and colours readable.
+void write_pretty(const Json& j, int indent, std::string& out) {
+  const std::string pad(static_cast<std::size_t>(indent) + 2, ' ');
+  const std::string close_pad(static_cast<std::size_t>(indent), ' ');
+  if (j.is_object() && !j.empty()) {
+    out += "{\n";
+    bool first = true;
+    for (const auto& [key, value] : j.items()) {
+      if (!first) out += ",\n";
+      first = false;
+      out += pad + Json(key).dump() + ": ";
+      write_pretty(value, indent + 2, out);
+    }
+    out += "\n" + close_pad + "}";
+  } else if (j.is_array() && !j.empty()) {
+    const bool flat =
+        std::none_of(j.begin(), j.end(), [](const Json& e) { return e.is_structured(); });
+    out += flat ? "[" : "[\n";
+    for (std::size_t i = 0; i < j.size(); ++i) {
+      if (i > 0) out += flat ? ", " : ",\n";
+      if (!flat) out += pad;
+      write_pretty(j[i], indent + 2, out);
+    }
+    out += flat ? "]" : "\n" + close_pad + "]";
+  } else {
+    out += j.dump();
+  }
+}
+
+}  // namespace
+
+FogScene scene_from_json(const std::string& text, const std::string& source_name) {
+  const Reader r(source_name.empty() ? "<scene>" : source_name);
+  const Json doc = parse_text(text, r);
+  FogScene scene = read_document(doc, r);
+  try {
+    validate_scene(scene);
+  } catch (const Error& e) {
+    // e.what() is "<C++ path> = <value>: <rule>" (scene_validate.cpp); keep it whole after the
+    // JSON pointer so the message names the field both ways.
+    const std::string what = e.what();
+    const auto eq = what.find(" = ");
+    r.fail(eq == std::string::npos ? "" : json_pointer_for(what.substr(0, eq), doc), what);
+  }
+  return scene;
+}
+
+std::string scene_to_json(const FogScene& scene) {
+  validate_scene(scene);  // NaN and friends have no JSON spelling: refuse rather than corrupt
+  std::string out;
+  write_pretty(to_document(scene), 0, out);
+  out += "\n";
+  return out;
+}
+
+FogScene load_scene(const fs::path& path) {
+  const std::string name = path.string();
+  std::error_code ec;
+  if (fs::is_directory(path, ec))
+    throw Error(ErrorCode::io, name + ": is a folder, not a scene file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(ErrorCode::io, name + ": cannot open: " + std::strerror(errno));
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) throw Error(ErrorCode::io, name + ": cannot read: " + std::strerror(errno));
+  return scene_from_json(text.str(), name);
+}
+
+void save_scene(const fs::path& path, const FogScene& scene) {
+  const std::string text = scene_to_json(scene);  // throws before anything touches the disk
+  const std::string name = path.string();
+  detail::AtomicFile file(path);  // removes its temporary file unless committed
+  {
+    std::ofstream out(file.temp_path(), std::ios::binary | std::ios::trunc);
+    if (!out) {
+      const int err = errno;
+      std::error_code ec;
+      const fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+      if (!fs::is_directory(folder, ec))
+        throw Error(ErrorCode::io,
+                    name + ": cannot write: folder " + folder.string() + " does not exist");
+      throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(err));
+    }
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.close();
+    if (!out) throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(errno));
+  }
+  file.commit();
+}
+
+}  // namespace mr

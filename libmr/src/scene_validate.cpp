@@ -1,0 +1,162 @@
+// mr::validate_scene: every field of a FogScene checked against the ranges documented in
+// mr/scene.h and docs/scene.md, so that the scattering core can trust its input and a bad value
+// is reported where it was set rather than as NaN pixels far downstream.
+//
+// Message shape (one line): "<C++ field path> = <value found>: <rule>", e.g.
+// "lighting.lamps[2].position_m.y = nan: must be finite". scene_json.cpp relies on this shape:
+// it maps the path before " = " to a JSON pointer, so keep paths free of " = ".
+#include <charconv>
+#include <cmath>
+#include <string>
+
+#include "mr/error.h"
+#include "mr/scattering.h"
+#include "mr/scene.h"
+
+namespace mr {
+
+namespace {
+
+constexpr int kMaxLamps = 64;       // the core's per-pixel light loop is sized for this
+constexpr double kMaxSigmaT = 1e4;  // 1/m; beyond this the fog is a wall within a millimetre
+constexpr int kMaxMarchSteps = 4096;
+constexpr int kMaxGridStep = 3;  // DESIGN.md section 3: M, N <= 3
+constexpr double kMaxSunRadiusDeg = 5;
+
+// Shortest text that reads back as the same value, so the message shows what the user wrote
+// ("1.2", not "1.200000"); to_chars spells non-finite values "nan", "inf", "-inf".
+template <typename T>
+std::string show(T v) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
+
+[[noreturn]] void fail(const std::string& path, const std::string& value, const std::string& rule) {
+  throw Error(ErrorCode::invalid_argument, path + " = " + value + ": " + rule);
+}
+
+// Comparisons are written so that NaN fails them (every comparison with NaN is false).
+void finite(const std::string& path, double v) {
+  if (!std::isfinite(v)) fail(path, show(v), "must be finite");
+}
+
+// T is float for colour channels, double otherwise: the message shows the value as stored.
+template <typename T>
+void closed(const std::string& path, T v, double lo, double hi) {
+  if (!(v >= lo && v <= hi)) fail(path, show(v), "must be in [" + show(lo) + ", " + show(hi) + "]");
+}
+
+void positive(const std::string& path, double v) {
+  if (!(std::isfinite(v) && v > 0)) fail(path, show(v), "must be finite and > 0");
+}
+
+void int_range(const std::string& path, int v, int lo, int hi, const std::string& note = "") {
+  if (v < lo || v > hi)
+    fail(path, std::to_string(v),
+         "must be in " + std::to_string(lo) + ".." + std::to_string(hi) + note);
+}
+
+void finite_vec(const std::string& path, const Vec3& v) {
+  finite(path + ".x", v.x);
+  finite(path + ".y", v.y);
+  finite(path + ".z", v.z);
+}
+
+// Directions are normalised by the core: the squared length must be a usable positive number.
+void direction(const std::string& path, const Vec3& v) {
+  finite_vec(path, v);
+  const double len2 = v.x * v.x + v.y * v.y + v.z * v.z;
+  const std::string value = "(" + show(v.x) + ", " + show(v.y) + ", " + show(v.z) + ")";
+  if (!(len2 > 0)) fail(path, value, "must have a non-zero length");
+  if (!std::isfinite(len2)) fail(path, value, "is too long to normalise; use a unit vector");
+}
+
+// Radiometric quantities: non-negative and finite per channel.
+void non_negative_rgb(const std::string& path, const Rgb& c) {
+  for (int i = 0; i < 3; ++i) {
+    const std::string p = path + "[" + std::to_string(i) + "]";
+    if (!(std::isfinite(c[i]) && c[i] >= 0)) fail(p, show(c[i]), "must be finite and >= 0");
+  }
+}
+
+void validate_pose(const CameraPose& pose) {
+  finite_vec("pose.position_m", pose.position_m);
+  finite("pose.yaw_deg", pose.yaw_deg);
+  closed("pose.pitch_deg", pose.pitch_deg, -90, 90);
+  closed("pose.roll_deg", pose.roll_deg, -180, 180);
+}
+
+void validate_medium(const Medium& m) {
+  for (int i = 0; i < 3; ++i)
+    closed("medium.sigma_t_per_m[" + std::to_string(i) + "]", m.sigma_t_per_m[i], 0, kMaxSigmaT);
+  for (int i = 0; i < 3; ++i) closed("medium.albedo[" + std::to_string(i) + "]", m.albedo[i], 0, 1);
+  // Open interval: |g| = 1 is a delta-function phase (HG's normalisation divides by zero).
+  if (!(m.g > -1 && m.g < 1)) fail("medium.g", show(m.g), "must be in (-1, 1)");
+  if (m.height_fog) {
+    finite("medium.height_fog.base_height_m", m.height_fog->base_height_m);
+    positive("medium.height_fog.scale_height_m", m.height_fog->scale_height_m);
+  }
+  // The layer bounds may be infinite (unbounded), never NaN, and must leave a non-empty layer.
+  if (std::isnan(m.layer_bottom_m))
+    fail("medium.layer_bottom_m", "nan", "must be a number or -inf");
+  if (std::isnan(m.layer_top_m)) fail("medium.layer_top_m", "nan", "must be a number or +inf");
+  if (!(m.layer_bottom_m < m.layer_top_m))
+    fail("medium.layer_bottom_m", show(m.layer_bottom_m),
+         "must be < medium.layer_top_m = " + show(m.layer_top_m));
+  closed("medium.noise.amplitude", m.noise.amplitude, 0, 1);
+  positive("medium.noise.scale_m", m.noise.scale_m);
+  int_range("medium.noise.octaves", m.noise.octaves, 1, 8);
+}
+
+void validate_lighting(const Lighting& l) {
+  if (l.sun) {
+    direction("lighting.sun.direction_to_sun", l.sun->direction_to_sun);
+    non_negative_rgb("lighting.sun.irradiance", l.sun->irradiance);
+    closed("lighting.sun.angular_radius_deg", l.sun->angular_radius_deg, 0, kMaxSunRadiusDeg);
+  }
+  if (l.sky_radiance) non_negative_rgb("lighting.sky_radiance", *l.sky_radiance);
+  if (l.lamps.size() > static_cast<std::size_t>(kMaxLamps))
+    fail("lighting.lamps", std::to_string(l.lamps.size()) + " lamps",
+         "at most " + std::to_string(kMaxLamps) + " are supported");
+  for (std::size_t i = 0; i < l.lamps.size(); ++i) {
+    const Lamp& lamp = l.lamps[i];
+    const std::string p = "lighting.lamps[" + std::to_string(i) + "]";
+    finite_vec(p + ".position_m", lamp.position_m);
+    non_negative_rgb(p + ".intensity_per_sr", lamp.intensity_per_sr);
+    direction(p + ".spot_direction", lamp.spot_direction);
+    if (!(lamp.outer_angle_deg > 0 && lamp.outer_angle_deg <= 180))
+      fail(p + ".outer_angle_deg", show(lamp.outer_angle_deg), "must be in (0, 180]");
+    if (!(lamp.inner_angle_deg >= 0 && lamp.inner_angle_deg <= lamp.outer_angle_deg))
+      fail(p + ".inner_angle_deg", show(lamp.inner_angle_deg),
+           "must be in [0, outer_angle_deg = " + show(lamp.outer_angle_deg) + "]");
+  }
+}
+
+void validate_render(const RenderSettings& r) {
+  // Enums can hold any int after a cast (or a stray memcpy); the core switches on them.
+  const int q = static_cast<int>(r.quality);
+  if (q < static_cast<int>(Quality::draft) || q > static_cast<int>(Quality::final))
+    fail("render.quality", std::to_string(q), "not a valid mr::Quality");
+  const int b = static_cast<int>(r.backend);
+  if (b < static_cast<int>(Backend::automatic) || b > static_cast<int>(Backend::cpu))
+    fail("render.backend", std::to_string(b), "not a valid mr::Backend");
+  int_range("render.march_steps", r.march_steps, 0, kMaxMarchSteps,
+            " (0: from the quality preset)");
+  int_range("render.grid_step", r.grid_step, 0, kMaxGridStep, " (0: from the quality preset)");
+  if (!(std::isfinite(r.max_distance_m) && r.max_distance_m >= 0))
+    fail("render.max_distance_m", show(r.max_distance_m), "must be finite and >= 0 (0: automatic)");
+  if (r.threads < 0)
+    fail("render.threads", std::to_string(r.threads), "must be >= 0 (0: all cores)");
+}
+
+}  // namespace
+
+void validate_scene(const FogScene& scene) {
+  validate_pose(scene.pose);
+  validate_medium(scene.medium);
+  validate_lighting(scene.lighting);
+  validate_render(scene.render);
+}
+
+}  // namespace mr

@@ -1,0 +1,290 @@
+#include "render/embree_scene.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <numbers>
+#include <string>
+#include <utility>
+
+#include "mr/error.h"
+
+namespace mr::render {
+
+/// Collects the errors Embree reports through its callback. The callback runs inside Embree
+/// (possibly on a TBB worker during a build), where throwing would unwind through C code; so it
+/// only records, and the constructor throws mr::Error(internal) after each Embree call sequence.
+struct OccluderScene::ErrorSink {
+  std::mutex mutex;
+  std::string first_message;
+  bool failed = false;
+
+  static void callback(void* user, RTCError code, const char* message) {
+    auto* sink = static_cast<ErrorSink*>(user);
+    const std::lock_guard lock(sink->mutex);
+    if (sink->failed) return;
+    sink->failed = true;
+    sink->first_message =
+        "Embree error " + std::to_string(int(code)) + ": " + (message ? message : "(no message)");
+  }
+  void throw_if_failed() {
+    const std::lock_guard lock(mutex);
+    if (failed) throw Error(ErrorCode::internal, first_message);
+  }
+};
+
+namespace {
+
+void validate_mesh(const TriangleMesh& mesh) {
+  if (mesh.positions.size() % 3 != 0)
+    throw Error(ErrorCode::invalid_argument, "occluder mesh has " +
+                                                 std::to_string(mesh.positions.size()) +
+                                                 " position floats, not a multiple of 3");
+  if (mesh.indices.size() % 3 != 0)
+    throw Error(ErrorCode::invalid_argument, "occluder mesh has " +
+                                                 std::to_string(mesh.indices.size()) +
+                                                 " indices, not a multiple of 3");
+  const std::size_t vertices = mesh.vertex_count();
+  for (std::size_t i = 0; i < mesh.indices.size(); ++i)
+    if (mesh.indices[i] >= vertices)
+      throw Error(ErrorCode::invalid_argument, "occluder mesh index " + std::to_string(i) + " is " +
+                                                   std::to_string(mesh.indices[i]) +
+                                                   ", but the mesh has " +
+                                                   std::to_string(vertices) + " vertices");
+  for (std::size_t i = 0; i < mesh.positions.size(); ++i)
+    if (!std::isfinite(mesh.positions[i]))
+      throw Error(ErrorCode::invalid_argument,
+                  "occluder mesh vertex " + std::to_string(i / 3) + " is not finite");
+}
+
+constexpr float kInfF = std::numeric_limits<float>::infinity();
+
+}  // namespace
+
+OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& options)
+    : mesh_(std::move(mesh)), errors_(std::make_unique<ErrorSink>()) {
+  validate_mesh(mesh_);
+  device_ = rtcNewDevice(nullptr);
+  if (!device_)
+    throw Error(ErrorCode::internal, "Embree could not create a device (error " +
+                                         std::to_string(int(rtcGetDeviceError(nullptr))) + ")");
+  rtcSetDeviceErrorFunction(device_, &ErrorSink::callback, errors_.get());
+  try {
+    native_ray8_ = rtcGetDeviceProperty(device_, RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED) != 0;
+    const RTCBuildQuality quality =
+        options.build_quality == BuildQuality::low    ? RTC_BUILD_QUALITY_LOW
+        : options.build_quality == BuildQuality::high ? RTC_BUILD_QUALITY_HIGH
+                                                      : RTC_BUILD_QUALITY_MEDIUM;
+    scene_ = rtcNewScene(device_);
+    errors_->throw_if_failed();
+    rtcSetSceneBuildQuality(scene_, quality);
+    if (options.robust) rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    const std::size_t triangles = mesh_.triangle_count();
+    if (triangles > 0) {
+      // Embree reads vertices with 16-byte loads: the last one needs a float of padding.
+      const std::size_t vertices = mesh_.vertex_count();
+      mesh_.positions.push_back(0.0f);
+      RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+      rtcSetGeometryBuildQuality(geometry, quality);
+      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                 mesh_.positions.data(), 0, 3 * sizeof(float), vertices);
+      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                 mesh_.indices.data(), 0, 3 * sizeof(std::uint32_t), triangles);
+      rtcCommitGeometry(geometry);
+      rtcAttachGeometry(scene_, geometry);
+      rtcReleaseGeometry(geometry);  // the scene holds its own reference
+      errors_->throw_if_failed();
+    }
+    rtcCommitScene(scene_);
+    errors_->throw_if_failed();
+  } catch (...) {
+    release();
+    throw;
+  }
+}
+
+OccluderScene::~OccluderScene() {
+  release();
+}
+
+void OccluderScene::release() noexcept {
+  if (scene_) rtcReleaseScene(scene_);
+  if (device_) rtcReleaseDevice(device_);
+  scene_ = nullptr;
+  device_ = nullptr;
+}
+
+OccluderScene::OccluderScene(OccluderScene&& other) noexcept
+    : mesh_(std::move(other.mesh_)),  // moving a vector keeps its buffer: Embree's view stays valid
+      errors_(std::move(other.errors_)),
+      device_(std::exchange(other.device_, nullptr)),
+      scene_(std::exchange(other.scene_, nullptr)),
+      native_ray8_(other.native_ray8_) {}
+
+OccluderScene& OccluderScene::operator=(OccluderScene&& other) noexcept {
+  if (this != &other) {
+    release();  // before the mesh it shares goes away
+    mesh_ = std::move(other.mesh_);
+    errors_ = std::move(other.errors_);
+    device_ = std::exchange(other.device_, nullptr);
+    scene_ = std::exchange(other.scene_, nullptr);
+    native_ray8_ = other.native_ray8_;
+  }
+  return *this;
+}
+
+bool OccluderScene::occluded(const std::array<float, 3>& origin,
+                             const std::array<float, 3>& direction, float t_near,
+                             float t_far) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay ray;
+  ray.org_x = origin[0];
+  ray.org_y = origin[1];
+  ray.org_z = origin[2];
+  ray.tnear = t_near;
+  ray.dir_x = direction[0];
+  ray.dir_y = direction[1];
+  ray.dir_z = direction[2];
+  ray.time = 0.0f;
+  ray.tfar = t_far;
+  ray.mask = 0xFFFFFFFFu;
+  ray.id = 0;
+  ray.flags = 0;
+  rtcOccluded1(scene_, &context, &ray);
+  return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
+}
+
+void OccluderScene::occluded8(const RayPacket8& rays, bool occluded_out[8]) const {
+  if (!native_ray8_) {
+    for (int k = 0; k < 8; ++k)
+      occluded_out[k] = rays.valid[k] != 0 &&
+                        occluded({rays.origin_x[k], rays.origin_y[k], rays.origin_z[k]},
+                                 {rays.direction_x[k], rays.direction_y[k], rays.direction_z[k]},
+                                 rays.t_near[k], rays.t_far[k]);
+    return;
+  }
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  alignas(32) int valid[8];
+  alignas(32) RTCRay8 packet;
+  for (int k = 0; k < 8; ++k) {
+    valid[k] = rays.valid[k] ? -1 : 0;
+    packet.org_x[k] = rays.origin_x[k];
+    packet.org_y[k] = rays.origin_y[k];
+    packet.org_z[k] = rays.origin_z[k];
+    packet.tnear[k] = rays.t_near[k];
+    packet.dir_x[k] = rays.direction_x[k];
+    packet.dir_y[k] = rays.direction_y[k];
+    packet.dir_z[k] = rays.direction_z[k];
+    packet.time[k] = 0.0f;
+    packet.tfar[k] = rays.t_far[k];
+    packet.mask[k] = 0xFFFFFFFFu;
+    packet.id[k] = unsigned(k);
+    packet.flags[k] = 0;
+  }
+  rtcOccluded8(valid, scene_, &context, &packet);
+  for (int k = 0; k < 8; ++k) occluded_out[k] = valid[k] != 0 && packet.tfar[k] < 0.0f;
+}
+
+float OccluderScene::intersect_distance(const std::array<float, 3>& origin,
+                                        const std::array<float, 3>& direction, float t_near,
+                                        float t_far) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit hit;
+  hit.ray.org_x = origin[0];
+  hit.ray.org_y = origin[1];
+  hit.ray.org_z = origin[2];
+  hit.ray.tnear = t_near;
+  hit.ray.dir_x = direction[0];
+  hit.ray.dir_y = direction[1];
+  hit.ray.dir_z = direction[2];
+  hit.ray.time = 0.0f;
+  hit.ray.tfar = t_far;
+  hit.ray.mask = 0xFFFFFFFFu;
+  hit.ray.id = 0;
+  hit.ray.flags = 0;
+  hit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  hit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(scene_, &context, &hit);
+  return hit.hit.geomID != RTC_INVALID_GEOMETRY_ID ? hit.ray.tfar : kInfF;
+}
+
+namespace {
+
+/// A 32-bit integer hash with good avalanche (Wellons' "lowbias32"): the RNG of ambient
+/// occlusion, so results depend only on the seed and the ray number.
+inline std::uint32_t hash32(std::uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352dU;
+  x ^= x >> 15;
+  x *= 0x846ca68bU;
+  x ^= x >> 16;
+  return x;
+}
+inline float unit_float(std::uint32_t bits) {
+  return float(bits >> 8) * (1.0f / 16777216.0f);
+}
+
+}  // namespace
+
+float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& point,
+                        const std::array<float, 3>& normal, int ray_count, float max_distance_m,
+                        std::uint32_t seed) {
+  if (ray_count < 1)
+    throw Error(ErrorCode::invalid_argument,
+                "ambient occlusion needs at least 1 ray, got " + std::to_string(ray_count));
+  if (!(max_distance_m > 0) || !std::isfinite(max_distance_m))
+    throw Error(ErrorCode::invalid_argument, "ambient occlusion distance must be positive, got " +
+                                                 std::to_string(max_distance_m) + " m");
+  const double n_len = std::sqrt(double(normal[0]) * normal[0] + double(normal[1]) * normal[1] +
+                                 double(normal[2]) * normal[2]);
+  if (!(n_len > 0) || !std::isfinite(n_len))
+    throw Error(ErrorCode::invalid_argument, "ambient occlusion normal is zero or not finite");
+  const double nx = normal[0] / n_len, ny = normal[1] / n_len, nz = normal[2] / n_len;
+  // Orthonormal basis around the normal (Duff et al. 2017, branchless).
+  const double sign = std::copysign(1.0, nz);
+  const double a = -1.0 / (sign + nz), b = nx * ny * a;
+  const double t1[3] = {1.0 + sign * nx * nx * a, sign * b, -sign * nx};
+  const double t2[3] = {b, sign + ny * ny * a, -ny};
+
+  // Start just off the surface: float positions far from the world origin are coarser.
+  const double point_norm = std::sqrt(double(point[0]) * point[0] + double(point[1]) * point[1] +
+                                      double(point[2]) * point[2]);
+  const float offset_m = float(std::max(1e-4, 1e-4 * point_norm));
+  const float origin[3] = {float(point[0] + offset_m * nx), float(point[1] + offset_m * ny),
+                           float(point[2] + offset_m * nz)};
+
+  const std::uint32_t stream = hash32(seed ^ 0x5bd1e995U);
+  int open = 0;
+  for (int first = 0; first < ray_count; first += 8) {
+    RayPacket8 packet;
+    for (int k = 0; k < 8; ++k) {
+      const int index = first + k;
+      packet.valid[k] = index < ray_count ? -1 : 0;
+      // Cosine-weighted direction, stratified in u1 (= sin^2 of the polar angle).
+      const std::uint32_t h1 = hash32(stream + 2u * std::uint32_t(index));
+      const std::uint32_t h2 = hash32(h1 ^ 0x68e31da4U);
+      const double u1 = (std::min(index, ray_count - 1) + unit_float(h1)) / ray_count;
+      const double phi = 2.0 * std::numbers::pi * unit_float(h2);
+      const double r = std::sqrt(u1), cos_theta = std::sqrt(std::max(0.0, 1.0 - u1));
+      const double lx = r * std::cos(phi), ly = r * std::sin(phi);
+      packet.origin_x[k] = origin[0];
+      packet.origin_y[k] = origin[1];
+      packet.origin_z[k] = origin[2];
+      packet.direction_x[k] = float(lx * t1[0] + ly * t2[0] + cos_theta * nx);
+      packet.direction_y[k] = float(lx * t1[1] + ly * t2[1] + cos_theta * ny);
+      packet.direction_z[k] = float(lx * t1[2] + ly * t2[2] + cos_theta * nz);
+      packet.t_near[k] = 0.0f;
+      packet.t_far[k] = max_distance_m;
+    }
+    bool blocked[8];
+    scene.occluded8(packet, blocked);
+    for (int k = 0; k < 8 && first + k < ray_count; ++k) open += blocked[k] ? 0 : 1;
+  }
+  return float(open) / float(ray_count);
+}
+
+}  // namespace mr::render

@@ -1,0 +1,51 @@
+// Private to libmr: the participating medium as the scattering core evaluates it: density,
+// closed-form optical depth along rays (DESIGN.md section 3), and the inverse map from optical
+// depth back to distance that places march steps uniformly in transmittance.
+#pragma once
+
+#include <array>
+#include <cmath>
+
+#include "mr/scene.h"
+
+namespace mr::render {
+
+using Vec3d = std::array<double, 3>;
+
+/// A ray o + t w inside the medium, with the parts of the medium's closed form that depend only
+/// on the ray precomputed. All optical depths here are of the SMOOTH density (no noise) and for
+/// a unit extinction: multiply by sigma_t (per channel) to get the channel's optical depth.
+class RayDensity {
+ public:
+  RayDensity(const Medium& medium, const Vec3d& origin, const Vec3d& direction);
+
+  /// Unit-extinction optical depth from t0 to t1 (t1 may be +inf), >= 0; +inf if the ray runs
+  /// forever through density bounded away from 0.
+  double optical_depth(double t0, double t1) const;
+  /// The t >= 0 where optical_depth(0, t) == target (target < optical_depth(0, inf)).
+  double distance_at_optical_depth(double target) const;
+  /// Density rho at distance t (smooth part; 0 outside the layer).
+  double density(double t) const;
+
+ private:
+  // Inside the layer [t_enter, t_exit] the density is k * exp(-a t) (a = w_y / H; a = 0 and
+  // k = 1 for homogeneous fog).
+  double t_enter_ = 0, t_exit_ = 0;
+  double k_ = 0, a_ = 0;
+  bool empty_ = true;
+  double integral_from_enter(double t) const;  // of k exp(-a s) ds over [t_enter, t]
+};
+
+/// Smooth density at a world point (0 outside the layer).
+double density_at(const Medium& medium, const Vec3d& x);
+
+/// The noise modulation max(0, 1 + amplitude * fbm(x / scale)) (1 when noise is off).
+double noise_modulation(const Medium::Noise& noise, const Vec3d& x);
+
+/// Henyey-Greenstein phase function; cos_theta = dot(view direction, direction to the light).
+inline double henyey_greenstein(double g, double cos_theta) {
+  const double denom = 1.0 + g * g - 2.0 * g * cos_theta;
+  return (1.0 - g * g) / (4.0 * 3.14159265358979323846 * denom * std::sqrt(denom));
+}
+
+}  // namespace mr::render

@@ -1,0 +1,569 @@
+#include "render/occluder_mesh.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "mr/error.h"
+
+namespace mr::render {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+struct V3 {
+  double x = 0, y = 0, z = 0;
+};
+inline V3 operator+(V3 a, V3 b) {
+  return {a.x + b.x, a.y + b.y, a.z + b.z};
+}
+inline V3 operator-(V3 a, V3 b) {
+  return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+inline V3 operator*(double s, V3 a) {
+  return {s * a.x, s * a.y, s * a.z};
+}
+inline double dot(V3 a, V3 b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+inline V3 cross(V3 a, V3 b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline double length(V3 a) {
+  return std::sqrt(dot(a, a));
+}
+
+/// The camera's rays in the world frame. Pixel (x, y)'s centre is image point (x + 0.5, y + 0.5)
+/// and its corners are the integer image points, as in mr::CameraPose::ray_direction.
+struct RayFrame {
+  V3 forward, right, up;
+  double cx = 0, cy = 0, inv_focal_px = 0;
+
+  RayFrame(const Camera& camera, const CameraPose& pose) {
+    const auto axes = pose.axes();
+    forward = {axes[0].x, axes[0].y, axes[0].z};
+    right = {axes[1].x, axes[1].y, axes[1].z};
+    up = {axes[2].x, axes[2].y, axes[2].z};
+    cx = camera.cx;
+    cy = camera.cy;
+    inv_focal_px = 1.0 / camera.focal_px;
+  }
+  /// Direction through image point (u, v), scaled so its forward component is 1: the point at
+  /// z-depth z on the ray is z * direction.
+  V3 direction(double u, double v) const {
+    const double a = (u - cx) * inv_focal_px, b = (v - cy) * inv_focal_px;
+    return a * right - b * up + forward;
+  }
+  V3 unit_direction(double u, double v) const {
+    const V3 d = direction(u, v);
+    return (1.0 / length(d)) * d;
+  }
+};
+
+/// One pixel's surface sample, relative to the camera position (world orientation). Floats keep
+/// the 1080p working set small; the inputs are float anyway.
+struct Sample {
+  float x = 0, y = 0, z = 0;  ///< the 3D point minus the camera position, metres
+  float distance_m = 0;       ///< along the centre ray; 0 = no surface
+  float inv_z = 0;            ///< 1 / z-depth; affine in image coordinates on any plane
+
+  bool valid() const { return distance_m > 0; }
+  V3 point() const { return {x, y, z}; }
+};
+
+/// Relative gap between two distances, the quantity MeshOptions::discontinuity_ratio bounds.
+inline double relative_gap(double d1, double d2) {
+  return std::abs(d1 - d2) / std::min(d1, d2);
+}
+
+void check_inputs(ConstImageView distance_m, const Camera& camera, double discontinuity_ratio) {
+  if (distance_m.channels != 1)
+    throw Error(ErrorCode::invalid_argument, "depth map has " +
+                                                 std::to_string(distance_m.channels) +
+                                                 " channels, expected 1 (distance in metres)");
+  if (distance_m.width != camera.width || distance_m.height != camera.height)
+    throw Error(ErrorCode::size_mismatch, "depth map is " + std::to_string(distance_m.width) + "x" +
+                                              std::to_string(distance_m.height) + ", camera is " +
+                                              std::to_string(camera.width) + "x" +
+                                              std::to_string(camera.height));
+  if (distance_m.width <= 0 || distance_m.height <= 0 || !distance_m.data)
+    throw Error(ErrorCode::invalid_argument, "depth map is empty");
+  if (!(camera.focal_px > 0) || !std::isfinite(camera.focal_px))
+    throw Error(ErrorCode::invalid_argument,
+                "camera focal length must be positive, got " + std::to_string(camera.focal_px));
+  if (!(discontinuity_ratio > 0) || !std::isfinite(discontinuity_ratio))
+    throw Error(ErrorCode::invalid_argument,
+                "discontinuity ratio must be positive, got " + std::to_string(discontinuity_ratio));
+}
+
+std::vector<Sample> compute_samples(ConstImageView distance_m, const RayFrame& frame) {
+  const int width = distance_m.width;
+  std::vector<Sample> samples(distance_m.pixel_count());
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, distance_m.height), [&](const tbb::blocked_range<int>& rows) {
+        for (int y = rows.begin(); y < rows.end(); ++y) {
+          const float* row = distance_m.row(y);
+          Sample* out = samples.data() + std::size_t(y) * width;
+          for (int x = 0; x < width; ++x) {
+            const double d = row[x];
+            // load_depth maps NaN, 0 and negatives to +inf (no surface); do the
+            // same here for depth maps from elsewhere.
+            if (!(d > 0 && d < kInf)) {
+              out[x] = Sample{};
+              continue;
+            }
+            const V3 dir = frame.direction(x + 0.5, y + 0.5);
+            const double len = length(dir);
+            const V3 p = (d / len) * dir;
+            out[x] = Sample{float(p.x), float(p.y), float(p.z), float(d), float(len / d)};
+          }
+        }
+      });
+  return samples;
+}
+
+/// How well the pixel continues the surface of the neighbours n1 (adjacent) and n2 (next one out)
+/// on one side: the relative error of linearly extrapolating their inverse depth to the pixel
+/// (exact for any plane, however slanted). With only n1 available: the plain relative gap.
+inline double side_error(const Sample& c, const Sample* n1, const Sample* n2) {
+  if (!n1) return kInf;
+  if (!n2) return relative_gap(c.distance_m, n1->distance_m);
+  const double predicted = 2.0 * double(n1->inv_z) - double(n2->inv_z);
+  return std::abs(double(c.inv_z) - predicted) / double(c.inv_z);
+}
+
+/// The surface tangent at pixel c along one image axis (m = the neighbours before it, p = after
+/// it; nullptr where outside the image or without a surface). Returns false when neither
+/// neighbour continues c's surface.
+bool axis_tangent(const Sample& c, const Sample* m1, const Sample* m2, const Sample* p1,
+                  const Sample* p2, double ratio, V3& tangent) {
+  const double e_minus = side_error(c, m1, m2);
+  const double e_plus = side_error(c, p1, p2);
+  const bool minus_ok =
+      m1 && (e_minus <= ratio || relative_gap(c.distance_m, m1->distance_m) <= ratio);
+  const bool plus_ok =
+      p1 && (e_plus <= ratio || relative_gap(c.distance_m, p1->distance_m) <= ratio);
+  if (minus_ok && plus_ok) {
+    // Central differences where the surface is planar across the pixel (second difference of
+    // inverse depth about as small as on either side): symmetric and least noisy. Otherwise
+    // (a crease at the pixel) the one-sided difference on the flatter side keeps the pixel's
+    // own face.
+    const double e_centre =
+        std::abs(double(m1->inv_z) - 2.0 * double(c.inv_z) + double(p1->inv_z)) / double(c.inv_z);
+    if (e_centre <= std::max(2.0 * std::min(e_minus, e_plus), 1e-4)) {
+      tangent = p1->point() - m1->point();
+      return true;
+    }
+  }
+  if (minus_ok && (!plus_ok || e_minus <= e_plus)) {
+    tangent = c.point() - m1->point();
+    return true;
+  }
+  if (plus_ok) {
+    tangent = p1->point() - c.point();
+    return true;
+  }
+  return false;
+}
+
+/// Unit normal of valid pixel (x, y), facing the camera.
+V3 pixel_normal(const std::vector<Sample>& samples, int width, int height, int x, int y,
+                double ratio) {
+  const Sample* base = samples.data();
+  auto at = [&](int px, int py) -> const Sample* {
+    if (px < 0 || py < 0 || px >= width || py >= height) return nullptr;
+    const Sample* s = base + std::size_t(py) * width + px;
+    return s->valid() ? s : nullptr;
+  };
+  const Sample& c = *at(x, y);
+  const V3 ray = (1.0 / double(c.distance_m)) * c.point();
+  V3 tx, ty;
+  const bool has_x =
+      axis_tangent(c, at(x - 1, y), at(x - 2, y), at(x + 1, y), at(x + 2, y), ratio, tx);
+  const bool has_y =
+      axis_tangent(c, at(x, y - 1), at(x, y - 2), at(x, y + 1), at(x, y + 2), ratio, ty);
+  V3 n = -1.0 * ray;
+  if (has_x && has_y) {
+    const V3 m = cross(tx, ty);
+    if (length(m) > 0) n = m;
+  } else if (has_x || has_y) {
+    // One tangent only: of the normals perpendicular to it, the one closest to facing the
+    // camera (the least committal guess).
+    const V3 t = has_x ? tx : ty;
+    const double t2 = dot(t, t);
+    if (t2 > 0) {
+      const V3 m = n - (dot(n, t) / t2) * t;
+      if (length(m) > 1e-9) n = m;
+    }
+  }
+  if (dot(n, ray) > 0) n = -1.0 * n;
+  return (1.0 / length(n)) * n;
+}
+
+/// Writes the unit normal of every pixel (0 where there is no surface) to normals_out, 3 floats
+/// per pixel, rows contiguous.
+void compute_normals(const std::vector<Sample>& samples, int width, int height, double ratio,
+                     float* normals_out) {
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      for (int x = 0; x < width; ++x) {
+        const std::size_t i = std::size_t(y) * width + x;
+        float* out = normals_out + 3 * i;
+        if (!samples[i].valid()) {
+          out[0] = out[1] = out[2] = 0.0f;
+          continue;
+        }
+        const V3 n = pixel_normal(samples, width, height, x, y, ratio);
+        out[0] = float(n.x);
+        out[1] = float(n.y);
+        out[2] = float(n.z);
+      }
+    }
+  });
+}
+
+/// A pixel's plane: unit normal n (facing the camera) and offset h = dot(n, point - camera),
+/// negative. A camera ray with unit direction w meets it at distance h / dot(n, w).
+struct Plane {
+  float nx = 0, ny = 0, nz = 0, h = 0;
+  V3 normal() const { return {nx, ny, nz}; }
+};
+
+/// Distance at which the plane of a pixel at distance d_m meets the unit ray w, or d_m itself
+/// when the ray meets the plane nearly edge-on or behind the camera (the extrapolated plane then
+/// says nothing reliable about the ray; in practice: rays just past the horizon of a ground
+/// plane). A factor 4 window admits every legitimate case, where the pixel's own centre ray is
+/// at most a pixel away.
+inline double plane_distance(const Plane& plane, double d_m, V3 w) {
+  const double den = dot(plane.normal(), w);
+  if (den < 0) {
+    const double t = double(plane.h) / den;
+    if (t >= 0.25 * d_m && t <= 4.0 * d_m) return t;
+  }
+  return d_m;
+}
+
+/// Whether neighbouring pixels p and q lie on one continuous surface (MeshOptions).
+inline bool continuous(const Sample& p, const Plane& pp, const Sample& q, const Plane& pq,
+                       double ratio) {
+  const double dp = p.distance_m, dq = q.distance_m;
+  if (relative_gap(dp, dq) <= ratio) return true;
+  // Slanted surfaces: each pixel's plane must predict the other's distance. Requiring both
+  // keeps a foreground silhouette apart from a background that one plane happens to graze.
+  const V3 wq = (1.0 / dq) * q.point(), wp = (1.0 / dp) * p.point();
+  const double den_pq = dot(pp.normal(), wq), den_qp = dot(pq.normal(), wp);
+  if (!(den_pq < 0 && den_qp < 0)) return false;
+  const double t_pq = double(pp.h) / den_pq, t_qp = double(pq.h) / den_qp;
+  return relative_gap(t_pq, dq) <= ratio && relative_gap(t_qp, dp) <= ratio;
+}
+
+// Per-pixel flags.
+constexpr std::uint8_t kValid = 1, kRightContinuous = 2, kDownContinuous = 4;
+
+/// How the up-to-four pixels around a corner share it. Slots: 0 = top-left, 1 = top-right,
+/// 2 = bottom-left, 3 = bottom-right pixel. Key bits 0-3: slot has a surface; bits 4-7: the
+/// pairs (TL,TR), (BL,BR), (TL,BL), (TR,BR) are continuous. Pixels connected through continuous
+/// pairs share one vertex (`label` numbers the groups 0..count-1 in slot order).
+struct CornerGroups {
+  std::uint8_t count = 0;
+  std::array<std::uint8_t, 4> label{0xFF, 0xFF, 0xFF, 0xFF};
+};
+
+constexpr std::array<CornerGroups, 256> make_corner_table() {
+  std::array<CornerGroups, 256> table{};
+  constexpr int pairs[4][2] = {{0, 1}, {2, 3}, {0, 2}, {1, 3}};
+  for (int key = 0; key < 256; ++key) {
+    int parent[4] = {0, 1, 2, 3};
+    auto find = [&parent](int a) {
+      while (parent[a] != a) a = parent[a];
+      return a;
+    };
+    for (int e = 0; e < 4; ++e) {
+      const int a = pairs[e][0], b = pairs[e][1];
+      if (!((key >> (4 + e)) & 1) || !((key >> a) & 1) || !((key >> b) & 1)) continue;
+      const int ra = find(a), rb = find(b);
+      if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+    }
+    CornerGroups groups;
+    int root_label[4] = {-1, -1, -1, -1};
+    for (int s = 0; s < 4; ++s) {
+      if (!((key >> s) & 1)) continue;
+      const int r = find(s);
+      if (root_label[r] < 0) root_label[r] = groups.count++;
+      groups.label[s] = std::uint8_t(root_label[r]);
+    }
+    table[key] = groups;
+  }
+  return table;
+}
+constexpr std::array<CornerGroups, 256> kCornerTable = make_corner_table();
+
+constexpr int kTopLeft = 0, kTopRight = 1, kBottomLeft = 2, kBottomRight = 3;
+
+}  // namespace
+
+Image estimate_normals(ConstImageView distance_m, const Camera& camera, const CameraPose& pose,
+                       double discontinuity_ratio) {
+  check_inputs(distance_m, camera, discontinuity_ratio);
+  const RayFrame frame(camera, pose);
+  const std::vector<Sample> samples = compute_samples(distance_m, frame);
+  Image normals =
+      Image::uninitialized(distance_m.width, distance_m.height, 3, {"N.x", "N.y", "N.z"});
+  compute_normals(samples, distance_m.width, distance_m.height, discontinuity_ratio,
+                  normals.data());
+  return normals;
+}
+
+TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& camera,
+                                       const CameraPose& pose, const MeshOptions& options) {
+  check_inputs(distance_m, camera, options.discontinuity_ratio);
+  if (!(options.thickness_m >= 0) || !std::isfinite(options.thickness_m))
+    throw Error(ErrorCode::invalid_argument,
+                "mesh thickness must be >= 0 metres, got " + std::to_string(options.thickness_m));
+  const int width = distance_m.width, height = distance_m.height;
+  const double ratio = options.discontinuity_ratio;
+  const RayFrame frame(camera, pose);
+  const V3 origin{pose.position_m.x, pose.position_m.y, pose.position_m.z};
+  const std::size_t pixel_count = distance_m.pixel_count();
+  auto pixel_index = [width](int x, int y) { return std::size_t(y) * width + x; };
+
+  // 1. Points, normals and planes per pixel.
+  const std::vector<Sample> samples = compute_samples(distance_m, frame);
+  std::vector<Plane> planes(pixel_count);
+  {
+    std::vector<float> normals(3 * pixel_count);
+    compute_normals(samples, width, height, ratio, normals.data());
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, pixel_count),
+        [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t i = r.begin(); i < r.end(); ++i) {
+            const float* n = &normals[3 * i];
+            const Sample& s = samples[i];
+            planes[i] = Plane{n[0], n[1], n[2], float(dot(V3{n[0], n[1], n[2]}, s.point()))};
+          }
+        });
+  }
+
+  // 2. Continuity with the right and lower neighbours; surface pixels per row.
+  std::vector<std::uint8_t> flags(pixel_count);
+  // row_pixel_offset[y + 1] first counts row y's surface pixels, then (prefix sum) is the number
+  // of surface pixels in rows 0..y.
+  std::vector<std::uint64_t> row_pixel_offset(height + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      std::uint64_t count = 0;
+      for (int x = 0; x < width; ++x) {
+        const std::size_t i = pixel_index(x, y);
+        const Sample& p = samples[i];
+        if (!p.valid()) {
+          flags[i] = 0;
+          continue;
+        }
+        ++count;
+        std::uint8_t f = kValid;
+        if (x + 1 < width && samples[i + 1].valid() &&
+            continuous(p, planes[i], samples[i + 1], planes[i + 1], ratio))
+          f |= kRightContinuous;
+        const std::size_t below = i + width;
+        if (y + 1 < height && samples[below].valid() &&
+            continuous(p, planes[i], samples[below], planes[below], ratio))
+          f |= kDownContinuous;
+        flags[i] = f;
+      }
+      row_pixel_offset[y + 1] = count;
+    }
+  });
+
+  // 3. Corner keys and vertex counts. Corner (i, j) is image point (i, j), 0 <= i <= width,
+  // 0 <= j <= height. corner_base first holds the offset within its row, then the global index
+  // of the corner's first vertex.
+  const int corner_width = width + 1, corner_height = height + 1;
+  const std::size_t corner_count = std::size_t(corner_width) * corner_height;
+  std::vector<std::uint8_t> corner_key(corner_count);
+  std::vector<std::uint32_t> corner_base(corner_count);
+  std::vector<std::uint64_t> row_vertex_offset(corner_height + 1, 0);
+  auto flags_at = [&](int x, int y) -> std::uint8_t {
+    return (x < 0 || y < 0 || x >= width || y >= height) ? 0 : flags[pixel_index(x, y)];
+  };
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, corner_height), [&](const tbb::blocked_range<int>& rows) {
+        for (int j = rows.begin(); j < rows.end(); ++j) {
+          std::uint32_t running = 0;
+          for (int i = 0; i < corner_width; ++i) {
+            const std::uint8_t tl = flags_at(i - 1, j - 1), tr = flags_at(i, j - 1);
+            const std::uint8_t bl = flags_at(i - 1, j), br = flags_at(i, j);
+            const unsigned key = (tl & kValid) | (tr & kValid) << 1 | (bl & kValid) << 2 |
+                                 (br & kValid) << 3 | ((tl & kRightContinuous) ? 1u << 4 : 0u) |
+                                 ((bl & kRightContinuous) ? 1u << 5 : 0u) |
+                                 ((tl & kDownContinuous) ? 1u << 6 : 0u) |
+                                 ((tr & kDownContinuous) ? 1u << 7 : 0u);
+            const std::size_t c = std::size_t(j) * corner_width + i;
+            corner_key[c] = std::uint8_t(key);
+            corner_base[c] = running;
+            running += kCornerTable[key].count;
+          }
+          row_vertex_offset[j + 1] = running;
+        }
+      });
+  for (int j = 0; j < corner_height; ++j) row_vertex_offset[j + 1] += row_vertex_offset[j];
+  for (int y = 0; y < height; ++y) row_pixel_offset[y + 1] += row_pixel_offset[y];
+  const std::uint64_t surface_vertices = row_vertex_offset[corner_height];
+  const std::uint64_t surface_pixels = row_pixel_offset[height];
+
+  // 4. Silhouette edges to extrude (optional): per pixel, bit s set when side s (0 top,
+  // 1 bottom, 2 left, 3 right) faces a farther discontinuous neighbour or the sky.
+  const bool extrude = options.thickness_m > 0;
+  std::vector<std::uint8_t> silhouette;
+  std::vector<std::uint64_t> row_edge_offset;
+  if (extrude) {
+    silhouette.assign(pixel_count, 0);
+    row_edge_offset.assign(height + 1, 0);
+    tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+      for (int y = rows.begin(); y < rows.end(); ++y) {
+        std::uint64_t count = 0;
+        for (int x = 0; x < width; ++x) {
+          const std::size_t i = pixel_index(x, y);
+          if (!(flags[i] & kValid)) continue;
+          const float d = samples[i].distance_m;
+          // Whether the neighbour across a side is behind a discontinuity, farther away.
+          auto behind = [&](int qx, int qy, bool linked) {
+            if (qx < 0 || qy < 0 || qx >= width || qy >= height) return false;  // image border
+            const Sample& q = samples[pixel_index(qx, qy)];
+            return !q.valid() || (!linked && q.distance_m > d);
+          };
+          std::uint8_t bits = 0;
+          if (behind(x, y - 1, y > 0 && (flags_at(x, y - 1) & kDownContinuous))) bits |= 1;
+          if (behind(x, y + 1, flags[i] & kDownContinuous)) bits |= 2;
+          if (behind(x - 1, y, x > 0 && (flags_at(x - 1, y) & kRightContinuous))) bits |= 4;
+          if (behind(x + 1, y, flags[i] & kRightContinuous)) bits |= 8;
+          silhouette[i] = bits;
+          count += std::popcount(bits);
+        }
+        row_edge_offset[y + 1] = count;
+      }
+    });
+    for (int y = 0; y < height; ++y) row_edge_offset[y + 1] += row_edge_offset[y];
+  }
+  const std::uint64_t extruded_edges = extrude ? row_edge_offset[height] : 0;
+  const std::uint64_t total_vertices = surface_vertices + 2 * extruded_edges;
+  if (total_vertices > std::numeric_limits<std::uint32_t>::max())
+    throw Error(ErrorCode::invalid_argument, "occluder mesh of a " + std::to_string(width) + "x" +
+                                                 std::to_string(height) + " depth map would need " +
+                                                 std::to_string(total_vertices) +
+                                                 " vertices, more than 32-bit indices hold");
+
+  TriangleMesh mesh;
+  // One float more than needed: OccluderScene pads the vertex buffer for Embree's 16-byte loads
+  // and should not have to reallocate 25 MB (1080p) to do it.
+  mesh.positions.reserve(3 * total_vertices + 1);
+  mesh.positions.resize(3 * total_vertices);
+  mesh.surface_triangle_count = 2 * surface_pixels;
+  mesh.indices.resize(3 * (mesh.surface_triangle_count + 2 * extruded_edges));
+
+  // 5. Vertex positions: per corner and group, the average distance at which the corner ray
+  // meets the planes of the group's pixels.
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, corner_height), [&](const tbb::blocked_range<int>& rows) {
+        for (int j = rows.begin(); j < rows.end(); ++j) {
+          for (int i = 0; i < corner_width; ++i) {
+            const std::size_t c = std::size_t(j) * corner_width + i;
+            const std::uint64_t base = row_vertex_offset[j] + corner_base[c];
+            corner_base[c] = std::uint32_t(base);
+            const CornerGroups& groups = kCornerTable[corner_key[c]];
+            if (groups.count == 0) continue;
+            const V3 w = frame.unit_direction(i, j);
+            double sum[4] = {0, 0, 0, 0};
+            int n[4] = {0, 0, 0, 0};
+            const int slot_x[4] = {i - 1, i, i - 1, i}, slot_y[4] = {j - 1, j - 1, j, j};
+            for (int s = 0; s < 4; ++s) {
+              if (groups.label[s] == 0xFF) continue;
+              const std::size_t p = pixel_index(slot_x[s], slot_y[s]);
+              sum[groups.label[s]] += plane_distance(planes[p], samples[p].distance_m, w);
+              ++n[groups.label[s]];
+            }
+            for (int g = 0; g < groups.count; ++g) {
+              const V3 v = origin + (sum[g] / n[g]) * w;
+              float* out = &mesh.positions[3 * (base + g)];
+              out[0] = float(v.x);
+              out[1] = float(v.y);
+              out[2] = float(v.z);
+            }
+          }
+        }
+      });
+
+  // 6. Two triangles per surface pixel, and the extrusions.
+  auto vertex_of = [&](int i, int j, int slot) {
+    const std::size_t c = std::size_t(j) * corner_width + i;
+    return corner_base[c] + kCornerTable[corner_key[c]].label[slot];
+  };
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      std::uint32_t* tri = mesh.indices.data() + 6 * row_pixel_offset[y];
+      for (int x = 0; x < width; ++x) {
+        if (!(flags[pixel_index(x, y)] & kValid)) continue;
+        // The pixel is the bottom-right neighbour of its top-left corner, and so on.
+        const std::uint32_t c00 = vertex_of(x, y, kBottomRight);
+        const std::uint32_t c10 = vertex_of(x + 1, y, kBottomLeft);
+        const std::uint32_t c01 = vertex_of(x, y + 1, kTopRight);
+        const std::uint32_t c11 = vertex_of(x + 1, y + 1, kTopLeft);
+        tri[0] = c00, tri[1] = c11, tri[2] = c01;
+        tri[3] = c00, tri[4] = c10, tri[5] = c11;
+        tri += 6;
+      }
+    }
+  });
+  if (extrude) {
+    const double thickness_m = options.thickness_m;
+    tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+      for (int y = rows.begin(); y < rows.end(); ++y) {
+        std::uint64_t edge = row_edge_offset[y];
+        for (int x = 0; x < width; ++x) {
+          const std::size_t i = pixel_index(x, y);
+          const std::uint8_t bits = silhouette[i];
+          if (!bits) continue;
+          const std::uint32_t c00 = vertex_of(x, y, kBottomRight);
+          const std::uint32_t c10 = vertex_of(x + 1, y, kBottomLeft);
+          const std::uint32_t c01 = vertex_of(x, y + 1, kTopRight);
+          const std::uint32_t c11 = vertex_of(x + 1, y + 1, kTopLeft);
+          const std::uint32_t ends[4][2] = {{c00, c10}, {c01, c11}, {c00, c01}, {c10, c11}};
+          const int neighbour_x[4] = {x, x, x - 1, x + 1}, neighbour_y[4] = {y - 1, y + 1, y, y};
+          for (int side = 0; side < 4; ++side) {
+            if (!((bits >> side) & 1)) continue;
+            // Stop at the background behind the silhouette, if there is one.
+            const Sample& q = samples[pixel_index(neighbour_x[side], neighbour_y[side])];
+            const double depth_m =
+                q.valid() ? std::min(thickness_m, double(q.distance_m - samples[i].distance_m))
+                          : thickness_m;
+            const std::uint64_t first = surface_vertices + 2 * edge;
+            for (int e = 0; e < 2; ++e) {
+              const float* v = &mesh.positions[3 * std::size_t(ends[side][e])];
+              const V3 front{v[0], v[1], v[2]};
+              const V3 ray = front - origin;
+              const V3 back = front + (depth_m / length(ray)) * ray;
+              float* out = &mesh.positions[3 * (first + e)];
+              out[0] = float(back.x);
+              out[1] = float(back.y);
+              out[2] = float(back.z);
+            }
+            std::uint32_t* tri = mesh.indices.data() + 3 * (mesh.surface_triangle_count + 2 * edge);
+            const std::uint32_t a = ends[side][0], b = ends[side][1];
+            const std::uint32_t a_back = std::uint32_t(first), b_back = std::uint32_t(first + 1);
+            tri[0] = a, tri[1] = b, tri[2] = b_back;
+            tri[3] = a, tri[4] = b_back, tri[5] = a_back;
+            ++edge;
+          }
+        }
+      }
+    });
+  }
+  return mesh;
+}
+
+}  // namespace mr::render

@@ -1,0 +1,557 @@
+#include "render/scattering_cpu.h"
+
+#include <tbb/blocked_range2d.h>
+#include <tbb/combinable.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <vector>
+
+#include "render/embree_scene.h"
+#include "render/medium.h"
+
+namespace mr::render {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kPi = std::numbers::pi;
+constexpr double kDeg = kPi / 180.0;
+constexpr double kGoldenAngle = 2.39996322972865332;
+
+Vec3d vec(const Vec3& v) { return {v.x, v.y, v.z}; }
+double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+Vec3d add(const Vec3d& a, const Vec3d& b, double s = 1) {
+  return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]};
+}
+Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec3d normalized(const Vec3d& a) {
+  const double n = std::sqrt(dot(a, a));
+  return {a[0] / n, a[1] / n, a[2] / n};
+}
+Vec3d cross(const Vec3d& a, const Vec3d& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+std::array<float, 3> f3(const Vec3d& v) { return {float(v[0]), float(v[1]), float(v[2])}; }
+
+// Interleaved gradient noise (Jimenez 2014): a per-pixel offset in [0, 1) whose neighbours
+// differ, so stratified jitter turns into fine noise the interpolation and eye average out.
+double pixel_jitter(int x, int y, std::uint32_t seed) {
+  const double ign = std::fmod(52.9829189 * std::fmod(0.06711056 * x + 0.00583715 * y, 1.0), 1.0);
+  const double rot = double((seed * 2654435761u) >> 8) / double(1u << 24);
+  return std::fmod(ign + rot, 1.0);
+}
+
+// The smooth cone falloff of a spot lamp (1 for point lamps).
+double spot_factor(const Lamp& lamp, const Vec3d& from_lamp_unit) {
+  if (lamp.outer_angle_deg >= 180.0) return 1.0;
+  const double cos_a = dot(normalized(vec(lamp.spot_direction)), from_lamp_unit);
+  const double cos_in = std::cos(lamp.inner_angle_deg * kDeg), cos_out = std::cos(lamp.outer_angle_deg * kDeg);
+  if (cos_a >= cos_in) return 1.0;
+  if (cos_a <= cos_out) return 0.0;
+  const double t = (cos_a - cos_out) / (cos_in - cos_out);
+  return t * t * (3 - 2 * t);
+}
+
+// A lamp's closest approach to a view ray: at distance tc along it, h away from it.
+struct LampOnRay {
+  double tc, h;
+};
+
+struct PixelSample {
+  double inscatter[3] = {0, 0, 0};
+  double camera_od[3] = {0, 0, 0};  // optical depth camera -> surface (or end of the sky march)
+  double shaft = 1;                 // fraction of march samples that saw the sun (1: no sun)
+  double ao = 1;                    // ambient occlusion at the surface
+};
+
+class Core {
+ public:
+  Core(const CoreInputs& in, const MarchPlan& plan) : in_(in), plan_(plan), scene_(*in.scene) {
+    const Medium& m = scene_.medium;
+    for (int c = 0; c < 3; ++c) sigma_[c] = m.sigma_t_per_m[c];
+    sigma_mean_ = (sigma_[0] + sigma_[1] + sigma_[2]) / 3.0;
+    sigma_min_ = std::min({sigma_[0], sigma_[1], sigma_[2]});
+    if (scene_.lighting.sun) {
+      const Sun& sun = *scene_.lighting.sun;
+      sun_dir_ = normalized(vec(sun.direction_to_sun));
+      // An orthonormal frame around the sun direction for sampling its disk.
+      const Vec3d helper = std::fabs(sun_dir_[1]) < 0.9 ? Vec3d{0, 1, 0} : Vec3d{1, 0, 0};
+      sun_u_ = normalized(cross(helper, sun_dir_));
+      sun_v_ = cross(sun_dir_, sun_u_);
+      sun_tan_radius_ = std::tan(sun.angular_radius_deg * kDeg);
+      // Light-path optical depth toward the sun does not depend on x/z: only on height.
+    }
+    origin_ = vec(scene_.pose.position_m);
+    constant_source_ = !scene_.lighting.sun && scene_.lighting.lamps.empty() &&
+                       scene_.medium.noise.amplitude <= 0;
+  }
+
+  std::size_t shadow_rays() const { return rays_.combine(std::plus<>()); }
+
+  Vec3d ray(int x, int y) const { return vec(scene_.pose.ray_direction(*in_.camera, x, y)); }
+
+  // The march's far end: the surface, or for the sky where the fog has (almost) ended.
+  double march_length(const RayDensity& rd, double distance) const {
+    if (std::isfinite(distance)) return distance;
+    if (scene_.render.max_distance_m > 0) return scene_.render.max_distance_m;
+    constexpr double kMax = 100e3;
+    if (sigma_min_ <= 0) return kMax;
+    const double od_inf = rd.optical_depth(0, kInf);
+    // Transmittance 1e-4 in the clearest channel, or (fog thinning upward) all but 1e-4 of the
+    // remaining optical depth.
+    const double target = std::isinf(od_inf) ? 9.21 / sigma_min_ : od_inf - 1e-4 / sigma_min_;
+    if (target <= 0) return 0;
+    return std::min(kMax, rd.distance_at_optical_depth(target));
+  }
+
+  PixelSample march(int x, int y) const {
+    PixelSample s;
+    const double distance = in_.distance_m.at(x, y, 0);
+    const Vec3d w = ray(x, y);
+    const RayDensity rd(scene_.medium, origin_, w);
+    const double length = march_length(rd, distance);
+    const double od_unit_total = rd.optical_depth(0, length);
+    const Medium& m = scene_.medium;
+    const bool has_noise = m.noise.amplitude > 0;
+
+    if (constant_source_ || length <= 0) {
+      // Sky light only: sum over segments telescopes to albedo L (1 - tau(D)) exactly (to the
+      // very end of the fog for the sky).
+      const double od_exact = rd.optical_depth(0, distance);
+      for (int c = 0; c < 3; ++c) {
+        s.camera_od[c] = sigma_[c] * od_exact;
+        s.inscatter[c] = m.albedo[c] * in_.sky_radiance[c] * -std::expm1(-s.camera_od[c]);
+      }
+      return s;
+    }
+
+    // Segment boundaries: uniform in transmittance, plus equiangular ones around each lamp.
+    std::vector<double> bounds;
+    bounds.reserve(std::size_t(plan_.steps + plan_.lamp_steps * scene_.lighting.lamps.size() + 2));
+    bounds.push_back(0);
+    bounds.push_back(length);
+    const double od_mean_total = sigma_mean_ * od_unit_total;
+    if (od_mean_total > 1e-6) {
+      const double tau_end = std::exp(-od_mean_total);
+      for (int i = 1; i < plan_.steps; ++i) {
+        const double tau = 1.0 - (1.0 - tau_end) * i / plan_.steps;
+        const double t = rd.distance_at_optical_depth(-std::log(tau) / sigma_mean_);
+        if (t > 0 && t < length) bounds.push_back(t);
+      }
+    } else {
+      for (int i = 1; i < plan_.steps; ++i) bounds.push_back(length * i / plan_.steps);
+    }
+    std::vector<LampOnRay> lamp_rays;
+    lamp_rays.reserve(scene_.lighting.lamps.size());
+    for (const Lamp& lamp : scene_.lighting.lamps) {
+      const Vec3d p = vec(lamp.position_m);
+      const double tc = dot(sub(p, origin_), w);
+      const double h = std::max(1e-6, std::sqrt(std::max(0.0, dot(sub(p, origin_), sub(p, origin_)) - tc * tc)));
+      lamp_rays.push_back({tc, h});
+      const double th_a = std::atan2(-tc, h), th_b = std::atan2(length - tc, h);
+      for (int i = 1; i < plan_.lamp_steps; ++i) {
+        const double t = tc + h * std::tan(th_a + (th_b - th_a) * i / plan_.lamp_steps);
+        if (t > 0 && t < length) bounds.push_back(t);
+      }
+    }
+    std::sort(bounds.begin(), bounds.end());
+    bounds.erase(std::unique(bounds.begin(), bounds.end()), bounds.end());
+
+    const double jitter = pixel_jitter(x, y, scene_.render.seed);
+    const std::uint32_t pixel_rotation = std::uint32_t(x * 73856093u ^ y * 19349663u);
+    double od[3] = {0, 0, 0};
+    double tau_a[3] = {1, 1, 1};
+    int sun_samples = 0, sun_seen = 0;
+    std::size_t rays = 0;
+    for (std::size_t i = 0; i + 1 < bounds.size(); ++i) {
+      const double ta = bounds[i], tb = bounds[i + 1];
+      // Stratified jitter: each segment's own offset (a golden-ratio sequence from the pixel's),
+      // so the offsets' biases cancel along the ray instead of adding up.
+      const double u = std::fmod(jitter + 0.6180339887498949 * double(i), 1.0);
+      const double ts = ta + (tb - ta) * u;
+      const Vec3d xs = add(origin_, w, ts);
+      const double seg_od_unit =
+          rd.optical_depth(ta, tb) * (has_noise ? noise_modulation(m.noise, xs) : 1.0);
+      double weight[3];
+      const double tau_before[3] = {tau_a[0], tau_a[1], tau_a[2]};
+      for (int c = 0; c < 3; ++c) {
+        od[c] += sigma_[c] * seg_od_unit;
+        const double tau_b = std::exp(-od[c]);
+        weight[c] = m.albedo[c] * (tau_a[c] - tau_b);  // integral of tau sigma_s over the segment
+        tau_a[c] = tau_b;
+      }
+      if (weight[0] + weight[1] + weight[2] <= 0 && tau_before[0] + tau_before[1] + tau_before[2] <= 0) continue;
+
+      double source[3] = {in_.sky_radiance[0], in_.sky_radiance[1], in_.sky_radiance[2]};
+      const double shadow_near = 1e-3 + 1e-4 * ts;
+      if (scene_.lighting.sun) {
+        const Sun& sun = *scene_.lighting.sun;
+        Vec3d dir = sun_dir_;
+        if (sun_tan_radius_ > 0) {
+          // Stratified over the disk: one sample per step, a golden-angle spiral per pixel.
+          const double k = double(i) + jitter;
+          const double r = sun_tan_radius_ * std::sqrt(std::fmod(k / double(bounds.size()), 1.0));
+          const double phi = kGoldenAngle * (double(i) + double(pixel_rotation % 1024));
+          dir = normalized(add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
+        }
+        bool visible = true;
+        if (in_.occluders) {
+          visible = !in_.occluders->occluded(f3(xs), f3(dir), float(shadow_near), float(kInf));
+          ++rays;
+        }
+        ++sun_samples;
+        if (visible) {
+          ++sun_seen;
+          const double phase = henyey_greenstein(m.g, dot(w, sun_dir_));
+          const double od_sun = scene_.render.light_path_attenuation
+                                    ? RayDensity(m, xs, sun_dir_).optical_depth(0, kInf)
+                                    : 0.0;
+          for (int c = 0; c < 3; ++c)
+            source[c] += phase * sun.irradiance[c] * std::exp(-sigma_[c] * od_sun);
+        }
+      }
+      // Lamps: the 1/r^2 falloff is integrated exactly over the segment (with t = tc + h tan(th),
+      // dt / r^2 = d(th) / h); the rest of the integrand, smooth, is taken at the segment's
+      // midpoint in th (no jitter: lamps light the fog smoothly, and jitter would only add noise).
+      for (std::size_t li = 0; li < scene_.lighting.lamps.size(); ++li) {
+        const Lamp& lamp = scene_.lighting.lamps[li];
+        const LampOnRay& lr = lamp_rays[li];
+        const double th_a = std::atan((ta - lr.tc) / lr.h), th_b = std::atan((tb - lr.tc) / lr.h);
+        const double tm = std::clamp(lr.tc + lr.h * std::tan(0.5 * (th_a + th_b)), ta, tb);
+        const Vec3d xm = add(origin_, w, tm);
+        const Vec3d to_lamp = sub(vec(lamp.position_m), xm);
+        const double r = std::sqrt(dot(to_lamp, to_lamp));
+        if (r < 1e-9) continue;
+        const Vec3d l = {to_lamp[0] / r, to_lamp[1] / r, to_lamp[2] / r};
+        const double spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
+        if (spot <= 0) continue;
+        if (in_.occluders) {
+          ++rays;
+          if (in_.occluders->occluded(f3(xm), f3(l), float(1e-3 + 1e-4 * tm), float(r * (1 - 1e-4))))
+            continue;
+        }
+        const double modulation = has_noise ? noise_modulation(m.noise, xm) : 1.0;
+        const double rho = rd.density(tm) * modulation;
+        const double od_to_m = rd.optical_depth(ta, tm) * modulation;
+        const double phase = henyey_greenstein(m.g, dot(w, l));
+        const double od_lamp = scene_.render.light_path_attenuation
+                                   ? RayDensity(m, xm, l).optical_depth(0, r)
+                                   : 0.0;
+        const double common = (th_b - th_a) / lr.h * phase * spot * rho;
+        for (int c = 0; c < 3; ++c)
+          s.inscatter[c] += m.albedo[c] * sigma_[c] * tau_before[c] *
+                            std::exp(-sigma_[c] * (od_to_m + od_lamp)) * common *
+                            lamp.intensity_per_sr[c];
+      }
+      for (int c = 0; c < 3; ++c) s.inscatter[c] += weight[c] * source[c];
+    }
+    for (int c = 0; c < 3; ++c) s.camera_od[c] = od[c];
+    s.shaft = sun_samples ? double(sun_seen) / sun_samples : 1.0;
+    rays_.local() += rays;
+    return s;
+  }
+
+  // Ambient occlusion at a surface pixel (1 when there is nothing to occlude or no need).
+  double ambient_occlusion_at(int x, int y) const {
+    if (!in_.occluders || plan_.ao_rays <= 0 || in_.normals.data == nullptr) return 1.0;
+    const double distance = in_.distance_m.at(x, y, 0);
+    if (!std::isfinite(distance)) return 1.0;
+    const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
+    if (dot(n, n) < 0.5) return 1.0;
+    const Vec3d x0 = add(add(origin_, ray(x, y), distance), n, 1e-3 + 1e-3 * distance);
+    rays_.local() += std::size_t(plan_.ao_rays);
+    return ambient_occlusion(*in_.occluders, f3(x0), f3(n), plan_.ao_rays,
+                             float(std::max(1.0, 0.25 * distance)),
+                             scene_.render.seed ^ std::uint32_t(x * 7919 + y * 104729));
+  }
+
+  // T's surface factor S (DESIGN.md section 3) at a surface pixel; writes the sun visibility.
+  void surface_term(int x, int y, double ao, double S[3], float* sun_visibility) const {
+    S[0] = S[1] = S[2] = 1.0;
+    *sun_visibility = 1.0f;
+    const double distance = in_.distance_m.at(x, y, 0);
+    const bool lights = scene_.lighting.sun || !scene_.lighting.lamps.empty();
+    if (!std::isfinite(distance) || !lights || in_.normals.data == nullptr) return;
+    const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
+    if (dot(n, n) < 0.5) return;
+    const Medium& m = scene_.medium;
+    const Vec3d x0 = add(origin_, ray(x, y), distance);
+    const Vec3d xo = add(x0, n, 1e-3 + 1e-3 * distance);  // off the surface for shadow rays
+    double direct[3] = {0, 0, 0}, direct_fogged[3] = {0, 0, 0};
+    std::size_t rays = 0;
+    if (scene_.lighting.sun) {
+      const Sun& sun = *scene_.lighting.sun;
+      const double cos_i = dot(n, sun_dir_);
+      double visible = 0;
+      if (cos_i > 0) {
+        const int count = in_.occluders ? (sun_tan_radius_ > 0 ? plan_.sun_surface_rays : 1) : 0;
+        int seen = 0;
+        for (int k = 0; k < count; ++k) {
+          Vec3d dir = sun_dir_;
+          if (sun_tan_radius_ > 0) {
+            const double r = sun_tan_radius_ * std::sqrt((k + 0.5) / count);
+            const double phi = kGoldenAngle * (k + pixel_jitter(x, y, scene_.render.seed) * count);
+            dir = normalized(add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
+          }
+          seen += !in_.occluders->occluded(f3(xo), f3(dir), 0.0f, float(kInf));
+        }
+        rays += std::size_t(count);
+        visible = count ? double(seen) / count : 1.0;
+      }
+      *sun_visibility = float(visible);
+      const double od_sun = scene_.render.light_path_attenuation
+                                ? RayDensity(m, x0, sun_dir_).optical_depth(0, kInf)
+                                : 0.0;
+      for (int c = 0; c < 3; ++c) {
+        const double e = sun.irradiance[c] * std::max(0.0, cos_i) * visible;
+        direct[c] += e;
+        direct_fogged[c] += e * std::exp(-sigma_[c] * od_sun);
+      }
+    }
+    for (const Lamp& lamp : scene_.lighting.lamps) {
+      const Vec3d to_lamp = sub(vec(lamp.position_m), x0);
+      const double r2 = dot(to_lamp, to_lamp), r = std::sqrt(r2);
+      if (r < 1e-6) continue;
+      const Vec3d l = {to_lamp[0] / r, to_lamp[1] / r, to_lamp[2] / r};
+      const double cos_i = dot(n, l);
+      if (cos_i <= 0) continue;
+      const double spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
+      if (spot <= 0) continue;
+      if (in_.occluders) {
+        ++rays;
+        if (in_.occluders->occluded(f3(xo), f3(l), 0.0f, float(r * (1 - 1e-4)))) continue;
+      }
+      const double od_lamp = scene_.render.light_path_attenuation
+                                 ? RayDensity(m, x0, l).optical_depth(0, r)
+                                 : 0.0;
+      for (int c = 0; c < 3; ++c) {
+        const double e = lamp.intensity_per_sr[c] * spot * cos_i / r2;
+        direct[c] += e;
+        direct_fogged[c] += e * std::exp(-sigma_[c] * od_lamp);
+      }
+    }
+    rays_.local() += rays;
+    for (int c = 0; c < 3; ++c) {
+      const double ambient = kPi * in_.sky_radiance[c] * ao;
+      const double total = direct[c] + ambient;
+      S[c] = total > 0 ? (direct_fogged[c] + ambient) / total : 1.0;
+    }
+  }
+
+  // Camera transmittance in closed form (exact unless noise modulates the view ray).
+  void camera_optical_depth(int x, int y, double od[3]) const {
+    const Vec3d w = ray(x, y);
+    const RayDensity rd(scene_.medium, origin_, w);
+    const double length = march_length(rd, in_.distance_m.at(x, y, 0));
+    const double unit = rd.optical_depth(0, std::isfinite(in_.distance_m.at(x, y, 0)) ? length : kInf);
+    for (int c = 0; c < 3; ++c) od[c] = sigma_[c] * unit;
+  }
+
+  bool has_noise() const { return scene_.medium.noise.amplitude > 0; }
+  // Sky light only: every pixel is a closed form, cheaper than interpolating.
+  bool constant_source() const { return constant_source_; }
+  bool needs_ao() const {
+    return in_.occluders && (scene_.lighting.sun || !scene_.lighting.lamps.empty());
+  }
+
+ private:
+  const CoreInputs& in_;
+  MarchPlan plan_;
+  const FogScene& scene_;
+  double sigma_[3];
+  double sigma_mean_ = 0, sigma_min_ = 0;
+  Vec3d sun_dir_{0, 1, 0}, sun_u_{1, 0, 0}, sun_v_{0, 0, 1};
+  double sun_tan_radius_ = 0;
+  Vec3d origin_{};
+  bool constant_source_ = false;
+  mutable tbb::combinable<std::size_t> rays_{[] { return std::size_t(0); }};
+};
+
+// Per-pixel state of the gradient-accelerated pass.
+struct Sparse {
+  int width = 0, height = 0;
+  std::vector<PixelSample> samples;  // valid where `have` is set
+  std::vector<unsigned char> have;
+  PixelSample& at(int x, int y) { return samples[std::size_t(y) * width + x]; }
+  bool has(int x, int y) const { return have[std::size_t(y) * width + x] != 0; }
+};
+
+bool depth_continuous(double a, double b) {
+  // DESIGN.md section 3: interpolate only where the pixel's depth is within d / 10 of the
+  // sample's; sky matches sky only.
+  if (std::isinf(a) || std::isinf(b)) return std::isinf(a) && std::isinf(b);
+  return std::fabs(a - b) <= 0.1 * b;
+}
+
+}  // namespace
+
+MarchPlan march_plan(const RenderSettings& settings) {
+  MarchPlan plan;
+  switch (settings.quality) {
+    case Quality::draft: plan = {12, 8, 3, 2, 4}; break;
+    case Quality::normal: plan = {32, 16, 2, 4, 8}; break;
+    case Quality::final: plan = {128, 48, 1, 16, 32}; break;
+  }
+  if (settings.march_steps > 0) plan.steps = settings.march_steps;
+  if (settings.grid_step > 0) plan.grid_step = settings.grid_step;
+  if (!settings.gradient_acceleration) plan.grid_step = 1;
+  return plan;
+}
+
+void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
+  const MarchPlan plan = march_plan(in.scene->render);
+  const Core core(in, plan);
+  const int w = in.distance_m.width, h = in.distance_m.height;
+  const int g = core.constant_source() ? 1 : std::max(1, plan.grid_step);
+
+  Sparse sparse;
+  sparse.width = w;
+  sparse.height = h;
+  sparse.samples.resize(std::size_t(w) * h);
+  sparse.have.assign(std::size_t(w) * h, 0);
+
+  auto exact = [&](int x, int y) {
+    PixelSample s = core.march(x, y);
+    if (core.needs_ao()) s.ao = core.ambient_occlusion_at(x, y);
+    sparse.at(x, y) = s;
+    sparse.have[std::size_t(y) * w + x] = 1;
+  };
+
+  // Pass 1: exact samples on the sparse grid (and the last row / column, so every pixel lies in
+  // a cell with four samples).
+  std::vector<int> gx, gy;
+  for (int x = 0; x < w; x += g) gx.push_back(x);
+  if (gx.back() != w - 1) gx.push_back(w - 1);
+  for (int y = 0; y < h; y += g) gy.push_back(y);
+  if (gy.back() != h - 1) gy.push_back(h - 1);
+  tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, gy.size(), 0, gx.size()),
+                    [&](const tbb::blocked_range2d<std::size_t>& r) {
+                      for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j)
+                        for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i)
+                          exact(gx[i], gy[j]);
+                    });
+  std::size_t exact_count = gx.size() * gy.size();
+
+  // Pass 2: every other pixel from its cell's four samples with their gradients, where all
+  // four are depth-continuous with it and agree on the sun's shadowing; else exactly.
+  std::vector<unsigned char> interpolated(std::size_t(w) * h, 0);
+  tbb::combinable<std::size_t> exact_more{[] { return std::size_t(0); }};
+  if (g > 1) {
+    auto d = [&](int x, int y) { return double(in.distance_m.at(x, y, 0)); };
+    // Gradient of a sample along one grid axis from its grid neighbours (central where both
+    // are continuous with it, one-sided where one is, else flat).
+    auto gradient = [&](std::size_t i, std::size_t j, bool along_x, int c) {
+      const int x = gx[i], y = gy[j];
+      const PixelSample& s = sparse.at(x, y);
+      auto value = [&](const PixelSample& p) { return c < 3 ? p.inscatter[c] : (c < 6 ? p.camera_od[c - 3] : p.ao); };
+      const std::size_t n = along_x ? gx.size() : gy.size();
+      const std::size_t k = along_x ? i : j;
+      double slope_sum = 0;
+      int slopes = 0;
+      for (int side : {-1, 1}) {
+        if ((side < 0 && k == 0) || (side > 0 && k + 1 >= n)) continue;
+        const int nx = along_x ? gx[k + side] : x, ny = along_x ? y : gy[k + side];
+        if (!depth_continuous(d(nx, ny), d(x, y))) continue;
+        const double dist = along_x ? nx - x : ny - y;
+        slope_sum += (value(sparse.at(nx, ny)) - value(s)) / dist;
+        ++slopes;
+      }
+      return slopes ? slope_sum / slopes : 0.0;
+    };
+    constexpr int kValues = 7;  // R (3), camera optical depth (3), ambient occlusion
+    tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, gy.size() - 1, 0, gx.size() - 1),
+                      [&](const tbb::blocked_range2d<std::size_t>& r) {
+      for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j)
+        for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i) {
+          const int x0 = gx[i], x1 = gx[i + 1], y0 = gy[j], y1 = gy[j + 1];
+          const std::array<std::pair<std::size_t, std::size_t>, 4> corners{
+              {{i, j}, {i + 1, j}, {i, j + 1}, {i + 1, j + 1}}};
+          // The corners' gradients, once per cell.
+          double value[4][kValues], grad_x[4][kValues], grad_y[4][kValues];
+          double shaft_min = 1, shaft_max = 0;
+          for (int k = 0; k < 4; ++k) {
+            const auto [ci, cj] = corners[k];
+            const PixelSample& s = sparse.at(gx[ci], gy[cj]);
+            for (int c = 0; c < kValues; ++c) {
+              value[k][c] = c < 3 ? s.inscatter[c] : (c < 6 ? s.camera_od[c - 3] : s.ao);
+              grad_x[k][c] = gradient(ci, cj, true, c);
+              grad_y[k][c] = gradient(ci, cj, false, c);
+            }
+            shaft_min = std::min(shaft_min, s.shaft);
+            shaft_max = std::max(shaft_max, s.shaft);
+          }
+          // A shadow boundary crosses the cell, or the in-scatter changes too fast across it
+          // (the core of a lamp's glow) for gradients to follow: its pixels get their own march.
+          double lum_min = kInf, lum_max = 0;
+          for (int k = 0; k < 4; ++k) {
+            const double lum = value[k][0] + value[k][1] + value[k][2];
+            lum_min = std::min(lum_min, lum);
+            lum_max = std::max(lum_max, lum);
+          }
+          const bool shadow_edge = shaft_max - shaft_min > 0.2 || lum_max > 1.25 * lum_min + 1e-12;
+          for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+              if (sparse.has(x, y)) continue;
+              // Cells share edges: the first cell to reach a pixel decides it.
+              const std::size_t idx = std::size_t(y) * w + x;
+              if ((x == x1 && i + 2 < gx.size()) || (y == y1 && j + 2 < gy.size())) continue;
+              bool ok = !shadow_edge;
+              for (int k = 0; k < 4 && ok; ++k)
+                ok = depth_continuous(d(x, y), d(gx[corners[k].first], gy[corners[k].second]));
+              if (!ok) {
+                exact(x, y);
+                ++exact_more.local();
+                continue;
+              }
+              const double fx = double(x - x0) / (x1 - x0), fy = double(y - y0) / (y1 - y0);
+              const double wts[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+              PixelSample& p = sparse.at(x, y);
+              double acc[kValues] = {};
+              for (int k = 0; k < 4; ++k) {
+                const double dx = x - gx[corners[k].first], dy = y - gy[corners[k].second];
+                for (int c = 0; c < kValues; ++c)
+                  acc[c] += wts[k] * (value[k][c] + grad_x[k][c] * dx + grad_y[k][c] * dy);
+              }
+              for (int c = 0; c < 3; ++c) {
+                p.inscatter[c] = std::max(0.0, acc[c]);
+                p.camera_od[c] = std::max(0.0, acc[3 + c]);
+              }
+              p.ao = std::clamp(acc[6], 0.0, 1.0);
+              interpolated[idx] = 1;
+            }
+        }
+    });
+  }
+  exact_count += exact_more.combine(std::plus<>());
+
+  // Pass 3: per pixel, the transmittance map T = tau(camera, surface) * S(surface) and the AOVs.
+  const bool closed_form_camera = !core.has_noise();
+  tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y)
+      for (int x = 0; x < w; ++x) {
+        const PixelSample& s = sparse.at(x, y);
+        double od[3] = {s.camera_od[0], s.camera_od[1], s.camera_od[2]};
+        if (closed_form_camera) core.camera_optical_depth(x, y, od);
+        double S[3];
+        float sun_visible = 1.0f;
+        core.surface_term(x, y, s.ao, S, &sun_visible);
+        for (int c = 0; c < 3; ++c) {
+          out.transmittance.at(x, y, c) = float(std::exp(-od[c]) * S[c]);
+          out.inscatter.at(x, y, c) = float(s.inscatter[c]);
+          out.optical_depth.at(x, y, c) = float(od[c]);
+        }
+        out.sun_visibility.at(x, y, 0) = sun_visible;
+      }
+  });
+  std::size_t interpolated_count = 0;
+  for (unsigned char v : interpolated) interpolated_count += v;
+  out.exact_pixels = exact_count;
+  out.interpolated_pixels = interpolated_count;
+  out.shadow_rays = core.shadow_rays();
+}
+
+}  // namespace mr::render

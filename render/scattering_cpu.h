@@ -1,0 +1,50 @@
+// Private to libmr: the CPU reference implementation of the single-scattering core
+// (DESIGN.md section 3): per-pixel ray marching with per-segment analytic integration, light
+// paths through the medium in closed form, volumetric shadows through the occluder mesh
+// (Embree), the surface term of the transmittance map, and the gradient-based image-space
+// acceleration (sparse exact samples, gradient interpolation, exact recomputation where the
+// depth or the shadowing differs).
+#pragma once
+
+#include <cstddef>
+
+#include "mr/camera.h"
+#include "mr/image.h"
+#include "mr/scene.h"
+
+namespace mr::render {
+
+class OccluderScene;
+
+/// March steps and grid spacing of a quality preset (RenderSettings overrides applied).
+struct MarchPlan {
+  int steps = 32;        ///< view-ray segments placed uniformly in transmittance
+  int lamp_steps = 16;   ///< extra segments per lamp, equiangular around its closest approach
+  int grid_step = 2;     ///< sparse-sample spacing in pixels (1: every pixel exact)
+  int sun_surface_rays = 4;  ///< shadow rays over the sun's disk at surfaces (soft sun)
+  int ao_rays = 8;           ///< ambient-occlusion rays at sparse samples
+};
+MarchPlan march_plan(const RenderSettings& settings);
+
+struct CoreInputs {
+  const Camera* camera = nullptr;
+  const FogScene* scene = nullptr;
+  ConstImageView distance_m;          ///< 1 channel, +inf = sky
+  ConstImageView normals;             ///< 3 channels, world; may be empty when no sun/lamps
+  const OccluderScene* occluders = nullptr;  ///< nullptr: nothing casts shadows
+  std::array<float, 3> sky_radiance{};
+};
+
+struct CoreOutputs {
+  ImageView transmittance;   ///< 3 channels
+  ImageView inscatter;       ///< 3 channels
+  ImageView sun_visibility;  ///< 1 channel
+  ImageView optical_depth;   ///< 3 channels
+  std::size_t exact_pixels = 0, interpolated_pixels = 0, shadow_rays = 0;
+};
+
+/// Renders every pixel of the outputs (all the distance map's size). Runs in parallel in the
+/// calling TBB arena; deterministic.
+void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out);
+
+}  // namespace mr::render

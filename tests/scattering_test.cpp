@@ -1,0 +1,429 @@
+// The scattering core against closed forms (DESIGN.md section 3). Tolerances are the issue's:
+// relative error below 1e-3 for closed forms, 1e-2 for the lamp glow against an independent
+// numerical integration, one march step for the shadowed fraction of a ray.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <numbers>
+
+#include "mr/error.h"
+#include "mr/fog.h"
+#include "mr/scattering.h"
+#include "render/medium.h"
+#include "test_support.h"
+
+namespace mr {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+double hg(double g, double c) {
+  return (1 - g * g) / (4 * kPi * std::pow(1 + g * g - 2 * g * c, 1.5));
+}
+double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+Vec3 normalize(const Vec3& v) {
+  const double n = std::sqrt(dot(v, v));
+  return {v.x / n, v.y / n, v.z / n};
+}
+
+// Composite Simpson on [a, b] with n (even) intervals.
+double simpson(const std::function<double(double)>& f, double a, double b, int n) {
+  const double h = (b - a) / n;
+  double s = f(a) + f(b);
+  for (int i = 1; i < n; ++i) s += f(a + i * h) * (i % 2 ? 4 : 2);
+  return s * h / 3;
+}
+
+// A depth map where every pixel sees a surface at distance `d`.
+Image constant_depth(const Camera& cam, float d) {
+  Image im(cam.width, cam.height, 1, {"Z"});
+  for (float& v : im.pixels()) v = d;
+  return im;
+}
+
+// Ground plane y = 0 seen from the pose; sky (+inf) above the horizon.
+Image ground_depth(const Camera& cam, const CameraPose& pose) {
+  Image im(cam.width, cam.height, 1, {"Z"});
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Vec3 w = pose.ray_direction(cam, x, y);
+      im.at(x, y, 0) = w.y < -1e-6 ? float(-pose.position_m.y / w.y) : kInf;
+    }
+  return im;
+}
+
+FogScene base_scene() {
+  FogScene s;
+  s.medium.sigma_t_per_m = {0.02f, 0.02f, 0.02f};
+  s.medium.albedo = {0.9f, 0.8f, 0.7f};
+  s.medium.g = 0.4;
+  s.lighting.sky_radiance = Rgb{0, 0, 0};
+  s.render.quality = Quality::final;
+  return s;
+}
+
+TEST(Scattering, HomogeneousSunWithoutLightPathAttenuationIsClosedForm) {
+  const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
+  FogScene s = base_scene();
+  s.lighting.sun = Sun{normalize({0.3, 0.5, 0.8}), {3, 2.5, 2}, 0.0};
+  s.render.light_path_attenuation = false;
+  s.render.volumetric_shadows = false;
+  s.render.quality = Quality::normal;  // exact at any step count: the source is constant
+  s.render.gradient_acceleration = false;  // the interpolation's error is tested on its own
+  Image depth = constant_depth(cam, 60);
+  for (int x = 0; x < cam.width; ++x) depth.at(x, 3, 0) = kInf;  // a row of sky
+  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  double worst = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Vec3 w = s.pose.ray_direction(cam, x, y);
+      const double p = hg(s.medium.g, dot(w, s.lighting.sun->direction_to_sun));
+      for (int c = 0; c < 3; ++c) {
+        const double tau = std::exp(-s.medium.sigma_t_per_m[c] * double(depth.at(x, y, 0)));
+        const double want = s.lighting.sun->irradiance[c] * p * s.medium.albedo[c] * (1 - tau);
+        worst = std::max(worst, std::fabs(out.inscatter.at(x, y, c) - want) / want);
+      }
+    }
+  EXPECT_LT(worst, 1e-3);
+}
+
+TEST(Scattering, SunThroughAFogLayerWithLightPathAttenuation) {
+  // Homogeneous fog below 30 m; the sun's light crosses (top - y) / l_y of it to reach a point.
+  // Along a view ray y = y0 + t w_y, so the integrand is a single exponential in t:
+  // R = albedo E p exp(-sigma (top - y0) / l_y) (1 - exp(-sigma k d)) / k, k = 1 - w_y / l_y.
+  const Camera cam = Camera::from_horizontal_fov(32, 24, 50);
+  FogScene s = base_scene();
+  s.medium.layer_top_m = 30;
+  s.lighting.sun = Sun{normalize({0.2, 0.6, -0.7}), {3, 3, 3}, 0.0};
+  s.render.volumetric_shadows = false;
+  const Image depth = constant_depth(cam, 80);  // every sample stays below 30 m
+  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  const Vec3 l = s.lighting.sun->direction_to_sun;
+  double worst = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Vec3 w = s.pose.ray_direction(cam, x, y);
+      const double d = depth.at(x, y, 0);
+      ASSERT_LT(s.pose.position_m.y + d * w.y, 30.0);
+      const double k = 1 - w.y / l.y;
+      for (int c = 0; c < 3; ++c) {
+        const double sigma = s.medium.sigma_t_per_m[c];
+        const double want = s.medium.albedo[c] * 3.0 * hg(s.medium.g, dot(w, l)) *
+                            std::exp(-sigma * (30 - s.pose.position_m.y) / l.y) *
+                            -std::expm1(-sigma * k * d) / k;
+        worst = std::max(worst, std::fabs(out.inscatter.at(x, y, c) - want) / want);
+      }
+    }
+  EXPECT_LT(worst, 1e-3);
+}
+
+TEST(Scattering, HeightFogOpticalDepthForRaysUpDownAndLevel) {
+  Medium m;
+  m.height_fog = Medium::HeightFog{2.0, 15.0};
+  const render::Vec3d o{0, 5, 0};
+  const double h = 15, k = std::exp(-(5 - 2.0) / h);
+  for (const render::Vec3d& w : {render::Vec3d{0, 0.6, 0.8}, render::Vec3d{0, -0.28, 0.96},
+                                 render::Vec3d{0, 0, 1}}) {
+    const render::RayDensity rd(m, o, w);
+    for (double t : {0.5, 10.0, 40.0}) {
+      // DESIGN.md section 3: k H (1 - exp(-t w_y / H)) / w_y, and k t when w_y = 0.
+      const double want = w[1] == 0 ? k * t : k * h * (1 - std::exp(-t * w[1] / h)) / w[1];
+      EXPECT_NEAR(rd.optical_depth(0, t), want, 1e-9 * want) << w[1] << " " << t;
+      // The inverse used to place steps.
+      EXPECT_NEAR(rd.distance_at_optical_depth(want), t, 1e-7 * t);
+    }
+  }
+  // Going up, the optical depth to infinity is finite: k H / w_y.
+  EXPECT_NEAR(render::RayDensity(m, o, {0, 0.6, 0.8}).optical_depth(0, INFINITY), k * h / 0.6, 1e-9);
+}
+
+TEST(Scattering, KoschmiederReductionWithAmbientLightOnly) {
+  // No sun, no lamps, albedo 1: C = I t + L_sky (1 - t), exactly the skeleton's model.
+  const Camera cam = Camera::from_horizontal_fov(48, 32, 60);
+  const Image photo = test::make_test_photo(48, 32);
+  Image depth(48, 32, 1);
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 48; ++x) depth.at(x, y, 0) = y < 8 ? kInf : float(5 + 11 * x + 3 * y);
+  FogScene s;
+  s.medium.sigma_t_per_m = {0.01f, 0.015f, 0.02f};
+  s.medium.albedo = {1, 1, 1};
+  s.lighting.sky_radiance = Rgb{0.7f, 0.75f, 0.8f};
+  const FogLayers physical = fog(photo, depth, cam, s);
+  FogParams k;
+  k.sigma_t_per_m = s.medium.sigma_t_per_m;
+  k.airlight = s.lighting.sky_radiance;
+  const FogLayers koschmieder = fog(photo, depth, k);
+  EXPECT_LT(test::max_abs_diff(physical.composite, koschmieder.composite), 1e-5);
+  EXPECT_LT(test::max_abs_diff(physical.transmittance, koschmieder.transmittance), 1e-6);
+}
+
+// Sunlit ground under a 20 m fog layer: S = (E cos tau_sun + pi L) / (E cos + pi L).
+TEST(Scattering, SurfaceTermOfASunlitPlane) {
+  const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
+  FogScene s = base_scene();
+  s.pose.pitch_deg = -35;
+  s.medium.layer_top_m = 20;
+  s.lighting.sky_radiance = Rgb{0.2f, 0.25f, 0.3f};
+  s.lighting.sun = Sun{direction_from_azimuth_elevation(30, 40), {3, 3, 3}, 0.27};
+  s.render.quality = Quality::normal;
+  const Image depth = ground_depth(cam, s.pose);
+  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  const Vec3 l = normalize(s.lighting.sun->direction_to_sun);
+  double worst = 0;
+  int checked = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const double d = depth.at(x, y, 0);
+      if (std::isinf(d)) continue;
+      const double cos_i = l.y;  // ground normal (0, 1, 0)
+      for (int c = 0; c < 3; ++c) {
+        const double sigma = s.medium.sigma_t_per_m[c];
+        const double tau_sun = std::exp(-sigma * 20 / l.y);
+        const double e = 3.0 * cos_i, amb = kPi * (*s.lighting.sky_radiance)[c];
+        const double want = std::exp(-sigma * d) * (e * tau_sun + amb) / (e + amb);
+        worst = std::max(worst, std::fabs(out.transmittance.at(x, y, c) - want) / want);
+      }
+      EXPECT_EQ(out.sun_visibility.at(x, y, 0), 1.0f);
+      ++checked;
+    }
+  EXPECT_GT(checked, 300);
+  EXPECT_LT(worst, 1e-3);
+}
+
+TEST(Scattering, SurfaceTermOfALamplitPlane) {
+  const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
+  FogScene s = base_scene();
+  s.pose.pitch_deg = -35;
+  s.lighting.sky_radiance = Rgb{0.05f, 0.05f, 0.05f};
+  Lamp lamp;
+  lamp.position_m = {0.5, 3.0, 6.0};
+  lamp.intensity_per_sr = {40, 30, 20};
+  s.lighting.lamps = {lamp};
+  s.render.quality = Quality::draft;
+  const Image depth = ground_depth(cam, s.pose);
+  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  double worst = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const double d = depth.at(x, y, 0);
+      if (std::isinf(d)) continue;
+      const Vec3 w = s.pose.ray_direction(cam, x, y);
+      const Vec3 p{s.pose.position_m.x + d * w.x, s.pose.position_m.y + d * w.y,
+                   s.pose.position_m.z + d * w.z};
+      const Vec3 to{lamp.position_m.x - p.x, lamp.position_m.y - p.y, lamp.position_m.z - p.z};
+      const double r2 = dot(to, to), r = std::sqrt(r2), cos_i = to.y / r;
+      for (int c = 0; c < 3; ++c) {
+        const double sigma = s.medium.sigma_t_per_m[c];
+        const double e = lamp.intensity_per_sr[c] * cos_i / r2;
+        const double amb = kPi * 0.05;
+        const double want = std::exp(-sigma * d) * (e * std::exp(-sigma * r) + amb) / (e + amb);
+        worst = std::max(worst, std::fabs(out.transmittance.at(x, y, c) - want) / want);
+      }
+    }
+  EXPECT_LT(worst, 1e-3);
+}
+
+TEST(Scattering, PointLampGlowMatchesNumericalIntegration) {
+  const Camera cam = Camera::from_horizontal_fov(48, 36, 50);
+  FogScene s = base_scene();
+  s.medium.sigma_t_per_m = {0.05f, 0.05f, 0.05f};
+  s.medium.g = 0.3;
+  Lamp lamp;
+  lamp.position_m = {0.8, 1.9, 12};
+  lamp.intensity_per_sr = {60, 50, 40};
+  s.lighting.lamps = {lamp};
+  s.render.volumetric_shadows = false;
+  s.render.quality = Quality::normal;
+  const Image depth = constant_depth(cam, 40);
+  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  double max_r = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) max_r = std::max(max_r, double(out.inscatter.at(x, y, 0)));
+  double worst = 0;
+  int glow = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      if (out.inscatter.at(x, y, 0) < 0.05 * max_r) continue;  // the glow
+      ++glow;
+      const Vec3 w = s.pose.ray_direction(cam, x, y);
+      const Vec3 o = s.pose.position_m;
+      for (int c = 0; c < 3; ++c) {
+        const double sigma = s.medium.sigma_t_per_m[c];
+        auto integrand = [&](double t) {
+          const Vec3 to{lamp.position_m.x - o.x - t * w.x, lamp.position_m.y - o.y - t * w.y,
+                        lamp.position_m.z - o.z - t * w.z};
+          const double r2 = dot(to, to), r = std::sqrt(r2);
+          return std::exp(-sigma * t) * s.medium.albedo[c] * sigma *
+                 hg(s.medium.g, dot(w, to) / r) * lamp.intensity_per_sr[c] / r2 *
+                 std::exp(-sigma * r);
+        };
+        const double want = simpson(integrand, 0, 40, 40000);
+        worst = std::max(worst, std::fabs(out.inscatter.at(x, y, c) - want) / want);
+      }
+    }
+  EXPECT_GT(glow, 20);
+  EXPECT_LT(worst, 1e-2);
+}
+
+TEST(Scattering, HalfPlaneShadowedFractionWithinOneMarchStep) {
+  // A roof (half-plane y = 5, x < 0) and a back wall at z = 40. The sun, tilted toward +x,
+  // shades the part of each view ray for which x + (5 - y) tan(a) < 0 and y < 5.
+  const Camera cam = Camera::from_horizontal_fov(64, 48, 70);
+  FogScene s;
+  s.medium.sigma_t_per_m = {1e-4f, 1e-4f, 1e-4f};  // thin: weights uniform along the ray
+  s.medium.g = 0;
+  s.lighting.sky_radiance = Rgb{0, 0, 0};
+  const double a = 0.5;  // sun tilt from the zenith toward +x, radians
+  s.lighting.sun = Sun{{std::sin(a), std::cos(a), 0}, {1, 1, 1}, 0.0};
+  s.render.light_path_attenuation = false;
+  s.render.gradient_acceleration = false;
+  const int steps = 64;
+  s.render.march_steps = steps;
+  Image depth(cam.width, cam.height, 1, {"Z"});
+  const Vec3 o = s.pose.position_m;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Vec3 w = s.pose.ray_direction(cam, x, y);
+      double d = (40 - o.z) / w.z;
+      if (w.y > 0) {
+        const double t_roof = (5 - o.y) / w.y;
+        if (o.x + t_roof * w.x < 0 && t_roof < d) d = t_roof;
+      }
+      depth.at(x, y, 0) = float(d);
+    }
+  // Whether the camera sees the roof at (hx, 5, hz): the pixel whose footprint holds that point
+  // shows the roof (its centre ray meets the roof, in front of the wall).
+  auto roof_visible = [&](double hx, double hz) {
+    const Vec3 rel{hx - o.x, 5 - o.y, hz - o.z};
+    if (rel.z <= 0) return false;
+    const int ix = int(std::floor(cam.cx + cam.focal_px * rel.x / rel.z));
+    const int iy = int(std::floor(cam.cy - cam.focal_px * rel.y / rel.z));
+    if (ix < 0 || iy < 0 || ix >= cam.width || iy >= cam.height) return false;
+    const Vec3 w = s.pose.ray_direction(cam, ix, iy);
+    if (w.y <= 0) return false;
+    const double t_roof = (5 - o.y) / w.y;
+    return o.x + t_roof * w.x < 0 && std::fabs(depth.at(ix, iy, 0) - t_roof) < 1e-3 * t_roof;
+  };
+  const ScatteringLayers lit = render_scattering(Image(), depth, cam, s);
+  FogScene unshadowed = s;
+  unshadowed.render.volumetric_shadows = false;
+  const ScatteringLayers open = render_scattering(Image(), depth, cam, unshadowed);
+  int partial = 0;
+  for (int y = 0; y < cam.height; y += 3)
+    for (int x = 0; x < cam.width; x += 3) {
+      const Vec3 w = s.pose.ray_direction(cam, x, y);
+      const double d = depth.at(x, y, 0);
+      // Geometry: the lit fraction of [0, d] by fine sampling.
+      const int n = 100000;
+      int lit_count = 0;
+      for (int i = 0; i < n; ++i) {
+        const double t = d * (i + 0.5) / n;
+        const double px = o.x + t * w.x, py = o.y + t * w.y, pz = o.z + t * w.z;
+        // The sun ray meets the roof plane at (hx, 5, pz); it is blocked if the roof is there
+        // AND the camera sees that part of the roof (only what the photo shows is geometry).
+        const double hx = px + (5 - py) * std::tan(a);
+        lit_count += !(py < 5 && hx < 0 && roof_visible(hx, pz));
+      }
+      const double want = double(lit_count) / n;
+      const double got = lit.inscatter.at(x, y, 1) / open.inscatter.at(x, y, 1);
+      if (want > 0.05 && want < 0.95) ++partial;
+      EXPECT_NEAR(got, want, 1.0 / steps + 0.01) << x << "," << y;  // + mesh discretisation
+    }
+  EXPECT_GT(partial, 20);
+}
+
+// The gradient acceleration against the same march without it, on a sunlit street-like scene
+// with shafts: it must cost little error (mean 0.5 %, any pixel 5 %) for its speed-up.
+TEST(Scattering, GradientAccelerationErrorIsSmall) {
+  const Camera cam = Camera::from_horizontal_fov(96, 64, 60);
+  FogScene s = base_scene();
+  s.pose.pitch_deg = -5;
+  s.lighting.sun = Sun{direction_from_azimuth_elevation(-60, 25), {3, 3, 3}, 0.27};
+  s.lighting.sky_radiance = Rgb{0.3f, 0.3f, 0.35f};
+  s.render.quality = Quality::normal;
+  Image depth = ground_depth(cam, s.pose);
+  // A wall on the left (x = -3) and a pillar, for shadows and discontinuities.
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Vec3 w = s.pose.ray_direction(cam, x, y);
+      if (w.x < 0) {
+        const double t = -3.0 / w.x;
+        if (s.pose.position_m.y + t * w.y < 6 && t < depth.at(x, y, 0)) depth.at(x, y, 0) = float(t);
+      }
+      if (x >= 60 && x < 64 && y > 10) depth.at(x, y, 0) = std::min(depth.at(x, y, 0), 12.0f);
+    }
+  const ScatteringLayers fast = render_scattering(Image(), depth, cam, s);
+  s.render.gradient_acceleration = false;
+  const ScatteringLayers exact = render_scattering(Image(), depth, cam, s);
+  EXPECT_LT(fast.timings.exact_pixels, exact.timings.exact_pixels / 2);
+  double sum = 0, worst = 0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < exact.inscatter.pixels().size(); ++i) {
+    const double e = exact.inscatter.pixels()[i];
+    const double err = std::fabs(fast.inscatter.pixels()[i] - e) / e;
+    sum += err;
+    worst = std::max(worst, err);
+    ++n;
+  }
+  EXPECT_LT(sum / n, 5e-3);
+  EXPECT_LT(worst, 5e-2);
+}
+
+TEST(Scattering, DeterministicForASeed) {
+  const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
+  FogScene s = base_scene();
+  s.pose.pitch_deg = -10;
+  s.lighting.sun = Sun{direction_from_azimuth_elevation(60, 20), {3, 3, 3}, 0.27};
+  s.lighting.sky_radiance = Rgb{0.3f, 0.3f, 0.3f};
+  s.medium.noise.amplitude = 0.5;
+  s.render.quality = Quality::normal;
+  const Image depth = ground_depth(cam, s.pose);
+  const ScatteringLayers a = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers b = render_scattering(Image(), depth, cam, s);
+  EXPECT_EQ(test::max_abs_diff(a.inscatter, b.inscatter), 0.0);
+  EXPECT_EQ(test::max_abs_diff(a.transmittance, b.transmittance), 0.0);
+  for (float v : a.inscatter.pixels()) ASSERT_TRUE(std::isfinite(v) && v >= 0);
+}
+
+TEST(Scattering, BadInputIsAClearError) {
+  const Camera cam = Camera::from_horizontal_fov(20, 10, 60);
+  const Image depth = constant_depth(cam, 10);
+  auto expect_error = [&](const FogScene& s, const Image& d, const std::string& needle) {
+    try {
+      render_scattering(Image(), d, cam, s);
+      ADD_FAILURE() << "expected an error about " << needle;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  FogScene s = base_scene();
+  FogScene bad = s;
+  bad.medium.sigma_t_per_m[1] = -0.1f;
+  expect_error(bad, depth, "sigma_t");
+  bad = s;
+  bad.medium.g = 1.0;
+  expect_error(bad, depth, "medium.g");
+  bad = s;
+  bad.medium.albedo[0] = std::nanf("");
+  expect_error(bad, depth, "albedo");
+  expect_error(s, Image(), "depth map");
+  Image nan_depth = depth;
+  nan_depth.at(3, 3, 0) = std::nanf("");
+  expect_error(s, nan_depth, "NaN");
+  bad = s;
+  bad.lighting.sky_radiance.reset();  // 'auto' needs a photo
+  expect_error(bad, depth, "photo");
+  // A lamp just behind the wall the camera sees (at 10 m): inside the geometry.
+  bad = s;
+  Lamp lamp;
+  lamp.position_m = {0, s.pose.position_m.y, 10.5};
+  bad.lighting.lamps = {lamp};
+  expect_error(bad, depth, "inside the scene's geometry");
+  expect_error(s, constant_depth(Camera::from_horizontal_fov(21, 10, 60), 10), "21x10");
+}
+
+}  // namespace
+}  // namespace mr

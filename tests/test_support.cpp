@@ -1,0 +1,94 @@
+#include "test_support.h"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+
+namespace fs = std::filesystem;
+
+namespace mr::test {
+
+ScratchDir::ScratchDir() {
+  std::random_device rd;
+  path_ = fs::temp_directory_path() /
+          ("mr-test-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
+  fs::create_directories(path_);
+}
+
+ScratchDir::~ScratchDir() {
+  std::error_code ec;
+  // Read-only subfolders made by tests must be writable again to be removed.
+  for (auto it = fs::recursive_directory_iterator(path_, ec); it != fs::recursive_directory_iterator(); ++it)
+    if (it->is_directory(ec)) fs::permissions(it->path(), fs::perms::owner_all, fs::perm_options::add, ec);
+  fs::remove_all(path_, ec);
+}
+
+std::vector<std::string> ScratchDir::list() const {
+  std::vector<std::string> names;
+  for (const auto& e : fs::recursive_directory_iterator(path_))
+    names.push_back(fs::relative(e.path(), path_).string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::uint64_t file_checksum(const fs::path& path) {
+  const std::string bytes = read_bytes(path);
+  std::uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
+  return h;
+}
+
+void write_bytes(const fs::path& path, const std::string& bytes) {
+  std::ofstream f(path, std::ios::binary);
+  f << bytes;
+}
+
+std::string read_bytes(const fs::path& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+CommandResult run(const std::string& command_line) {
+  CommandResult result;
+  FILE* pipe = ::popen((command_line + " 2>&1").c_str(), "r");
+  if (!pipe) throw std::runtime_error("popen failed: " + command_line);
+  std::array<char, 4096> buf;
+  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe)) result.output.append(buf.data(), n);
+  const int status = ::pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+Image make_test_photo(int width, int height) {
+  Image im(width, height, 3);
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const float u = (x + 0.5f) / width, v = (y + 0.5f) / height;
+      float* p = im.pixel(x, y);
+      p[0] = u;
+      p[1] = v;
+      p[2] = 0.5f + 0.5f * std::sin(6.2831853f * (u + v));
+    }
+  return im;
+}
+
+double max_abs_diff(const Image& a, const Image& b) {
+  if (a.width() != b.width() || a.height() != b.height() || a.channels() != b.channels())
+    throw std::runtime_error("max_abs_diff: shapes differ");
+  double m = 0;
+  for (std::size_t i = 0; i < a.pixels().size(); ++i)
+    m = std::max(m, double(std::fabs(a.pixels()[i] - b.pixels()[i])));
+  return m;
+}
+
+}  // namespace mr::test

@@ -1,0 +1,44 @@
+// Helpers shared by the tests: scratch folders, checksums, running the CLI.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "mr/image.h"
+
+namespace mr::test {
+
+/// A fresh folder under the system temp dir, removed (with its contents) on destruction.
+class ScratchDir {
+ public:
+  ScratchDir();
+  ~ScratchDir();
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+  /// Names of all entries (recursively, relative), sorted.
+  std::vector<std::string> list() const;
+
+ private:
+  std::filesystem::path path_;
+};
+
+/// 64-bit FNV-1a of a file's bytes.
+std::uint64_t file_checksum(const std::filesystem::path& path);
+void write_bytes(const std::filesystem::path& path, const std::string& bytes);
+std::string read_bytes(const std::filesystem::path& path);
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  ///< stdout and stderr together
+};
+/// Runs a shell command line, capturing its output.
+CommandResult run(const std::string& command_line);
+
+/// A smooth synthetic RGB test image in scene-linear [0, 1]: gradients plus a hue sweep.
+Image make_test_photo(int width, int height);
+/// Largest |a - b| over all values; images must have equal shapes.
+double max_abs_diff(const Image& a, const Image& b);
+
+}  // namespace mr::test
