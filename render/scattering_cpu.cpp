@@ -78,6 +78,7 @@ class Core {
     for (int c = 0; c < 3; ++c) sigma_[c] = m.sigma_t_per_m[c];
     sigma_mean_ = (sigma_[0] + sigma_[1] + sigma_[2]) / 3.0;
     sigma_min_ = std::min({sigma_[0], sigma_[1], sigma_[2]});
+    grey_ = sigma_[0] == sigma_[1] && sigma_[1] == sigma_[2];
     if (scene_.lighting.sun) {
       const Sun& sun = *scene_.lighting.sun;
       sun_dir_ = normalized(vec(sun.direction_to_sun));
@@ -235,9 +236,11 @@ class Core {
           rd.optical_depth(ta, tb) * (has_noise ? noise_modulation(m.noise, xs) : 1.0);
       double weight[3];
       const double tau_before[3] = {tau_a[0], tau_a[1], tau_a[2]};
+      // Grey fog (equal sigma_t in all channels, the usual case): one exp for all three.
+      const double tau_grey = grey_ ? std::exp(-(od[0] + sigma_[0] * seg_od_unit)) : 0.0;
       for (int c = 0; c < 3; ++c) {
         od[c] += sigma_[c] * seg_od_unit;
-        const double tau_b = std::exp(-od[c]);
+        const double tau_b = grey_ ? tau_grey : std::exp(-od[c]);
         weight[c] = m.albedo[c] * (tau_a[c] - tau_b);  // integral of tau sigma_s over the segment
         tau_a[c] = tau_b;
       }
@@ -253,8 +256,10 @@ class Core {
           const double od_sun = scene_.render.light_path_attenuation
                                     ? RayDensity(m, xs, sun_dir_).optical_depth(0, kInf)
                                     : 0.0;
+          const double tau_sun_grey = grey_ ? std::exp(-sigma_[0] * od_sun) : 0.0;
           for (int c = 0; c < 3; ++c)
-            source[c] += phase * sun.irradiance[c] * std::exp(-sigma_[c] * od_sun);
+            source[c] += phase * sun.irradiance[c] *
+                         (grey_ ? tau_sun_grey : std::exp(-sigma_[c] * od_sun));
         }
       }
       // Lamps: the 1/r^2 falloff is integrated exactly over the segment (with t = tc + h tan(th),
@@ -438,6 +443,7 @@ class Core {
   const FogScene& scene_;
   double sigma_[3];
   double sigma_mean_ = 0, sigma_min_ = 0;
+  bool grey_ = false;
   Vec3d sun_dir_{0, 1, 0}, sun_u_{1, 0, 0}, sun_v_{0, 0, 1};
   double sun_tan_radius_ = 0;
   static constexpr std::uint32_t kSpiralRotations = 1024;
@@ -468,9 +474,9 @@ bool depth_continuous(double a, double b) {
 MarchPlan march_plan(const RenderSettings& settings) {
   MarchPlan plan;
   switch (settings.quality) {
-    case Quality::draft: plan = {12, 8, 3, 2, 4}; break;
-    case Quality::normal: plan = {32, 16, 2, 4, 8}; break;
-    case Quality::final: plan = {128, 48, 1, 16, 32}; break;
+    case Quality::draft: plan = {12, 8, 3, 2, 4, 2}; break;
+    case Quality::normal: plan = {32, 16, 2, 4, 8, 1}; break;
+    case Quality::final: plan = {128, 48, 1, 16, 32, 1}; break;
   }
   if (settings.march_steps > 0) plan.steps = settings.march_steps;
   if (settings.grid_step > 0) plan.grid_step = settings.grid_step;
@@ -540,6 +546,16 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       return slopes ? slope_sum / slopes : 0.0;
     };
     constexpr int kValues = 7;  // R (3), camera optical depth (3), ambient occlusion
+    // Every sample's gradients once (cells share corners: four cells would redo them).
+    using Gradients = std::array<double, 2 * kValues>;  // d/dx of each value, then d/dy
+    std::vector<Gradients> sample_gradients(gx.size() * gy.size());
+    tbb::parallel_for(std::size_t(0), gy.size(), [&](std::size_t j) {
+      for (std::size_t i = 0; i < gx.size(); ++i)
+        for (int c = 0; c < kValues; ++c) {
+          sample_gradients[j * gx.size() + i][c] = gradient(i, j, true, c);
+          sample_gradients[j * gx.size() + i][kValues + c] = gradient(i, j, false, c);
+        }
+    });
     tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, gy.size() - 1, 0, gx.size() - 1),
                       [&](const tbb::blocked_range2d<std::size_t>& r) {
       for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j)
@@ -555,8 +571,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
             const PixelSample& s = sparse.at(gx[ci], gy[cj]);
             for (int c = 0; c < kValues; ++c) {
               value[k][c] = c < 3 ? s.inscatter[c] : (c < 6 ? s.camera_od[c - 3] : s.ao);
-              grad_x[k][c] = gradient(ci, cj, true, c);
-              grad_y[k][c] = gradient(ci, cj, false, c);
+              grad_x[k][c] = sample_gradients[cj * gx.size() + ci][c];
+              grad_y[k][c] = sample_gradients[cj * gx.size() + ci][kValues + c];
             }
             shaft_min = std::min(shaft_min, s.shaft);
             shaft_max = std::max(shaft_max, s.shaft);

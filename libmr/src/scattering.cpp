@@ -12,6 +12,7 @@
 #include "mr/error.h"
 #include "photo/airlight.h"
 #include "photo/composite.h"
+#include "render/depth_downsample.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
 #include "render/scattering_cpu.h"
@@ -99,8 +100,18 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       auto t = Clock::now();
       normals = render::estimate_normals(distance_m.view(), camera, scene.pose);
       if (scene.render.volumetric_shadows) {
-        render::TriangleMesh mesh =
-            render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose);
+        // The preset's mesh resolution (a coarse mesh builds and traces faster), unless the
+        // image is too small to coarsen.
+        int mesh_step = render::march_plan(scene.render).mesh_step;
+        if (w / mesh_step < 16 || h / mesh_step < 16) mesh_step = 1;
+        render::TriangleMesh mesh;
+        if (mesh_step > 1) {
+          const render::DownsampledDistance coarse =
+              render::downsample_distance_nearest(distance_m.view(), camera, mesh_step);
+          mesh = render::reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, scene.pose);
+        } else {
+          mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose);
+        }
         out.timings.mesh_s = seconds_since(t);
         t = Clock::now();
         if (mesh.triangle_count() > 0) occluders.emplace(std::move(mesh));
