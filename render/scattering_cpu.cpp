@@ -474,8 +474,8 @@ bool depth_continuous(double a, double b) {
 MarchPlan march_plan(const RenderSettings& settings) {
   MarchPlan plan;
   switch (settings.quality) {
-    case Quality::draft: plan = {12, 8, 3, 2, 4, 2}; break;
-    case Quality::normal: plan = {32, 16, 2, 4, 8, 1}; break;
+    case Quality::draft: plan = {12, 8, 4, 2, 4, 2}; break;
+    case Quality::normal: plan = {32, 16, 3, 4, 8, 1}; break;
     case Quality::final: plan = {128, 48, 1, 16, 32, 1}; break;
   }
   if (settings.march_steps > 0) plan.steps = settings.march_steps;
