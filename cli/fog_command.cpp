@@ -87,8 +87,16 @@ FogPlan make_plan(const FogCommandOptions& o) {
       if (n > 4) throw std::invalid_argument("--noise takes at most 4 numbers");
       scene.medium.noise.amplitude = v[0];
       if (n > 1) scene.medium.noise.scale_m = v[1];
-      if (n > 2) scene.medium.noise.octaves = int(v[2]);
-      if (n > 3) scene.medium.noise.seed = std::uint32_t(v[3]);
+      // Whole numbers in range before the casts (a double out of an int's range is UB).
+      const auto whole = [&](double x, double lo, double hi, const std::string& name) {
+        if (!(x >= lo && x <= hi && x == std::floor(x)))
+          throw std::invalid_argument("--noise '" + o.noise + "': " + name + " must be a whole number in " +
+                                      std::to_string(std::uint32_t(lo)) + ".." +
+                                      std::to_string(std::uint32_t(hi)));
+        return x;
+      };
+      if (n > 2) scene.medium.noise.octaves = int(whole(v[2], 1, 8, "octaves"));
+      if (n > 3) scene.medium.noise.seed = std::uint32_t(whole(v[3], 0, 4294967295.0, "seed"));
     }
     const bool sun_given = o.sun_azimuth_deg || o.sun_elevation_deg || !o.sun_direction.empty() ||
                            !o.sun_irradiance.empty() || o.sun_radius_deg;
@@ -100,6 +108,8 @@ FogPlan make_plan(const FogCommandOptions& o) {
       } else if (o.sun_azimuth_deg || o.sun_elevation_deg) {
         if (!o.sun_azimuth_deg || !o.sun_elevation_deg)
           throw std::invalid_argument("--sun-azimuth and --sun-elevation go together");
+        if (!(std::abs(*o.sun_elevation_deg) <= 90))  // as in scene files
+          throw std::invalid_argument("--sun-elevation must be in [-90, 90] degrees");
         sun.direction_to_sun = direction_from_azimuth_elevation(*o.sun_azimuth_deg, *o.sun_elevation_deg);
       }
       if (!o.sun_irradiance.empty()) sun.irradiance = parse_rgb(o.sun_irradiance);
@@ -149,7 +159,6 @@ FogPlan make_plan(const FogCommandOptions& o) {
   }
   // Photos in parallel already use the cores; each render gets what its arena allows.
   validate_scene(scene);
-  if (!o.save_scene_path.empty()) save_scene(o.save_scene_path, scene);
 
   if (o.depth_kind == "distance") plan.depth.kind = DepthKind::distance;
   else if (o.depth_kind == "z") plan.depth.kind = DepthKind::planar_z;
@@ -165,6 +174,15 @@ FogPlan make_plan(const FogCommandOptions& o) {
   plan.pixel_type = parse_pixel_type(o.bit_depth);
   if (!o.format.empty() && !is_writable_image_extension("x." + o.format))
     throw Error(ErrorCode::invalid_argument, "--format '" + o.format + "' is not a writable image format");
+  // Last, so that a usage error writes nothing; like the images, it never replaces an input.
+  if (!o.save_scene_path.empty()) {
+    for (const fs::path& photo : expand_inputs(o.inputs))
+      for (const fs::path& input : {photo, find_depth(o, photo)})
+        if (same_file(o.save_scene_path, input))
+          throw Error(ErrorCode::invalid_argument, "--save-scene " + o.save_scene_path +
+                                                       " is an input file; refusing to overwrite it");
+    save_scene(o.save_scene_path, scene);
+  }
   return plan;
 }
 

@@ -4,9 +4,12 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numbers>
 #include <regex>
+#include <stdexcept>
 
 #include "mr/io.h"
+#include "mr/scene_json.h"
 #include "test_support.h"
 
 namespace fs = std::filesystem;
@@ -205,6 +208,423 @@ TEST_F(CliBatch, InterruptLeavesNoPartialFiles) {
   EXPECT_FALSE(has_temp_files(dir.path())) << info;
   for (const auto& e : fs::directory_iterator(out)) EXPECT_NO_THROW(read_image(e.path())) << e.path();
   EXPECT_EQ(checksums(many), before);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The physical model's options (--scene, --save-scene, sun, lamps, shadows, ...), end to end.
+// Each run fogs one 64x40 photo at --quality draft (about 0.2 s); outputs are float EXRs with
+// the AOV layers, so the checks below read exact values, not 8-bit codes.
+
+constexpr int kW = 64, kH = 40;
+
+// Depth `metres` everywhere: along each ray (a bowl around the camera) or, read with
+// --depth-kind z, a wall facing the camera.
+void write_constant_depth(const fs::path& path, float metres) {
+  Image d(kW, kH, 1, {"Z"});
+  for (float& v : d.pixels()) v = metres;
+  write_raw(path, d, PixelType::float32);
+}
+
+double channel_mean(const Image& im, const std::string& name) {
+  const int c = im.channel_index(name);
+  if (c < 0) throw std::runtime_error("no channel " + name);
+  double sum = 0;
+  for (int y = 0; y < im.height(); ++y)
+    for (int x = 0; x < im.width(); ++x) sum += im.at(x, y, c);
+  return sum / double(im.pixel_count());
+}
+
+// Mean of inscatter.R/G/B.
+double inscatter_mean(const Image& im) {
+  return (channel_mean(im, "inscatter.R") + channel_mean(im, "inscatter.G") +
+          channel_mean(im, "inscatter.B")) /
+         3;
+}
+
+// A scene document with fog in a layer below 8 m, a sun and the sky given.
+std::string valley_scene(double g, double sun_azimuth_deg, double sun_elevation_deg) {
+  return R"({"format": "libmr-scene", "version": 1,
+  "medium": {"visibility_m": 40, "g": )" +
+         std::to_string(g) + R"(, "layer_top_m": 8},
+  "lighting": {"sun": {"azimuth_deg": )" +
+         std::to_string(sun_azimuth_deg) + R"(, "elevation_deg": )" +
+         std::to_string(sun_elevation_deg) + R"(, "irradiance": [6, 5, 4]},
+               "sky_radiance": [0.2, 0.22, 0.25]}})";
+}
+
+class CliScene : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    in = dir / "in";
+    fs::create_directories(in);
+    write_photo(in / "photo.png", kW, kH);
+    write_constant_depth(in / "photo_depth.exr", 60.0f);
+    write_constant_depth(in / "wall_depth.exr", 25.0f);
+  }
+  // --quality draft unless args say otherwise.
+  std::string command(const std::string& out_name, const std::string& args) const {
+    return kMr + " fog " + (in / "photo.png").string() + " -o " + (dir / out_name).string() +
+           " -q " + (args.find("--quality") == std::string::npos ? "--quality draft " : "") + args;
+  }
+  test::CommandResult fog(const std::string& out_name, const std::string& args) const {
+    return test::run(command(out_name, args));
+  }
+  // Only what the command writes to stderr (stdout is dropped).
+  test::CommandResult fog_stderr(const std::string& out_name, const std::string& args) const {
+    return test::run("{ " + command(out_name, args) + " 2>&1 1>/dev/null; }");
+  }
+  // Runs into out_name/ and reads the layered float EXR back (composite + AOVs).
+  Image render(const std::string& out_name, const std::string& args) const {
+    const auto r = fog(out_name, "--format exr --bit-depth float --aovs " + args);
+    if (r.exit_code != 0)
+      throw std::runtime_error("mr fog " + args + " exited " + std::to_string(r.exit_code) + ":\n" +
+                               r.output);
+    return read_raw(dir / out_name / "photo_fog.exr");
+  }
+  fs::path write_scene(const std::string& name, const std::string& json) const {
+    test::write_bytes(dir / name, json);
+    return dir / name;
+  }
+  test::ScratchDir dir;
+  fs::path in;
+};
+
+TEST_F(CliScene, SceneFileChangesTheFogAndOptionsOverrideIt) {
+  const fs::path valley = write_scene("valley.json", valley_scene(0.6, 0, 30));
+  const Image plain = render("plain", "");
+  const Image scene = render("scene", "--scene " + valley.string());
+  // 40 m visibility, a sun and a given sky instead of 150 m under the estimated sky.
+  EXPECT_GT(test::max_abs_diff(scene, plain), 0.05);
+  // The scene's 40 m visibility: tau = 3.912 / 40 * 60 m along the central ray (inside the layer).
+  EXPECT_NEAR(scene.at(kW / 2, kH / 2, scene.channel_index("optical_depth.G")), 3.912 / 40 * 60,
+              1e-3 * 5.9);
+
+  // An option overrides that one value and keeps the rest of the scene: the result is exactly
+  // that of a scene file holding the option's value.
+  const Image g_option = render("g_option", "--scene " + valley.string() + " --g -0.5");
+  const Image g_file =
+      render("g_file", "--scene " + write_scene("g.json", valley_scene(-0.5, 0, 30)).string());
+  EXPECT_EQ(test::max_abs_diff(g_option, g_file), 0.0);
+  EXPECT_GT(test::max_abs_diff(g_option, scene), 0.1);  // g changes the sun's in-scatter (1.6)
+
+  const Image sun_option =
+      render("sun_option", "--scene " + valley.string() + " --sun-azimuth 180 --sun-elevation 60");
+  const Image sun_file =
+      render("sun_file", "--scene " + write_scene("sun.json", valley_scene(0.6, 180, 60)).string());
+  EXPECT_EQ(test::max_abs_diff(sun_option, sun_file), 0.0);
+  EXPECT_GT(test::max_abs_diff(sun_option, scene), 0.1);  // measured: 1.6
+}
+
+TEST_F(CliScene, BadSceneFilesAreUsageErrorsNamingTheValue) {
+  const std::string head = R"({"format": "libmr-scene", "version": 1, )";
+  struct Case {
+    std::string json;
+    std::vector<std::string> expected;  // in the one ERROR line
+  };
+  const Case cases[] = {
+      {head + R"("medium": {"g" 0.5}})", {"line 1, column", "syntax error"}},
+      {head + R"("medium": {"sigma_t_per_m": [0.02, -0.1, 0.02]}})",
+       {"/medium/sigma_t_per_m", "medium.sigma_t_per_m[1] = -0.1", "[0, 10000]"}},
+      {head + R"("medium": {"g": 1.5}})", {"/medium/g", "medium.g = 1.5", "(-1, 1)"}},
+      {head + R"("medium": {"g": "NaN"}})", {"/medium/g", "string"}},
+      {head + R"("medium": {"g": null}})", {"/medium/g"}},
+      {head + R"("medium": {"albdo": 0.9}})", {"/medium/albdo", "unknown key", "\"albedo\""}},
+      {head + R"("medium": {"visibility_m": -5}})", {"/medium/visibility_m"}},
+      {head + R"("lighting": {"lamps": [{"position_m": [0, "up", 0]}]}})",
+       {"/lighting/lamps/0/position_m"}},
+      {head + R"("lighting": {"sun": {"azimuth_deg": 10}}})", {"/lighting/sun", "elevation_deg"}},
+      {R"({"format": "libmr-scene", "version": 2})", {"/version", "version 2"}},
+  };
+  const auto inputs_before = checksums(in);
+  for (const Case& c : cases) {
+    const fs::path scene = write_scene("bad.json", c.json);
+    const std::string scene_bytes = test::read_bytes(scene);
+    const auto r = fog_stderr(
+        "out", "--scene " + scene.string() + " --save-scene " + (dir / "saved.json").string());
+    SCOPED_TRACE(c.json + "\n" + r.output);
+    EXPECT_EQ(r.exit_code, 2);
+    EXPECT_EQ(r.output.rfind("ERROR: ", 0), 0u);  // first line, on stderr
+    EXPECT_EQ(count(r.output, "\n"), 1);          // one line
+    EXPECT_NE(r.output.find("bad.json"), std::string::npos);
+    for (const std::string& e : c.expected) EXPECT_NE(r.output.find(e), std::string::npos) << e;
+    EXPECT_FALSE(fs::exists(dir / "out"));         // no output (not even its folder)
+    EXPECT_FALSE(fs::exists(dir / "saved.json"));  // nor a saved scene
+    EXPECT_EQ(test::read_bytes(scene), scene_bytes);
+  }
+  EXPECT_EQ(checksums(in), inputs_before);
+}
+
+TEST_F(CliScene, SavedSceneReproducesTheImage) {
+  const std::string options =
+      "--visibility 60m --albedo 0.9,0.95,1 --g 0.4 --height-fog 0,15 --layer -5,40 "
+      "--noise 0.3,8,3,7 --sun-azimuth 20 --sun-elevation 15 --sun-irradiance 4,3,2 "
+      "--sun-radius 0.5 --lamp '6,3,20;80,60,40;0,-1,0;30,60' --lamp '-5,2,30;40,40,40' "
+      "--camera-height 2 --pitch 3 --roll 2 --yaw 5 --seed 9 --march-steps 24 "
+      "--airlight 0.3,0.32,0.35";
+  const fs::path saved = dir / "saved.json";
+  const Image first = render("first", options + " --save-scene " + saved.string());
+  ASSERT_TRUE(fs::exists(saved));
+  // The document holds what the options said.
+  const FogScene s = load_scene(saved);
+  EXPECT_FLOAT_EQ(s.medium.sigma_t_per_m[1], float(3.912 / 60));
+  EXPECT_EQ(s.medium.albedo, (Rgb{0.9f, 0.95f, 1.0f}));
+  EXPECT_EQ(s.medium.g, 0.4);
+  ASSERT_TRUE(s.medium.height_fog);
+  EXPECT_EQ(s.medium.height_fog->scale_height_m, 15);
+  EXPECT_EQ(s.medium.layer_bottom_m, -5);
+  EXPECT_EQ(s.medium.layer_top_m, 40);
+  EXPECT_EQ(s.medium.noise.amplitude, 0.3);
+  EXPECT_EQ(s.medium.noise.scale_m, 8);
+  EXPECT_EQ(s.medium.noise.octaves, 3);
+  EXPECT_EQ(s.medium.noise.seed, 7u);
+  ASSERT_TRUE(s.lighting.sun);
+  EXPECT_NEAR(s.lighting.sun->direction_to_sun.y, std::sin(15 * std::numbers::pi / 180), 1e-12);
+  EXPECT_EQ(s.lighting.sun->irradiance, (Rgb{4, 3, 2}));
+  EXPECT_EQ(s.lighting.sun->angular_radius_deg, 0.5);
+  ASSERT_TRUE(s.lighting.sky_radiance);
+  EXPECT_EQ(*s.lighting.sky_radiance, (Rgb{0.3f, 0.32f, 0.35f}));
+  ASSERT_EQ(s.lighting.lamps.size(), 2u);
+  EXPECT_EQ(s.lighting.lamps[0].position_m.z, 20);
+  EXPECT_EQ(s.lighting.lamps[0].outer_angle_deg, 60);
+  EXPECT_EQ(s.lighting.lamps[1].intensity_per_sr, (Rgb{40, 40, 40}));
+  EXPECT_EQ(s.pose.position_m.y, 2);
+  EXPECT_EQ(s.pose.pitch_deg, 3);
+  EXPECT_EQ(s.pose.roll_deg, 2);
+  EXPECT_EQ(s.pose.yaw_deg, 5);
+  EXPECT_EQ(s.render.quality, Quality::draft);
+  EXPECT_EQ(s.render.seed, 9u);
+  EXPECT_EQ(s.render.march_steps, 24);
+
+  // Fed back alone, it gives the same pixels, bit for bit, in every layer. (Not the same file
+  // bytes: OpenEXR headers hold the time of writing.)
+  const Image again = render("again", "--scene " + saved.string());
+  EXPECT_EQ(test::max_abs_diff(again, first), 0.0);
+  // ... and the options did matter.
+  EXPECT_GT(test::max_abs_diff(first, render("plain", "")), 0.05);
+}
+
+// Fog between -10 m and 5 m (so that sunlight reaches into it), 80 m visibility, sky 0.2.
+const std::string kLayerFog = "--layer -10,5 --visibility 80m --airlight 0.2 ";
+
+TEST_F(CliScene, SunBrightensTheInScatter) {
+  const Image no_sun = render("no_sun", kLayerFog);
+  const Image sun =
+      render("sun", kLayerFog + "--sun-azimuth 0 --sun-elevation 45 --sun-irradiance 10");
+  // Sky alone: about 0.16; the sun adds about 0.44 (measured). Required: at least +50 %.
+  EXPECT_GT(inscatter_mean(sun), 1.5 * inscatter_mean(no_sun));
+  for (const char* c : {"R", "G", "B"})
+    EXPECT_GT(channel_mean(sun, c), channel_mean(no_sun, c) + 0.1) << c;
+  // Forward scattering (g > 0): a sun ahead of the camera lights the fog more than one behind.
+  // (--no-shadows: a sun this low ahead would be behind the depth map's surface.)
+  const std::string g = kLayerFog + "--g 0.7 --no-shadows --sun-elevation 15 --sun-irradiance 10 ";
+  const double ahead = inscatter_mean(render("ahead", g + "--sun-azimuth 0"));
+  const double behind = inscatter_mean(render("behind", g + "--sun-azimuth 180"));
+  EXPECT_GT(ahead, 3 * behind);  // measured: 2.27 vs 0.19
+}
+
+TEST_F(CliScene, LampBrightensPixelsNearItsProjectionMost) {
+  // Camera at (0, 1.6, 0) looking along +Z with f = 50 px; a lamp at (4, 1.6, 12) projects to
+  // x = 32 + 50 * 4 / 12 = 48.7, y = 20 (pixel centres at +0.5).
+  const std::string fog = "--visibility 80m --airlight 0.2 --focal-px 50 ";
+  const Image dark = render("dark", fog);
+  const Image lit = render("lit", fog + "--lamp '4,1.6,12;200,200,200'");
+  const int c = lit.channel_index("inscatter.G");
+  auto gain = [&](int x, int y) { return lit.at(x, y, c) - dark.at(x, y, c); };
+  const double near = gain(48, 20), same_row_far = gain(4, 20), corner = gain(4, 2);
+  // Measured: +10.2 at the lamp, +0.06 at the row's far end and in the corner.
+  EXPECT_GT(near, 1.0);
+  EXPECT_GT(near, 10 * same_row_far);
+  EXPECT_GT(near, 10 * corner);
+  EXPECT_GE(same_row_far, 0.0);  // light only adds
+  // The gain falls off away from the projection along the row.
+  EXPECT_GT(gain(48, 20), gain(40, 20));
+  EXPECT_GT(gain(40, 20), gain(24, 20));
+}
+
+TEST_F(CliScene, NoShadowsLetsTheSunThroughAWall) {
+  // The depth map, read as planar z, is a wall 25 m ahead; the sun is low behind it, so the
+  // wall shadows all the fog in front of it.
+  const std::string wall =
+      kLayerFog + "--depth " + (in / "wall_depth.exr").string() + " --depth-kind z ";
+  const std::string sun_ahead = "--sun-azimuth 0 --sun-elevation 10 --sun-irradiance 10 ";
+  const Image no_sun = render("no_sun", wall);
+  const Image shadowed = render("shadowed", wall + sun_ahead);
+  const Image unshadowed = render("unshadowed", wall + sun_ahead + "--no-shadows");
+  // Measured: 0.1334 without a sun, 0.1336 shadowed, 0.340 with --no-shadows.
+  EXPECT_LT(inscatter_mean(shadowed) - inscatter_mean(no_sun), 0.01);
+  EXPECT_GT(inscatter_mean(unshadowed) - inscatter_mean(shadowed), 0.1);
+  // Control: with the sun behind the camera nothing blocks it, and the flag changes nothing.
+  const std::string sun_behind = "--sun-azimuth 180 --sun-elevation 10 --sun-irradiance 10 ";
+  const Image lit = render("lit", wall + sun_behind);
+  EXPECT_GT(inscatter_mean(lit) - inscatter_mean(no_sun), 0.1);
+  EXPECT_EQ(test::max_abs_diff(lit, render("lit_no_shadows", wall + sun_behind + "--no-shadows")),
+            0.0);
+}
+
+// Bad option values, in groups of a few (each case is one `mr` run of about 0.2 s).
+struct BadOptions {
+  std::string group;
+  std::vector<std::pair<std::string, std::string>> cases;  // args, text expected in the ERROR line
+};
+void PrintTo(const BadOptions& b, std::ostream* os) {
+  *os << b.group;
+}
+class CliBadOptions : public CliScene, public ::testing::WithParamInterface<BadOptions> {};
+
+// A bad value is a usage error (exit 2, not a crash), one ERROR line on stderr naming it, and
+// nothing is written: no output folder, no --save-scene file.
+TEST_P(CliBadOptions, AreUsageErrorsNamingTheValue) {
+  for (const auto& [args, expected] : GetParam().cases) {
+    const auto r = fog_stderr("out", args + " --save-scene " + (dir / "saved.json").string());
+    SCOPED_TRACE(args + "\n" + r.output);
+    EXPECT_EQ(r.exit_code, 2);  // a signal gives -1
+    EXPECT_EQ(r.output.rfind("ERROR: ", 0), 0u);
+    EXPECT_EQ(count(r.output, "\n"), 1);
+    EXPECT_NE(r.output.find(expected), std::string::npos) << expected;
+    EXPECT_FALSE(fs::exists(dir / "out"));
+    EXPECT_FALSE(fs::exists(dir / "saved.json"));
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    CliScene, CliBadOptions,
+    ::testing::Values(
+        BadOptions{"Lamp",
+                   {{"--lamp '1,2'", "--lamp '1,2': expected x,y,z;R,G,B"},
+                    {"--lamp 'a,b,c;1,1,1'", "--lamp position"},
+                    {"--lamp '1,2,3;1,1'", "'1,1' must be one value or three"},
+                    {"--lamp '1,2,3;1,1,1;0,-1,0'", "expected x,y,z;R,G,B"},
+                    {"--lamp '1,2,3;1,1,1;0,0,0;10,20'", "lighting.lamps[0].spot_direction"},
+                    {"--lamp '1,2,3;1,1,1;0,-1,0;40,30'", "lighting.lamps[0].inner_angle_deg = 40"},
+                    {"--lamp '1,2,3;-1,1,1'", "lighting.lamps[0].intensity_per_sr[0] = -1"}}},
+        BadOptions{"Sun",
+                   {{"--sun-dir 0,0,0", "lighting.sun.direction_to_sun"},
+                    {"--sun-dir 1,2", "--sun-dir x,y,z"},
+                    {"--sun-elevation 30", "--sun-azimuth and --sun-elevation go together"},
+                    {"--sun-azimuth 0 --sun-elevation 95", "--sun-elevation must be in [-90, 90]"},
+                    {"--sun-irradiance -1", "lighting.sun.irradiance[0] = -1"},
+                    {"--sun-radius 10", "lighting.sun.angular_radius_deg = 10"}}},
+        BadOptions{"Medium",
+                   {{"--g 1", "medium.g = 1: must be in (-1, 1)"},
+                    {"--g -1", "medium.g = -1"},
+                    {"--g nan", "medium.g = nan"},
+                    {"--albedo 1.5", "medium.albedo[0] = 1.5"},
+                    {"--density -0.1", "medium.sigma_t_per_m[0] = -0.1"},
+                    {"--height-fog 0,-5", "medium.height_fog.scale_height_m = -5"},
+                    {"--height-fog 5", "--height-fog base,scale"},
+                    {"--layer 10,5", "medium.layer_bottom_m = 10"}}},
+        BadOptions{"Noise",
+                   {{"--noise 2", "medium.noise.amplitude = 2"},
+                    {"--noise 0.5,10,4.5", "octaves must be a whole number in 1..8"},
+                    {"--noise 0.5,10,1e10", "octaves must be a whole number"},
+                    {"--noise 0.5,10,4,-1", "seed must be a whole number in 0..4294967295"},
+                    {"--noise 0.5,10,4,1,5", "--noise takes at most 4 numbers"}}},
+        BadOptions{"QualityCameraRender",
+                   {{"--quality ultra", "--quality 'ultra'"},
+                    {"--pitch 100", "pose.pitch_deg = 100"},
+                    {"--march-steps 5000", "render.march_steps = 5000"},
+                    {"--march-steps -1", "render.march_steps = -1"},
+                    {"--camera-height inf", "pose.position_m.y = inf"}}}),
+    [](const ::testing::TestParamInfo<BadOptions>& info) { return info.param.group; });
+
+TEST_F(CliScene, OptionsRefusedByTheParserOrLaterWriteNoScene) {
+  // Bad values that CLI11 itself refuses are usage errors too.
+  for (const std::string args : {"--seed -1", "--g x", "--march-steps 2.5", "-j -2"}) {
+    const auto r = fog("out", args);
+    EXPECT_EQ(r.exit_code, 2) << args << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(dir / "out")) << args;
+  }
+  // A usage error found after the scene was resolved writes no scene file either.
+  for (const std::string args :
+       {"--format xyz", "--bit-depth 12", "--depth-kind disparity", "--depth-kind w"}) {
+    const auto r = fog("out", args + " --g 0.5 --save-scene " + (dir / "saved.json").string());
+    EXPECT_EQ(r.exit_code, 2) << args << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(dir / "saved.json")) << args;
+  }
+  // Control: the same without the error writes it.
+  const auto r = fog("out", "--g 0.5 --save-scene " + (dir / "saved.json").string());
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(load_scene(dir / "saved.json").medium.g, 0.5);
+}
+
+TEST_F(CliScene, SaveSceneNeverOverwritesAnInput) {
+  const auto before = checksums(in);
+  for (const fs::path& target : {in / "photo.png", in / "photo_depth.exr"}) {
+    const auto r = fog("out", "--save-scene " + target.string());
+    EXPECT_EQ(r.exit_code, 2) << target << "\n" << r.output;
+    EXPECT_NE(r.output.find("refusing to overwrite"), std::string::npos) << r.output;
+  }
+  EXPECT_EQ(checksums(in), before);
+}
+
+TEST_F(CliScene, ThreadCountDoesNotChangeTheOutput) {
+  write_photo(in / "second.png", kW, kH);
+  write_constant_depth(in / "second_depth.exr", 30.0f);
+  // Everything that has per-thread state: noise, jitter, sun shadows through the mesh, lamps.
+  const std::string args =
+      " --format exr --bit-depth float --aovs --layer -10,8 --noise 0.4,6 "
+      "--sun-azimuth 10 --sun-elevation 20 --lamp '3,2,10;100,100,100' --g 0.3 -q ";
+  const char* threads[] = {"-j 1", "", "-j 3"};
+  std::vector<Image> outputs[3];
+  for (int i = 0; i < 3; ++i) {
+    const fs::path out = dir / ("out" + std::to_string(i));
+    const auto r = test::run(kMr + " fog " + in.string() + " -o " + out.string() +
+                             " --quality draft " + args + threads[i]);
+    ASSERT_EQ(r.exit_code, 0) << threads[i] << "\n" << r.output;
+    for (const char* name : {"photo_fog.exr", "second_fog.exr"})
+      outputs[i].push_back(read_raw(out / name));
+  }
+  // Identical pixels in every layer. (Not the files' bytes: OpenEXR headers hold the time of
+  // writing.)
+  for (int i = 1; i < 3; ++i)
+    for (int k = 0; k < 2; ++k)
+      EXPECT_EQ(test::max_abs_diff(outputs[i][k], outputs[0][k]), 0.0) << threads[i] << " " << k;
+}
+
+TEST_F(CliScene, AovLayersInTheExr) {
+  std::vector<std::string> layers = {"R", "G", "B", "depth.Z", "sun_visibility.Y"};
+  for (const std::string layer : {"transmittance", "inscatter", "optical_depth"})
+    for (const char* c : {".R", ".G", ".B"}) layers.push_back(layer + c);
+  auto sorted = [](std::vector<std::string> v) {
+    std::sort(v.begin(), v.end());  // OpenEXR stores channels sorted by name
+    return v;
+  };
+  // Homogeneous fog, no lights: T = exp(-tau), tau = sigma * 60 m everywhere.
+  const Image exr = render("exr", "--visibility 80m --airlight 0.2");
+  EXPECT_EQ(sorted(exr.channel_names()), sorted(layers));  // channel names of the file's header
+  const double tau = 3.912 / 80 * 60;
+  for (const auto& [x, y] :
+       {std::pair{0, 0}, std::pair{kW / 2, kH / 2}, std::pair{kW - 1, kH - 1}}) {
+    EXPECT_EQ(exr.at(x, y, exr.channel_index("depth.Z")), 60.0f);
+    EXPECT_EQ(exr.at(x, y, exr.channel_index("sun_visibility.Y")), 1.0f);  // no sun
+    EXPECT_NEAR(exr.at(x, y, exr.channel_index("optical_depth.B")), tau, 1e-4 * tau);
+    EXPECT_NEAR(exr.at(x, y, exr.channel_index("transmittance.R")), std::exp(-tau),
+                1e-4 * std::exp(-tau));
+    EXPECT_NEAR(exr.at(x, y, exr.channel_index("inscatter.G")), 0.2 * (1 - std::exp(-tau)), 1e-4);
+  }
+  // A PNG output gets the same layers in <name>_fog_aovs.exr beside it. The sun's visibility
+  // is 0 on surfaces facing away from the sun (the bowl, with the sun ahead), a fraction in
+  // [0, 1] otherwise (measured mean with the sun behind the camera: 0.61).
+  double mean_visibility[2];
+  for (int behind = 0; behind < 2; ++behind) {
+    const std::string out = behind ? "png_behind" : "png_ahead";
+    const auto r =
+        fog(out, "--aovs --visibility 80m --layer -10,5 --sun-elevation 30 --sun-azimuth " +
+                     std::string(behind ? "180" : "0"));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_TRUE(fs::exists(dir / out / "photo_fog.png"));
+    const Image aovs = read_raw(dir / out / "photo_fog_aovs.exr");
+    EXPECT_EQ(sorted(aovs.channel_names()), sorted(layers));
+    const int v = aovs.channel_index("sun_visibility.Y");
+    for (int y = 0; y < kH; ++y)
+      for (int x = 0; x < kW; ++x) {
+        EXPECT_GE(aovs.at(x, y, v), 0.0f);
+        EXPECT_LE(aovs.at(x, y, v), 1.0f);
+      }
+    mean_visibility[behind] = channel_mean(aovs, "sun_visibility.Y");
+  }
+  EXPECT_EQ(mean_visibility[0], 0.0);
+  EXPECT_GT(mean_visibility[1], 0.3);
 }
 
 }  // namespace
