@@ -333,6 +333,8 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
     std::fprintf(stderr, "ERROR: %s\n", e.what());
     return 2;
   }
+  for (const std::string& warning : scene_warnings(plan.scene))
+    std::fprintf(stderr, "WARNING: %s\n", warning.c_str());
 
   // Jobs: photo -> depth, outputs. Depth maps named on the command line are not photos.
   std::vector<fs::path> photos = expand_inputs(o.inputs, {"_depth", "_disparity", "_aovs"});

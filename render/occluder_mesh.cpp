@@ -264,7 +264,7 @@ inline bool continuous(const Sample& p, const Plane& pp, const Sample& q, const 
 }
 
 // Per-pixel flags.
-constexpr std::uint8_t kValid = 1, kRightContinuous = 2, kDownContinuous = 4;
+constexpr std::uint8_t kValid = 1, kRightContinuous = 2, kDownContinuous = 4, kFan = 8;
 
 /// How the up-to-four pixels around a corner share it. Slots: 0 = top-left, 1 = top-right,
 /// 2 = bottom-left, 3 = bottom-right pixel. Key bits 0-3: slot has a surface; bits 4-7: the
@@ -326,6 +326,9 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
   if (!(options.thickness_m >= 0) || !std::isfinite(options.thickness_m))
     throw Error(ErrorCode::invalid_argument,
                 "mesh thickness must be >= 0 metres, got " + std::to_string(options.thickness_m));
+  if (!(options.centre_tolerance >= 0))
+    throw Error(ErrorCode::invalid_argument, "mesh centre tolerance must be >= 0, got " +
+                                                 std::to_string(options.centre_tolerance));
   const int width = distance_m.width, height = distance_m.height;
   const double ratio = options.discontinuity_ratio;
   const RayFrame frame(camera, pose);
@@ -451,22 +454,35 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
     for (int y = 0; y < height; ++y) row_edge_offset[y + 1] += row_edge_offset[y];
   }
   const std::uint64_t extruded_edges = extrude ? row_edge_offset[height] : 0;
-  const std::uint64_t total_vertices = surface_vertices + 2 * extruded_edges;
-  if (total_vertices > std::numeric_limits<std::uint32_t>::max())
-    throw Error(ErrorCode::invalid_argument, "occluder mesh of a " + std::to_string(width) + "x" +
-                                                 std::to_string(height) + " depth map would need " +
-                                                 std::to_string(total_vertices) +
-                                                 " vertices, more than 32-bit indices hold");
+  auto check_vertex_count = [&](std::uint64_t vertices) {
+    if (vertices > std::numeric_limits<std::uint32_t>::max())
+      throw Error(ErrorCode::invalid_argument,
+                  "occluder mesh of a " + std::to_string(width) + "x" + std::to_string(height) +
+                      " depth map would need " + std::to_string(vertices) +
+                      " vertices, more than 32-bit indices hold");
+  };
+  check_vertex_count(surface_vertices + 2 * extruded_edges);  // before corner_base narrows
 
   TriangleMesh mesh;
-  // One float more than needed: OccluderScene pads the vertex buffer for Embree's 16-byte loads
+  // The vertex count depends on the pixels to fan (step 6), known only once the corners are
+  // placed: reserve for the worst case, every pixel fanned (pages never written are never
+  // committed), plus one float: OccluderScene pads the vertex buffer for Embree's 16-byte loads
   // and should not have to reallocate 25 MB (1080p) to do it.
-  mesh.positions.reserve(3 * total_vertices + 1);
-  mesh.positions.resize(3 * total_vertices);
-  mesh.surface_triangle_count = 2 * surface_pixels;
-  mesh.indices.resize(3 * (mesh.surface_triangle_count + 2 * extruded_edges));
+  mesh.positions.reserve(3 * (surface_vertices + surface_pixels + 2 * extruded_edges) + 1);
+  mesh.positions.resize(3 * surface_vertices);
+  auto store = [&mesh](std::uint64_t vertex, V3 v) {
+    float* out = &mesh.positions[3 * vertex];
+    out[0] = float(v.x);
+    out[1] = float(v.y);
+    out[2] = float(v.z);
+  };
+  // A vertex's z-depth (along the camera's forward axis).
+  auto vertex_z = [&mesh, &frame, &origin](std::uint32_t vertex) {
+    const float* v = &mesh.positions[3 * std::size_t(vertex)];
+    return dot(V3{v[0], v[1], v[2]} - origin, frame.forward);
+  };
 
-  // 5. Vertex positions: per corner and group, the average distance at which the corner ray
+  // 5. Corner vertices: per corner and group, the average distance at which the corner ray
   // meets the planes of the group's pixels.
   tbb::parallel_for(
       tbb::blocked_range<int>(0, corner_height), [&](const tbb::blocked_range<int>& rows) {
@@ -487,34 +503,90 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
               sum[groups.label[s]] += plane_distance(planes[p], samples[p].distance_m, w);
               ++n[groups.label[s]];
             }
-            for (int g = 0; g < groups.count; ++g) {
-              const V3 v = origin + (sum[g] / n[g]) * w;
-              float* out = &mesh.positions[3 * (base + g)];
-              out[0] = float(v.x);
-              out[1] = float(v.y);
-              out[2] = float(v.z);
-            }
+            for (int g = 0; g < groups.count; ++g) store(base + g, origin + (sum[g] / n[g]) * w);
           }
         }
       });
-
-  // 6. Two triangles per surface pixel, and the extrusions.
   auto vertex_of = [&](int i, int j, int slot) {
     const std::size_t c = std::size_t(j) * corner_width + i;
     return corner_base[c] + kCornerTable[corner_key[c]].label[slot];
   };
+
+  // 6. Pixels to fan. A pixel's centre is the image midpoint of its diagonal c00-c11, where both
+  // its triangles meet; inverse z-depth is affine in image coordinates along a 3D segment, so the
+  // triangles pass the centre ray at the z-depth whose inverse is the mean of those of c00 and
+  // c11. Where a crease crosses the pixel no choice of corners on the corner rays gets every
+  // pixel centre right (a shared corner serves planes on both sides); such pixels get a vertex
+  // of their own that puts the surface through their measured point (step 7).
+  const double centre_tolerance = options.centre_tolerance;
+  std::vector<std::uint64_t> row_fan_offset(height + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      std::uint64_t count = 0;
+      for (int x = 0; x < width; ++x) {
+        const std::size_t i = pixel_index(x, y);
+        if (!(flags[i] & kValid)) continue;
+        const double inv_z = 0.5 / vertex_z(vertex_of(x, y, kBottomRight)) +
+                             0.5 / vertex_z(vertex_of(x + 1, y + 1, kTopLeft));
+        // The triangles' distance along the centre ray relative to the measured one.
+        if (std::abs(double(samples[i].inv_z) / inv_z - 1.0) > centre_tolerance) {
+          flags[i] |= kFan;
+          ++count;
+        }
+      }
+      row_fan_offset[y + 1] = count;
+    }
+  });
+  for (int y = 0; y < height; ++y) row_fan_offset[y + 1] += row_fan_offset[y];
+  const std::uint64_t fanned_pixels = row_fan_offset[height];
+  // Vertices: corners, then one per fanned pixel, then the extrusions.
+  const std::uint64_t centre_base = surface_vertices;
+  const std::uint64_t extrusion_base = surface_vertices + fanned_pixels;
+  const std::uint64_t total_vertices = extrusion_base + 2 * extruded_edges;
+  check_vertex_count(total_vertices);
+  mesh.positions.resize(3 * total_vertices);  // within the reserved capacity
+  mesh.surface_triangle_count = 2 * (surface_pixels + fanned_pixels);
+  mesh.indices.resize(3 * (mesh.surface_triangle_count + 2 * extruded_edges));
+
+  // 7. Two triangles per surface pixel; a fanned pixel's centre vertex and its other two
+  // triangles (layout: see TriangleMesh). The centre ray crosses the edge that the pixel's first
+  // two triangles share (c00-c11, or m-c11 when fanned), which is v0 -> v1 in one and v2 -> v0
+  // in the other: Embree's edge tests then compute the same value with opposite signs, so the
+  // ray cannot slip between them even in non-robust mode. (A vertex on the centre ray itself
+  // would be fragile: for a ray through a vertex Embree's edge tests come down to rounding
+  // noise, and such rays were lost in tests.)
+  const std::uint64_t fan_triangle_base = 2 * surface_pixels;
   tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y < rows.end(); ++y) {
       std::uint32_t* tri = mesh.indices.data() + 6 * row_pixel_offset[y];
+      std::uint64_t fan = row_fan_offset[y];
       for (int x = 0; x < width; ++x) {
-        if (!(flags[pixel_index(x, y)] & kValid)) continue;
+        const std::size_t i = pixel_index(x, y);
+        if (!(flags[i] & kValid)) continue;
         // The pixel is the bottom-right neighbour of its top-left corner, and so on.
         const std::uint32_t c00 = vertex_of(x, y, kBottomRight);
         const std::uint32_t c10 = vertex_of(x + 1, y, kBottomLeft);
         const std::uint32_t c01 = vertex_of(x, y + 1, kTopRight);
         const std::uint32_t c11 = vertex_of(x + 1, y + 1, kTopLeft);
-        tri[0] = c00, tri[1] = c11, tri[2] = c01;
-        tri[3] = c00, tri[4] = c10, tri[5] = c11;
+        if (flags[i] & kFan) {
+          // m on the diagonal, halfway from c00 to the centre, at the depth that puts the
+          // centre (1/3 of the way from m to c11 in the image) at the measured point; no
+          // farther than 4x the pixel's z-depth (the limit applies only when c11 is over 2.5x
+          // nearer than the pixel).
+          const double inv_z = double(samples[i].inv_z);
+          const double inv_zm = std::max(1.5 * inv_z - 0.5 / vertex_z(c11), 0.25 * inv_z);
+          const std::uint32_t m = std::uint32_t(centre_base + fan);
+          store(m, origin + (1.0 / inv_zm) * frame.direction(x + 0.25, y + 0.25));
+          tri[0] = m, tri[1] = c11, tri[2] = c01;
+          tri[3] = m, tri[4] = c10, tri[5] = c11;
+          std::uint32_t* extra = mesh.indices.data() + 3 * (fan_triangle_base + 2 * fan);
+          extra[0] = m, extra[1] = c00, extra[2] = c10;
+          extra[3] = m, extra[4] = c01, extra[5] = c00;
+          ++fan;
+        } else {
+          tri[0] = c00, tri[1] = c11, tri[2] = c01;
+          tri[3] = c00, tri[4] = c10, tri[5] = c11;
+        }
         tri += 6;
       }
     }
@@ -541,7 +613,7 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
             const double depth_m =
                 q.valid() ? std::min(thickness_m, double(q.distance_m - samples[i].distance_m))
                           : thickness_m;
-            const std::uint64_t first = surface_vertices + 2 * edge;
+            const std::uint64_t first = extrusion_base + 2 * edge;
             for (int e = 0; e < 2; ++e) {
               const float* v = &mesh.positions[3 * std::size_t(ends[side][e])];
               const V3 front{v[0], v[1], v[2]};

@@ -7,6 +7,10 @@
 // several vertices where a depth discontinuity separates them, so a continuous surface comes out
 // watertight while no triangle ever bridges a jump in depth (such bridging triangles are long and
 // thin, and made shadow rays ~100x slower in measurements, besides casting false shadows).
+// A pixel's two triangles follow its corners only; where that would miss the pixel's measured
+// depth (a crease crossing the pixel, whose corners serve planes on both sides), the pixel gets a
+// vertex of its own that puts the surface through its measured point, so every pixel centre
+// re-renders to its input depth (MeshOptions::centre_tolerance).
 #pragma once
 
 #include <cstddef>
@@ -22,16 +26,20 @@ namespace mr::render {
 /// An indexed triangle mesh in the world frame (metres, +Y up; see mr/scene.h).
 ///
 /// Layout of a mesh made by reconstruct_occluder_mesh (callers may rely on it, e.g. to map an
-/// Embree primitive id back to its pixel): the first 2 * N triangles are the surface, two per
-/// pixel with a surface (N of them), visited row by row (top row first, left to right).
-/// Triangle 2k is (c00, c11, c01) and 2k+1 is (c00, c10, c11), where cXY is the vertex index of
-/// the pixel's corner X right / Y down of its top-left corner, so cross(v1 - v0, v2 - v0) points
-/// towards the camera. Triangles after the first 2N are the optional silhouette extrusions
-/// (MeshOptions::thickness_m; their winding is unspecified).
+/// Embree primitive id below 2N back to its pixel k = id / 2): the first 2 * N triangles are
+/// the surface, two per pixel with a surface (N of them), visited row by row (top row first,
+/// left to right). Triangle 2k is (a, c11, c01) and 2k+1 is (a, c10, c11), where cXY is the
+/// vertex index of the pixel's corner X right / Y down of its top-left corner and a is c00,
+/// except for a fanned pixel (see MeshOptions::centre_tolerance), where a is the pixel's own
+/// vertex m. The F fanned pixels' other two triangles follow, in the same pixel order:
+/// triangles 2N + 2f and 2N + 2f + 1 of the f-th fanned pixel are (m, c00, c10) and
+/// (m, c01, c00). In every surface triangle cross(v1 - v0, v2 - v0) points towards the camera.
+/// Triangles after the first 2N + 2F (surface_triangle_count) are the optional silhouette
+/// extrusions (MeshOptions::thickness_m; their winding is unspecified).
 struct TriangleMesh {
   std::vector<float> positions;            ///< x, y, z per vertex, world metres
   std::vector<std::uint32_t> indices;      ///< 3 vertex indices per triangle
-  std::size_t surface_triangle_count = 0;  ///< the first triangles, 2 per pixel (see above)
+  std::size_t surface_triangle_count = 0;  ///< the first triangles, 2N + 2F (see above)
 
   std::size_t vertex_count() const { return positions.size() / 3; }
   std::size_t triangle_count() const { return indices.size() / 3; }
@@ -49,6 +57,16 @@ struct MeshOptions {
   /// by this many metres (limited to the depth of the background behind it). 0 = off; must be
   /// >= 0 and finite.
   double thickness_m = 0;
+  /// A pixel's two triangles meet its centre ray at the depth their corners c00 and c11 give
+  /// it, which misses the pixel's measured distance where a crease crosses the pixel (by up to
+  /// ~1/4 of the per-pixel change in relative depth slope between the two faces: percents on
+  /// faces seen at grazing angles). Where it would miss by more than this fraction of the
+  /// distance, the pixel is fanned instead: four triangles around a vertex of its own that puts
+  /// the surface through its measured point (see reconstruct_occluder_mesh; layout: see
+  /// TriangleMesh), so re-rendered depth at every pixel centre is within this fraction of the
+  /// input (plus float rounding). Only pixels at creases, or where the depth is noisy, are
+  /// fanned; 0 fans nearly every pixel (twice the triangles), +inf none. Must be >= 0.
+  double centre_tolerance = 1e-3;
 };
 
 /// Estimates a unit surface normal per pixel of a distance map.
@@ -74,11 +92,22 @@ Image estimate_normals(ConstImageView distance_m, const Camera& camera, const Ca
 /// Reconstructs the occluder mesh of a distance map (seed 000, Algorithm 4, see the file comment).
 ///
 /// `distance_m` as for estimate_normals. Each pixel with a surface contributes two triangles over
-/// its four corners (layout: see TriangleMesh); pixels without one contribute none. A corner's
-/// vertex is on the corner's camera ray at the average of the distances where that ray meets the
-/// planes of the pixels sharing the vertex (a pixel whose plane the ray meets nearly edge-on, or
-/// far from the pixel's own distance, contributes its own distance instead). Deterministic, and
-/// parallel over rows (TBB). The returned mesh owns its buffers.
+/// its four corners, or four around a vertex of its own (layout: see TriangleMesh); pixels without
+/// one contribute none. A corner's vertex is on the corner's camera ray at the average of the
+/// distances where that ray meets the planes of the pixels sharing the vertex (a pixel whose
+/// plane the ray meets nearly edge-on, or far from the pixel's own distance, contributes its own
+/// distance instead); the average is the best one corner can do for pixels on both sides of a
+/// crease (taking the nearer or farther plane fixes one side's pixel centres and doubles the
+/// other side's error). A fanned pixel (x, y)'s vertex m is on the ray through image point
+/// (x + 1/4, y + 1/4) (on the diagonal, halfway from corner c00 to the centre), at the depth where
+/// the segment from m to c11 meets the centre ray at the pixel's measured point (m no farther than
+/// 4x the pixel's depth). The centre ray then crosses the edge shared by the pixel's first two
+/// triangles, as it crosses c00-c11 for an unfanned pixel; with a vertex on the centre ray itself,
+/// Embree's (non-robust) edge tests there come down to rounding noise, and rays through it were
+/// lost in tests.
+/// Vertices: corners first, then the fanned pixels' vertices in pixel order, then the
+/// extrusions. Deterministic, and parallel over rows (TBB). The returned mesh owns its
+/// buffers.
 ///
 /// Throws mr::Error(invalid_argument) for a depth map with other than 1 channel or bad options,
 /// mr::Error(size_mismatch) when its size differs from the camera's (the message names both

@@ -21,6 +21,8 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;
 constexpr double kGoldenAngle = 2.39996322972865332;
+// Step multiplier for pixels next to a shaft's edge (see render_scattering_cpu's pass 2).
+constexpr int kShaftRefinement = 4;
 
 Vec3d vec(const Vec3& v) { return {v.x, v.y, v.z}; }
 double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -90,7 +92,8 @@ class Core {
       // cos / sin of the golden-angle spiral's angles, looked up per march step (sincos per
       // step measured 9 % of a render).
       const std::size_t max_steps =
-          std::size_t(plan.steps + plan.lamp_steps * int(scene_.lighting.lamps.size()) + 2);
+          std::size_t(plan.steps * kShaftRefinement +
+                      plan.lamp_steps * int(scene_.lighting.lamps.size()) + 2);
       spiral_.resize(kSpiralRotations + max_steps);
       for (std::size_t n = 0; n < spiral_.size(); ++n)
         spiral_[n] = {std::cos(kGoldenAngle * double(n)), std::sin(kGoldenAngle * double(n))};
@@ -128,7 +131,8 @@ class Core {
     return std::min(kMax, rd.distance_at_optical_depth(target));
   }
 
-  PixelSample march(int x, int y) const {
+  // `steps`: view-ray segments (the preset's, or more where a pixel straddles a shaft edge).
+  PixelSample march(int x, int y, int steps) const {
     PixelSample s;
     const double distance = in_.distance_m.at(x, y, 0);
     const Vec3d w = ray(x, y);
@@ -151,19 +155,19 @@ class Core {
 
     // Segment boundaries: uniform in transmittance, plus equiangular ones around each lamp.
     std::vector<double> bounds;
-    bounds.reserve(std::size_t(plan_.steps + plan_.lamp_steps * scene_.lighting.lamps.size() + 2));
+    bounds.reserve(std::size_t(steps + plan_.lamp_steps * scene_.lighting.lamps.size() + 2));
     bounds.push_back(0);
     bounds.push_back(length);
     const double od_mean_total = sigma_mean_ * od_unit_total;
     if (od_mean_total > 1e-6) {
       const double tau_end = std::exp(-od_mean_total);
-      for (int i = 1; i < plan_.steps; ++i) {
-        const double tau = 1.0 - (1.0 - tau_end) * i / plan_.steps;
+      for (int i = 1; i < steps; ++i) {
+        const double tau = 1.0 - (1.0 - tau_end) * i / steps;
         const double t = rd.distance_at_optical_depth(-std::log(tau) / sigma_mean_);
         if (t > 0 && t < length) bounds.push_back(t);
       }
     } else {
-      for (int i = 1; i < plan_.steps; ++i) bounds.push_back(length * i / plan_.steps);
+      for (int i = 1; i < steps; ++i) bounds.push_back(length * i / steps);
     }
     std::vector<LampOnRay> lamp_rays;
     lamp_rays.reserve(scene_.lighting.lamps.size());
@@ -189,7 +193,9 @@ class Core {
     // of one view ray toward the sun are nearly parallel and close: coherent), then the sums.
     thread_local std::vector<double> sample_t;
     thread_local std::vector<unsigned char> sun_visible;
+    thread_local std::vector<double> crossing;  // visibility changes between samples i, i + 1
     sample_t.resize(segments);
+    crossing.resize(segments);
     sun_visible.assign(segments, 1);
     for (std::size_t i = 0; i < segments; ++i) {
       // Stratified jitter: each segment's own offset (a golden-ratio sequence from the pixel's),
@@ -223,11 +229,28 @@ class Core {
         for (int k = 0; k < 8 && first + std::size_t(k) < segments; ++k)
           sun_visible[first + std::size_t(k)] = !blocked[k];
       }
+      // Shaft edges: where the visibility changes between two samples, bisect for the crossing
+      // (to 1/64 of the gap), so each segment gets its exact lit part instead of all or nothing:
+      // one sample per segment alone leaves a jitter-dithered edge of 1/steps steps.
+      for (std::size_t i = 0; i + 1 < segments; ++i) {
+        if (sun_visible[i] == sun_visible[i + 1]) continue;
+        double lo = sample_t[i], hi = sample_t[i + 1];
+        const Vec3d dir = sun_sample_direction(i, jitter, double(segments + 1), pixel_rotation);
+        for (int k = 0; k < kEdgeBisections; ++k) {
+          const double mid = 0.5 * (lo + hi);
+          const bool visible = !in_.occluders->occluded(f3(add(origin_, w, mid)), f3(dir),
+                                                       float(1e-3 + 1e-4 * mid), float(kInf));
+          (visible == bool(sun_visible[i]) ? lo : hi) = mid;
+        }
+        rays += kEdgeBisections;
+        crossing[i] = 0.5 * (lo + hi);
+      }
     }
 
     double od[3] = {0, 0, 0};
     double tau_a[3] = {1, 1, 1};
-    int sun_samples = 0, sun_seen = 0;
+    int sun_samples = 0;
+    double sun_seen_fraction = 0;
     for (std::size_t i = 0; i < segments; ++i) {
       const double ta = bounds[i], tb = bounds[i + 1];
       const double ts = sample_t[i];
@@ -246,20 +269,48 @@ class Core {
       }
       if (weight[0] + weight[1] + weight[2] <= 0 && tau_before[0] + tau_before[1] + tau_before[2] <= 0) continue;
 
-      double source[3] = {in_.sky_radiance[0], in_.sky_radiance[1], in_.sky_radiance[2]};
+      const double source[3] = {in_.sky_radiance[0], in_.sky_radiance[1], in_.sky_radiance[2]};
       if (scene_.lighting.sun) {
         const Sun& sun = *scene_.lighting.sun;
+        // The segment's lit weight: [ta, tl] is lit as sample i - 1, [tl, tr] as sample i,
+        // [tr, tb] as sample i + 1 (tl, tr: the bisected crossings that fall inside it).
+        const bool vis_prev = i > 0 ? sun_visible[i - 1] : sun_visible[i];
+        const bool vis_next = i + 1 < segments ? sun_visible[i + 1] : sun_visible[i];
+        const double tl = vis_prev != bool(sun_visible[i]) ? std::max(ta, crossing[i - 1]) : ta;
+        const double tr = vis_next != bool(sun_visible[i]) ? std::min(tb, crossing[i]) : tb;
+        double lit_weight[3] = {0, 0, 0};
+        if (tl == ta && tr == tb) {
+          if (sun_visible[i])
+            for (int c = 0; c < 3; ++c) lit_weight[c] = weight[c];
+        } else {
+          const double modulation = seg_od_unit > 0 ? seg_od_unit / std::max(1e-300, rd.optical_depth(ta, tb)) : 0.0;
+          const std::array<std::pair<double, double>, 3> pieces{
+              {{ta, tl}, {tl, tr}, {tr, tb}}};
+          const bool lit[3] = {vis_prev, bool(sun_visible[i]), vis_next};
+          for (int k = 0; k < 3; ++k) {
+            if (!lit[k] || !(pieces[k].second > pieces[k].first)) continue;
+            const double od_p = rd.optical_depth(ta, pieces[k].first) * modulation;
+            const double od_q = rd.optical_depth(ta, pieces[k].second) * modulation;
+            for (int c = 0; c < 3; ++c)
+              lit_weight[c] += m.albedo[c] * tau_before[c] *
+                               (std::exp(-sigma_[c] * od_p) - std::exp(-sigma_[c] * od_q));
+          }
+        }
+        const double length_ab = tb - ta;
+        sun_seen_fraction += length_ab > 0
+                                 ? ((vis_prev ? tl - ta : 0) + (sun_visible[i] ? tr - tl : 0) +
+                                    (vis_next ? tb - tr : 0)) / length_ab
+                                 : double(sun_visible[i]);
         ++sun_samples;
-        if (sun_visible[i]) {
-          ++sun_seen;
+        if (lit_weight[0] + lit_weight[1] + lit_weight[2] > 0) {
           const double phase = henyey_greenstein(m.g, dot(w, sun_dir_));
           const double od_sun = scene_.render.light_path_attenuation
                                     ? RayDensity(m, xs, sun_dir_).optical_depth(0, kInf)
                                     : 0.0;
           const double tau_sun_grey = grey_ ? std::exp(-sigma_[0] * od_sun) : 0.0;
           for (int c = 0; c < 3; ++c)
-            source[c] += phase * sun.irradiance[c] *
-                         (grey_ ? tau_sun_grey : std::exp(-sigma_[c] * od_sun));
+            s.inscatter[c] += lit_weight[c] * phase * sun.irradiance[c] *
+                              (grey_ ? tau_sun_grey : std::exp(-sigma_[c] * od_sun));
         }
       }
       // Lamps: the 1/r^2 falloff is integrated exactly over the segment (with t = tc + h tan(th),
@@ -298,7 +349,7 @@ class Core {
       for (int c = 0; c < 3; ++c) s.inscatter[c] += weight[c] * source[c];
     }
     for (int c = 0; c < 3; ++c) s.camera_od[c] = od[c];
-    s.shaft = sun_samples ? double(sun_seen) / sun_samples : 1.0;
+    s.shaft = sun_samples ? sun_seen_fraction / sun_samples : 1.0;
     rays_.local() += rays;
     return s;
   }
@@ -447,6 +498,7 @@ class Core {
   Vec3d sun_dir_{0, 1, 0}, sun_u_{1, 0, 0}, sun_v_{0, 0, 1};
   double sun_tan_radius_ = 0;
   static constexpr std::uint32_t kSpiralRotations = 1024;
+  static constexpr int kEdgeBisections = 6;
   std::vector<std::pair<double, double>> spiral_;  // cos, sin of kGoldenAngle * n
   Vec3d origin_{};
   bool constant_source_ = false;
@@ -496,8 +548,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   sparse.samples.resize(std::size_t(w) * h);
   sparse.have.assign(std::size_t(w) * h, 0);
 
-  auto exact = [&](int x, int y) {
-    PixelSample s = core.march(x, y);
+  auto exact = [&](int x, int y, int steps) {
+    PixelSample s = core.march(x, y, steps);
     if (core.needs_ao()) s.ao = core.ambient_occlusion_at(x, y);
     s.sun_disk = core.sun_disk_visibility(x, y);
     sparse.at(x, y) = s;
@@ -515,7 +567,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                     [&](const tbb::blocked_range2d<std::size_t>& r) {
                       for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j)
                         for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i)
-                          exact(gx[i], gy[j]);
+                          exact(gx[i], gy[j], plan.steps);
                     });
   std::size_t exact_count = gx.size() * gy.size();
 
@@ -600,7 +652,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
               for (int k = 0; k < 4 && ok; ++k)
                 ok = depth_continuous(d(x, y), d(gx[corners[k].first], gy[corners[k].second]));
               if (!ok) {
-                exact(x, y);
+                // A shaft's edge crosses the cell: its pixels get finer steps, or thin slivers
+                // of shadow that one step misses or catches would show as grain.
+                exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
                 ++exact_more.local();
                 continue;
               }

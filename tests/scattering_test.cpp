@@ -425,5 +425,33 @@ TEST(Scattering, BadInputIsAClearError) {
   expect_error(s, constant_depth(Camera::from_horizontal_fov(21, 10, 60), 10), "21x10");
 }
 
+
+// A sun above homogeneous fog with no top never gets in: the scene is valid (and the core
+// correctly adds no sunlight, checked here too), but front ends are told why.
+TEST(Scattering, SunThatCannotReachTheFogIsWarnedAbout) {
+  FogScene s;
+  s.lighting.sun = Sun{direction_from_azimuth_elevation(0, 30), {5, 5, 5}, 0.27};
+  s.lighting.sky_radiance = Rgb{0, 0, 0};
+  const std::vector<std::string> warnings = scene_warnings(s);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("--layer"), std::string::npos) << warnings[0];
+  const Camera cam = Camera::from_horizontal_fov(16, 12, 60);
+  Image depth(cam.width, cam.height, 1, {"Z"});
+  for (float& d : depth.pixels()) d = 50.0f;
+  const ScatteringLayers unlit = render_scattering(Image(), depth, cam, s);
+  for (float v : unlit.inscatter.pixels()) EXPECT_EQ(v, 0.0f);
+
+  FogScene topped = s;
+  topped.medium.layer_top_m = 30;
+  EXPECT_TRUE(scene_warnings(topped).empty());
+  const ScatteringLayers lit = render_scattering(Image(), depth, cam, topped);
+  EXPECT_GT(lit.inscatter.at(8, 6, 0), 0.01f);
+  FogScene height = s;
+  height.medium.height_fog = Medium::HeightFog{0, 10};
+  EXPECT_TRUE(scene_warnings(height).empty());
+  FogScene no_sun;
+  EXPECT_TRUE(scene_warnings(no_sun).empty());
+}
+
 }  // namespace
 }  // namespace mr

@@ -3,6 +3,9 @@
 // own geometry; and the composite C = I * T + R.
 #pragma once
 
+#include <string>
+#include <vector>
+
 #include "mr/camera.h"
 #include "mr/fog.h"
 #include "mr/image.h"
@@ -46,5 +49,11 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
 /// Checks every field of a scene and throws mr::Error(invalid_argument) naming the first bad
 /// one by its path ("medium.g", "lighting.lamps[2].position_m") and what was found.
 void validate_scene(const FogScene& scene);
+
+/// Things in a valid scene that are almost certainly not what its author meant, one sentence
+/// each (empty when there are none); front ends show them as warnings. Today: a sun whose light
+/// cannot reach the camera's surroundings because the fog above is (close to) infinitely thick,
+/// e.g. homogeneous fog with no layer top: the core then correctly renders no sunlight at all.
+std::vector<std::string> scene_warnings(const FogScene& scene);
 
 }  // namespace mr
