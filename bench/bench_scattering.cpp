@@ -7,8 +7,8 @@
 //
 // Scene: sample_photos/leuven.jpg + leuven_depth.exr (hfov 60 deg, camera 1.6 m above the
 // street, horizon at row 362 of 563: pitch +7.05 deg), resized with OIIO (depth: nearest, so
-// discontinuities stay sharp); fog of 120 m visibility, albedo 0.9, g 0.5, sun at azimuth -70,
-// elevation 18 degrees, sky radiance from the photo.
+// discontinuities stay sharp); a fog bank 15 m deep of 120 m visibility, albedo 0.9, g 0.5, sun
+// at azimuth -70, elevation 18 degrees, sky radiance from the photo.
 #include <benchmark/benchmark.h>
 
 #include <OpenImageIO/imagebuf.h>
@@ -68,6 +68,8 @@ mr::FogScene scene(mr::Quality quality, bool accelerate) {
   s.medium.sigma_t_per_m = {sigma, sigma, sigma};
   s.medium.albedo = {0.9f, 0.9f, 0.9f};
   s.medium.g = 0.5;
+  s.medium.layer_bottom_m = 0;  // a fog bank 15 m deep: sunlight enters through its top
+  s.medium.layer_top_m = 15;
   s.pose.pitch_deg = 7.05;
   s.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-70, 18), {4, 3.8, 3.4}, 0.27};
   s.render.quality = quality;
