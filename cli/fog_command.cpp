@@ -157,6 +157,12 @@ FogPlan make_plan(const FogCommandOptions& o) {
     else if (o.quality == "final") scene.render.quality = Quality::final;
     else throw Error(ErrorCode::invalid_argument, "--quality '" + o.quality + "': expected draft, normal or final");
   }
+  if (!o.backend.empty()) {
+    if (o.backend == "auto") scene.render.backend = Backend::automatic;
+    else if (o.backend == "cpu") scene.render.backend = Backend::cpu;
+    else if (o.backend == "vulkan") scene.render.backend = Backend::vulkan;
+    else throw Error(ErrorCode::invalid_argument, "--backend '" + o.backend + "': expected auto, cpu or vulkan");
+  }
   // Photos in parallel already use the cores; each render gets what its arena allows.
   validate_scene(scene);
 
@@ -221,6 +227,10 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   }
   ScatteringLayers aovs;
   const FogLayers layers = fog(photo, depth.distance_m, camera, plan.scene, &aovs);
+  if (!aovs.backend_notice.empty()) {  // the Vulkan fall-back: once per run
+    static std::once_flag noticed;
+    std::call_once(noticed, [&] { report.warning(aovs.backend_notice); });
+  }
   if (interrupted) return Outcome::failed;
 
   WriteOptions write;
@@ -298,6 +308,8 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
   cmd->add_option("--scene", o.scene_path, "Scene JSON (docs/scene.md); options below override it");
   cmd->add_option("--save-scene", o.save_scene_path, "Write the resolved scene JSON here");
   cmd->add_option("--quality", o.quality, "draft, normal or final [default: normal]");
+  cmd->add_option("--backend", o.backend,
+                  "auto, cpu or vulkan [default: auto: Vulkan on a GPU, else the CPU with a notice]");
   cmd->add_option("--sun-azimuth", o.sun_azimuth_deg, "Sun azimuth, degrees (0 = the camera's forward at yaw 0, 90 = right)");
   cmd->add_option("--sun-elevation", o.sun_elevation_deg, "Sun elevation above the horizon, degrees");
   cmd->add_option("--sun-dir", o.sun_direction, "Direction to the sun x,y,z (world: +Y up)");

@@ -36,6 +36,7 @@ struct FogCommandOptions {
   std::string scene_path;       ///< --scene scene.json
   std::string save_scene_path;  ///< --save-scene: write the resolved scene
   std::string quality;
+  std::string backend;  ///< --backend auto|cpu|vulkan
   std::optional<double> sun_azimuth_deg, sun_elevation_deg;
   std::string sun_direction;    ///< "x,y,z"
   std::string sun_irradiance;   ///< "v" or "R,G,B"

@@ -543,8 +543,8 @@ TEST(SceneJson, BadEnumStrings) {
   EXPECT_CONTAINS(parse_error(doc("\"render\": {\"quality\": \"ultra\"}")),
                   "scene.json: /render/quality: expected one of \"draft\", \"normal\", \"final\", "
                   "found a string (\"ultra\")");
-  EXPECT_CONTAINS(parse_error(doc("\"render\": {\"backend\": \"vulkan\"}")),
-                  "scene.json: /render/backend: expected one of \"auto\", \"cpu\"");
+  EXPECT_CONTAINS(parse_error(doc("\"render\": {\"backend\": \"opengl\"}")),
+                  "scene.json: /render/backend: expected one of \"auto\", \"cpu\", \"vulkan\"");
   const FogScene s =
       scene_from_json(doc("\"render\": {\"quality\": \"draft\", \"backend\": \"auto\"}"), "q");
   EXPECT_EQ(s.render.quality, Quality::draft);

@@ -16,6 +16,7 @@
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
 #include "render/scattering_cpu.h"
+#include "render/vulkan/vulkan_backend.h"
 
 namespace mr {
 
@@ -96,6 +97,34 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     const bool lights = scene.lighting.sun || !scene.lighting.lamps.empty();
     Image normals;
     std::optional<render::OccluderScene> occluders;
+    // Backend dispatch: the one place that decides which backend runs. automatic: Vulkan on a
+    // GPU, else (no loader, no device, only a software device, out of memory) the CPU, with a
+    // one-line notice.
+    render::vulkan::Backend* gpu = nullptr;
+#if defined(__SANITIZE_ADDRESS__)
+    // Mesa's Vulkan drivers leak under LeakSanitizer (even a bare device probe, from a driver the
+    // loader has unloaded, so no suppression can name it): sanitizer builds probe only when asked.
+    constexpr bool kProbeAutomatically = false;
+#else
+    constexpr bool kProbeAutomatically = true;
+#endif
+    if (scene.render.backend == Backend::automatic && !kProbeAutomatically) {
+      out.backend_notice = "vulkan: not probed in sanitizer builds; the CPU backend renders";
+    } else if (scene.render.backend != Backend::cpu) {
+      try {
+        render::vulkan::Backend& b = render::vulkan::Backend::shared();
+        if (scene.render.backend == Backend::vulkan || !b.device().cpu_implementation)
+          gpu = &b;
+        else
+          out.backend_notice = "vulkan: only a software device (" + b.device().name +
+                               "); the CPU backend renders (render.backend 'vulkan' forces it)";
+      } catch (const render::vulkan::Unavailable& e) {
+        if (scene.render.backend == Backend::vulkan)
+          throw Error(ErrorCode::invalid_argument, std::string("render.backend is 'vulkan' but ") + e.what());
+        out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
+      }
+    }
+    render::TriangleMesh occluder_mesh;  // the Vulkan backend rasterizes it into shadow maps
     if (lights) {
       auto t = Clock::now();
       normals = render::estimate_normals(distance_m.view(), camera, scene.pose);
@@ -113,25 +142,48 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
           mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose);
         }
         out.timings.mesh_s = seconds_since(t);
-        t = Clock::now();
-        if (mesh.triangle_count() > 0) occluders.emplace(std::move(mesh));
-        out.timings.bvh_s = seconds_since(t);
+        occluder_mesh = std::move(mesh);
       } else {
         out.timings.mesh_s = seconds_since(t);
       }
     }
-    // Backend dispatch: the CPU reference is the only backend so far (Backend::automatic -> cpu).
     render::CoreInputs in;
     in.camera = &camera;
     in.scene = &scene;
     in.distance_m = distance_m.view();
     if (!normals.empty()) in.normals = normals.view();
-    in.occluders = occluders ? &*occluders : nullptr;
     in.sky_radiance = out.sky_radiance;
     render::CoreOutputs core{out.transmittance.view(), out.inscatter.view(),
                              out.sun_visibility.view(), out.optical_depth.view()};
-    const auto t = Clock::now();
-    render::render_scattering_cpu(in, core);
+    auto t = Clock::now();
+    auto run_cpu = [&] {
+      t = Clock::now();
+      if (occluder_mesh.triangle_count() > 0) occluders.emplace(std::move(occluder_mesh));
+      out.timings.bvh_s = seconds_since(t);
+      in.occluders = occluders ? &*occluders : nullptr;
+      t = Clock::now();
+      render::render_scattering_cpu(in, core);
+      out.backend = "cpu";
+    };
+    if (gpu) {
+      try {
+        render::vulkan::BackendTimings bt;
+        gpu->render(in, &occluder_mesh, core, {}, &bt);
+        out.backend = "vulkan: " + gpu->device().name;
+        out.timings.upload_s = bt.gpu_upload_s + bt.host_upload_s;
+        out.timings.shadow_maps_s = bt.gpu_shadow_maps_s;
+        out.timings.gpu_scatter_s = bt.gpu_scatter_s;
+        out.timings.download_s = bt.gpu_download_s + bt.host_download_s;
+        out.timings.tiles = bt.tiles;
+      } catch (const render::vulkan::Unavailable& e) {  // e.g. out of device memory
+        if (scene.render.backend == Backend::vulkan)
+          throw Error(ErrorCode::invalid_argument, std::string("render.backend is 'vulkan' but ") + e.what());
+        out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
+        run_cpu();
+      }
+    } else {
+      run_cpu();
+    }
     out.timings.scatter_s = seconds_since(t);
     out.timings.exact_pixels = core.exact_pixels;
     out.timings.interpolated_pixels = core.interpolated_pixels;
@@ -163,6 +215,8 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
     layers_out->optical_depth = std::move(layers.optical_depth);
     layers_out->sky_radiance = layers.sky_radiance;
     layers_out->timings = layers.timings;
+    layers_out->backend = std::move(layers.backend);
+    layers_out->backend_notice = std::move(layers.backend_notice);
   }
   return out;
 }

@@ -498,8 +498,7 @@ RenderSettings read_render(const Json& j, const std::string& p, const Reader& r)
   if (const Json* v = member(j, "quality"))
     s.quality = static_cast<Quality>(r.choice(*v, p + "/quality", {"draft", "normal", "final"}));
   if (const Json* v = member(j, "backend"))
-    s.backend =
-        r.choice(*v, p + "/backend", {"auto", "cpu"}) == 0 ? Backend::automatic : Backend::cpu;
+    s.backend = static_cast<Backend>(r.choice(*v, p + "/backend", {"auto", "cpu", "vulkan"}));
   if (const Json* v = member(j, "march_steps"))
     s.march_steps = static_cast<int>(r.integer(*v, p + "/march_steps", kIntMin, kIntMax));
   if (const Json* v = member(j, "grid_step"))
@@ -673,7 +672,9 @@ Json to_document(const FogScene& s) {
   const RenderSettings& r = s.render;
   static constexpr const char* kQuality[] = {"draft", "normal", "final"};
   doc["render"] = Json{{"quality", kQuality[static_cast<int>(r.quality)]},
-                       {"backend", r.backend == Backend::cpu ? "cpu" : "auto"},
+                       {"backend", r.backend == Backend::cpu      ? "cpu"
+                                   : r.backend == Backend::vulkan ? "vulkan"
+                                                                  : "auto"},
                        {"march_steps", r.march_steps},
                        {"grid_step", r.grid_step},
                        {"gradient_acceleration", r.gradient_acceleration},

@@ -139,7 +139,7 @@ void validate_render(const RenderSettings& r) {
   if (q < static_cast<int>(Quality::draft) || q > static_cast<int>(Quality::final))
     fail("render.quality", std::to_string(q), "not a valid mr::Quality");
   const int b = static_cast<int>(r.backend);
-  if (b < static_cast<int>(Backend::automatic) || b > static_cast<int>(Backend::cpu))
+  if (b < static_cast<int>(Backend::automatic) || b > static_cast<int>(Backend::vulkan))
     fail("render.backend", std::to_string(b), "not a valid mr::Backend");
   int_range("render.march_steps", r.march_steps, 0, kMaxMarchSteps,
             " (0: from the quality preset)");

@@ -29,8 +29,17 @@ struct ScatteringLayers {
     double total_s = 0;
     std::size_t exact_pixels = 0;         ///< pixels marched exactly
     std::size_t interpolated_pixels = 0;  ///< pixels filled by gradient interpolation
-    std::size_t shadow_rays = 0;
+    std::size_t shadow_rays = 0;          ///< CPU only (the GPU looks up shadow maps)
+    // Vulkan backend only (0 on the CPU): each stage's GPU time (timestamp queries) plus, for
+    // upload and download, the host's copies into / out of staging memory.
+    double upload_s = 0;       ///< depth, normals, mesh, parameters to the device
+    double shadow_maps_s = 0;  ///< rasterizing the occluder mesh into shadow maps
+    double gpu_scatter_s = 0;  ///< the compute passes (sparse grid, interpolation, T)
+    double download_s = 0;     ///< T, R and the AOVs back to the host
+    int tiles = 0;             ///< dispatches the image was split into
   } timings;
+  std::string backend;         ///< what rendered: "cpu" or "vulkan: <device name>"
+  std::string backend_notice;  ///< one line when Backend::automatic fell back to the CPU
 };
 
 /// Renders T and R for `photo` (scene-linear RGB; used only to estimate the sky radiance when

@@ -101,7 +101,11 @@ struct Lighting {
 };
 
 enum class Quality { draft, normal, final };
-enum class Backend { automatic, cpu };
+/// Which implementation of the scattering core renders. automatic: Vulkan on a GPU when one is
+/// usable, else the CPU (with a notice in ScatteringLayers::backend_notice); a software Vulkan
+/// device (lavapipe) is never picked automatically, the CPU backend being faster there.
+/// vulkan: the Vulkan backend on the best device, lavapipe included; an error if there is none.
+enum class Backend { automatic, cpu, vulkan };
 
 /// How the core renders. Quality presets set the march steps and the gradient-acceleration
 /// grid; explicit fields override them (0 = from the preset).

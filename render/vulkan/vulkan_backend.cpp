@@ -1,0 +1,1030 @@
+#include "render/vulkan/vulkan_backend.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <optional>
+#include <vector>
+
+#include "render/vulkan/context.h"
+#include "shaders/scattering_params.h"
+
+namespace mr::render::vulkan {
+
+namespace {
+
+// SPIR-V compiled by glslc at build time (shaders/CMakeLists.txt).
+const std::uint32_t kGridSpv[] =
+#include "grid.comp.inc"
+    ;
+const std::uint32_t kResolveSpv[] =
+#include "resolve.comp.inc"
+    ;
+const std::uint32_t kShadowVertSpv[] =
+#include "shadow.vert.inc"
+    ;
+const std::uint32_t kShadowFragSpv[] =
+#include "shadow.frag.inc"
+    ;
+const std::uint32_t kLayoutCheckSpv[] =
+#include "layout_check.comp.inc"
+    ;
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+constexpr int kComputeBindings = 12;  // 0..10 storage buffers, 11 the shadow atlas
+constexpr int kMaxLamps = 16;         // shaders/scattering_common.glsl kMaxLamps
+constexpr float kFar = 3.0e38f;       // cleared shadow-map texels: nothing there
+// Shadow maps store each texel's surface depth plus its change across the texel, capped at this
+// many texels' worth: enough against self-shadowing of points just in front of lit surfaces
+// (surfaces themselves are looked up 1.5 texels off along their normal), small enough not to
+// lift the shadow off points just behind an occluder (a cap of 10 texels lit 15 % of some rays
+// that the CPU shades, in the half-plane test).
+constexpr double kSlopeBiasTexels = 0.5;
+
+using V3 = std::array<double, 3>;
+V3 vec(const Vec3& v) { return {v.x, v.y, v.z}; }
+double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+V3 cross(const V3& a, const V3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+V3 normalized(const V3& a) {
+  const double n = std::sqrt(dot(a, a));
+  return {a[0] / n, a[1] / n, a[2] / n};
+}
+gpu::vec4 v4(const V3& v, double w = 0) { return {float(v[0]), float(v[1]), float(v[2]), float(w)}; }
+gpu::vec4 v4(const Rgb& v, double w = 0) { return {v[0], v[1], v[2], float(w)}; }
+
+// A matrix from its rows (r[i] = (a, b, c, d): clip_i = a x + b y + c z + d).
+gpu::mat4 from_rows(const std::array<std::array<double, 4>, 4>& r) {
+  gpu::mat4 m;
+  for (int c = 0; c < 4; ++c) m.col[c] = {float(r[0][c]), float(r[1][c]), float(r[2][c]), float(r[3][c])};
+  return m;
+}
+
+int grid_count(int n, int g) { return (n - 1) / g + 1 + ((n - 1) % g != 0 ? 1 : 0); }
+
+VkShaderModule make_module(const Context& ctx, const std::uint32_t* code, std::size_t bytes) {
+  VkShaderModuleCreateInfo ci = make<VkShaderModuleCreateInfo>(VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO);
+  ci.codeSize = bytes;
+  ci.pCode = code;
+  VkShaderModule m = VK_NULL_HANDLE;
+  check(ctx.vk.vkCreateShaderModule(ctx.device, &ci, nullptr, &m), "vkCreateShaderModule");
+  return m;
+}
+
+template <class T>
+Unique<T> own(const Context& ctx, T handle, typename Unique<T>::Deleter d) {
+  return Unique<T>(ctx, handle, d);
+}
+
+void destroy_module(const Context& c, VkShaderModule h) { c.vk.vkDestroyShaderModule(c.device, h, nullptr); }
+void destroy_set_layout(const Context& c, VkDescriptorSetLayout h) {
+  c.vk.vkDestroyDescriptorSetLayout(c.device, h, nullptr);
+}
+void destroy_pipeline_layout(const Context& c, VkPipelineLayout h) {
+  c.vk.vkDestroyPipelineLayout(c.device, h, nullptr);
+}
+void destroy_pipeline(const Context& c, VkPipeline h) { c.vk.vkDestroyPipeline(c.device, h, nullptr); }
+void destroy_sampler(const Context& c, VkSampler h) { c.vk.vkDestroySampler(c.device, h, nullptr); }
+void destroy_pool(const Context& c, VkCommandPool h) { c.vk.vkDestroyCommandPool(c.device, h, nullptr); }
+void destroy_fence(const Context& c, VkFence h) { c.vk.vkDestroyFence(c.device, h, nullptr); }
+void destroy_descriptor_pool(const Context& c, VkDescriptorPool h) {
+  c.vk.vkDestroyDescriptorPool(c.device, h, nullptr);
+}
+void destroy_query_pool(const Context& c, VkQueryPool h) { c.vk.vkDestroyQueryPool(c.device, h, nullptr); }
+
+Unique<VkDescriptorSetLayout> make_set_layout(const Context& ctx,
+                                              const std::vector<VkDescriptorSetLayoutBinding>& b) {
+  VkDescriptorSetLayoutCreateInfo ci = make<VkDescriptorSetLayoutCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO);
+  ci.bindingCount = std::uint32_t(b.size());
+  ci.pBindings = b.data();
+  VkDescriptorSetLayout h = VK_NULL_HANDLE;
+  check(ctx.vk.vkCreateDescriptorSetLayout(ctx.device, &ci, nullptr, &h), "vkCreateDescriptorSetLayout");
+  return own(ctx, h, destroy_set_layout);
+}
+
+Unique<VkPipelineLayout> make_pipeline_layout(const Context& ctx, VkDescriptorSetLayout set,
+                                              const VkPushConstantRange* push) {
+  VkPipelineLayoutCreateInfo ci = make<VkPipelineLayoutCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO);
+  ci.setLayoutCount = 1;
+  ci.pSetLayouts = &set;
+  ci.pushConstantRangeCount = push ? 1 : 0;
+  ci.pPushConstantRanges = push;
+  VkPipelineLayout h = VK_NULL_HANDLE;
+  check(ctx.vk.vkCreatePipelineLayout(ctx.device, &ci, nullptr, &h), "vkCreatePipelineLayout");
+  return own(ctx, h, destroy_pipeline_layout);
+}
+
+Unique<VkPipeline> make_compute_pipeline(const Context& ctx, VkPipelineLayout layout,
+                                         const std::uint32_t* code, std::size_t bytes) {
+  const auto module = own(ctx, make_module(ctx, code, bytes), destroy_module);
+  VkComputePipelineCreateInfo ci = make<VkComputePipelineCreateInfo>(VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO);
+  ci.stage = make<VkPipelineShaderStageCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO);
+  ci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+  ci.stage.module = module.get();
+  ci.stage.pName = "main";
+  ci.layout = layout;
+  VkPipeline h = VK_NULL_HANDLE;
+  check(ctx.vk.vkCreateComputePipelines(ctx.device, VK_NULL_HANDLE, 1, &ci, nullptr, &h),
+        "vkCreateComputePipelines");
+  return own(ctx, h, destroy_pipeline);
+}
+
+void memory_barrier(const Context& ctx, VkCommandBuffer cmd, VkPipelineStageFlags src_stage,
+                    VkAccessFlags src, VkPipelineStageFlags dst_stage, VkAccessFlags dst) {
+  VkMemoryBarrier m = make<VkMemoryBarrier>(VK_STRUCTURE_TYPE_MEMORY_BARRIER);
+  m.srcAccessMask = src;
+  m.dstAccessMask = dst;
+  ctx.vk.vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 1, &m, 0, nullptr, 0, nullptr);
+}
+
+void image_barrier(const Context& ctx, VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect,
+                   std::uint32_t layers, VkImageLayout from, VkImageLayout to,
+                   VkPipelineStageFlags src_stage, VkAccessFlags src, VkPipelineStageFlags dst_stage,
+                   VkAccessFlags dst) {
+  VkImageMemoryBarrier m = make<VkImageMemoryBarrier>(VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER);
+  m.srcAccessMask = src;
+  m.dstAccessMask = dst;
+  m.oldLayout = from;
+  m.newLayout = to;
+  m.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  m.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  m.image = image;
+  m.subresourceRange = {aspect, 0, 1, 0, layers};
+  ctx.vk.vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 0, nullptr, 0, nullptr, 1, &m);
+}
+
+// Light-space frame of the sun: x, y across the rays, z = depth away from the sun.
+struct SunFrame {
+  V3 x, y, z;
+};
+
+struct Bounds3 {
+  double lo[3] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+                  std::numeric_limits<double>::infinity()};
+  double hi[3] = {-std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
+                  -std::numeric_limits<double>::infinity()};
+  void add(const V3& p) {
+    for (int i = 0; i < 3; ++i) {
+      lo[i] = std::min(lo[i], p[i]);
+      hi[i] = std::max(hi[i], p[i]);
+    }
+  }
+  bool empty() const { return !(hi[0] >= lo[0]); }
+};
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+
+struct Backend::Impl {
+  Context ctx;
+  Unique<VkDescriptorSetLayout> compute_set, shadow_set;
+  Unique<VkPipelineLayout> compute_layout, shadow_layout;
+  Unique<VkPipeline> grid, resolve, shadow;
+  Unique<VkSampler> sampler;
+  Unique<VkCommandPool> pool;
+  Unique<VkFence> fence;
+  VkCommandBuffer cmd = VK_NULL_HANDLE;
+  std::mutex mutex;
+
+  explicit Impl(const ContextOptions& options) : ctx(options) {
+    VkSamplerCreateInfo sci = make<VkSamplerCreateInfo>(VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO);
+    sci.magFilter = VK_FILTER_NEAREST;
+    sci.minFilter = VK_FILTER_NEAREST;
+    sci.mipmapMode = VK_SAMPLER_MIPMAP_MODE_NEAREST;
+    sci.addressModeU = sci.addressModeV = sci.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+    sci.maxLod = 0;
+    VkSampler s = VK_NULL_HANDLE;
+    check(ctx.vk.vkCreateSampler(ctx.device, &sci, nullptr, &s), "vkCreateSampler");
+    sampler = own(ctx, s, destroy_sampler);
+
+    VkCommandPoolCreateInfo pci = make<VkCommandPoolCreateInfo>(VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO);
+    pci.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    pci.queueFamilyIndex = ctx.queue_family;
+    VkCommandPool p = VK_NULL_HANDLE;
+    check(ctx.vk.vkCreateCommandPool(ctx.device, &pci, nullptr, &p), "vkCreateCommandPool");
+    pool = own(ctx, p, destroy_pool);
+    VkCommandBufferAllocateInfo cai = make<VkCommandBufferAllocateInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO);
+    cai.commandPool = pool.get();
+    cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    cai.commandBufferCount = 1;
+    check(ctx.vk.vkAllocateCommandBuffers(ctx.device, &cai, &cmd), "vkAllocateCommandBuffers");
+    VkFenceCreateInfo fci = make<VkFenceCreateInfo>(VK_STRUCTURE_TYPE_FENCE_CREATE_INFO);
+    VkFence f = VK_NULL_HANDLE;
+    check(ctx.vk.vkCreateFence(ctx.device, &fci, nullptr, &f), "vkCreateFence");
+    fence = own(ctx, f, destroy_fence);
+  }
+
+  // Pipelines are built on first use: Backend::automatic only probes the device, and on a
+  // CPU-only machine renders on the CPU without paying for shader compilation.
+  void ensure_pipelines() {
+    if (grid.get()) return;
+    std::vector<VkDescriptorSetLayoutBinding> b;
+    for (int i = 0; i < kComputeBindings; ++i)
+      b.push_back({std::uint32_t(i),
+                   i == 11 ? VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1,
+                   VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
+    compute_set = make_set_layout(ctx, b);
+    compute_layout = make_pipeline_layout(ctx, compute_set.get(), nullptr);
+    grid = make_compute_pipeline(ctx, compute_layout.get(), kGridSpv, sizeof(kGridSpv));
+    resolve = make_compute_pipeline(ctx, compute_layout.get(), kResolveSpv, sizeof(kResolveSpv));
+
+    shadow_set = make_set_layout(
+        ctx, {{0, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT,
+               nullptr}});
+    const VkPushConstantRange push{VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
+                                   sizeof(gpu::ShadowPush)};
+    shadow_layout = make_pipeline_layout(ctx, shadow_set.get(), &push);
+    shadow = make_shadow_pipeline();
+
+  }
+
+  ~Impl() {
+    if (ctx.device) ctx.vk.vkDeviceWaitIdle(ctx.device);
+  }
+
+  Unique<VkPipeline> make_shadow_pipeline() {
+    const auto vert = own(ctx, make_module(ctx, kShadowVertSpv, sizeof(kShadowVertSpv)), destroy_module);
+    const auto frag = own(ctx, make_module(ctx, kShadowFragSpv, sizeof(kShadowFragSpv)), destroy_module);
+    VkPipelineShaderStageCreateInfo stages[2] = {
+        make<VkPipelineShaderStageCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO),
+        make<VkPipelineShaderStageCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO)};
+    stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
+    stages[0].module = vert.get();
+    stages[0].pName = "main";
+    stages[1].stage = VK_SHADER_STAGE_FRAGMENT_BIT;
+    stages[1].module = frag.get();
+    stages[1].pName = "main";
+    const VkVertexInputBindingDescription binding{0, 3 * sizeof(float), VK_VERTEX_INPUT_RATE_VERTEX};
+    const VkVertexInputAttributeDescription attribute{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0};
+    VkPipelineVertexInputStateCreateInfo vi = make<VkPipelineVertexInputStateCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO);
+    vi.vertexBindingDescriptionCount = 1;
+    vi.pVertexBindingDescriptions = &binding;
+    vi.vertexAttributeDescriptionCount = 1;
+    vi.pVertexAttributeDescriptions = &attribute;
+    VkPipelineInputAssemblyStateCreateInfo ia = make<VkPipelineInputAssemblyStateCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO);
+    ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
+    VkPipelineViewportStateCreateInfo vp = make<VkPipelineViewportStateCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO);
+    vp.viewportCount = 1;
+    vp.scissorCount = 1;
+    VkPipelineRasterizationStateCreateInfo rs = make<VkPipelineRasterizationStateCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO);
+    rs.polygonMode = VK_POLYGON_MODE_FILL;
+    rs.cullMode = VK_CULL_MODE_NONE;  // the mesh is a shell seen from both sides
+    rs.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
+    rs.lineWidth = 1.0f;
+    VkPipelineMultisampleStateCreateInfo ms = make<VkPipelineMultisampleStateCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO);
+    ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
+    VkPipelineDepthStencilStateCreateInfo ds = make<VkPipelineDepthStencilStateCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO);
+    ds.depthTestEnable = VK_TRUE;
+    ds.depthWriteEnable = VK_TRUE;
+    ds.depthCompareOp = VK_COMPARE_OP_LESS;
+    VkPipelineColorBlendAttachmentState att{};
+    att.colorWriteMask = VK_COLOR_COMPONENT_R_BIT;
+    VkPipelineColorBlendStateCreateInfo cb = make<VkPipelineColorBlendStateCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO);
+    cb.attachmentCount = 1;
+    cb.pAttachments = &att;
+    const VkDynamicState dyn_states[] = {VK_DYNAMIC_STATE_VIEWPORT, VK_DYNAMIC_STATE_SCISSOR};
+    VkPipelineDynamicStateCreateInfo dyn = make<VkPipelineDynamicStateCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_DYNAMIC_STATE_CREATE_INFO);
+    dyn.dynamicStateCount = 2;
+    dyn.pDynamicStates = dyn_states;
+    const VkFormat color_format = VK_FORMAT_R32_SFLOAT;
+    VkPipelineRenderingCreateInfo rendering = make<VkPipelineRenderingCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_RENDERING_CREATE_INFO);
+    rendering.colorAttachmentCount = 1;
+    rendering.pColorAttachmentFormats = &color_format;
+    rendering.depthAttachmentFormat = VK_FORMAT_D32_SFLOAT;
+    VkGraphicsPipelineCreateInfo ci = make<VkGraphicsPipelineCreateInfo>(VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO);
+    ci.pNext = &rendering;
+    ci.stageCount = 2;
+    ci.pStages = stages;
+    ci.pVertexInputState = &vi;
+    ci.pInputAssemblyState = &ia;
+    ci.pViewportState = &vp;
+    ci.pRasterizationState = &rs;
+    ci.pMultisampleState = &ms;
+    ci.pDepthStencilState = &ds;
+    ci.pColorBlendState = &cb;
+    ci.pDynamicState = &dyn;
+    ci.layout = shadow_layout.get();
+    VkPipeline h = VK_NULL_HANDLE;
+    check(ctx.vk.vkCreateGraphicsPipelines(ctx.device, VK_NULL_HANDLE, 1, &ci, nullptr, &h),
+          "vkCreateGraphicsPipelines");
+    return own(ctx, h, destroy_pipeline);
+  }
+
+  void begin() {
+    check(ctx.vk.vkResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
+    VkCommandBufferBeginInfo bi = make<VkCommandBufferBeginInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO);
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    check(ctx.vk.vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
+  }
+
+  void submit_and_wait() {
+    check(ctx.vk.vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
+    VkSubmitInfo si = make<VkSubmitInfo>(VK_STRUCTURE_TYPE_SUBMIT_INFO);
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cmd;
+    VkFence f = fence.get();
+    check(ctx.vk.vkQueueSubmit(ctx.queue, 1, &si, f), "vkQueueSubmit");
+    check(ctx.vk.vkWaitForFences(ctx.device, 1, &f, VK_TRUE, std::numeric_limits<std::uint64_t>::max()),
+          "vkWaitForFences");
+    check(ctx.vk.vkResetFences(ctx.device, 1, &f), "vkResetFences");
+  }
+
+  void render(const CoreInputs& in, const TriangleMesh* mesh, CoreOutputs& out, const BackendOptions& opt,
+              BackendTimings* timings);
+  std::vector<float> echo_layout(const void* params, std::size_t params_bytes, const void* lamps,
+                                 std::size_t lamps_bytes, const void* layers, std::size_t layers_bytes,
+                                 std::size_t out_vec4s);
+};
+
+// ------------------------------------------------------------------------------------------------
+
+void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreOutputs& out,
+                           const BackendOptions& opt, BackendTimings* timings) {
+  std::lock_guard lock(mutex);
+  ensure_pipelines();
+  const FogScene& scene = *in.scene;
+  const Camera& cam = *in.camera;
+  const Medium& medium = scene.medium;
+  const Lighting& lighting = scene.lighting;
+  const MarchPlan plan = march_plan(scene.render);
+  const int W = in.distance_m.width, H = in.distance_m.height;
+  if (lighting.lamps.size() > std::size_t(kMaxLamps))
+    throw Unavailable("the Vulkan backend renders at most " + std::to_string(kMaxLamps) + " lamps, the scene has " +
+                      std::to_string(lighting.lamps.size()));
+  const bool sun = lighting.sun.has_value();
+  const bool lights = sun || !lighting.lamps.empty();
+  const bool constant_source = !lights && medium.noise.amplitude <= 0;
+  const int g = constant_source ? 1 : std::max(1, plan.grid_step);
+  const bool shadows = mesh && mesh->triangle_count() > 0 && scene.render.volumetric_shadows && lights;
+  const bool normals = in.normals.data != nullptr;
+  const auto limits = ctx.properties.limits;
+
+  // ---- parameters -----------------------------------------------------------------------------
+  gpu::ScatterParams p{};
+  const auto [forward, right, up] = scene.pose.axes();
+  const V3 origin = vec(scene.pose.position_m);
+  p.origin = v4(origin);
+  p.right = v4(vec(right));
+  p.up = v4(vec(up));
+  p.forward = v4(vec(forward));
+  p.camera = {float(cam.focal_px), float(cam.cx), float(cam.cy), 0};
+  const int ngx = grid_count(W, g), ngy = grid_count(H, g);
+  std::uint32_t flags = 0;
+  if (sun) flags |= gpu::kFlagSun;
+  if (shadows) flags |= gpu::kFlagShadows | gpu::kFlagNeedsAo;
+  if (scene.render.light_path_attenuation) flags |= gpu::kFlagLightPathAttenuation;
+  if (medium.noise.amplitude > 0) flags |= gpu::kFlagNoise;
+  if (constant_source) flags |= gpu::kFlagConstantSource;
+  if (normals) flags |= gpu::kFlagNormals;
+  p.image = {W, H, g, int(lighting.lamps.size())};
+  p.plan = {plan.steps, plan.lamp_steps, plan.sun_surface_rays, plan.ao_rays};
+  p.flags = {flags, scene.render.seed, medium.noise.seed, std::uint32_t(std::max(0, medium.noise.octaves))};
+  const Rgb& s = medium.sigma_t_per_m;
+  p.sigma = v4(s, (double(s[0]) + s[1] + s[2]) / 3.0);
+  p.albedo = v4(medium.albedo, medium.g);
+  p.sky = v4(in.sky_radiance, std::min({s[0], s[1], s[2]}));
+  auto clamp_height = [](double h) { return float(std::clamp(h, -1e30, 1e30)); };
+  p.layer = {clamp_height(medium.layer_bottom_m), clamp_height(medium.layer_top_m),
+             medium.height_fog ? float(medium.height_fog->base_height_m) : 0.0f,
+             medium.height_fog ? float(medium.height_fog->scale_height_m) : 0.0f};
+  p.noise = {float(medium.noise.amplitude), float(1.0 / medium.noise.scale_m), 0, 0};
+  SunFrame frame{};
+  if (sun) {
+    const V3 l = normalized(vec(lighting.sun->direction_to_sun));
+    const V3 helper = std::fabs(l[1]) < 0.9 ? V3{0, 1, 0} : V3{1, 0, 0};
+    const V3 u = normalized(cross(helper, l));
+    const V3 v = cross(l, u);
+    p.sun_dir = v4(l, std::tan(lighting.sun->angular_radius_deg * 3.14159265358979323846 / 180.0));
+    p.sun_u = v4(u);
+    p.sun_v = v4(v);
+    p.sun_irradiance = v4(lighting.sun->irradiance, 1);
+    frame = {u, v, {-l[0], -l[1], -l[2]}};
+  }
+  p.misc.x = float(scene.render.max_distance_m);
+
+  // ---- shadow maps: layers ----------------------------------------------------------------------
+  int size = opt.shadow_map_size;
+  if (size <= 0) {
+    int side = 1;
+    while (side < std::max(W, H)) side *= 2;
+    // Texels per image pixel: 1 (draft), 2 (normal), 4 (final); 1024..4096 texels a side.
+    const int scale = scene.render.quality == Quality::draft ? 1 : scene.render.quality == Quality::final ? 4 : 2;
+    size = std::clamp(side * scale, 1024, 4096);
+  }
+  size = std::min<int>(size, int(limits.maxImageDimension2D));
+  std::vector<gpu::ShadowLayer> layers;
+  std::vector<gpu::GpuLamp> lamps;
+  int n_cascades = 0;
+  if (shadows) {
+    const std::size_t nv = mesh->vertex_count();
+    const float* pos = mesh->positions.data();
+    if (sun) {
+      // The mesh in light space; cascades by view distance, each an orthographic map fitted to
+      // its slice of the view frustum (within the mesh's extent), depth covering the whole mesh.
+      Bounds3 mb;
+      for (std::size_t i = 0; i < nv; ++i) {
+        const V3 q{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]};
+        mb.add({dot(q, frame.x), dot(q, frame.y), dot(q, frame.z)});
+      }
+      double d_near = std::numeric_limits<double>::infinity(), d_far = 0;
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+          const double d = in.distance_m.at(x, y, 0);
+          if (std::isfinite(d) && d > 0) {
+            d_near = std::min(d_near, d);
+            d_far = std::max(d_far, d);
+          }
+        }
+      d_near = std::max(0.05, std::min(d_near, d_far));
+      n_cascades = d_far > 0 ? std::clamp(int(std::ceil(std::log(d_far / d_near) / std::log(4.0))), 1, 4) : 1;
+      std::vector<double> ends(std::size_t(n_cascades) + 1, 0.0);
+      for (int c = 1; c <= n_cascades; ++c) {
+        const double f = double(c) / n_cascades;
+        const double logarithmic = d_near * std::pow(d_far / d_near, f);
+        const double uniform = d_near + (d_far - d_near) * f;
+        ends[std::size_t(c)] = 0.8 * logarithmic + 0.2 * uniform;
+      }
+      const double z_pad = 0.01 * (mb.hi[2] - mb.lo[2]) + 0.01;
+      const double z_lo = mb.lo[2] - z_pad, z_hi = mb.hi[2] + z_pad;
+      for (int c = 0; c < n_cascades; ++c) {
+        Bounds3 fb;
+        const bool last = c + 1 == n_cascades;
+        if (last) {
+          fb = mb;  // the last cascade holds all of the mesh: every point beyond is covered
+        } else {
+          for (double t : {ends[std::size_t(c)], ends[std::size_t(c) + 1]})
+            for (int j = 0; j <= 8; ++j)
+              for (int i = 0; i <= 8; ++i) {
+                const Vec3 w = scene.pose.ray_direction(cam, W * i / 8.0 - 0.5, H * j / 8.0 - 0.5);
+                const V3 q{origin[0] + t * w.x, origin[1] + t * w.y, origin[2] + t * w.z};
+                fb.add({dot(q, frame.x), dot(q, frame.y), 0});
+              }
+          for (int k = 0; k < 2; ++k) {  // within the mesh's extent
+            fb.lo[k] = std::max(fb.lo[k], mb.lo[k]);
+            fb.hi[k] = std::min(fb.hi[k], mb.hi[k]);
+          }
+          if (!(fb.hi[0] > fb.lo[0] && fb.hi[1] > fb.lo[1])) fb = mb;
+        }
+        double extent = std::max(fb.hi[0] - fb.lo[0], fb.hi[1] - fb.lo[1]);
+        extent = extent * 1.05 + 1e-3;
+        const double cx = 0.5 * (fb.lo[0] + fb.hi[0]), cy = 0.5 * (fb.lo[1] + fb.hi[1]);
+        const double k = 2.0 / extent, kz = 1.0 / (z_hi - z_lo);
+        gpu::ShadowLayer L{};
+        L.view_proj = from_rows({{{k * frame.x[0], k * frame.x[1], k * frame.x[2], -k * cx},
+                                  {k * frame.y[0], k * frame.y[1], k * frame.y[2], -k * cy},
+                                  {kz * frame.z[0], kz * frame.z[1], kz * frame.z[2], -kz * z_lo},
+                                  {0, 0, 0, 1}}});
+        const double texel = extent / size;
+        L.origin = {0, 0, 0, float(gpu::kLayerSun)};
+        L.axis = v4(frame.z, texel);
+        L.bounds = {float(z_lo), float(z_hi), float(kSlopeBiasTexels * texel), 0};
+        layers.push_back(L);
+        const float end = last ? 3e38f : float(ends[std::size_t(c) + 1]);
+        switch (c) {
+          case 0: p.cascade_end.x = end; break;
+          case 1: p.cascade_end.y = end; break;
+          case 2: p.cascade_end.z = end; break;
+          default: p.cascade_end.w = end; break;
+        }
+      }
+    }
+    // Lamps: six cube faces each, perspective from the lamp, storing the distance from it.
+    Bounds3 wb;
+    for (std::size_t i = 0; i < nv; ++i) wb.add({pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]});
+    for (const Lamp& lamp : lighting.lamps) {
+      const V3 lp = vec(lamp.position_m);
+      double far = 0;
+      for (int corner = 0; corner < 8; ++corner) {
+        const V3 q{corner & 1 ? wb.hi[0] : wb.lo[0], corner & 2 ? wb.hi[1] : wb.lo[1], corner & 4 ? wb.hi[2] : wb.lo[2]};
+        const V3 d{q[0] - lp[0], q[1] - lp[1], q[2] - lp[2]};
+        far = std::max(far, std::sqrt(dot(d, d)));
+      }
+      far = far * 1.01 + 1.0;
+      const double near = 0.01;
+      const double a = far / (far - near), b = -far * near / (far - near);
+      for (int f = 0; f < 6; ++f) {
+        V3 F{0, 0, 0};
+        F[std::size_t(f / 2)] = f % 2 ? -1.0 : 1.0;
+        const V3 U = std::fabs(F[1]) > 0.5 ? V3{0, 0, 1} : V3{0, 1, 0};
+        const V3 R = cross(U, F);
+        gpu::ShadowLayer L{};
+        L.view_proj = from_rows({{{R[0], R[1], R[2], -dot(R, lp)},
+                                  {U[0], U[1], U[2], -dot(U, lp)},
+                                  {a * F[0], a * F[1], a * F[2], -a * dot(F, lp) + b},
+                                  {F[0], F[1], F[2], -dot(F, lp)}}});
+        L.origin = v4(lp, gpu::kLayerLamp);
+        L.axis = v4(F, 2.0 / size);
+        L.bounds = {float(near), float(far), float(kSlopeBiasTexels * far * 2.0 / size), 0};
+        layers.push_back(L);
+      }
+    }
+  }
+  p.grid_count = {ngx, ngy, n_cascades, 0};
+  p.misc.y = float(size);
+  {
+    std::size_t first = std::size_t(n_cascades);
+    for (const Lamp& lamp : lighting.lamps) {
+      gpu::GpuLamp gl{};
+      gl.position = v4(vec(lamp.position_m), shadows ? double(first) : -1.0);
+      first += 6;
+      gl.intensity = v4(lamp.intensity_per_sr);
+      const bool spot = lamp.outer_angle_deg < 180.0;
+      gl.spot = v4(normalized(vec(lamp.spot_direction)), spot ? 1.0 : 0.0);
+      gl.cone = {float(std::cos(lamp.inner_angle_deg * 3.14159265358979323846 / 180.0)),
+                 float(std::cos(lamp.outer_angle_deg * 3.14159265358979323846 / 180.0)), 0, 0};
+      lamps.push_back(gl);
+    }
+  }
+  const int n_layers = int(layers.size());
+
+  // ---- tiles ------------------------------------------------------------------------------------
+  const std::size_t range = limits.maxStorageBufferRange;
+  std::size_t tile_limit = std::min<std::size_t>(opt.max_tile_pixels ? opt.max_tile_pixels : std::size_t(-1),
+                                                 range / (4 * sizeof(float) * gpu::kSampleVec4s));
+  tile_limit = std::max<std::size_t>(tile_limit, 1);
+  int tw = W, th = H;
+  while (std::size_t(tw) * std::size_t(th) > tile_limit) {
+    if (tw >= th) tw = (tw + 1) / 2;
+    else th = (th + 1) / 2;
+  }
+  // The depth / normals region around a tile: the grid's halo, and as far as AO rays reach in
+  // the image (a ray of length d / 4 from a point at distance d spans at most f / 3 pixels).
+  int halo = 2 * g + 2;
+  if (shadows && plan.ao_rays > 0) halo = std::max(halo, int(std::ceil(cam.focal_px / 3.0)) + 2);
+  auto region_pixels = [&](int h) {
+    return std::size_t(std::min(W, tw + 2 * h)) * std::size_t(std::min(H, th + 2 * h));
+  };
+  while (halo > 2 * g + 2 && region_pixels(halo) * 3 * sizeof(float) > range) halo = std::max(2 * g + 2, halo / 2);
+  const std::size_t region_max = region_pixels(halo);
+  const std::size_t tile_max = std::size_t(tw) * std::size_t(th);
+  const std::size_t grid_max = std::size_t(std::min(ngx, (tw + g - 1) / g + 5)) * std::size_t(std::min(ngy, (th + g - 1) / g + 5));
+  if (region_max * 3 * sizeof(float) > range || tile_max * 3 * sizeof(float) > range)
+    throw Unavailable("tile of " + std::to_string(tw) + "x" + std::to_string(th) +
+                      " does not fit the device's storage-buffer range");
+  const int tiles_x = (W + tw - 1) / tw, tiles_y = (H + th - 1) / th;
+  const int n_tiles = tiles_x * tiles_y;
+
+  // ---- resources --------------------------------------------------------------------------------
+  const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+  const VkBufferUsageFlags readback = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+                                      VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+  Buffer params_buf(ctx, sizeof(gpu::ScatterParams), storage, false);
+  Buffer lamps_buf(ctx, std::max<std::size_t>(1, lamps.size()) * sizeof(gpu::GpuLamp), storage, false);
+  Buffer layers_buf(ctx, std::max(1, n_layers) * sizeof(gpu::ShadowLayer), storage, false);
+  Buffer depth_buf(ctx, region_max * sizeof(float), storage, false);
+  Buffer normals_buf(ctx, normals ? region_max * 3 * sizeof(float) : 16, storage, false);
+  Buffer grid_buf(ctx, grid_max * gpu::kSampleVec4s * 4 * sizeof(float), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, false);
+  Buffer t_buf(ctx, tile_max * 3 * sizeof(float), readback, false);
+  Buffer r_buf(ctx, tile_max * 3 * sizeof(float), readback, false);
+  Buffer v_buf(ctx, tile_max * sizeof(float), readback, false);
+  Buffer od_buf(ctx, tile_max * 3 * sizeof(float), readback, false);
+  Buffer counters_buf(ctx, 4 * sizeof(std::uint32_t), readback, false);
+  Buffer vertex_buf, index_buf;
+  std::size_t mesh_bytes = 0;
+  if (shadows) {
+    vertex_buf = Buffer(ctx, mesh->vertex_count() * 3 * sizeof(float),
+                        VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, false);
+    index_buf = Buffer(ctx, mesh->indices.size() * sizeof(std::uint32_t),
+                       VK_BUFFER_USAGE_INDEX_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, false);
+    mesh_bytes = vertex_buf.size + index_buf.size;
+  }
+  const std::size_t scene_bytes = lamps_buf.size + layers_buf.size + mesh_bytes;
+  const std::size_t tile_up_bytes = sizeof(gpu::ScatterParams) + depth_buf.size + normals_buf.size;
+  Buffer staging_up(ctx, std::max(scene_bytes, tile_up_bytes), VK_BUFFER_USAGE_TRANSFER_SRC_BIT, true);
+  const std::size_t down_bytes = t_buf.size + r_buf.size + v_buf.size + od_buf.size + counters_buf.size;
+  Buffer down(ctx, down_bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
+  const std::uint32_t atlas_side = n_layers > 0 ? std::uint32_t(size) : 1u;
+  Image2D atlas(ctx, VK_FORMAT_R32_SFLOAT, atlas_side, atlas_side, std::uint32_t(std::max(1, n_layers)),
+                VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_SAMPLED_BIT, VK_IMAGE_ASPECT_COLOR_BIT);
+  std::optional<Image2D> depth_attachment;
+  if (n_layers > 0)
+    depth_attachment.emplace(ctx, VK_FORMAT_D32_SFLOAT, atlas_side, atlas_side, 1,
+                             VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT, VK_IMAGE_ASPECT_DEPTH_BIT);
+
+  // Timestamps: 3 for the scene, 4 per tile.
+  const bool timed = ctx.timestamp_valid_bits > 0;
+  const std::uint32_t n_queries = 3 + 4 * std::uint32_t(n_tiles);
+  Unique<VkQueryPool> queries;
+  if (timed) {
+    VkQueryPoolCreateInfo qci = make<VkQueryPoolCreateInfo>(VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO);
+    qci.queryType = VK_QUERY_TYPE_TIMESTAMP;
+    qci.queryCount = n_queries;
+    VkQueryPool q = VK_NULL_HANDLE;
+    check(ctx.vk.vkCreateQueryPool(ctx.device, &qci, nullptr, &q), "vkCreateQueryPool");
+    queries = own(ctx, q, destroy_query_pool);
+  }
+  auto stamp = [&](std::uint32_t index, VkPipelineStageFlagBits stage) {
+    if (timed) ctx.vk.vkCmdWriteTimestamp(cmd, stage, queries.get(), index);
+  };
+
+  // Descriptor sets: the compute set (all passes, all tiles) and the shadow-map set.
+  VkDescriptorPoolSize pool_sizes[] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 12},
+                                       {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1}};
+  VkDescriptorPoolCreateInfo dpci = make<VkDescriptorPoolCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO);
+  dpci.maxSets = 2;
+  dpci.poolSizeCount = 2;
+  dpci.pPoolSizes = pool_sizes;
+  VkDescriptorPool dp = VK_NULL_HANDLE;
+  check(ctx.vk.vkCreateDescriptorPool(ctx.device, &dpci, nullptr, &dp), "vkCreateDescriptorPool");
+  const auto descriptor_pool = own(ctx, dp, destroy_descriptor_pool);
+  VkDescriptorSet sets[2];
+  const VkDescriptorSetLayout set_layouts[2] = {compute_set.get(), shadow_set.get()};
+  VkDescriptorSetAllocateInfo dsai = make<VkDescriptorSetAllocateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO);
+  dsai.descriptorPool = dp;
+  dsai.descriptorSetCount = 2;
+  dsai.pSetLayouts = set_layouts;
+  check(ctx.vk.vkAllocateDescriptorSets(ctx.device, &dsai, sets), "vkAllocateDescriptorSets");
+  {
+    const VkBuffer buffers[11] = {params_buf.handle, lamps_buf.handle, layers_buf.handle, depth_buf.handle,
+                                  normals_buf.handle, grid_buf.handle, t_buf.handle, r_buf.handle,
+                                  v_buf.handle, od_buf.handle, counters_buf.handle};
+    VkDescriptorBufferInfo infos[12];
+    VkWriteDescriptorSet writes[13];
+    for (int i = 0; i < 11; ++i) {
+      infos[i] = {buffers[i], 0, VK_WHOLE_SIZE};
+      writes[i] = make<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
+      writes[i].dstSet = sets[0];
+      writes[i].dstBinding = std::uint32_t(i);
+      writes[i].descriptorCount = 1;
+      writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+      writes[i].pBufferInfo = &infos[i];
+    }
+    const VkDescriptorImageInfo image_info{sampler.get(), atlas.all_layers, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+    writes[11] = make<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
+    writes[11].dstSet = sets[0];
+    writes[11].dstBinding = 11;
+    writes[11].descriptorCount = 1;
+    writes[11].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+    writes[11].pImageInfo = &image_info;
+    infos[11] = {layers_buf.handle, 0, VK_WHOLE_SIZE};
+    writes[12] = make<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
+    writes[12].dstSet = sets[1];
+    writes[12].dstBinding = 0;
+    writes[12].descriptorCount = 1;
+    writes[12].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    writes[12].pBufferInfo = &infos[11];
+    ctx.vk.vkUpdateDescriptorSets(ctx.device, 13, writes, 0, nullptr);
+  }
+
+  // ---- scene upload and shadow maps ---------------------------------------------------------------
+  auto t_host = Clock::now();
+  {
+    auto* dst = static_cast<char*>(staging_up.mapped);
+    std::size_t off = 0;
+    auto put = [&](const void* src, std::size_t bytes) {
+      if (bytes) std::memcpy(dst + off, src, bytes);
+      off += bytes;
+    };
+    std::vector<char> zeros(std::max(lamps_buf.size, layers_buf.size), 0);
+    put(lamps.empty() ? zeros.data() : static_cast<const void*>(lamps.data()), lamps_buf.size);
+    put(layers.empty() ? zeros.data() : static_cast<const void*>(layers.data()), layers_buf.size);
+    if (shadows) {
+      put(mesh->positions.data(), vertex_buf.size);
+      put(mesh->indices.data(), index_buf.size);
+    }
+  }
+  double host_up = seconds_since(t_host);
+  begin();
+  if (timed) ctx.vk.vkCmdResetQueryPool(cmd, queries.get(), 0, n_queries);
+  stamp(0, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT);
+  {
+    VkDeviceSize off = 0;
+    auto copy = [&](const Buffer& b) {
+      if (!b.handle) return;
+      const VkBufferCopy region{off, 0, b.size};
+      ctx.vk.vkCmdCopyBuffer(cmd, staging_up.handle, b.handle, 1, &region);
+      off += b.size;
+    };
+    copy(lamps_buf);
+    copy(layers_buf);
+    if (shadows) {
+      copy(vertex_buf);
+      copy(index_buf);
+    }
+  }
+  memory_barrier(ctx, cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                 VK_PIPELINE_STAGE_VERTEX_INPUT_BIT | VK_PIPELINE_STAGE_VERTEX_SHADER_BIT |
+                     VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                 VK_ACCESS_VERTEX_ATTRIBUTE_READ_BIT | VK_ACCESS_INDEX_READ_BIT | VK_ACCESS_SHADER_READ_BIT);
+  stamp(1, VK_PIPELINE_STAGE_TRANSFER_BIT);
+  if (n_layers > 0) {
+    image_barrier(ctx, cmd, atlas.handle, VK_IMAGE_ASPECT_COLOR_BIT, atlas.layers, VK_IMAGE_LAYOUT_UNDEFINED,
+                  VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, 0,
+                  VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
+    ctx.vk.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, shadow.get());
+    ctx.vk.vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, shadow_layout.get(), 0, 1, &sets[1], 0,
+                                   nullptr);
+    const VkViewport viewport{0, 0, float(size), float(size), 0, 1};
+    const VkRect2D scissor{{0, 0}, {std::uint32_t(size), std::uint32_t(size)}};
+    ctx.vk.vkCmdSetViewport(cmd, 0, 1, &viewport);
+    ctx.vk.vkCmdSetScissor(cmd, 0, 1, &scissor);
+    const VkDeviceSize zero = 0;
+    ctx.vk.vkCmdBindVertexBuffers(cmd, 0, 1, &vertex_buf.handle, &zero);
+    ctx.vk.vkCmdBindIndexBuffer(cmd, index_buf.handle, 0, VK_INDEX_TYPE_UINT32);
+    for (int l = 0; l < n_layers; ++l) {
+      // The depth attachment is reused by every layer: wait for the previous layer's tests.
+      image_barrier(ctx, cmd, depth_attachment->handle, VK_IMAGE_ASPECT_DEPTH_BIT, 1, VK_IMAGE_LAYOUT_UNDEFINED,
+                    VK_IMAGE_LAYOUT_DEPTH_ATTACHMENT_OPTIMAL,
+                    VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT,
+                    VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT,
+                    VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT,
+                    VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT);
+      VkRenderingAttachmentInfo color = make<VkRenderingAttachmentInfo>(VK_STRUCTURE_TYPE_RENDERING_ATTACHMENT_INFO);
+      color.imageView = atlas.layer_views[std::size_t(l)];
+      color.imageLayout = VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL;
+      color.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
+      color.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+      color.clearValue.color.float32[0] = kFar;
+      VkRenderingAttachmentInfo depth = make<VkRenderingAttachmentInfo>(VK_STRUCTURE_TYPE_RENDERING_ATTACHMENT_INFO);
+      depth.imageView = depth_attachment->layer_views[0];
+      depth.imageLayout = VK_IMAGE_LAYOUT_DEPTH_ATTACHMENT_OPTIMAL;
+      depth.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
+      depth.storeOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+      depth.clearValue.depthStencil = {1.0f, 0};
+      VkRenderingInfo ri = make<VkRenderingInfo>(VK_STRUCTURE_TYPE_RENDERING_INFO);
+      ri.renderArea = scissor;
+      ri.layerCount = 1;
+      ri.colorAttachmentCount = 1;
+      ri.pColorAttachments = &color;
+      ri.pDepthAttachment = &depth;
+      ctx.vk.vkCmdBeginRendering(cmd, &ri);
+      const gpu::ShadowPush push{{l, 0, 0, 0}};
+      ctx.vk.vkCmdPushConstants(cmd, shadow_layout.get(), VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT,
+                                0, sizeof(push), &push);
+      ctx.vk.vkCmdDrawIndexed(cmd, std::uint32_t(mesh->indices.size()), 1, 0, 0, 0);
+      ctx.vk.vkCmdEndRendering(cmd);
+    }
+    image_barrier(ctx, cmd, atlas.handle, VK_IMAGE_ASPECT_COLOR_BIT, atlas.layers,
+                  VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
+                  VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT,
+                  VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
+  } else {
+    image_barrier(ctx, cmd, atlas.handle, VK_IMAGE_ASPECT_COLOR_BIT, atlas.layers, VK_IMAGE_LAYOUT_UNDEFINED,
+                  VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, 0,
+                  VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
+  }
+  stamp(2, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT);
+  submit_and_wait();
+
+  // ---- tiles ------------------------------------------------------------------------------------
+  double host_down = 0;
+  std::size_t exact = 0, interpolated = 0;
+  int tile_index = 0;
+  for (int ty = 0; ty < tiles_y; ++ty)
+    for (int tx = 0; tx < tiles_x; ++tx, ++tile_index) {
+      const int x0 = tx * tw, y0 = ty * th;
+      const int x1 = std::min(W, x0 + tw), y1 = std::min(H, y0 + th);
+      const int rx0 = std::max(0, x0 - halo), ry0 = std::max(0, y0 - halo);
+      const int rx1 = std::min(W, x1 + halo), ry1 = std::min(H, y1 + halo);
+      // Grid samples the tile's pixels need: their cells' corners and those corners' neighbours.
+      auto cell = [&](int v, int n_grid) { return std::max(0, std::min(v / g, n_grid - 2)); };
+      const int i0 = std::max(0, cell(x0, ngx) - 1), i1 = std::min(ngx - 1, cell(x1 - 1, ngx) + 2);
+      const int j0 = std::max(0, cell(y0, ngy) - 1), j1 = std::min(ngy - 1, cell(y1 - 1, ngy) + 2);
+      gpu::ScatterParams tp = p;
+      tp.region = {rx0, ry0, rx1 - rx0, ry1 - ry0};
+      tp.tile = {x0, y0, x1 - x0, y1 - y0};
+      tp.grid = {i0, j0, i1 - i0 + 1, j1 - j0 + 1};
+      if (std::size_t(tp.grid.z) * std::size_t(tp.grid.w) > grid_max)
+        throw Error(ErrorCode::internal, "vulkan: grid buffer too small for a tile");
+
+      t_host = Clock::now();
+      auto* dst = static_cast<char*>(staging_up.mapped);
+      std::memcpy(dst, &tp, sizeof(tp));
+      float* dd = reinterpret_cast<float*>(dst + sizeof(tp));
+      const int rw = rx1 - rx0;
+      for (int y = ry0; y < ry1; ++y)
+        std::memcpy(dd + std::size_t(y - ry0) * rw, in.distance_m.pixel(rx0, y), std::size_t(rw) * sizeof(float));
+      const std::size_t region_px = std::size_t(rw) * std::size_t(ry1 - ry0);
+      float* nd = reinterpret_cast<float*>(dst + sizeof(tp) + depth_buf.size);
+      if (normals)
+        for (int y = ry0; y < ry1; ++y)
+          std::memcpy(nd + std::size_t(y - ry0) * rw * 3, in.normals.pixel(rx0, y), std::size_t(rw) * 3 * sizeof(float));
+      host_up += seconds_since(t_host);
+
+      const std::uint32_t q = 3 + 4 * std::uint32_t(tile_index);
+      begin();
+      stamp(q, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT);
+      {
+        VkBufferCopy c{0, 0, sizeof(tp)};
+        ctx.vk.vkCmdCopyBuffer(cmd, staging_up.handle, params_buf.handle, 1, &c);
+        c = {sizeof(tp), 0, region_px * sizeof(float)};
+        ctx.vk.vkCmdCopyBuffer(cmd, staging_up.handle, depth_buf.handle, 1, &c);
+        if (normals) {
+          c = {sizeof(tp) + depth_buf.size, 0, region_px * 3 * sizeof(float)};
+          ctx.vk.vkCmdCopyBuffer(cmd, staging_up.handle, normals_buf.handle, 1, &c);
+        }
+        ctx.vk.vkCmdFillBuffer(cmd, counters_buf.handle, 0, VK_WHOLE_SIZE, 0);
+      }
+      memory_barrier(ctx, cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                     VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+      stamp(q + 1, VK_PIPELINE_STAGE_TRANSFER_BIT);
+      ctx.vk.vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, compute_layout.get(), 0, 1, &sets[0], 0,
+                                     nullptr);
+      const std::uint32_t wg = gpu::kWorkgroupSize;
+      ctx.vk.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, grid.get());
+      ctx.vk.vkCmdDispatch(cmd, (std::uint32_t(tp.grid.z) + wg - 1) / wg, (std::uint32_t(tp.grid.w) + wg - 1) / wg, 1);
+      memory_barrier(ctx, cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                     VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
+      ctx.vk.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, resolve.get());
+      ctx.vk.vkCmdDispatch(cmd, (std::uint32_t(x1 - x0) + wg - 1) / wg, (std::uint32_t(y1 - y0) + wg - 1) / wg, 1);
+      memory_barrier(ctx, cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                     VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
+      stamp(q + 2, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT);
+      const std::size_t px = std::size_t(x1 - x0) * std::size_t(y1 - y0);
+      {
+        VkDeviceSize off = 0;
+        auto copy_back = [&](const Buffer& b, std::size_t bytes) {
+          const VkBufferCopy c{0, off, bytes};
+          ctx.vk.vkCmdCopyBuffer(cmd, b.handle, down.handle, 1, &c);
+          off += b.size;
+        };
+        copy_back(t_buf, px * 3 * sizeof(float));
+        copy_back(r_buf, px * 3 * sizeof(float));
+        copy_back(v_buf, px * sizeof(float));
+        copy_back(od_buf, px * 3 * sizeof(float));
+        copy_back(counters_buf, counters_buf.size);
+      }
+      memory_barrier(ctx, cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                     VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+      stamp(q + 3, VK_PIPELINE_STAGE_TRANSFER_BIT);
+      submit_and_wait();
+
+      t_host = Clock::now();
+      const char* src = static_cast<const char*>(down.mapped);
+      const int cw = x1 - x0;
+      auto unpack = [&](const ImageView& view, std::size_t offset, int channels) {
+        const float* f = reinterpret_cast<const float*>(src + offset);
+        for (int y = y0; y < y1; ++y)
+          std::memcpy(view.pixel(x0, y), f + std::size_t(y - y0) * cw * channels,
+                      std::size_t(cw) * channels * sizeof(float));
+      };
+      unpack(out.transmittance, 0, 3);
+      unpack(out.inscatter, t_buf.size, 3);
+      unpack(out.sun_visibility, t_buf.size + r_buf.size, 1);
+      unpack(out.optical_depth, t_buf.size + r_buf.size + v_buf.size, 3);
+      std::uint32_t counts[4];
+      std::memcpy(counts, src + t_buf.size + r_buf.size + v_buf.size + od_buf.size, sizeof(counts));
+      host_down += seconds_since(t_host);
+      // Grid samples inside the tile count as exact pixels (as on the CPU).
+      std::size_t grid_in_tile = 0;
+      for (int i = i0; i <= i1; ++i) {
+        const int gxv = std::min(i * g, W - 1);
+        if (gxv < x0 || gxv >= x1) continue;
+        for (int j = j0; j <= j1; ++j) {
+          const int gyv = std::min(j * g, H - 1);
+          if (gyv >= y0 && gyv < y1) ++grid_in_tile;
+        }
+      }
+      exact += counts[0] + grid_in_tile;
+      interpolated += counts[1];
+    }
+  out.exact_pixels = exact;
+  out.interpolated_pixels = interpolated;
+  out.shadow_rays = 0;  // shadow-map lookups are not counted
+
+  if (timings) {
+    *timings = BackendTimings{};
+    timings->host_upload_s = host_up;
+    timings->host_download_s = host_down;
+    timings->tiles = n_tiles;
+    timings->shadow_layers = n_layers;
+    timings->shadow_map_size = n_layers > 0 ? size : 0;
+    if (timed) {
+      std::vector<std::uint64_t> ts(n_queries);
+      check(ctx.vk.vkGetQueryPoolResults(ctx.device, queries.get(), 0, n_queries, ts.size() * sizeof(std::uint64_t),
+                                         ts.data(), sizeof(std::uint64_t),
+                                         VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT),
+            "vkGetQueryPoolResults");
+      const double period = double(limits.timestampPeriod) * 1e-9;
+      const std::uint64_t mask =
+          ctx.timestamp_valid_bits >= 64 ? ~std::uint64_t(0) : ((std::uint64_t(1) << ctx.timestamp_valid_bits) - 1);
+      auto span = [&](std::uint32_t a, std::uint32_t b) { return double((ts[b] - ts[a]) & mask) * period; };
+      timings->gpu_upload_s = span(0, 1);
+      timings->gpu_shadow_maps_s = span(1, 2);
+      for (int t = 0; t < n_tiles; ++t) {
+        const std::uint32_t q = 3 + 4 * std::uint32_t(t);
+        timings->gpu_upload_s += span(q, q + 1);
+        timings->gpu_scatter_s += span(q + 1, q + 2);
+        timings->gpu_download_s += span(q + 2, q + 3);
+      }
+    }
+  }
+}
+
+std::vector<float> Backend::Impl::echo_layout(const void* params, std::size_t params_bytes, const void* lamps,
+                                              std::size_t lamps_bytes, const void* layers, std::size_t layers_bytes,
+                                              std::size_t out_vec4s) {
+  std::lock_guard lock(mutex);
+  std::vector<VkDescriptorSetLayoutBinding> b;
+  for (std::uint32_t i = 0; i < 4; ++i)
+    b.push_back({i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
+  const auto set_layout = make_set_layout(ctx, b);
+  const auto layout = make_pipeline_layout(ctx, set_layout.get(), nullptr);
+  const auto pipeline = make_compute_pipeline(ctx, layout.get(), kLayoutCheckSpv, sizeof(kLayoutCheckSpv));
+  const std::size_t out_bytes = out_vec4s * 4 * sizeof(float);
+  Buffer bufs[4] = {Buffer(ctx, params_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, true),
+                    Buffer(ctx, lamps_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, true),
+                    Buffer(ctx, layers_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, true),
+                    Buffer(ctx, out_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, true)};
+  std::memcpy(bufs[0].mapped, params, params_bytes);
+  std::memcpy(bufs[1].mapped, lamps, lamps_bytes);
+  std::memcpy(bufs[2].mapped, layers, layers_bytes);
+  std::memset(bufs[3].mapped, 0, out_bytes);
+  VkDescriptorPoolSize ps{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 4};
+  VkDescriptorPoolCreateInfo dpci = make<VkDescriptorPoolCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO);
+  dpci.maxSets = 1;
+  dpci.poolSizeCount = 1;
+  dpci.pPoolSizes = &ps;
+  VkDescriptorPool dp = VK_NULL_HANDLE;
+  check(ctx.vk.vkCreateDescriptorPool(ctx.device, &dpci, nullptr, &dp), "vkCreateDescriptorPool");
+  const auto pool_owner = own(ctx, dp, destroy_descriptor_pool);
+  VkDescriptorSet set = VK_NULL_HANDLE;
+  VkDescriptorSetLayout sl = set_layout.get();
+  VkDescriptorSetAllocateInfo ai = make<VkDescriptorSetAllocateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO);
+  ai.descriptorPool = dp;
+  ai.descriptorSetCount = 1;
+  ai.pSetLayouts = &sl;
+  check(ctx.vk.vkAllocateDescriptorSets(ctx.device, &ai, &set), "vkAllocateDescriptorSets");
+  VkDescriptorBufferInfo infos[4];
+  VkWriteDescriptorSet writes[4];
+  for (int i = 0; i < 4; ++i) {
+    infos[i] = {bufs[i].handle, 0, VK_WHOLE_SIZE};
+    writes[i] = make<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
+    writes[i].dstSet = set;
+    writes[i].dstBinding = std::uint32_t(i);
+    writes[i].descriptorCount = 1;
+    writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    writes[i].pBufferInfo = &infos[i];
+  }
+  ctx.vk.vkUpdateDescriptorSets(ctx.device, 4, writes, 0, nullptr);
+  begin();
+  memory_barrier(ctx, cmd, VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                 VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+  ctx.vk.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.get());
+  ctx.vk.vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout.get(), 0, 1, &set, 0, nullptr);
+  ctx.vk.vkCmdDispatch(cmd, 1, 1, 1);
+  memory_barrier(ctx, cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT,
+                 VK_ACCESS_HOST_READ_BIT);
+  submit_and_wait();
+  std::vector<float> result(out_vec4s * 4);
+  std::memcpy(result.data(), bufs[3].mapped, out_bytes);
+  return result;
+}
+
+// ------------------------------------------------------------------------------------------------
+
+Backend::Backend(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Backend::~Backend() = default;
+
+Backend& Backend::shared() {
+  static std::mutex mutex;
+  static std::unique_ptr<Backend> backend;
+  static std::optional<std::string> failure;
+  std::lock_guard lock(mutex);
+  if (backend) return *backend;
+  if (failure) throw Unavailable(*failure);
+  ContextOptions options;
+  if (const char* v = std::getenv("MR_VULKAN_VALIDATION")) options.validation = std::string(v) == "1";
+  if (const char* v = std::getenv("MR_VULKAN_DEVICE")) options.device_filter = v;
+  try {
+    backend.reset(new Backend(std::make_unique<Impl>(options)));
+  } catch (const Unavailable& e) {
+    std::string what = e.what();
+    if (what.rfind("vulkan: ", 0) == 0) what = what.substr(8);
+    failure = what;
+    throw;
+  }
+  return *backend;
+}
+
+const DeviceInfo& Backend::device() const { return impl_->ctx.info; }
+
+void Backend::render(const CoreInputs& in, const TriangleMesh* mesh, CoreOutputs& out, const BackendOptions& options,
+                     BackendTimings* timings) {
+  impl_->render(in, mesh, out, options, timings);
+}
+
+std::size_t Backend::validation_messages() const { return impl_->ctx.validation_count.load(); }
+std::string Backend::validation_log() const {
+  std::lock_guard lock(impl_->ctx.log_mutex);
+  return impl_->ctx.validation_log;
+}
+bool Backend::validation_enabled() const { return impl_->ctx.validation; }
+
+std::vector<float> echo_parameter_layout(const void* params, std::size_t params_bytes, const void* lamps,
+                                         std::size_t lamps_bytes, const void* layers, std::size_t layers_bytes,
+                                         std::size_t out_vec4s) {
+  return Backend::shared().impl_->echo_layout(params, params_bytes, lamps, lamps_bytes, layers,
+                                                         layers_bytes, out_vec4s);
+}
+
+}  // namespace mr::render::vulkan
