@@ -1,6 +1,10 @@
 // The scattering core against closed forms (DESIGN.md section 3). Tolerances are the issue's:
 // relative error below 1e-3 for closed forms, 1e-2 for the lamp glow against an independent
 // numerical integration, one march step for the shadowed fraction of a ray.
+//
+// One set of tests, two backends: this file is compiled into mr_scattering_tests (the CPU core)
+// and, with MR_SCATTERING_TEST_VULKAN, into mr_vulkan_tests, where the same tests run on the
+// Vulkan backend (lavapipe in CI) with the same tolerances, test names prefixed "Vulkan.".
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -12,60 +16,56 @@
 #include "mr/fog.h"
 #include "mr/scattering.h"
 #include "render/medium.h"
+#include "scattering_scenes.h"
 #include "test_support.h"
+#ifdef MR_SCATTERING_TEST_VULKAN
+#include "vulkan_test_support.h"
+#endif
 
 namespace mr {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-constexpr float kInf = std::numeric_limits<float>::infinity();
+using test::base_scene;
+using test::constant_depth;
+using test::dot;
+using test::ground_depth;
+using test::hg;
+using test::kInf;
+using test::kPi;
+using test::normalize;
+using test::simpson;
 
-double hg(double g, double c) {
-  return (1 - g * g) / (4 * kPi * std::pow(1 + g * g - 2 * g * c, 1.5));
-}
-double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-Vec3 normalize(const Vec3& v) {
-  const double n = std::sqrt(dot(v, v));
-  return {v.x / n, v.y / n, v.z / n};
-}
+#ifdef MR_SCATTERING_TEST_VULKAN
+constexpr Backend kBackend = Backend::vulkan;
+#else
+constexpr Backend kBackend = Backend::cpu;
+#endif
 
-// Composite Simpson on [a, b] with n (even) intervals.
-double simpson(const std::function<double(double)>& f, double a, double b, int n) {
-  const double h = (b - a) / n;
-  double s = f(a) + f(b);
-  for (int i = 1; i < n; ++i) s += f(a + i * h) * (i % 2 ? 4 : 2);
-  return s * h / 3;
-}
+class Scattering : public ::testing::Test {
+ protected:
+  void SetUp() override {
+#ifdef MR_SCATTERING_TEST_VULKAN
+    vktest::configure_environment();
+    std::string why;
+    if (!vktest::backend_or_null(&why)) GTEST_SKIP() << why;
+#endif
+  }
+  void TearDown() override {
+#ifdef MR_SCATTERING_TEST_VULKAN
+    vktest::expect_validation_clean();
+#endif
+  }
+};
 
-// A depth map where every pixel sees a surface at distance `d`.
-Image constant_depth(const Camera& cam, float d) {
-  Image im(cam.width, cam.height, 1, {"Z"});
-  for (float& v : im.pixels()) v = d;
-  return im;
-}
-
-// Ground plane y = 0 seen from the pose; sky (+inf) above the horizon.
-Image ground_depth(const Camera& cam, const CameraPose& pose) {
-  Image im(cam.width, cam.height, 1, {"Z"});
-  for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x) {
-      const Vec3 w = pose.ray_direction(cam, x, y);
-      im.at(x, y, 0) = w.y < -1e-6 ? float(-pose.position_m.y / w.y) : kInf;
-    }
-  return im;
-}
-
-FogScene base_scene() {
-  FogScene s;
-  s.medium.sigma_t_per_m = {0.02f, 0.02f, 0.02f};
-  s.medium.albedo = {0.9f, 0.8f, 0.7f};
-  s.medium.g = 0.4;
-  s.lighting.sky_radiance = Rgb{0, 0, 0};
-  s.render.quality = Quality::final;
-  return s;
+// render_scattering on the backend under test, checking that it is the one that rendered.
+ScatteringLayers render(const Image& depth, const Camera& cam, FogScene s) {
+  s.render.backend = kBackend;
+  ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  EXPECT_EQ(out.backend.rfind(kBackend == Backend::vulkan ? "vulkan" : "cpu", 0), 0u) << out.backend;
+  return out;
 }
 
-TEST(Scattering, HomogeneousSunWithoutLightPathAttenuationIsClosedForm) {
+TEST_F(Scattering, HomogeneousSunWithoutLightPathAttenuationIsClosedForm) {
   const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
   FogScene s = base_scene();
   s.lighting.sun = Sun{normalize({0.3, 0.5, 0.8}), {3, 2.5, 2}, 0.0};
@@ -75,7 +75,7 @@ TEST(Scattering, HomogeneousSunWithoutLightPathAttenuationIsClosedForm) {
   s.render.gradient_acceleration = false;  // the interpolation's error is tested on its own
   Image depth = constant_depth(cam, 60);
   for (int x = 0; x < cam.width; ++x) depth.at(x, 3, 0) = kInf;  // a row of sky
-  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers out = render(depth, cam, s);
   double worst = 0;
   for (int y = 0; y < cam.height; ++y)
     for (int x = 0; x < cam.width; ++x) {
@@ -90,7 +90,7 @@ TEST(Scattering, HomogeneousSunWithoutLightPathAttenuationIsClosedForm) {
   EXPECT_LT(worst, 1e-3);
 }
 
-TEST(Scattering, SunThroughAFogLayerWithLightPathAttenuation) {
+TEST_F(Scattering, SunThroughAFogLayerWithLightPathAttenuation) {
   // Homogeneous fog below 30 m; the sun's light crosses (top - y) / l_y of it to reach a point.
   // Along a view ray y = y0 + t w_y, so the integrand is a single exponential in t:
   // R = albedo E p exp(-sigma (top - y0) / l_y) (1 - exp(-sigma k d)) / k, k = 1 - w_y / l_y.
@@ -100,7 +100,7 @@ TEST(Scattering, SunThroughAFogLayerWithLightPathAttenuation) {
   s.lighting.sun = Sun{normalize({0.2, 0.6, -0.7}), {3, 3, 3}, 0.0};
   s.render.volumetric_shadows = false;
   const Image depth = constant_depth(cam, 80);  // every sample stays below 30 m
-  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers out = render(depth, cam, s);
   const Vec3 l = s.lighting.sun->direction_to_sun;
   double worst = 0;
   for (int y = 0; y < cam.height; ++y)
@@ -120,7 +120,8 @@ TEST(Scattering, SunThroughAFogLayerWithLightPathAttenuation) {
   EXPECT_LT(worst, 1e-3);
 }
 
-TEST(Scattering, HeightFogOpticalDepthForRaysUpDownAndLevel) {
+#ifndef MR_SCATTERING_TEST_VULKAN  // backend-independent: run once, on the CPU build
+TEST_F(Scattering, HeightFogOpticalDepthForRaysUpDownAndLevel) {
   Medium m;
   m.height_fog = Medium::HeightFog{2.0, 15.0};
   const render::Vec3d o{0, 5, 0};
@@ -139,8 +140,9 @@ TEST(Scattering, HeightFogOpticalDepthForRaysUpDownAndLevel) {
   // Going up, the optical depth to infinity is finite: k H / w_y.
   EXPECT_NEAR(render::RayDensity(m, o, {0, 0.6, 0.8}).optical_depth(0, INFINITY), k * h / 0.6, 1e-9);
 }
+#endif
 
-TEST(Scattering, KoschmiederReductionWithAmbientLightOnly) {
+TEST_F(Scattering, KoschmiederReductionWithAmbientLightOnly) {
   // No sun, no lamps, albedo 1: C = I t + L_sky (1 - t), exactly the skeleton's model.
   const Camera cam = Camera::from_horizontal_fov(48, 32, 60);
   const Image photo = test::make_test_photo(48, 32);
@@ -151,6 +153,7 @@ TEST(Scattering, KoschmiederReductionWithAmbientLightOnly) {
   s.medium.sigma_t_per_m = {0.01f, 0.015f, 0.02f};
   s.medium.albedo = {1, 1, 1};
   s.lighting.sky_radiance = Rgb{0.7f, 0.75f, 0.8f};
+  s.render.backend = kBackend;
   const FogLayers physical = fog(photo, depth, cam, s);
   FogParams k;
   k.sigma_t_per_m = s.medium.sigma_t_per_m;
@@ -161,7 +164,7 @@ TEST(Scattering, KoschmiederReductionWithAmbientLightOnly) {
 }
 
 // Sunlit ground under a 20 m fog layer: S = (E cos tau_sun + pi L) / (E cos + pi L).
-TEST(Scattering, SurfaceTermOfASunlitPlane) {
+TEST_F(Scattering, SurfaceTermOfASunlitPlane) {
   const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
   FogScene s = base_scene();
   s.pose.pitch_deg = -35;
@@ -170,7 +173,7 @@ TEST(Scattering, SurfaceTermOfASunlitPlane) {
   s.lighting.sun = Sun{direction_from_azimuth_elevation(30, 40), {3, 3, 3}, 0.27};
   s.render.quality = Quality::normal;
   const Image depth = ground_depth(cam, s.pose);
-  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers out = render(depth, cam, s);
   const Vec3 l = normalize(s.lighting.sun->direction_to_sun);
   double worst = 0;
   int checked = 0;
@@ -193,7 +196,7 @@ TEST(Scattering, SurfaceTermOfASunlitPlane) {
   EXPECT_LT(worst, 1e-3);
 }
 
-TEST(Scattering, SurfaceTermOfALamplitPlane) {
+TEST_F(Scattering, SurfaceTermOfALamplitPlane) {
   const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
   FogScene s = base_scene();
   s.pose.pitch_deg = -35;
@@ -204,7 +207,7 @@ TEST(Scattering, SurfaceTermOfALamplitPlane) {
   s.lighting.lamps = {lamp};
   s.render.quality = Quality::draft;
   const Image depth = ground_depth(cam, s.pose);
-  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers out = render(depth, cam, s);
   double worst = 0;
   for (int y = 0; y < cam.height; ++y)
     for (int x = 0; x < cam.width; ++x) {
@@ -226,7 +229,7 @@ TEST(Scattering, SurfaceTermOfALamplitPlane) {
   EXPECT_LT(worst, 1e-3);
 }
 
-TEST(Scattering, PointLampGlowMatchesNumericalIntegration) {
+TEST_F(Scattering, PointLampGlowMatchesNumericalIntegration) {
   const Camera cam = Camera::from_horizontal_fov(48, 36, 50);
   FogScene s = base_scene();
   s.medium.sigma_t_per_m = {0.05f, 0.05f, 0.05f};
@@ -238,7 +241,7 @@ TEST(Scattering, PointLampGlowMatchesNumericalIntegration) {
   s.render.volumetric_shadows = false;
   s.render.quality = Quality::normal;
   const Image depth = constant_depth(cam, 40);
-  const ScatteringLayers out = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers out = render(depth, cam, s);
   double max_r = 0;
   for (int y = 0; y < cam.height; ++y)
     for (int x = 0; x < cam.width; ++x) max_r = std::max(max_r, double(out.inscatter.at(x, y, 0)));
@@ -268,7 +271,7 @@ TEST(Scattering, PointLampGlowMatchesNumericalIntegration) {
   EXPECT_LT(worst, 1e-2);
 }
 
-TEST(Scattering, HalfPlaneShadowedFractionWithinOneMarchStep) {
+TEST_F(Scattering, HalfPlaneShadowedFractionWithinOneMarchStep) {
   // A roof (half-plane y = 5, x < 0) and a back wall at z = 40. The sun, tilted toward +x,
   // shades the part of each view ray for which x + (5 - y) tan(a) < 0 and y < 5.
   const Camera cam = Camera::from_horizontal_fov(64, 48, 70);
@@ -307,10 +310,10 @@ TEST(Scattering, HalfPlaneShadowedFractionWithinOneMarchStep) {
     const double t_roof = (5 - o.y) / w.y;
     return o.x + t_roof * w.x < 0 && std::fabs(depth.at(ix, iy, 0) - t_roof) < 1e-3 * t_roof;
   };
-  const ScatteringLayers lit = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers lit = render(depth, cam, s);
   FogScene unshadowed = s;
   unshadowed.render.volumetric_shadows = false;
-  const ScatteringLayers open = render_scattering(Image(), depth, cam, unshadowed);
+  const ScatteringLayers open = render(depth, cam, unshadowed);
   int partial = 0;
   for (int y = 0; y < cam.height; y += 3)
     for (int x = 0; x < cam.width; x += 3) {
@@ -337,7 +340,7 @@ TEST(Scattering, HalfPlaneShadowedFractionWithinOneMarchStep) {
 
 // The gradient acceleration against the same march without it, on a sunlit street-like scene
 // with shafts: it must cost little error (mean 0.5 %, any pixel 5 %) for its speed-up.
-TEST(Scattering, GradientAccelerationErrorIsSmall) {
+TEST_F(Scattering, GradientAccelerationErrorIsSmall) {
   const Camera cam = Camera::from_horizontal_fov(96, 64, 60);
   FogScene s = base_scene();
   s.pose.pitch_deg = -5;
@@ -355,9 +358,9 @@ TEST(Scattering, GradientAccelerationErrorIsSmall) {
       }
       if (x >= 60 && x < 64 && y > 10) depth.at(x, y, 0) = std::min(depth.at(x, y, 0), 12.0f);
     }
-  const ScatteringLayers fast = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers fast = render(depth, cam, s);
   s.render.gradient_acceleration = false;
-  const ScatteringLayers exact = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers exact = render(depth, cam, s);
   EXPECT_LT(fast.timings.exact_pixels, exact.timings.exact_pixels / 2);
   double sum = 0, worst = 0;
   std::size_t n = 0;
@@ -372,7 +375,7 @@ TEST(Scattering, GradientAccelerationErrorIsSmall) {
   EXPECT_LT(worst, 5e-2);
 }
 
-TEST(Scattering, DeterministicForASeed) {
+TEST_F(Scattering, DeterministicForASeed) {
   const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
   FogScene s = base_scene();
   s.pose.pitch_deg = -10;
@@ -381,19 +384,20 @@ TEST(Scattering, DeterministicForASeed) {
   s.medium.noise.amplitude = 0.5;
   s.render.quality = Quality::normal;
   const Image depth = ground_depth(cam, s.pose);
-  const ScatteringLayers a = render_scattering(Image(), depth, cam, s);
-  const ScatteringLayers b = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers a = render(depth, cam, s);
+  const ScatteringLayers b = render(depth, cam, s);
   EXPECT_EQ(test::max_abs_diff(a.inscatter, b.inscatter), 0.0);
   EXPECT_EQ(test::max_abs_diff(a.transmittance, b.transmittance), 0.0);
   for (float v : a.inscatter.pixels()) ASSERT_TRUE(std::isfinite(v) && v >= 0);
 }
 
-TEST(Scattering, BadInputIsAClearError) {
+#ifndef MR_SCATTERING_TEST_VULKAN  // backend-independent: run once, on the CPU build
+TEST_F(Scattering, BadInputIsAClearError) {
   const Camera cam = Camera::from_horizontal_fov(20, 10, 60);
   const Image depth = constant_depth(cam, 10);
   auto expect_error = [&](const FogScene& s, const Image& d, const std::string& needle) {
     try {
-      render_scattering(Image(), d, cam, s);
+      render(d, cam, s);
       ADD_FAILURE() << "expected an error about " << needle;
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
@@ -424,11 +428,12 @@ TEST(Scattering, BadInputIsAClearError) {
   expect_error(bad, depth, "inside the scene's geometry");
   expect_error(s, constant_depth(Camera::from_horizontal_fov(21, 10, 60), 10), "21x10");
 }
+#endif
 
 
 // A sun above homogeneous fog with no top never gets in: the scene is valid (and the core
 // correctly adds no sunlight, checked here too), but front ends are told why.
-TEST(Scattering, SunThatCannotReachTheFogIsWarnedAbout) {
+TEST_F(Scattering, SunThatCannotReachTheFogIsWarnedAbout) {
   FogScene s;
   s.lighting.sun = Sun{direction_from_azimuth_elevation(0, 30), {5, 5, 5}, 0.27};
   s.lighting.sky_radiance = Rgb{0, 0, 0};
@@ -438,13 +443,13 @@ TEST(Scattering, SunThatCannotReachTheFogIsWarnedAbout) {
   const Camera cam = Camera::from_horizontal_fov(16, 12, 60);
   Image depth(cam.width, cam.height, 1, {"Z"});
   for (float& d : depth.pixels()) d = 50.0f;
-  const ScatteringLayers unlit = render_scattering(Image(), depth, cam, s);
+  const ScatteringLayers unlit = render(depth, cam, s);
   for (float v : unlit.inscatter.pixels()) EXPECT_EQ(v, 0.0f);
 
   FogScene topped = s;
   topped.medium.layer_top_m = 30;
   EXPECT_TRUE(scene_warnings(topped).empty());
-  const ScatteringLayers lit = render_scattering(Image(), depth, cam, topped);
+  const ScatteringLayers lit = render(depth, cam, topped);
   EXPECT_GT(lit.inscatter.at(8, 6, 0), 0.01f);
   FogScene height = s;
   height.medium.height_fog = Medium::HeightFog{0, 10};

@@ -1,0 +1,65 @@
+// Scenes and small helpers shared by the scattering core's tests (tests/scattering_test.cpp,
+// compiled once per backend) and the GPU-vs-CPU comparisons (tests/vulkan_scattering_test.cpp).
+#pragma once
+
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <numbers>
+
+#include "mr/image.h"
+#include "mr/scene.h"
+
+namespace mr::test {
+
+constexpr double kPi = std::numbers::pi;
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+/// Henyey-Greenstein phase function, written out independently of render/medium.h.
+inline double hg(double g, double c) {
+  return (1 - g * g) / (4 * kPi * std::pow(1 + g * g - 2 * g * c, 1.5));
+}
+inline double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Vec3 normalize(const Vec3& v) {
+  const double n = std::sqrt(dot(v, v));
+  return {v.x / n, v.y / n, v.z / n};
+}
+
+/// Composite Simpson on [a, b] with n (even) intervals.
+inline double simpson(const std::function<double(double)>& f, double a, double b, int n) {
+  const double h = (b - a) / n;
+  double s = f(a) + f(b);
+  for (int i = 1; i < n; ++i) s += f(a + i * h) * (i % 2 ? 4 : 2);
+  return s * h / 3;
+}
+
+/// A depth map where every pixel sees a surface at distance `d`.
+inline Image constant_depth(const Camera& cam, float d) {
+  Image im(cam.width, cam.height, 1, {"Z"});
+  for (float& v : im.pixels()) v = d;
+  return im;
+}
+
+/// Ground plane y = 0 seen from the pose; sky (+inf) above the horizon.
+inline Image ground_depth(const Camera& cam, const CameraPose& pose) {
+  Image im(cam.width, cam.height, 1, {"Z"});
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Vec3 w = pose.ray_direction(cam, x, y);
+      im.at(x, y, 0) = w.y < -1e-6 ? float(-pose.position_m.y / w.y) : kInf;
+    }
+  return im;
+}
+
+/// Coloured fog with g 0.4, no sky light, final quality (the closed-form tests' start).
+inline FogScene base_scene() {
+  FogScene s;
+  s.medium.sigma_t_per_m = {0.02f, 0.02f, 0.02f};
+  s.medium.albedo = {0.9f, 0.8f, 0.7f};
+  s.medium.g = 0.4;
+  s.lighting.sky_radiance = Rgb{0, 0, 0};
+  s.render.quality = Quality::final;
+  return s;
+}
+
+}  // namespace mr::test
