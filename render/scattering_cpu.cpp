@@ -27,12 +27,18 @@ constexpr double kGoldenAngle = 2.39996322972865332;
 using gpu::kEdgeBisections;
 using gpu::kShaftRefinement;
 
-Vec3d vec(const Vec3& v) { return {v.x, v.y, v.z}; }
-double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+Vec3d vec(const Vec3& v) {
+  return {v.x, v.y, v.z};
+}
+double dot(const Vec3d& a, const Vec3d& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
 Vec3d add(const Vec3d& a, const Vec3d& b, double s = 1) {
   return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]};
 }
-Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec3d sub(const Vec3d& a, const Vec3d& b) {
+  return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+}
 Vec3d normalized(const Vec3d& a) {
   const double n = std::sqrt(dot(a, a));
   return {a[0] / n, a[1] / n, a[2] / n};
@@ -40,11 +46,15 @@ Vec3d normalized(const Vec3d& a) {
 Vec3d cross(const Vec3d& a, const Vec3d& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
-std::array<float, 3> f3(const Vec3d& v) { return {float(v[0]), float(v[1]), float(v[2])}; }
+std::array<float, 3> f3(const Vec3d& v) {
+  return {float(v[0]), float(v[1]), float(v[2])};
+}
 
 // Interleaved gradient noise (Jimenez 2014): a per-pixel offset in [0, 1) whose neighbours
 // differ, so stratified jitter turns into fine noise the interpolation and eye average out.
-double fract(double v) { return v - std::floor(v); }
+double fract(double v) {
+  return v - std::floor(v);
+}
 
 double pixel_jitter(int x, int y, std::uint32_t seed) {
   const double ign = fract(52.9829189 * fract(0.06711056 * x + 0.00583715 * y));
@@ -56,7 +66,8 @@ double pixel_jitter(int x, int y, std::uint32_t seed) {
 double spot_factor(const Lamp& lamp, const Vec3d& from_lamp_unit) {
   if (lamp.outer_angle_deg >= 180.0) return 1.0;
   const double cos_a = dot(normalized(vec(lamp.spot_direction)), from_lamp_unit);
-  const double cos_in = std::cos(lamp.inner_angle_deg * kDeg), cos_out = std::cos(lamp.outer_angle_deg * kDeg);
+  const double cos_in = std::cos(lamp.inner_angle_deg * kDeg),
+               cos_out = std::cos(lamp.outer_angle_deg * kDeg);
   if (cos_a >= cos_in) return 1.0;
   if (cos_a <= cos_out) return 0.0;
   const double t = (cos_a - cos_out) / (cos_in - cos_out);
@@ -94,9 +105,8 @@ class Core {
       sun_tan_radius_ = std::tan(sun.angular_radius_deg * kDeg);
       // cos / sin of the golden-angle spiral's angles, looked up per march step (sincos per
       // step measured 9 % of a render).
-      const std::size_t max_steps =
-          std::size_t(plan.steps * kShaftRefinement +
-                      plan.lamp_steps * int(scene_.lighting.lamps.size()) + 2);
+      const std::size_t max_steps = std::size_t(
+          plan.steps * kShaftRefinement + plan.lamp_steps * int(scene_.lighting.lamps.size()) + 2);
       spiral_.resize(kSpiralRotations + max_steps);
       for (std::size_t n = 0; n < spiral_.size(); ++n)
         spiral_[n] = {std::cos(kGoldenAngle * double(n)), std::sin(kGoldenAngle * double(n))};
@@ -107,8 +117,8 @@ class Core {
     forward_ = vec(forward);
     right_ = vec(right);
     up_ = vec(up);
-    constant_source_ = !scene_.lighting.sun && scene_.lighting.lamps.empty() &&
-                       scene_.medium.noise.amplitude <= 0;
+    constant_source_ =
+        !scene_.lighting.sun && scene_.lighting.lamps.empty() && scene_.medium.noise.amplitude <= 0;
   }
 
   std::size_t shadow_rays() const { return rays_.combine(std::plus<>()); }
@@ -123,7 +133,8 @@ class Core {
 
   // Direction of march step i's sample of the sun's disk: stratified in radius over the ray's
   // steps, a golden-angle spiral in angle, rotated per pixel (rotation < kSpiralRotations).
-  Vec3d sun_sample_direction(std::size_t i, double jitter, double steps, std::uint32_t rotation) const {
+  Vec3d sun_sample_direction(std::size_t i, double jitter, double steps,
+                             std::uint32_t rotation) const {
     if (sun_tan_radius_ <= 0) return sun_dir_;
     const double r = sun_tan_radius_ * std::sqrt(fract((double(i) + jitter) / steps));
     const auto [c, s] = spiral_[i + rotation];
@@ -187,7 +198,8 @@ class Core {
     for (const Lamp& lamp : scene_.lighting.lamps) {
       const Vec3d p = vec(lamp.position_m);
       const double tc = dot(sub(p, origin_), w);
-      const double h = std::max(1e-6, std::sqrt(std::max(0.0, dot(sub(p, origin_), sub(p, origin_)) - tc * tc)));
+      const double h =
+          std::max(1e-6, std::sqrt(std::max(0.0, dot(sub(p, origin_), sub(p, origin_)) - tc * tc)));
       lamp_rays.push_back({tc, h});
       const double th_a = std::atan2(-tc, h), th_b = std::atan2(length - tc, h);
       for (int i = 1; i < plan_.lamp_steps; ++i) {
@@ -199,7 +211,8 @@ class Core {
     bounds.erase(std::unique(bounds.begin(), bounds.end()), bounds.end());
 
     const double jitter = pixel_jitter(x, y, scene_.render.seed);
-    const std::uint32_t pixel_rotation = std::uint32_t(x * 73856093u ^ y * 19349663u) % kSpiralRotations;
+    const std::uint32_t pixel_rotation =
+        std::uint32_t(x * 73856093u ^ y * 19349663u) % kSpiralRotations;
     const std::size_t segments = bounds.size() - 1;
 
     // First the segments' sample points, then their sun visibility in 8-wide packets (the rays
@@ -252,7 +265,7 @@ class Core {
         for (int k = 0; k < kEdgeBisections; ++k) {
           const double mid = 0.5 * (lo + hi);
           const bool visible = !in_.occluders->occluded(f3(add(origin_, w, mid)), f3(dir),
-                                                       float(1e-3 + 1e-4 * mid), float(kInf));
+                                                        float(1e-3 + 1e-4 * mid), float(kInf));
           (visible == bool(sun_visible[i]) ? lo : hi) = mid;
         }
         rays += kEdgeBisections;
@@ -280,7 +293,9 @@ class Core {
         weight[c] = m.albedo[c] * (tau_a[c] - tau_b);  // integral of tau sigma_s over the segment
         tau_a[c] = tau_b;
       }
-      if (weight[0] + weight[1] + weight[2] <= 0 && tau_before[0] + tau_before[1] + tau_before[2] <= 0) continue;
+      if (weight[0] + weight[1] + weight[2] <= 0 &&
+          tau_before[0] + tau_before[1] + tau_before[2] <= 0)
+        continue;
 
       const double source[3] = {in_.sky_radiance[0], in_.sky_radiance[1], in_.sky_radiance[2]};
       if (scene_.lighting.sun) {
@@ -296,9 +311,9 @@ class Core {
           if (sun_visible[i])
             for (int c = 0; c < 3; ++c) lit_weight[c] = weight[c];
         } else {
-          const double modulation = seg_od_unit > 0 ? seg_od_unit / std::max(1e-300, rd.optical_depth(ta, tb)) : 0.0;
-          const std::array<std::pair<double, double>, 3> pieces{
-              {{ta, tl}, {tl, tr}, {tr, tb}}};
+          const double modulation =
+              seg_od_unit > 0 ? seg_od_unit / std::max(1e-300, rd.optical_depth(ta, tb)) : 0.0;
+          const std::array<std::pair<double, double>, 3> pieces{{{ta, tl}, {tl, tr}, {tr, tb}}};
           const bool lit[3] = {vis_prev, bool(sun_visible[i]), vis_next};
           for (int k = 0; k < 3; ++k) {
             if (!lit[k] || !(pieces[k].second > pieces[k].first)) continue;
@@ -312,7 +327,8 @@ class Core {
         const double length_ab = tb - ta;
         sun_seen_fraction += length_ab > 0
                                  ? ((vis_prev ? tl - ta : 0) + (sun_visible[i] ? tr - tl : 0) +
-                                    (vis_next ? tb - tr : 0)) / length_ab
+                                    (vis_next ? tb - tr : 0)) /
+                                       length_ab
                                  : double(sun_visible[i]);
         ++sun_samples;
         if (lit_weight[0] + lit_weight[1] + lit_weight[2] > 0) {
@@ -343,16 +359,16 @@ class Core {
         if (spot <= 0) continue;
         if (in_.occluders) {
           ++rays;
-          if (in_.occluders->occluded(f3(xm), f3(l), float(1e-3 + 1e-4 * tm), float(r * (1 - 1e-4))))
+          if (in_.occluders->occluded(f3(xm), f3(l), float(1e-3 + 1e-4 * tm),
+                                      float(r * (1 - 1e-4))))
             continue;
         }
         const double modulation = has_noise ? noise_modulation(m.noise, xm) : 1.0;
         const double rho = rd.density(tm) * modulation;
         const double od_to_m = rd.optical_depth(ta, tm) * modulation;
         const double phase = henyey_greenstein(m.g, dot(w, l));
-        const double od_lamp = scene_.render.light_path_attenuation
-                                   ? RayDensity(m, xm, l).optical_depth(0, r)
-                                   : 0.0;
+        const double od_lamp =
+            scene_.render.light_path_attenuation ? RayDensity(m, xm, l).optical_depth(0, r) : 0.0;
         const double common = (th_b - th_a) / lr.h * phase * spot * rho;
         for (int c = 0; c < 3; ++c)
           s.inscatter[c] += m.albedo[c] * sigma_[c] * tau_before[c] *
@@ -405,7 +421,8 @@ class Core {
         if (sun_tan_radius_ > 0) {
           const double r = sun_tan_radius_ * std::sqrt((i + 0.5) / count);
           const double phi = kGoldenAngle * (i + pixel_jitter(x, y, scene_.render.seed) * count);
-          dir = normalized(add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
+          dir =
+              normalized(add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
         }
         packet.origin_x[k] = float(xo[0]);
         packet.origin_y[k] = float(xo[1]);
@@ -468,9 +485,8 @@ class Core {
         ++rays;
         if (in_.occluders->occluded(f3(xo), f3(l), 0.0f, float(r * (1 - 1e-4)))) continue;
       }
-      const double od_lamp = scene_.render.light_path_attenuation
-                                 ? RayDensity(m, x0, l).optical_depth(0, r)
-                                 : 0.0;
+      const double od_lamp =
+          scene_.render.light_path_attenuation ? RayDensity(m, x0, l).optical_depth(0, r) : 0.0;
       for (int c = 0; c < 3; ++c) {
         const double e = lamp.intensity_per_sr[c] * spot * cos_i / r2;
         direct[c] += e;
@@ -490,7 +506,8 @@ class Core {
     const Vec3d w = ray(x, y);
     const RayDensity rd(scene_.medium, origin_, w);
     const double length = march_length(rd, in_.distance_m.at(x, y, 0));
-    const double unit = rd.optical_depth(0, std::isfinite(in_.distance_m.at(x, y, 0)) ? length : kInf);
+    const double unit =
+        rd.optical_depth(0, std::isfinite(in_.distance_m.at(x, y, 0)) ? length : kInf);
     for (int c = 0; c < 3; ++c) od[c] = sigma_[c] * unit;
   }
 
@@ -539,9 +556,15 @@ bool depth_continuous(double a, double b) {
 MarchPlan march_plan(const RenderSettings& settings) {
   MarchPlan plan;
   switch (settings.quality) {
-    case Quality::draft: plan = {12, 8, 4, 2, 4, 2}; break;
-    case Quality::normal: plan = {32, 16, 3, 4, 8, 1}; break;
-    case Quality::final: plan = {128, 48, 1, 16, 32, 1}; break;
+    case Quality::draft:
+      plan = {12, 8, 4, 2, 4, 2};
+      break;
+    case Quality::normal:
+      plan = {32, 16, 3, 4, 8, 1};
+      break;
+    case Quality::final:
+      plan = {128, 48, 1, 16, 32, 1};
+      break;
   }
   if (settings.march_steps > 0) plan.steps = settings.march_steps;
   if (settings.grid_step > 0) plan.grid_step = settings.grid_step;
@@ -595,7 +618,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     auto gradient = [&](std::size_t i, std::size_t j, bool along_x, int c) {
       const int x = gx[i], y = gy[j];
       const PixelSample& s = sparse.at(x, y);
-      auto value = [&](const PixelSample& p) { return c < 3 ? p.inscatter[c] : (c < 6 ? p.camera_od[c - 3] : p.ao); };
+      auto value = [&](const PixelSample& p) {
+        return c < 3 ? p.inscatter[c] : (c < 6 ? p.camera_od[c - 3] : p.ao);
+      };
       const std::size_t n = along_x ? gx.size() : gy.size();
       const std::size_t k = along_x ? i : j;
       double slope_sum = 0;
@@ -621,79 +646,83 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           sample_gradients[j * gx.size() + i][kValues + c] = gradient(i, j, false, c);
         }
     });
-    tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, gy.size() - 1, 0, gx.size() - 1),
-                      [&](const tbb::blocked_range2d<std::size_t>& r) {
-      for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j)
-        for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i) {
-          const int x0 = gx[i], x1 = gx[i + 1], y0 = gy[j], y1 = gy[j + 1];
-          const std::array<std::pair<std::size_t, std::size_t>, 4> corners{
-              {{i, j}, {i + 1, j}, {i, j + 1}, {i + 1, j + 1}}};
-          // The corners' gradients, once per cell.
-          double value[4][kValues], grad_x[4][kValues], grad_y[4][kValues];
-          double shaft_min = 1, shaft_max = 0;
-          for (int k = 0; k < 4; ++k) {
-            const auto [ci, cj] = corners[k];
-            const PixelSample& s = sparse.at(gx[ci], gy[cj]);
-            for (int c = 0; c < kValues; ++c) {
-              value[k][c] = c < 3 ? s.inscatter[c] : (c < 6 ? s.camera_od[c - 3] : s.ao);
-              grad_x[k][c] = sample_gradients[cj * gx.size() + ci][c];
-              grad_y[k][c] = sample_gradients[cj * gx.size() + ci][kValues + c];
-            }
-            shaft_min = std::min(shaft_min, s.shaft);
-            shaft_max = std::max(shaft_max, s.shaft);
-          }
-          // A shadow boundary crosses the cell, or the in-scatter changes too fast across it
-          // (the core of a lamp's glow) for gradients to follow: its pixels get their own march.
-          double lum_min = kInf, lum_max = 0;
-          for (int k = 0; k < 4; ++k) {
-            const double lum = value[k][0] + value[k][1] + value[k][2];
-            lum_min = std::min(lum_min, lum);
-            lum_max = std::max(lum_max, lum);
-          }
-          const bool shadow_edge = shaft_max - shaft_min > 0.2 || lum_max > 1.25 * lum_min + 1e-12;
-          const double disk0 = sparse.at(x0, y0).sun_disk;
-          const bool sun_disk_agrees = disk0 >= 0 && sparse.at(x1, y0).sun_disk == disk0 &&
-                                       sparse.at(x0, y1).sun_disk == disk0 &&
-                                       sparse.at(x1, y1).sun_disk == disk0;
-          for (int y = y0; y <= y1; ++y)
-            for (int x = x0; x <= x1; ++x) {
-              if (sparse.has(x, y)) continue;
-              // Cells share edges: the first cell to reach a pixel decides it.
-              const std::size_t idx = std::size_t(y) * w + x;
-              if ((x == x1 && i + 2 < gx.size()) || (y == y1 && j + 2 < gy.size())) continue;
-              bool ok = !shadow_edge;
-              for (int k = 0; k < 4 && ok; ++k)
-                ok = depth_continuous(d(x, y), d(gx[corners[k].first], gy[corners[k].second]));
-              if (!ok) {
-                // A shaft's edge crosses the cell: its pixels get finer steps, or thin slivers
-                // of shadow that one step misses or catches would show as grain.
-                exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
-                ++exact_more.local();
-                continue;
-              }
-              const double fx = double(x - x0) / (x1 - x0), fy = double(y - y0) / (y1 - y0);
-              const double wts[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
-              PixelSample& p = sparse.at(x, y);
-              double acc[kValues] = {};
+    tbb::parallel_for(
+        tbb::blocked_range2d<std::size_t>(0, gy.size() - 1, 0, gx.size() - 1),
+        [&](const tbb::blocked_range2d<std::size_t>& r) {
+          for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j)
+            for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i) {
+              const int x0 = gx[i], x1 = gx[i + 1], y0 = gy[j], y1 = gy[j + 1];
+              const std::array<std::pair<std::size_t, std::size_t>, 4> corners{
+                  {{i, j}, {i + 1, j}, {i, j + 1}, {i + 1, j + 1}}};
+              // The corners' gradients, once per cell.
+              double value[4][kValues], grad_x[4][kValues], grad_y[4][kValues];
+              double shaft_min = 1, shaft_max = 0;
               for (int k = 0; k < 4; ++k) {
-                const double dx = x - gx[corners[k].first], dy = y - gy[corners[k].second];
-                for (int c = 0; c < kValues; ++c)
-                  acc[c] += wts[k] * (value[k][c] + grad_x[k][c] * dx + grad_y[k][c] * dy);
+                const auto [ci, cj] = corners[k];
+                const PixelSample& s = sparse.at(gx[ci], gy[cj]);
+                for (int c = 0; c < kValues; ++c) {
+                  value[k][c] = c < 3 ? s.inscatter[c] : (c < 6 ? s.camera_od[c - 3] : s.ao);
+                  grad_x[k][c] = sample_gradients[cj * gx.size() + ci][c];
+                  grad_y[k][c] = sample_gradients[cj * gx.size() + ci][kValues + c];
+                }
+                shaft_min = std::min(shaft_min, s.shaft);
+                shaft_max = std::max(shaft_max, s.shaft);
               }
-              for (int c = 0; c < 3; ++c) {
-                p.inscatter[c] = std::max(0.0, acc[c]);
-                p.camera_od[c] = std::max(0.0, acc[3 + c]);
+              // A shadow boundary crosses the cell, or the in-scatter changes too fast across it
+              // (the core of a lamp's glow) for gradients to follow: its pixels get their own
+              // march.
+              double lum_min = kInf, lum_max = 0;
+              for (int k = 0; k < 4; ++k) {
+                const double lum = value[k][0] + value[k][1] + value[k][2];
+                lum_min = std::min(lum_min, lum);
+                lum_max = std::max(lum_max, lum);
               }
-              p.ao = std::clamp(acc[6], 0.0, 1.0);
-              // The surface's sun visibility is a step function: taken from the cell's samples
-              // only where all four agree (a shadow narrower than the grid spacing that falls
-              // between samples is lost: the price of the acceleration), else traced.
-              p.sun_disk = -1;
-              if (sun_disk_agrees) p.sun_disk = sparse.at(x0, y0).sun_disk;
-              interpolated[idx] = 1;
+              const bool shadow_edge =
+                  shaft_max - shaft_min > 0.2 || lum_max > 1.25 * lum_min + 1e-12;
+              const double disk0 = sparse.at(x0, y0).sun_disk;
+              const bool sun_disk_agrees = disk0 >= 0 && sparse.at(x1, y0).sun_disk == disk0 &&
+                                           sparse.at(x0, y1).sun_disk == disk0 &&
+                                           sparse.at(x1, y1).sun_disk == disk0;
+              for (int y = y0; y <= y1; ++y)
+                for (int x = x0; x <= x1; ++x) {
+                  if (sparse.has(x, y)) continue;
+                  // Cells share edges: the first cell to reach a pixel decides it.
+                  const std::size_t idx = std::size_t(y) * w + x;
+                  if ((x == x1 && i + 2 < gx.size()) || (y == y1 && j + 2 < gy.size())) continue;
+                  bool ok = !shadow_edge;
+                  for (int k = 0; k < 4 && ok; ++k)
+                    ok = depth_continuous(d(x, y), d(gx[corners[k].first], gy[corners[k].second]));
+                  if (!ok) {
+                    // A shaft's edge crosses the cell: its pixels get finer steps, or thin slivers
+                    // of shadow that one step misses or catches would show as grain.
+                    exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
+                    ++exact_more.local();
+                    continue;
+                  }
+                  const double fx = double(x - x0) / (x1 - x0), fy = double(y - y0) / (y1 - y0);
+                  const double wts[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
+                                         fx * fy};
+                  PixelSample& p = sparse.at(x, y);
+                  double acc[kValues] = {};
+                  for (int k = 0; k < 4; ++k) {
+                    const double dx = x - gx[corners[k].first], dy = y - gy[corners[k].second];
+                    for (int c = 0; c < kValues; ++c)
+                      acc[c] += wts[k] * (value[k][c] + grad_x[k][c] * dx + grad_y[k][c] * dy);
+                  }
+                  for (int c = 0; c < 3; ++c) {
+                    p.inscatter[c] = std::max(0.0, acc[c]);
+                    p.camera_od[c] = std::max(0.0, acc[3 + c]);
+                  }
+                  p.ao = std::clamp(acc[6], 0.0, 1.0);
+                  // The surface's sun visibility is a step function: taken from the cell's samples
+                  // only where all four agree (a shadow narrower than the grid spacing that falls
+                  // between samples is lost: the price of the acceleration), else traced.
+                  p.sun_disk = -1;
+                  if (sun_disk_agrees) p.sun_disk = sparse.at(x0, y0).sun_disk;
+                  interpolated[idx] = 1;
+                }
             }
-        }
-    });
+        });
   }
   exact_count += exact_more.combine(std::plus<>());
 

@@ -19,7 +19,9 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 inline double hg(double g, double c) {
   return (1 - g * g) / (4 * kPi * std::pow(1 + g * g - 2 * g * c, 1.5));
 }
-inline double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline double dot(const Vec3& a, const Vec3& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 inline Vec3 normalize(const Vec3& v) {
   const double n = std::sqrt(dot(v, v));
   return {v.x / n, v.y / n, v.z / n};

@@ -61,7 +61,8 @@ class Scattering : public ::testing::Test {
 ScatteringLayers render(const Image& depth, const Camera& cam, FogScene s) {
   s.render.backend = kBackend;
   ScatteringLayers out = render_scattering(Image(), depth, cam, s);
-  EXPECT_EQ(out.backend.rfind(kBackend == Backend::vulkan ? "vulkan" : "cpu", 0), 0u) << out.backend;
+  EXPECT_EQ(out.backend.rfind(kBackend == Backend::vulkan ? "vulkan" : "cpu", 0), 0u)
+      << out.backend;
   return out;
 }
 
@@ -71,7 +72,7 @@ TEST_F(Scattering, HomogeneousSunWithoutLightPathAttenuationIsClosedForm) {
   s.lighting.sun = Sun{normalize({0.3, 0.5, 0.8}), {3, 2.5, 2}, 0.0};
   s.render.light_path_attenuation = false;
   s.render.volumetric_shadows = false;
-  s.render.quality = Quality::normal;  // exact at any step count: the source is constant
+  s.render.quality = Quality::normal;      // exact at any step count: the source is constant
   s.render.gradient_acceleration = false;  // the interpolation's error is tested on its own
   Image depth = constant_depth(cam, 60);
   for (int x = 0; x < cam.width; ++x) depth.at(x, 3, 0) = kInf;  // a row of sky
@@ -126,8 +127,8 @@ TEST_F(Scattering, HeightFogOpticalDepthForRaysUpDownAndLevel) {
   m.height_fog = Medium::HeightFog{2.0, 15.0};
   const render::Vec3d o{0, 5, 0};
   const double h = 15, k = std::exp(-(5 - 2.0) / h);
-  for (const render::Vec3d& w : {render::Vec3d{0, 0.6, 0.8}, render::Vec3d{0, -0.28, 0.96},
-                                 render::Vec3d{0, 0, 1}}) {
+  for (const render::Vec3d& w :
+       {render::Vec3d{0, 0.6, 0.8}, render::Vec3d{0, -0.28, 0.96}, render::Vec3d{0, 0, 1}}) {
     const render::RayDensity rd(m, o, w);
     for (double t : {0.5, 10.0, 40.0}) {
       // DESIGN.md section 3: k H (1 - exp(-t w_y / H)) / w_y, and k t when w_y = 0.
@@ -138,7 +139,8 @@ TEST_F(Scattering, HeightFogOpticalDepthForRaysUpDownAndLevel) {
     }
   }
   // Going up, the optical depth to infinity is finite: k H / w_y.
-  EXPECT_NEAR(render::RayDensity(m, o, {0, 0.6, 0.8}).optical_depth(0, INFINITY), k * h / 0.6, 1e-9);
+  EXPECT_NEAR(render::RayDensity(m, o, {0, 0.6, 0.8}).optical_depth(0, INFINITY), k * h / 0.6,
+              1e-9);
 }
 #endif
 
@@ -354,7 +356,8 @@ TEST_F(Scattering, GradientAccelerationErrorIsSmall) {
       const Vec3 w = s.pose.ray_direction(cam, x, y);
       if (w.x < 0) {
         const double t = -3.0 / w.x;
-        if (s.pose.position_m.y + t * w.y < 6 && t < depth.at(x, y, 0)) depth.at(x, y, 0) = float(t);
+        if (s.pose.position_m.y + t * w.y < 6 && t < depth.at(x, y, 0))
+          depth.at(x, y, 0) = float(t);
       }
       if (x >= 60 && x < 64 && y > 10) depth.at(x, y, 0) = std::min(depth.at(x, y, 0), 12.0f);
     }
@@ -429,7 +432,6 @@ TEST_F(Scattering, BadInputIsAClearError) {
   expect_error(s, constant_depth(Camera::from_horizontal_fov(21, 10, 60), 10), "21x10");
 }
 #endif
-
 
 // A sun above homogeneous fog with no top never gets in: the scene is valid (and the core
 // correctly adds no sunlight, checked here too), but front ends are told why.

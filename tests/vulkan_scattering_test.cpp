@@ -77,16 +77,17 @@ class VulkanScattering : public ::testing::Test {
   }
 
   // GPU vs CPU on one scene with the bar.
-  static vktest::Errors expect_matches_cpu(const std::string& name, const Image& depth, const Camera& cam,
-                                           const FogScene& s) {
+  static vktest::Errors expect_matches_cpu(const std::string& name, const Image& depth,
+                                           const Camera& cam, const FogScene& s) {
     const ScatteringLayers gpu = render(depth, cam, s, Backend::vulkan);
     const ScatteringLayers cpu = render(depth, cam, s, Backend::cpu);
     vktest::maybe_write_images(name, gpu, cpu);
     const vktest::Errors e = vktest::compare(gpu, cpu);
-    std::printf("%s: T mean %.4f %% p99 %.4f %% max %.3f %% | R mean %.4f %% p99 %.4f %% max %.3f %% | "
-                "edge band %zu of %zu px\n",
-                name.c_str(), 100 * e.mean_t, 100 * e.p99_t, 100 * e.max_t, 100 * e.mean_r, 100 * e.p99_r,
-                100 * e.max_r, e.edge_pixels, e.pixels);
+    std::printf(
+        "%s: T mean %.4f %% p99 %.4f %% max %.3f %% | R mean %.4f %% p99 %.4f %% max %.3f %% | "
+        "edge band %zu of %zu px\n",
+        name.c_str(), 100 * e.mean_t, 100 * e.p99_t, 100 * e.max_t, 100 * e.mean_r, 100 * e.p99_r,
+        100 * e.max_r, e.edge_pixels, e.pixels);
     EXPECT_LT(e.mean_t, 0.01) << name;
     EXPECT_LT(e.mean_r, 0.01) << name;
     EXPECT_LT(e.p99_t, 0.05) << name;
@@ -136,7 +137,8 @@ TEST_F(VulkanScattering, MatchesCpuOnASunlitStreetWithShafts) {
   s.lighting.sky_radiance = Rgb{0.3f, 0.3f, 0.35f};
   for (Quality q : {Quality::normal, Quality::final}) {
     s.render.quality = q;
-    expect_matches_cpu(q == Quality::normal ? "street_normal" : "street_final", street_depth(cam, s.pose), cam, s);
+    expect_matches_cpu(q == Quality::normal ? "street_normal" : "street_final",
+                       street_depth(cam, s.pose), cam, s);
   }
 }
 
@@ -174,7 +176,8 @@ TEST_F(VulkanScattering, MatchesCpuWithNoiseAndSky) {
   expect_matches_cpu("noise_sky", street_depth(cam, s.pose), cam, s);
 }
 
-// ---- tiling ---------------------------------------------------------------------------------------
+// ---- tiling
+// ---------------------------------------------------------------------------------------
 
 TEST_F(VulkanScattering, TilesGiveTheSameImage) {
   const Camera cam = Camera::from_horizontal_fov(96, 64, 60);

@@ -5,8 +5,8 @@
 #include <tbb/task_arena.h>
 
 #include <chrono>
-#include <optional>
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include "mr/error.h"
@@ -27,11 +27,14 @@ double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
-std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+std::string size_text(int w, int h) {
+  return std::to_string(w) + "x" + std::to_string(h);
+}
 
 // A lamp a little behind the visible surface at its pixel is inside the reconstructed geometry
 // (the mesh is a thin shell of what the camera sees): its light would leak or vanish.
-void check_lamps_outside_geometry(const Image& distance_m, const Camera& camera, const FogScene& scene) {
+void check_lamps_outside_geometry(const Image& distance_m, const Camera& camera,
+                                  const FogScene& scene) {
   const auto [forward, right, up] = scene.pose.axes();
   for (std::size_t i = 0; i < scene.lighting.lamps.size(); ++i) {
     const Vec3& p = scene.lighting.lamps[i].position_m;
@@ -49,7 +52,8 @@ void check_lamps_outside_geometry(const Image& distance_m, const Camera& camera,
     const double depth_behind = lamp_distance - surface;
     if (std::isfinite(surface) && depth_behind > 0.01 * surface && depth_behind < 0.1 * surface)
       throw Error(ErrorCode::invalid_argument,
-                  "lighting.lamps[" + std::to_string(i) + "].position_m is inside the scene's geometry: " +
+                  "lighting.lamps[" + std::to_string(i) +
+                      "].position_m is inside the scene's geometry: " +
                       std::to_string(depth_behind) + " m behind the surface seen at pixel (" +
                       std::to_string(px) + "," + std::to_string(py) + ")");
   }
@@ -66,17 +70,18 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
                                                  std::to_string(distance_m.channels()) +
                                                  " channels (expected 1)");
   if (distance_m.width() != camera.width || distance_m.height() != camera.height)
-    throw Error(ErrorCode::size_mismatch,
-                "render_scattering: depth map is " + size_text(distance_m.width(), distance_m.height()) +
-                    ", camera is " + size_text(camera.width, camera.height));
+    throw Error(ErrorCode::size_mismatch, "render_scattering: depth map is " +
+                                              size_text(distance_m.width(), distance_m.height()) +
+                                              ", camera is " +
+                                              size_text(camera.width, camera.height));
   for (float d : distance_m.pixels())
     if (std::isnan(d) || d <= 0)
       throw Error(ErrorCode::invalid_argument,
                   "render_scattering: distance map holds NaN, zero or negative values "
                   "(use +inf for sky; mr::read_depth converts them)");
   const bool need_sky_estimate = !scene.lighting.sky_radiance.has_value();
-  if (need_sky_estimate &&
-      (photo.empty() || photo.channels() < 3 || photo.width() != camera.width || photo.height() != camera.height))
+  if (need_sky_estimate && (photo.empty() || photo.channels() < 3 ||
+                            photo.width() != camera.width || photo.height() != camera.height))
     throw Error(ErrorCode::invalid_argument,
                 "render_scattering: the sky radiance is 'auto' but no photo of the camera's size "
                 "was given to estimate it from");
@@ -120,7 +125,8 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
                                "); the CPU backend renders (render.backend 'vulkan' forces it)";
       } catch (const render::vulkan::Unavailable& e) {
         if (scene.render.backend == Backend::vulkan)
-          throw Error(ErrorCode::invalid_argument, std::string("render.backend is 'vulkan' but ") + e.what());
+          throw Error(ErrorCode::invalid_argument,
+                      std::string("render.backend is 'vulkan' but ") + e.what());
         out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
       }
     }
@@ -137,7 +143,8 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         if (mesh_step > 1) {
           const render::DownsampledDistance coarse =
               render::downsample_distance_nearest(distance_m.view(), camera, mesh_step);
-          mesh = render::reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, scene.pose);
+          mesh = render::reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera,
+                                                   scene.pose);
         } else {
           mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose);
         }
@@ -177,7 +184,8 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         out.timings.tiles = bt.tiles;
       } catch (const render::vulkan::Unavailable& e) {  // e.g. out of device memory
         if (scene.render.backend == Backend::vulkan)
-          throw Error(ErrorCode::invalid_argument, std::string("render.backend is 'vulkan' but ") + e.what());
+          throw Error(ErrorCode::invalid_argument,
+                      std::string("render.backend is 'vulkan' but ") + e.what());
         out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
         run_cpu();
       }
@@ -196,8 +204,8 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
 FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
               const FogScene& scene, ScatteringLayers* layers_out) {
   if (photo.empty() || photo.channels() < 3)
-    throw Error(ErrorCode::invalid_argument,
-                "fog: photo must have at least 3 channels, has " + std::to_string(photo.channels()));
+    throw Error(ErrorCode::invalid_argument, "fog: photo must have at least 3 channels, has " +
+                                                 std::to_string(photo.channels()));
   if (photo.width() != distance_m.width() || photo.height() != distance_m.height())
     throw Error(ErrorCode::size_mismatch,
                 "fog: depth map is " + size_text(distance_m.width(), distance_m.height()) +
@@ -205,9 +213,11 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
   ScatteringLayers layers = render_scattering(photo, distance_m, camera, scene);
   FogLayers out;
   out.airlight = layers.sky_radiance;
-  out.composite = Image::uninitialized(photo.width(), photo.height(), photo.channels(), photo.channel_names());
+  out.composite =
+      Image::uninitialized(photo.width(), photo.height(), photo.channels(), photo.channel_names());
   out.composite.metadata() = photo.metadata();
-  photo::composite(photo.view(), layers.transmittance.view(), layers.inscatter.view(), out.composite.view());
+  photo::composite(photo.view(), layers.transmittance.view(), layers.inscatter.view(),
+                   out.composite.view());
   out.transmittance = std::move(layers.transmittance);
   out.inscatter = std::move(layers.inscatter);
   if (layers_out) {
