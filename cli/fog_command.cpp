@@ -218,13 +218,18 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   const ImageFileInfo info = probe_image(job.photo);
   const Camera camera = make_camera(o, photo);
   const DepthMap depth = read_depth(job.depth, camera, plan.depth);
-  if (depth.no_surface_pixels > 0) {
-    const double pct = 100.0 * double(depth.no_surface_pixels) / double(depth.distance_m.pixel_count());
+  // Sky stored as 0 or +inf is the documented encoding; NaN or negative values are not, and an
+  // all-sky map is almost certainly the wrong file or scale.
+  auto percent = [&](std::size_t n) {
     char text[64];
-    std::snprintf(text, sizeof text, "%.1f", pct);
-    report.warning(job.depth.string() + ": " + std::to_string(depth.no_surface_pixels) + " pixels (" +
-                   text + " %) have no surface (NaN, inf, 0 or negative): treated as sky");
-  }
+    std::snprintf(text, sizeof text, "%.1f", 100.0 * double(n) / double(depth.distance_m.pixel_count()));
+    return std::string(text);
+  };
+  if (depth.invalid_pixels > 0)
+    report.warning(job.depth.string() + ": " + std::to_string(depth.invalid_pixels) + " pixels (" +
+                   percent(depth.invalid_pixels) + " %) are NaN or negative: treated as sky");
+  if (depth.no_surface_pixels == depth.distance_m.pixel_count())
+    report.warning(job.depth.string() + ": no pixel has a surface (all 0, inf or invalid): all sky");
   ScatteringLayers aovs;
   const FogLayers layers = fog(photo, depth.distance_m, camera, plan.scene, &aovs);
   if (!aovs.backend_notice.empty()) {  // the Vulkan fall-back: once per run

@@ -125,6 +125,7 @@ TEST(Depth, NonFiniteZeroAndNegativeAreNoSurface) {
   z.at(3, 0, 0) = 5.0f;
   const DepthMap d = depth_to_distance(z, cam, {});
   EXPECT_EQ(d.no_surface_pixels, 3u);
+  EXPECT_EQ(d.invalid_pixels, 2u);  // NaN and -3; 0 is the sky encoding
   for (int x = 0; x < 3; ++x) EXPECT_TRUE(std::isinf(d.distance_m.at(x, 0, 0)) && d.distance_m.at(x, 0, 0) > 0);
   EXPECT_EQ(d.distance_m.at(3, 0, 0), 5.0f);
 }

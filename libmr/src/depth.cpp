@@ -46,9 +46,12 @@ DepthMap depth_to_distance(Image stored, const Camera& camera, const DepthOption
   constexpr float kInf = std::numeric_limits<float>::infinity();
   const int width = stored.width();
   const double f_b = camera.focal_px * options.baseline_m;
-  const std::size_t no_surface = tbb::parallel_reduce(
-      tbb::blocked_range<int>(0, stored.height()), std::size_t(0),
-      [&](const tbb::blocked_range<int>& rows, std::size_t count) {
+  // Counts: no surface at all, and of those the values that are not a sky encoding (NaN, -inf,
+  // negative: a broken file rather than sky).
+  using Counts = std::pair<std::size_t, std::size_t>;
+  const Counts counts = tbb::parallel_reduce(
+      tbb::blocked_range<int>(0, stored.height()), Counts{0, 0},
+      [&](const tbb::blocked_range<int>& rows, Counts count) {
         for (int y = rows.begin(); y < rows.end(); ++y) {
           float* row = stored.pixel(0, y);
           for (int x = 0; x < width; ++x) {
@@ -67,15 +70,16 @@ DepthMap depth_to_distance(Image stored, const Camera& camera, const DepthOption
             }
             if (!std::isfinite(d) || !(d > 0)) {
               d = kInf;
-              ++count;
+              ++count.first;
+              if (std::isnan(v) || v < 0) ++count.second;
             }
             row[x] = float(d);
           }
         }
         return count;
       },
-      std::plus<>());
-  return {std::move(stored), no_surface};
+      [](const Counts& a, const Counts& b) { return Counts{a.first + b.first, a.second + b.second}; });
+  return {std::move(stored), counts.first, counts.second};
 }
 
 DepthMap read_depth(const std::filesystem::path& path, const Camera& camera,

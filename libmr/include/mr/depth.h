@@ -31,6 +31,9 @@ struct DepthOptions {
 struct DepthMap {
   Image distance_m;
   std::size_t no_surface_pixels = 0;  ///< pixels whose stored value was NaN, inf, 0 or < 0
+  /// Of those, the pixels whose stored value was NaN or negative: not one of the sky encodings
+  /// (0, +inf) but a sign of a broken or mis-scaled map (front ends warn about these).
+  std::size_t invalid_pixels = 0;
 };
 
 /// Reads a depth file (float EXR/TIFF/PFM, 16-bit PNG/TIFF, ...; channel "Z", "depth.Z", "Y"
