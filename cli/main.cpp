@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cstdio>
 
+#include "estimate_command.h"
 #include "fog_command.h"
 #include "mr/version.h"
 
@@ -28,6 +29,8 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   mr::cli::FogCommandOptions fog_options;
   CLI::App* fog = mr::cli::add_fog_command(app, fog_options);
+  mr::cli::EstimateCommandOptions estimate_options;
+  CLI::App* estimate = mr::cli::add_estimate_command(app, estimate_options);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -37,5 +40,6 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
   if (fog->parsed()) return mr::cli::run_fog_command(fog_options, g_interrupted);
+  if (estimate->parsed()) return mr::cli::run_estimate_command(estimate_options);
   return 2;
 }

@@ -1,10 +1,12 @@
 // libmr: the whole public API.
 #pragma once
 
+#include "mr/annotations.h"
 #include "mr/camera.h"
 #include "mr/color.h"
 #include "mr/depth.h"
 #include "mr/error.h"
+#include "mr/estimate.h"
 #include "mr/fog.h"
 #include "mr/image.h"
 #include "mr/io.h"

@@ -1,0 +1,119 @@
+#include "estimate_command.h"
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <filesystem>
+
+#include "mr/annotations.h"
+#include "mr/camera.h"
+#include "mr/error.h"
+#include "mr/estimate.h"
+#include "mr/io.h"
+#include "mr/scene_json.h"
+
+namespace mr::cli {
+
+namespace fs = std::filesystem;
+
+CLI::App* add_estimate_command(CLI::App& app, EstimateCommandOptions& o) {
+  CLI::App* cmd = app.add_subcommand(
+      "estimate",
+      "Estimate a fog scene (camera pose, sun) and a metric depth map from one photo and its "
+      "annotations (docs/annotations.md)");
+  cmd->add_option("photo", o.photo, "The photo")->required();
+  cmd->add_option("--annotations", o.annotations,
+                  "Annotations JSON: horizon, camera height, planes, distance hints, shadow pairs");
+  auto* fov = cmd->add_option("--fov", o.fov_deg,
+                              "Horizontal field of view in degrees [default: EXIF, else 60]")
+                  ->check(CLI::Range(0.0, 180.0));
+  cmd->add_option("--focal-px", o.focal_px, "Focal length in pixels")
+      ->excludes(fov)
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("-o,--output", o.scene_out, "Scene JSON to write (what `mr fog --scene` reads)")
+      ->required();
+  cmd->add_option("--depth-out", o.depth_out,
+                  "Distance map to write (float EXR, channel Z, metres along the ray, +inf = sky)");
+  cmd->add_option("--overlay", o.overlay_out,
+                  "Debug picture to write: horizon, sky, depth colour map, annotations");
+  cmd->add_flag("-q,--quiet", o.quiet, "Print only errors");
+  return cmd;
+}
+
+int run_estimate_command(const EstimateCommandOptions& o) {
+  // Outputs must not replace the photo or each other.
+  std::error_code ec;
+  for (const std::string* out : {&o.scene_out, &o.depth_out, &o.overlay_out}) {
+    if (out->empty()) continue;
+    if (fs::equivalent(*out, o.photo, ec)) {
+      std::fprintf(stderr, "ERROR: %s: refusing to overwrite the input photo\n", out->c_str());
+      return 2;
+    }
+  }
+  if (!o.depth_out.empty() && !is_writable_image_extension(o.depth_out)) {
+    std::fprintf(stderr, "ERROR: %s: not an image format that can be written\n", o.depth_out.c_str());
+    return 2;
+  }
+  if (!o.overlay_out.empty() && !is_writable_image_extension(o.overlay_out)) {
+    std::fprintf(stderr, "ERROR: %s: not an image format that can be written\n", o.overlay_out.c_str());
+    return 2;
+  }
+
+  Annotations annotations;
+  if (!o.annotations.empty()) {
+    try {
+      annotations = load_annotations(o.annotations);
+    } catch (const Error& e) {
+      std::fprintf(stderr, "ERROR: %s\n", e.what());
+      return 2;
+    }
+  }
+  Image photo;
+  try {
+    photo = read_image(o.photo);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "ERROR: %s\n", e.what());
+    return 1;
+  }
+  SceneEstimate est;
+  try {
+    Camera camera = o.focal_px ? Camera::from_focal_px(photo.width(), photo.height(), *o.focal_px)
+                    : o.fov_deg ? Camera::from_horizontal_fov(photo.width(), photo.height(), *o.fov_deg)
+                                : Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
+    est = estimate_scene(photo, camera, annotations);
+    if (!o.quiet) {
+      std::printf("%s: %dx%d, focal %.1f px (%.1f deg across)\n", o.photo.c_str(), camera.width,
+                  camera.height, camera.focal_px, camera.horizontal_fov_deg());
+      for (const auto& note : est.notes) std::printf("  %s\n", note.c_str());
+    }
+  } catch (const Error& e) {
+    // Problems with the annotations name their JSON pointer; say which file they are in.
+    const std::string source = o.annotations.empty() ? o.photo : o.annotations;
+    std::fprintf(stderr, "ERROR: %s: %s\n", source.c_str(), e.what());
+    return e.code() == ErrorCode::invalid_argument ? 2 : 1;
+  }
+  try {
+    if (!o.depth_out.empty()) {
+      WriteOptions w;
+      w.pixel_type = PixelType::float32;
+      w.colorspace = colorspace::raw;
+      write_image(o.depth_out, est.geometry.distance_m, w);
+    }
+    if (!o.overlay_out.empty()) {
+      Image overlay = render_estimate_overlay(photo, est, annotations);
+      write_image(o.overlay_out, overlay);
+    }
+    save_scene(o.scene_out, est.scene);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "ERROR: %s\n", e.what());
+    return 1;
+  }
+  if (!o.quiet) {
+    std::printf("  wrote %s", o.scene_out.c_str());
+    if (!o.depth_out.empty()) std::printf(", %s", o.depth_out.c_str());
+    if (!o.overlay_out.empty()) std::printf(", %s", o.overlay_out.c_str());
+    std::printf("\n");
+  }
+  return 0;
+}
+
+}  // namespace mr::cli

@@ -1,0 +1,93 @@
+// User annotations of one photo: the few clicks that give single-photo estimation its geometry
+// and light (DESIGN.md section 4): the horizon, the camera height (or one known length), vertical
+// planes, "this region is at distance X", shadow pairs and a sunlit / shadowed patch.
+// The JSON document (every key, unit and rule) is documented in docs/annotations.md:
+//
+//   {"format": "libmr-annotations", "version": 1, "horizon": [[x0, y0], [x1, y1]],
+//    "camera_height_m": 1.6, "planes": [{"polygon": [[x, y], ...]}], ...}
+//
+// Pixel coordinates follow CameraPose::ray_direction: (0, 0) is the centre of the top-left pixel,
+// x to the right, y down; a click at continuous position (u, v) (pixel edges at integers) is
+// (u - 0.5, v - 0.5).
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace mr {
+
+/// A point in the photo, in pixels (x right, y down; (0, 0) = centre of the top-left pixel).
+using PixelPoint = std::array<double, 2>;
+
+struct Annotations {
+  /// Two points on the horizon line (the image of the plane through the camera parallel to the
+  /// ground). Gives the camera's pitch and roll. nullopt: estimated automatically.
+  std::optional<std::array<PixelPoint, 2>> horizon;
+  /// Height of the camera above the ground, metres (> 0). At most one of camera_height_m and
+  /// known_length is given; with neither, estimation assumes 1.6 m.
+  std::optional<double> camera_height_m;
+  /// Two points on the ground a known distance apart: fixes the camera height instead.
+  struct KnownLength {
+    PixelPoint a{}, b{};
+    double length_m = 0;  ///< > 0
+  };
+  std::optional<KnownLength> known_length;
+  /// A vertical plane standing on the ground, covering the polygon's pixels.
+  struct Plane {
+    std::vector<PixelPoint> polygon;  ///< >= 3 points
+    /// Optional: two image points where the plane meets the ground (its orientation). Without
+    /// it the plane faces the camera (perpendicular to its horizontal viewing direction) and
+    /// stands where the polygon's lowest point (measured across the horizon) meets the ground.
+    std::optional<std::array<PixelPoint, 2>> base;
+  };
+  std::vector<Plane> planes;
+  /// "The pixels of this polygon are `distance_m` metres away (along their rays)".
+  struct DistanceHint {
+    std::vector<PixelPoint> polygon;  ///< >= 3 points
+    double distance_m = 0;            ///< > 0
+  };
+  std::vector<DistanceHint> distance_hints;
+  /// A vertical caster standing on the ground at caster_foot, whose top at caster_top casts the
+  /// shadow whose tip on the ground is at shadow_tip.
+  struct ShadowPair {
+    PixelPoint caster_top{}, caster_foot{}, shadow_tip{};
+  };
+  std::vector<ShadowPair> shadow_pairs;
+  /// Polygons over one material in sun and in shadow (empty: not marked). Both or neither.
+  std::vector<PixelPoint> sunlit_patch, shadowed_patch;
+};
+
+/// The value of the document's "format" key.
+inline constexpr const char* kAnnotationsFormatName = "libmr-annotations";
+/// The newest document version this libmr reads and the one it writes.
+inline constexpr int kAnnotationsFormatVersion = 1;
+
+/// Checks what can be checked without the photo: every coordinate and number finite, heights,
+/// lengths and distances > 0, not both camera_height_m and known_length, polygons with >= 3
+/// points, horizon points and known-length points >= 1 px apart, both patches or neither.
+/// Throws mr::Error(invalid_argument) "source: /json/pointer: problem", e.g.
+///   "a.json: /planes/2/polygon: expected at least 3 points, found 2".
+void validate_annotations(const Annotations& annotations,
+                          const std::string& source_name = "<annotations>");
+
+/// Parses and validates a document. Unknown and duplicate keys are errors; so is a missing or
+/// wrong "format" / "version". Throws mr::Error(invalid_argument) naming the source and the JSON
+/// pointer of the offending value ("a.json: /horizon/1/0: expected a number, found null").
+Annotations annotations_from_json(const std::string& text,
+                                  const std::string& source_name = "<annotations>");
+
+/// Writes a document of kAnnotationsFormatVersion (pretty-printed, only the keys that are set;
+/// doubles with enough digits to read back bit for bit). Validates first (invalid_argument).
+std::string annotations_to_json(const Annotations& annotations);
+
+/// Reads and parses a file. Throws mr::Error: io (cannot read), invalid_argument (content).
+Annotations load_annotations(const std::filesystem::path& path);
+
+/// Writes annotations_to_json atomically (temporary file + rename). Throws mr::Error:
+/// invalid_argument (nothing written), io.
+void save_annotations(const std::filesystem::path& path, const Annotations& annotations);
+
+}  // namespace mr

@@ -1,0 +1,104 @@
+// Single-photo estimation (DESIGN.md section 4, issue 4): from one photo and its annotations
+// (mr/annotations.h), the camera pose, a metric distance map and the light, as a FogScene that
+// mr::fog renders and mr::save_scene writes.
+//
+//   mr::Image photo = mr::read_image("street.jpg");
+//   mr::Camera camera = mr::Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
+//   mr::SceneEstimate est = mr::estimate_scene(photo, camera, mr::load_annotations("street.json"));
+//   mr::save_scene("street.scene.json", est.scene);       // est.geometry.distance_m: the depth
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "mr/annotations.h"
+#include "mr/camera.h"
+#include "mr/image.h"
+#include "mr/scene.h"
+
+namespace mr {
+
+struct EstimateOptions {
+  /// Camera height when the annotations give neither camera_height_m nor known_length.
+  double default_camera_height_m = 1.6;
+};
+
+/// Where a value came from.
+enum class EstimateSource {
+  annotations,   ///< given by the user
+  known_length,  ///< camera height from the known length on the ground
+  fallback,      ///< a conservative default (level camera; default camera height)
+};
+const char* to_string(EstimateSource source) noexcept;
+
+struct GeometryEstimate {
+  /// Position (0, h, 0) with h the camera height; yaw 0 (the photo's own heading); pitch and
+  /// roll from the horizon.
+  CameraPose pose;
+  /// The horizon where it crosses the first and the last pixel column (pixel-centre coordinates).
+  std::array<PixelPoint, 2> horizon{};
+  EstimateSource horizon_source = EstimateSource::fallback;
+  EstimateSource height_source = EstimateSource::fallback;
+  /// How far to trust the geometry, in [0, 1]: 1 for an annotated horizon, 0.1 for the level
+  /// fall-back (a guess: right for photos taken level, several percent off per degree of tilt).
+  double confidence = 0;
+  /// One channel "Z": metres along each pixel's ray, +inf for the sky. What mr::fog takes.
+  Image distance_m;
+  /// Pixels of the map that are sky, ground, on a vertical plane, inside a distance hint.
+  std::size_t sky_pixels = 0, ground_pixels = 0, plane_pixels = 0, hint_pixels = 0;
+};
+
+/// The camera pose whose horizon passes through the two points (pixel-centre coordinates), at
+/// `camera_height_m` above the ground. Exact (no fitting). Throws mr::Error(invalid_argument)
+/// naming "/horizon" for points that are not finite, less than 1 px apart, more than one image
+/// size outside the image, or on a line more than 45 degrees from level.
+CameraPose pose_from_horizon(const Camera& camera, const std::array<PixelPoint, 2>& horizon,
+                             double camera_height_m);
+
+/// The geometry of the annotated photo: pose from the horizon (else a level camera: horizon
+/// through the principal point, low confidence) and camera height (else from known_length,
+/// else options.default_camera_height_m); distance map from the ground plane, the vertical
+/// planes and the distance hints (docs/annotations.md says which covers which).
+/// Throws mr::Error(invalid_argument) "/json/pointer: problem" for annotations that do not
+/// fit this camera (a plane or known length on or above the horizon, ...) or are invalid.
+GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
+                                   const EstimateOptions& options = {});
+
+/// The sun as fitted to the annotations' shadow pairs.
+struct SunEstimate {
+  Vec3 direction_to_sun;
+  double azimuth_deg = 0, elevation_deg = 0;
+  double rms_residual_deg = 0;     ///< angular residual of the pairs (RMS)
+  double median_residual_px = 0;   ///< reprojection residual of the marks (median over pairs)
+};
+
+struct SceneEstimate {
+  GeometryEstimate geometry;
+  std::optional<SunEstimate> sun;  ///< with shadow pairs
+  /// The scene for mr::fog: geometry.pose; the sun when fitted (its irradiance from the sun/sky
+  /// ratio of the marked patches, with the sky radiance from the photo, when both are marked);
+  /// everything else at FogScene's defaults.
+  FogScene scene;
+  /// One line per estimate made, for a person to read ("horizon: annotated, pitch -2.1 deg").
+  std::vector<std::string> notes;
+};
+
+/// Everything estimate_geometry does, plus the light: the sun direction fitted to the shadow
+/// pairs (Ceres; throws mr::Error(invalid_argument) naming the pair for bad or contradictory
+/// pairs) and, with sunlit and shadowed patches, the sun/sky ratio. `photo` is scene-linear
+/// RGB of the camera's size (size_mismatch otherwise).
+SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
+                             const Annotations& annotations, const EstimateOptions& options = {});
+
+/// A picture for a person to check the estimate with: the photo (scene-linear, RGB) with the
+/// depth colour-mapped over it (log distance, near = red to far = blue, half blended), the sky
+/// washed out towards white, the horizon as a red line, the plane polygons in yellow, the distance hints in
+/// cyan, the shadow pairs in magenta and the patches in green / dark green; an arrow toward the
+/// sun's azimuth at the top when the sun was fitted. Scene-linear RGB, the photo's size.
+Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
+                              const Annotations& annotations);
+
+}  // namespace mr

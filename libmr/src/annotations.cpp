@@ -1,0 +1,429 @@
+// The annotations document (docs/annotations.md): strict reading with errors that point at the
+// offending value, validation, writing that reads back exactly, and atomic saving.
+#include "mr/annotations.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <string_view>
+#include <utility>
+
+#include "atomic_file.h"
+#include "mr/error.h"
+
+namespace mr {
+
+namespace {
+
+namespace fs = std::filesystem;
+using Json = nlohmann::ordered_json;
+using Keys = std::initializer_list<std::string_view>;
+
+std::string describe(const Json& j) {
+  switch (j.type()) {
+    case Json::value_t::null:
+      return "null";
+    case Json::value_t::boolean:
+      return std::string("a boolean (") + (j.get<bool>() ? "true" : "false") + ")";
+    case Json::value_t::number_integer:
+    case Json::value_t::number_unsigned:
+    case Json::value_t::number_float:
+      return "a number (" + j.dump() + ")";
+    case Json::value_t::string: {
+      std::string s = j.dump();
+      if (s.size() > 40) s = s.substr(0, 40) + "...";
+      return "a string (" + s + ")";
+    }
+    case Json::value_t::array:
+      if (j.empty()) return "an empty array";
+      return "an array of " + std::to_string(j.size()) + (j.size() == 1 ? " element" : " elements");
+    case Json::value_t::object:
+      return "an object";
+    default:
+      return "an unsupported value";
+  }
+}
+
+std::string pointer_token(std::string_view key) {
+  std::string t;
+  for (char c : key) {
+    if (c == '~') t += "~0";
+    else if (c == '/') t += "~1";
+    else if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) t += '?';
+    else t += c;
+  }
+  return t;
+}
+
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diag = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
+                        std::tolower(static_cast<unsigned char>(b[j - 1]));
+      const std::size_t next = std::min({row[j] + 1, row[j - 1] + 1, diag + (same ? 0 : 1)});
+      diag = row[j];
+      row[j] = next;
+    }
+  }
+  return row[b.size()];
+}
+
+class Reader {
+ public:
+  explicit Reader(std::string source) : source_(std::move(source)) {}
+
+  [[noreturn]] void fail(const std::string& pointer, const std::string& problem) const {
+    throw Error(ErrorCode::invalid_argument,
+                source_ + ": " + (pointer.empty() ? "" : pointer + ": ") + problem);
+  }
+  [[noreturn]] void expected(const std::string& pointer, const std::string& what,
+                             const Json& found) const {
+    fail(pointer, "expected " + what + ", found " + describe(found));
+  }
+
+  void object(const Json& j, const std::string& pointer) const {
+    if (!j.is_object()) expected(pointer, "an object", j);
+  }
+
+  void check_keys(const Json& obj, const std::string& pointer, Keys known) const {
+    for (const auto& [key, value] : obj.items()) {
+      if (std::find(known.begin(), known.end(), key) != known.end()) continue;
+      std::string_view best;
+      std::size_t best_distance = std::numeric_limits<std::size_t>::max();
+      for (std::string_view k : known) {
+        const std::size_t d = edit_distance(key, k);
+        if (d < best_distance) best_distance = d, best = k;
+      }
+      std::string hint;
+      if (best_distance <= std::max<std::size_t>(2, key.size() / 4)) {
+        hint = "; did you mean \"" + std::string(best) + "\"?";
+      } else {
+        hint = "; expected one of: ";
+        for (std::string_view k : known) hint += (k == *known.begin() ? "" : ", ") + std::string(k);
+      }
+      fail(pointer + "/" + pointer_token(key), "unknown key" + hint);
+    }
+  }
+
+  double number(const Json& j, const std::string& pointer) const {
+    if (!j.is_number()) expected(pointer, "a number", j);
+    return j.get<double>();
+  }
+
+  PixelPoint point(const Json& j, const std::string& pointer) const {
+    if (!j.is_array() || j.size() != 2) expected(pointer, "a point [x, y] (2 numbers)", j);
+    return {number(j[0], pointer + "/0"), number(j[1], pointer + "/1")};
+  }
+
+  std::vector<PixelPoint> points(const Json& j, const std::string& pointer) const {
+    if (!j.is_array()) expected(pointer, "an array of points [[x, y], ...]", j);
+    std::vector<PixelPoint> out;
+    out.reserve(j.size());
+    for (std::size_t i = 0; i < j.size(); ++i)
+      out.push_back(point(j[i], pointer + "/" + std::to_string(i)));
+    return out;
+  }
+
+  std::array<PixelPoint, 2> two_points(const Json& j, const std::string& pointer) const {
+    if (!j.is_array() || j.size() != 2) expected(pointer, "two points [[x0, y0], [x1, y1]]", j);
+    return {point(j[0], pointer + "/0"), point(j[1], pointer + "/1")};
+  }
+
+ private:
+  std::string source_;
+};
+
+const Json* member(const Json& obj, const char* key) {
+  const auto it = obj.find(key);
+  return it == obj.end() ? nullptr : &*it;
+}
+
+// Parses, rejecting duplicate keys and turning syntax errors into "source: line L, column C:".
+Json parse_text(const std::string& text, const Reader& r) {
+  std::vector<std::set<std::string>> keys;  // per open object (arrays push an unused set)
+  std::vector<std::string> path;            // for the duplicate-key message
+  using Event = Json::parse_event_t;
+  auto callback = [&](int, Event event, Json& parsed) {
+    switch (event) {
+      case Event::object_start:
+      case Event::array_start:
+        keys.emplace_back();
+        break;
+      case Event::key: {
+        const std::string k = parsed.get<std::string>();
+        if (!keys.back().insert(k).second) r.fail("", "duplicate key \"" + k + "\"");
+        break;
+      }
+      case Event::object_end:
+      case Event::array_end:
+        keys.pop_back();
+        break;
+      case Event::value:
+        break;
+    }
+    return true;
+  };
+  try {
+    return Json::parse(text, callback, /*allow_exceptions=*/true, /*ignore_comments=*/false);
+  } catch (const nlohmann::json::parse_error& e) {
+    std::size_t line = 1, column = 1;
+    const std::size_t end = std::min<std::size_t>(e.byte > 0 ? e.byte - 1 : 0, text.size());
+    for (std::size_t i = 0; i < end; ++i) {
+      if (text[i] == '\n') ++line, column = 1;
+      else if ((static_cast<unsigned char>(text[i]) & 0xC0) != 0x80) ++column;
+    }
+    std::string what = e.what();
+    if (const auto p = what.find("syntax error"); p != std::string::npos) what = what.substr(p);
+    else if (const auto q = what.rfind(": "); q != std::string::npos) what = what.substr(q + 2);
+    r.fail("", "line " + std::to_string(line) + ", column " + std::to_string(column) + ": " + what);
+  }
+}
+
+Annotations from_document(const Json& doc, const Reader& r) {
+  r.object(doc, "");
+  r.check_keys(doc, "",
+               {"format", "version", "horizon", "camera_height_m", "known_length", "planes",
+                "distance_hints", "shadow_pairs", "sunlit_patch", "shadowed_patch"});
+  const Json* format = member(doc, "format");
+  if (!format) r.fail("/format", std::string("missing; expected \"") + kAnnotationsFormatName + "\"");
+  if (!format->is_string() || format->get<std::string>() != kAnnotationsFormatName)
+    r.expected("/format", std::string("\"") + kAnnotationsFormatName + "\"", *format);
+  const Json* version = member(doc, "version");
+  if (!version) r.fail("/version", "missing; expected 1");
+  if (!version->is_number_integer() && !version->is_number_unsigned())
+    r.expected("/version", "an integer", *version);
+  const long long v = version->get<long long>();
+  if (v < 1 || v > kAnnotationsFormatVersion)
+    r.fail("/version", "version " + std::to_string(v) + " is not supported (this libmr reads 1 to " +
+                           std::to_string(kAnnotationsFormatVersion) + ")");
+
+  Annotations a;
+  if (const Json* h = member(doc, "horizon")) a.horizon = r.two_points(*h, "/horizon");
+  if (const Json* h = member(doc, "camera_height_m")) a.camera_height_m = r.number(*h, "/camera_height_m");
+  if (const Json* k = member(doc, "known_length")) {
+    r.object(*k, "/known_length");
+    r.check_keys(*k, "/known_length", {"a", "b", "length_m"});
+    Annotations::KnownLength kl;
+    for (const char* key : {"a", "b", "length_m"})
+      if (!member(*k, key)) r.fail(std::string("/known_length/") + key, "missing");
+    kl.a = r.point((*k)["a"], "/known_length/a");
+    kl.b = r.point((*k)["b"], "/known_length/b");
+    kl.length_m = r.number((*k)["length_m"], "/known_length/length_m");
+    a.known_length = kl;
+  }
+  if (const Json* planes = member(doc, "planes")) {
+    if (!planes->is_array()) r.expected("/planes", "an array of planes", *planes);
+    for (std::size_t i = 0; i < planes->size(); ++i) {
+      const std::string p = "/planes/" + std::to_string(i);
+      const Json& j = (*planes)[i];
+      r.object(j, p);
+      r.check_keys(j, p, {"polygon", "base"});
+      if (!member(j, "polygon")) r.fail(p + "/polygon", "missing");
+      Annotations::Plane plane;
+      plane.polygon = r.points(j["polygon"], p + "/polygon");
+      if (const Json* b = member(j, "base")) plane.base = r.two_points(*b, p + "/base");
+      a.planes.push_back(std::move(plane));
+    }
+  }
+  if (const Json* hints = member(doc, "distance_hints")) {
+    if (!hints->is_array()) r.expected("/distance_hints", "an array of distance hints", *hints);
+    for (std::size_t i = 0; i < hints->size(); ++i) {
+      const std::string p = "/distance_hints/" + std::to_string(i);
+      const Json& j = (*hints)[i];
+      r.object(j, p);
+      r.check_keys(j, p, {"polygon", "distance_m"});
+      for (const char* key : {"polygon", "distance_m"})
+        if (!member(j, key)) r.fail(p + "/" + key, "missing");
+      a.distance_hints.push_back(
+          {r.points(j["polygon"], p + "/polygon"), r.number(j["distance_m"], p + "/distance_m")});
+    }
+  }
+  if (const Json* pairs = member(doc, "shadow_pairs")) {
+    if (!pairs->is_array()) r.expected("/shadow_pairs", "an array of shadow pairs", *pairs);
+    for (std::size_t i = 0; i < pairs->size(); ++i) {
+      const std::string p = "/shadow_pairs/" + std::to_string(i);
+      const Json& j = (*pairs)[i];
+      r.object(j, p);
+      r.check_keys(j, p, {"caster_top", "caster_foot", "shadow_tip"});
+      for (const char* key : {"caster_top", "caster_foot", "shadow_tip"})
+        if (!member(j, key)) r.fail(p + "/" + key, "missing");
+      a.shadow_pairs.push_back({r.point(j["caster_top"], p + "/caster_top"),
+                                r.point(j["caster_foot"], p + "/caster_foot"),
+                                r.point(j["shadow_tip"], p + "/shadow_tip")});
+    }
+  }
+  if (const Json* s = member(doc, "sunlit_patch")) a.sunlit_patch = r.points(*s, "/sunlit_patch");
+  if (const Json* s = member(doc, "shadowed_patch"))
+    a.shadowed_patch = r.points(*s, "/shadowed_patch");
+  validate_annotations(a, "");  // re-thrown below with the source name
+  return a;
+}
+
+Json point_json(const PixelPoint& p) { return Json::array({p[0], p[1]}); }
+Json points_json(const std::vector<PixelPoint>& ps) {
+  Json j = Json::array();
+  for (const auto& p : ps) j.push_back(point_json(p));
+  return j;
+}
+
+}  // namespace
+
+void validate_annotations(const Annotations& a, const std::string& source_name) {
+  const std::string prefix = source_name.empty() ? "" : source_name + ": ";
+  auto fail = [&](const std::string& pointer, const std::string& problem) {
+    throw Error(ErrorCode::invalid_argument, prefix + pointer + ": " + problem);
+  };
+  auto finite = [&](double v, const std::string& pointer) {
+    if (!std::isfinite(v)) fail(pointer, "expected a finite number, found " + std::to_string(v));
+  };
+  auto point = [&](const PixelPoint& p, const std::string& pointer) {
+    finite(p[0], pointer + "/0");
+    finite(p[1], pointer + "/1");
+  };
+  auto polygon = [&](const std::vector<PixelPoint>& ps, const std::string& pointer) {
+    for (std::size_t i = 0; i < ps.size(); ++i) point(ps[i], pointer + "/" + std::to_string(i));
+    if (ps.size() < 3)
+      fail(pointer, "expected a polygon of at least 3 points, found " + std::to_string(ps.size()));
+  };
+  auto apart = [&](const PixelPoint& p, const PixelPoint& q, const std::string& pointer,
+                   const char* what) {
+    if (std::hypot(p[0] - q[0], p[1] - q[1]) < 1.0)
+      fail(pointer, std::string("the two ") + what + " points are less than 1 pixel apart");
+  };
+  auto positive = [&](double v, const std::string& pointer) {
+    finite(v, pointer);
+    if (!(v > 0)) fail(pointer, "must be > 0, found " + std::to_string(v));
+  };
+
+  if (a.horizon) {
+    point((*a.horizon)[0], "/horizon/0");
+    point((*a.horizon)[1], "/horizon/1");
+    apart((*a.horizon)[0], (*a.horizon)[1], "/horizon", "horizon");
+  }
+  if (a.camera_height_m) positive(*a.camera_height_m, "/camera_height_m");
+  if (a.known_length) {
+    if (a.camera_height_m)
+      fail("/known_length", "give camera_height_m or known_length, not both");
+    point(a.known_length->a, "/known_length/a");
+    point(a.known_length->b, "/known_length/b");
+    positive(a.known_length->length_m, "/known_length/length_m");
+    apart(a.known_length->a, a.known_length->b, "/known_length", "known-length");
+  }
+  for (std::size_t i = 0; i < a.planes.size(); ++i) {
+    const std::string p = "/planes/" + std::to_string(i);
+    polygon(a.planes[i].polygon, p + "/polygon");
+    if (a.planes[i].base) {
+      point((*a.planes[i].base)[0], p + "/base/0");
+      point((*a.planes[i].base)[1], p + "/base/1");
+      apart((*a.planes[i].base)[0], (*a.planes[i].base)[1], p + "/base", "base");
+    }
+  }
+  for (std::size_t i = 0; i < a.distance_hints.size(); ++i) {
+    const std::string p = "/distance_hints/" + std::to_string(i);
+    polygon(a.distance_hints[i].polygon, p + "/polygon");
+    positive(a.distance_hints[i].distance_m, p + "/distance_m");
+  }
+  for (std::size_t i = 0; i < a.shadow_pairs.size(); ++i) {
+    const std::string p = "/shadow_pairs/" + std::to_string(i);
+    point(a.shadow_pairs[i].caster_top, p + "/caster_top");
+    point(a.shadow_pairs[i].caster_foot, p + "/caster_foot");
+    point(a.shadow_pairs[i].shadow_tip, p + "/shadow_tip");
+  }
+  if (!a.sunlit_patch.empty()) polygon(a.sunlit_patch, "/sunlit_patch");
+  if (!a.shadowed_patch.empty()) polygon(a.shadowed_patch, "/shadowed_patch");
+  if (a.sunlit_patch.empty() != a.shadowed_patch.empty())
+    fail(a.sunlit_patch.empty() ? "/sunlit_patch" : "/shadowed_patch",
+         "missing: sunlit_patch and shadowed_patch are marked together");
+}
+
+Annotations annotations_from_json(const std::string& text, const std::string& source_name) {
+  const Reader r(source_name);
+  const Json doc = parse_text(text, r);
+  try {
+    return from_document(doc, r);
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    if (what.rfind(source_name + ": ", 0) == 0) throw;
+    throw Error(e.code(), source_name + ": " + what);  // from validate_annotations(a, "")
+  }
+}
+
+std::string annotations_to_json(const Annotations& a) {
+  validate_annotations(a);
+  Json doc = Json::object();
+  doc["format"] = kAnnotationsFormatName;
+  doc["version"] = kAnnotationsFormatVersion;
+  if (a.horizon) doc["horizon"] = Json::array({point_json((*a.horizon)[0]), point_json((*a.horizon)[1])});
+  if (a.camera_height_m) doc["camera_height_m"] = *a.camera_height_m;
+  if (a.known_length)
+    doc["known_length"] = {{"a", point_json(a.known_length->a)},
+                           {"b", point_json(a.known_length->b)},
+                           {"length_m", a.known_length->length_m}};
+  if (!a.planes.empty()) {
+    Json planes = Json::array();
+    for (const auto& p : a.planes) {
+      Json j = {{"polygon", points_json(p.polygon)}};
+      if (p.base) j["base"] = Json::array({point_json((*p.base)[0]), point_json((*p.base)[1])});
+      planes.push_back(std::move(j));
+    }
+    doc["planes"] = std::move(planes);
+  }
+  if (!a.distance_hints.empty()) {
+    Json hints = Json::array();
+    for (const auto& h : a.distance_hints)
+      hints.push_back({{"polygon", points_json(h.polygon)}, {"distance_m", h.distance_m}});
+    doc["distance_hints"] = std::move(hints);
+  }
+  if (!a.shadow_pairs.empty()) {
+    Json pairs = Json::array();
+    for (const auto& s : a.shadow_pairs)
+      pairs.push_back({{"caster_top", point_json(s.caster_top)},
+                       {"caster_foot", point_json(s.caster_foot)},
+                       {"shadow_tip", point_json(s.shadow_tip)}});
+    doc["shadow_pairs"] = std::move(pairs);
+  }
+  if (!a.sunlit_patch.empty()) doc["sunlit_patch"] = points_json(a.sunlit_patch);
+  if (!a.shadowed_patch.empty()) doc["shadowed_patch"] = points_json(a.shadowed_patch);
+  return doc.dump(2) + "\n";
+}
+
+Annotations load_annotations(const fs::path& path) {
+  const std::string name = path.string();
+  std::error_code ec;
+  if (fs::is_directory(path, ec))
+    throw Error(ErrorCode::io, name + ": is a folder, not an annotations file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(ErrorCode::io, name + ": cannot open: " + std::strerror(errno));
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) throw Error(ErrorCode::io, name + ": cannot read: " + std::strerror(errno));
+  return annotations_from_json(text.str(), name);
+}
+
+void save_annotations(const fs::path& path, const Annotations& annotations) {
+  const std::string text = annotations_to_json(annotations);
+  const std::string name = path.string();
+  detail::AtomicFile file(path);
+  {
+    std::ofstream out(file.temp_path(), std::ios::binary | std::ios::trunc);
+    if (!out) throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(errno));
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.close();
+    if (!out) throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(errno));
+  }
+  file.commit();
+}
+
+}  // namespace mr

@@ -1,0 +1,293 @@
+// Single-photo estimation facade (mr/estimate.h) over photo/geometry and photo/illumination.
+#include "mr/estimate.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <numbers>
+
+#include "cv_bridge.h"
+#include "mr/error.h"
+#include "photo/airlight.h"
+#include "photo/geometry.h"
+#include "photo/illumination.h"
+
+namespace mr {
+
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+std::string fmt(const char* format, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, v);
+  return buf;
+}
+
+void check_camera(const Camera& camera) {
+  if (camera.width <= 0 || camera.height <= 0 || !(camera.focal_px > 0) ||
+      !std::isfinite(camera.focal_px) || !std::isfinite(camera.cx) || !std::isfinite(camera.cy))
+    throw Error(ErrorCode::invalid_argument,
+                "estimate: invalid camera (" + std::to_string(camera.width) + "x" +
+                    std::to_string(camera.height) + ", focal " + fmt("%g", camera.focal_px) + " px)");
+}
+
+// Mean-free helper: the photo's RGB pixels inside a polygon (pixel centres, even-odd rule).
+std::vector<std::array<float, 3>> pixels_in(const Image& photo, const std::vector<PixelPoint>& poly) {
+  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+  for (const auto& p : poly) {
+    x0 = std::min(x0, p[0]), x1 = std::max(x1, p[0]);
+    y0 = std::min(y0, p[1]), y1 = std::max(y1, p[1]);
+  }
+  std::vector<std::array<float, 3>> out;
+  const int xa = std::max(0, int(std::floor(x0))), xb = std::min(photo.width() - 1, int(std::ceil(x1)));
+  const int ya = std::max(0, int(std::floor(y0))), yb = std::min(photo.height() - 1, int(std::ceil(y1)));
+  for (int y = ya; y <= yb; ++y)
+    for (int x = xa; x <= xb; ++x)
+      if (photo::inside_polygon(poly, x, y))
+        out.push_back({photo.at(x, y, 0), photo.at(x, y, 1), photo.at(x, y, 2)});
+  return out;
+}
+
+}  // namespace
+
+const char* to_string(EstimateSource source) noexcept {
+  switch (source) {
+    case EstimateSource::annotations:
+      return "annotations";
+    case EstimateSource::known_length:
+      return "known_length";
+    case EstimateSource::fallback:
+      return "fallback";
+  }
+  return "?";
+}
+
+CameraPose pose_from_horizon(const Camera& camera, const std::array<PixelPoint, 2>& horizon,
+                             double camera_height_m) {
+  check_camera(camera);
+  if (!(camera_height_m > 0) || !std::isfinite(camera_height_m))
+    throw Error(ErrorCode::invalid_argument,
+                "/camera_height_m: must be > 0, found " + fmt("%g", camera_height_m));
+  const photo::PitchRoll pr = photo::pitch_roll_from_horizon(camera, horizon);
+  CameraPose pose;
+  pose.position_m = {0, camera_height_m, 0};
+  pose.yaw_deg = 0;
+  pose.pitch_deg = pr.pitch_deg;
+  pose.roll_deg = pr.roll_deg;
+  return pose;
+}
+
+GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
+                                   const EstimateOptions& options) {
+  check_camera(camera);
+  validate_annotations(annotations, "");
+  GeometryEstimate g;
+  g.pose.position_m = {0, 1, 0};
+  if (annotations.horizon) {
+    g.pose = pose_from_horizon(camera, *annotations.horizon, 1.0);
+    g.horizon_source = EstimateSource::annotations;
+    g.confidence = 1;
+  } else {
+    g.pose.pitch_deg = g.pose.roll_deg = 0;  // level: the horizon through the principal point
+    g.horizon_source = EstimateSource::fallback;
+    g.confidence = 0.1;
+  }
+  double height = options.default_camera_height_m;
+  g.height_source = EstimateSource::fallback;
+  if (annotations.camera_height_m) {
+    height = *annotations.camera_height_m;
+    g.height_source = EstimateSource::annotations;
+  } else if (annotations.known_length) {
+    height = photo::camera_height_from_known_length(camera, g.pose, *annotations.known_length);
+    g.height_source = EstimateSource::known_length;
+  }
+  if (!(height > 0) || !std::isfinite(height))
+    throw Error(ErrorCode::invalid_argument,
+                "default_camera_height_m: must be > 0, found " + fmt("%g", height));
+  g.pose.position_m = {0, height, 0};
+  g.horizon = photo::horizon_of_pose(camera, g.pose);
+  photo::DistanceMap map = photo::distance_map(camera, g.pose, annotations);
+  g.distance_m = std::move(map.distance_m);
+  g.sky_pixels = map.counts[int(photo::Coverage::sky)];
+  g.ground_pixels = map.counts[int(photo::Coverage::ground)];
+  g.plane_pixels = map.counts[int(photo::Coverage::plane)];
+  g.hint_pixels = map.counts[int(photo::Coverage::hint)];
+  return g;
+}
+
+SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
+                             const Annotations& annotations, const EstimateOptions& options) {
+  check_camera(camera);
+  if (photo.width() != camera.width || photo.height() != camera.height)
+    throw Error(ErrorCode::size_mismatch,
+                "estimate: photo is " + std::to_string(photo.width()) + "x" +
+                    std::to_string(photo.height()) + ", camera is " + std::to_string(camera.width) +
+                    "x" + std::to_string(camera.height));
+  if (photo.channels() < 3)
+    throw Error(ErrorCode::invalid_argument,
+                "estimate: the photo has " + std::to_string(photo.channels()) +
+                    " channel(s); RGB is needed");
+  SceneEstimate est;
+  est.geometry = estimate_geometry(camera, annotations, options);
+  const GeometryEstimate& g = est.geometry;
+  est.scene.pose = g.pose;
+  est.notes.push_back(std::string("horizon: ") +
+                      (g.horizon_source == EstimateSource::annotations
+                           ? "annotated"
+                           : "not annotated; assumed level through the image centre") +
+                      ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " +
+                      fmt("%.2f", g.pose.roll_deg) + " deg, confidence " + fmt("%.2f", g.confidence));
+  est.notes.push_back(std::string("camera height: ") + fmt("%.3f", g.pose.position_m.y) + " m (" +
+                      (g.height_source == EstimateSource::annotations
+                           ? "annotated"
+                           : g.height_source == EstimateSource::known_length ? "from the known length"
+                                                                             : "default") +
+                      ")");
+  const double n = double(photo.width()) * photo.height();
+  est.notes.push_back("depth: " + fmt("%.1f", 100.0 * g.ground_pixels / n) + " % ground, " +
+                      fmt("%.1f", 100.0 * g.plane_pixels / n) + " % planes, " +
+                      fmt("%.1f", 100.0 * g.hint_pixels / n) + " % hints, " +
+                      fmt("%.1f", 100.0 * g.sky_pixels / n) + " % sky");
+
+  if (!annotations.shadow_pairs.empty()) {
+    std::vector<photo::ShadowPair> pairs;
+    for (const auto& p : annotations.shadow_pairs)
+      pairs.push_back({p.caster_top, p.caster_foot, p.shadow_tip});
+    photo::SunFit fit;
+    try {
+      fit = photo::fit_sun_direction(pairs, camera, g.pose);
+    } catch (const Error& e) {
+      throw Error(e.code(), std::string("/shadow_pairs: ") + e.what());
+    }
+    SunEstimate sun;
+    sun.direction_to_sun = fit.direction_to_sun;
+    sun.azimuth_deg = fit.azimuth_deg;
+    sun.elevation_deg = fit.elevation_deg;
+    sun.rms_residual_deg = fit.rms_residual_deg;
+    sun.median_residual_px = fit.median_residual_px;
+    est.sun = sun;
+    Sun s;
+    s.direction_to_sun = fit.direction_to_sun;
+    est.notes.push_back("sun: from " + std::to_string(pairs.size()) + " shadow pair(s), azimuth " +
+                        fmt("%.1f", fit.azimuth_deg) + " deg, elevation " +
+                        fmt("%.1f", fit.elevation_deg) + " deg, residual " +
+                        fmt("%.2f", fit.rms_residual_deg) + " deg RMS, " +
+                        fmt("%.2f", fit.median_residual_px) + " px median");
+    if (!annotations.sunlit_patch.empty()) {
+      photo::SunSkyPatches patches;
+      try {
+        patches.lit = photo::PatchStats::from_pixels(pixels_in(photo, annotations.sunlit_patch));
+      } catch (const Error& e) {
+        throw Error(e.code(), std::string("/sunlit_patch: ") + e.what());
+      }
+      try {
+        patches.shadowed = photo::PatchStats::from_pixels(pixels_in(photo, annotations.shadowed_patch));
+      } catch (const Error& e) {
+        throw Error(e.code(), std::string("/shadowed_patch: ") + e.what());
+      }
+      patches.direction_to_sun = fit.direction_to_sun;
+      photo::SunSkyRatio ratio;
+      try {
+        ratio = photo::fit_sun_sky_ratio(patches);
+      } catch (const Error& e) {
+        throw Error(e.code(), std::string("/sunlit_patch, /shadowed_patch: ") + e.what());
+      }
+      const std::array<float, 3> sky = photo::estimate_airlight_dark_channel(photo.view());
+      est.scene.lighting.sky_radiance = Rgb{sky[0], sky[1], sky[2]};
+      for (int c = 0; c < 3; ++c)
+        s.irradiance[c] = float(ratio.ratio_rgb[c] * std::numbers::pi * sky[c]);
+      est.notes.push_back("sun/sky: E_sun / (pi L_sky) = " + fmt("%.2f", ratio.ratio) + " +- " +
+                          fmt("%.2f", ratio.ratio_sigma) +
+                          "; sky radiance from the photo (dark channel prior)");
+    }
+    est.scene.lighting.sun = s;
+  } else {
+    est.notes.push_back("sun: no shadow pairs; sky light only (overcast)");
+  }
+  return est;
+}
+
+Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
+                              const Annotations& annotations) {
+  const GeometryEstimate& g = estimate.geometry;
+  const int w = photo.width(), h = photo.height();
+  if (photo.channels() < 3)
+    throw Error(ErrorCode::invalid_argument, "overlay: the photo needs RGB channels");
+  if (g.distance_m.width() != w || g.distance_m.height() != h)
+    throw Error(ErrorCode::size_mismatch, "overlay: the estimate's distance map is " +
+                                              std::to_string(g.distance_m.width()) + "x" +
+                                              std::to_string(g.distance_m.height()) +
+                                              ", the photo " + std::to_string(w) + "x" +
+                                              std::to_string(h));
+  Image out(w, h, 3);
+  // Log-distance colour map over the finite range.
+  float dmin = std::numeric_limits<float>::infinity(), dmax = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float d = g.distance_m.at(x, y, 0);
+      if (std::isfinite(d) && d > 0) dmin = std::min(dmin, d), dmax = std::max(dmax, d);
+    }
+  const double l0 = std::log(std::max(1e-3f, dmin)), l1 = std::log(std::max(dmax, dmin * 1.001f));
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const float d = g.distance_m.at(x, y, 0);
+      float c[3];
+      float mix;
+      if (!std::isfinite(d)) {
+        c[0] = c[1] = c[2] = 1.25f, mix = 0.6f;  // sky: washed out white, unlike far blue
+      } else {
+        const double t = std::clamp((std::log(std::max(d, 1e-3f)) - l0) / (l1 - l0), 0.0, 1.0);
+        // red -> yellow -> green -> cyan -> blue
+        const double hue = 4 * t;
+        const int seg = std::min(3, int(hue));
+        const float f = float(hue - seg);
+        const float ramps[5][3] = {{1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 1, 1}, {0, 0, 1}};
+        for (int k = 0; k < 3; ++k) c[k] = ramps[seg][k] * (1 - f) + ramps[seg + 1][k] * f;
+        mix = 0.5f;
+      }
+      for (int k = 0; k < 3; ++k) {
+        const float p = std::max(0.0f, photo.at(x, y, k));
+        out.at(x, y, k) = (1 - mix) * p + mix * c[k] * 0.8f;
+      }
+    }
+  }
+  cv::Mat m = detail::as_mat(out.view());
+  const int thick = std::max(1, std::min(w, h) / 300);
+  constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
+  auto pt = [](const PixelPoint& p) {
+    return cv::Point(int(std::lround(p[0] * (1 << kShift))), int(std::lround(p[1] * (1 << kShift))));
+  };
+  auto polygon = [&](const std::vector<PixelPoint>& poly, const cv::Scalar& colour) {
+    std::vector<cv::Point> pts;
+    for (const auto& p : poly) pts.push_back(pt(p));
+    const cv::Point* data = pts.data();
+    const int count = int(pts.size());
+    cv::polylines(m, &data, &count, 1, true, colour, thick, cv::LINE_AA, kShift);
+  };
+  for (const auto& p : annotations.planes) polygon(p.polygon, cv::Scalar(1, 0.9, 0));
+  for (const auto& p : annotations.distance_hints) polygon(p.polygon, cv::Scalar(0, 0.9, 1));
+  if (!annotations.sunlit_patch.empty()) polygon(annotations.sunlit_patch, cv::Scalar(0.2, 1, 0.2));
+  if (!annotations.shadowed_patch.empty())
+    polygon(annotations.shadowed_patch, cv::Scalar(0, 0.35, 0));
+  for (const auto& s : annotations.shadow_pairs) {
+    cv::line(m, pt(s.caster_foot), pt(s.caster_top), cv::Scalar(1, 0, 1), thick, cv::LINE_AA, kShift);
+    cv::line(m, pt(s.caster_top), pt(s.shadow_tip), cv::Scalar(1, 0, 1), thick, cv::LINE_AA, kShift);
+  }
+  cv::line(m, pt(g.horizon[0]), pt(g.horizon[1]), cv::Scalar(1, 0, 0), thick + 1, cv::LINE_AA, kShift);
+  if (estimate.sun) {
+    // Compass at the top centre: up = the camera's horizontal forward, right = its right.
+    const double az = (estimate.sun->azimuth_deg - g.pose.yaw_deg) * kDeg;
+    const double len = std::min(w, h) / 10.0;
+    const PixelPoint c{w / 2.0, len * 1.2};
+    const PixelPoint tip{c[0] + len * std::sin(az), c[1] - len * std::cos(az)};
+    cv::circle(m, pt(c), int(len * (1 << kShift)), cv::Scalar(1, 1, 1), thick, cv::LINE_AA, kShift);
+    cv::arrowedLine(m, pt(c), pt(tip), cv::Scalar(1, 0.85, 0.2), thick + 1, cv::LINE_AA, kShift, 0.25);
+  }
+  return out;
+}
+
+}  // namespace mr

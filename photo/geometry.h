@@ -1,0 +1,79 @@
+// Private to libmr: user-assisted single-photo geometry (DESIGN.md section 4, issue 4 item 3).
+// The camera's pitch and roll from the horizon line, its height from the annotations (or one
+// known length on the ground), and a metric distance map from the ground plane y = 0, vertical
+// planes standing on it, and distance hints. Pixel coordinates as in CameraPose::ray_direction:
+// (0, 0) is the centre of the top-left pixel.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <optional>
+#include <vector>
+
+#include "mr/annotations.h"
+#include "mr/camera.h"
+#include "mr/image.h"
+#include "mr/scene.h"
+
+namespace mr::photo {
+
+/// Pitch and roll (degrees, CameraPose conventions) of a camera whose horizon passes through
+/// both points. With normalised image coordinates a = (x + 0.5 - cx) / f, b = (y + 0.5 - cy) / f,
+/// the horizon of a camera at yaw 0 is the line a sin(roll) + b cos(roll) = tan(pitch), so the
+/// line's unit normal (oriented down the image) gives roll and its offset gives pitch. Exact.
+/// Throws mr::Error(invalid_argument) naming "/horizon" (or a point of it): a non-finite point,
+/// points less than 1 px apart, a point farther outside the image than one image size, or a
+/// line more than 45 degrees from level (a vertical horizon included).
+struct PitchRoll {
+  double pitch_deg = 0, roll_deg = 0;
+};
+PitchRoll pitch_roll_from_horizon(const Camera& camera, const std::array<PixelPoint, 2>& horizon);
+
+/// Where the horizon of `pose` crosses the columns x = 0 and x = width - 1 (pixel-centre
+/// coordinates). Throws mr::Error(invalid_argument) when |roll| >= 90 degrees (the horizon is
+/// then not a function of x).
+std::array<PixelPoint, 2> horizon_of_pose(const Camera& camera, const CameraPose& pose);
+
+/// Where the ray through pixel `p` meets the ground y = 0; nullopt on or above the horizon.
+std::optional<Vec3> ground_point(const Camera& camera, const CameraPose& pose, const PixelPoint& p);
+
+/// The camera height that puts two ground pixels `length_m` apart (the ground points scale
+/// linearly with the height). Throws mr::Error(invalid_argument) naming "/known_length/a" or
+/// "/b" when a point is on or above the horizon of `pose` (whose height is ignored).
+double camera_height_from_known_length(const Camera& camera, const CameraPose& pose,
+                                       const Annotations::KnownLength& known);
+
+/// A vertical plane n . X = offset (n horizontal, unit).
+struct VerticalPlane {
+  Vec3 normal;
+  double offset = 0;
+};
+/// The plane of an annotated polygon: through the ground points of its `base` if given, else
+/// perpendicular to the camera's horizontal viewing direction through the ground point of the
+/// polygon's lowest vertex (the one farthest below the horizon line). Throws
+/// mr::Error(invalid_argument) naming `pointer` (e.g. "/planes/2") when that point is on or above
+/// the horizon, or the base's ground points coincide.
+VerticalPlane plane_of_polygon(const Camera& camera, const CameraPose& pose,
+                               const Annotations::Plane& plane, const std::string& pointer);
+
+/// What covers each pixel of a distance map.
+enum class Coverage : unsigned char { sky = 0, ground = 1, plane = 2, hint = 3 };
+
+struct DistanceMap {
+  Image distance_m;             ///< 1 channel "Z": metres along each ray, +inf = sky
+  std::vector<Coverage> coverage;  ///< per pixel, row-major
+  std::size_t counts[4] = {0, 0, 0, 0};  ///< pixels per Coverage
+};
+
+/// The distance map of the annotated scene seen by `camera` at `pose` (pose.position_m.y is the
+/// camera height, > 0): per pixel centre, the ground where the ray meets y = 0; inside a plane
+/// polygon the nearest such plane where the ray meets it at or above the ground (below the
+/// plane's base the ground is nearer); inside a distance hint its distance (hints are applied
+/// in order, a later one over an earlier one); +inf for rays above the horizon that nothing
+/// covers. Polygons are tested at pixel centres with the even-odd rule.
+DistanceMap distance_map(const Camera& camera, const CameraPose& pose, const Annotations& annotations);
+
+/// Even-odd point-in-polygon test.
+bool inside_polygon(const std::vector<PixelPoint>& polygon, double x, double y);
+
+}  // namespace mr::photo
