@@ -40,7 +40,7 @@ struct Job {
 constexpr const char* kDepthExtensions[] = {".exr", ".tif", ".tiff", ".pfm", ".png"};
 
 fs::path find_depth(const FogCommandOptions& o, const fs::path& photo) {
-  if (!o.depth.empty()) return is_pattern(o.depth) ? expand_pattern(o.depth, photo) : fs::path(o.depth);
+  if (!o.depth.empty() && o.depth != "auto") return is_pattern(o.depth) ? expand_pattern(o.depth, photo) : fs::path(o.depth);
   // Default: <dir>/<stem>_depth.<ext> with the first extension that exists.
   std::error_code ec;
   for (const char* ext : kDepthExtensions) {
@@ -177,6 +177,8 @@ FogPlan make_plan(const FogCommandOptions& o) {
     throw Error(ErrorCode::invalid_argument, "--depth-kind disparity needs --baseline (metres)");
   if (!(o.depth_scale > 0) || !std::isfinite(o.depth_scale))
     throw Error(ErrorCode::invalid_argument, "--depth-scale must be positive");
+  if (!o.annotations.empty() && o.depth != "auto")
+    throw Error(ErrorCode::invalid_argument, "--annotations needs --depth auto");
   plan.pixel_type = parse_pixel_type(o.bit_depth);
   if (!o.format.empty() && !is_writable_image_extension("x." + o.format))
     throw Error(ErrorCode::invalid_argument, "--format '" + o.format + "' is not a writable image format");
@@ -198,6 +200,42 @@ Camera make_camera(const FogCommandOptions& o, const Image& photo) {
   return Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
 }
 
+// --depth auto without a depth file: the geometry from mr::estimate_scene (the photo's
+// annotations when --annotations finds them, else the automatic / level-camera estimate). The
+// estimated pose (and sun, sky, when the annotations give them) replace the plan's; options on
+// the command line still win. --camera-height also scales the estimated depth.
+DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image& photo, const Camera& camera,
+                        FogScene& scene) {
+  try {
+    Annotations annotations;
+    if (!o.annotations.empty()) {
+      const bool pattern = is_pattern(o.annotations);
+      const fs::path path = pattern ? expand_pattern(o.annotations, job.photo) : fs::path(o.annotations);
+      std::error_code ec;
+      if (!pattern || fs::exists(path, ec)) annotations = load_annotations(path);
+    }
+    EstimateOptions options;
+    if (o.camera_height_m) options.default_camera_height_m = *o.camera_height_m;
+    SceneEstimate est = estimate_scene(photo.channels() >= 3 ? photo : photo.select_channels(std::array{0, 0, 0}),
+                                       camera, annotations, options);
+    scene.pose = est.scene.pose;
+    if (o.camera_height_m) scene.pose.position_m.y = *o.camera_height_m;
+    if (o.pitch_deg) scene.pose.pitch_deg = *o.pitch_deg;
+    if (o.roll_deg) scene.pose.roll_deg = *o.roll_deg;
+    if (o.yaw_deg) scene.pose.yaw_deg = *o.yaw_deg;
+    const bool sun_given = o.sun_azimuth_deg || o.sun_elevation_deg || !o.sun_direction.empty() ||
+                           !o.sun_irradiance.empty() || o.sun_radius_deg;
+    if (est.scene.lighting.sun && !sun_given) scene.lighting.sun = est.scene.lighting.sun;
+    if (est.scene.lighting.sky_radiance && o.airlight == "auto") scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
+    DepthMap depth;
+    depth.distance_m = std::move(est.geometry.distance_m);
+    depth.no_surface_pixels = est.geometry.sky_pixels;
+    return depth;
+  } catch (const Error& e) {
+    throw Error(e.code(), job.photo.string() + ": estimating the geometry (--depth auto): " + e.what());
+  }
+}
+
 Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job, Reporter& report,
                 const std::atomic<bool>& interrupted) {
   std::error_code ec;
@@ -217,7 +255,10 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   const Image photo = read_image(job.photo, read);
   const ImageFileInfo info = probe_image(job.photo);
   const Camera camera = make_camera(o, photo);
-  const DepthMap depth = read_depth(job.depth, camera, plan.depth);
+  FogScene scene = plan.scene;
+  const bool estimated = o.depth == "auto" && !fs::exists(job.depth, ec);
+  const DepthMap depth = estimated ? estimate_depth(o, job, photo, camera, scene) : read_depth(job.depth, camera, plan.depth);
+  const std::string depth_name = estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   // Sky stored as 0 or +inf is the documented encoding; NaN or negative values are not, and an
   // all-sky map is almost certainly the wrong file or scale.
   auto percent = [&](std::size_t n) {
@@ -226,12 +267,12 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
     return std::string(text);
   };
   if (depth.invalid_pixels > 0)
-    report.warning(job.depth.string() + ": " + std::to_string(depth.invalid_pixels) + " pixels (" +
+    report.warning(depth_name + ": " + std::to_string(depth.invalid_pixels) + " pixels (" +
                    percent(depth.invalid_pixels) + " %) are NaN or negative: treated as sky");
   if (depth.no_surface_pixels == depth.distance_m.pixel_count())
-    report.warning(job.depth.string() + ": no pixel has a surface (all 0, inf or invalid): all sky");
+    report.warning(depth_name + ": no pixel has a surface (all 0, inf or invalid): all sky");
   ScatteringLayers aovs;
-  const FogLayers layers = fog(photo, depth.distance_m, camera, plan.scene, &aovs);
+  const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs);
   if (!aovs.backend_notice.empty()) {  // the Vulkan fall-back: once per run
     static std::once_flag noticed;
     std::call_once(noticed, [&] { report.warning(aovs.backend_notice); });
@@ -283,7 +324,11 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
       ->required();
   cmd->add_option("--depth", o.depth,
                   "Depth map: a pattern with {dir} {stem} {name} {ext}, or one file for all "
-                  "[default: {dir}/{stem}_depth.{exr,tif,tiff,pfm,png}, first that exists]");
+                  "[default: {dir}/{stem}_depth.{exr,tif,tiff,pfm,png}, first that exists]; 'auto': "
+                  "that search, and where it finds nothing the geometry is estimated from the photo");
+  cmd->add_option("--annotations", o.annotations,
+                  "With --depth auto: annotations JSON (docs/annotations.md), a pattern like --depth "
+                  "(a photo without its file: automatic)");
   cmd->add_option("--depth-kind", o.depth_kind, "distance (along the ray), z (planar) or disparity")
       ->capture_default_str();
   cmd->add_option("--depth-scale", o.depth_scale,

@@ -14,7 +14,9 @@ namespace mr::cli {
 
 struct FogCommandOptions {
   std::vector<std::string> inputs;
-  std::string depth;  ///< pattern with {dir} {stem} {name} {ext}, or one file; empty: search
+  std::string depth;  ///< pattern with {dir} {stem} {name} {ext}, or one file; empty: search;
+                      ///< "auto": search, and estimate the geometry where nothing is found
+  std::string annotations;  ///< --depth auto: annotations JSON pattern (missing file: none)
   std::string depth_kind = "distance";
   double depth_scale = 1.0;
   double baseline_m = 0;

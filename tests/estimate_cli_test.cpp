@@ -42,7 +42,7 @@ TEST_F(EstimateCli, WritesSceneDepthAndOverlay) {
 
   // The same estimate in-process: the files hold exactly it.
   const Camera camera = Camera::from_horizontal_fov(160, 120, 50);
-  const GeometryEstimate g = estimate_geometry(camera, annotations);
+  const GeometryEstimate g = estimate_geometry(read_image(dir / "photo.png"), camera, annotations);
   const FogScene scene = load_scene(dir / "scene.json");
   EXPECT_EQ(scene.pose.pitch_deg, g.pose.pitch_deg);
   EXPECT_EQ(scene.pose.roll_deg, g.pose.roll_deg);

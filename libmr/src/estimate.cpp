@@ -5,15 +5,20 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <optional>
+#include <vector>
 
 #include "cv_bridge.h"
 #include "mr/error.h"
 #include "photo/airlight.h"
 #include "photo/geometry.h"
+#include "photo/horizon.h"
 #include "photo/illumination.h"
+#include "photo/sky_mask.h"
 
 namespace mr {
 
@@ -62,6 +67,14 @@ const char* to_string(EstimateSource source) noexcept {
       return "known_length";
     case EstimateSource::fallback:
       return "fallback";
+    case EstimateSource::horizontal_vps:
+      return "horizontal_vps";
+    case EstimateSource::horizontal_vp_and_zenith:
+      return "horizontal_vp_and_zenith";
+    case EstimateSource::zenith:
+      return "zenith";
+    case EstimateSource::horizontal_vp_level:
+      return "horizontal_vp_level";
   }
   return "?";
 }
@@ -81,16 +94,49 @@ CameraPose pose_from_horizon(const Camera& camera, const std::array<PixelPoint, 
   return pose;
 }
 
-GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
-                                   const EstimateOptions& options) {
+namespace {
+
+EstimateSource source_of(photo::HorizonCue cue) {
+  switch (cue) {
+    case photo::HorizonCue::horizontal_vps:
+      return EstimateSource::horizontal_vps;
+    case photo::HorizonCue::horizontal_vp_and_zenith:
+      return EstimateSource::horizontal_vp_and_zenith;
+    case photo::HorizonCue::zenith:
+      return EstimateSource::zenith;
+    case photo::HorizonCue::horizontal_vp_level:
+      return EstimateSource::horizontal_vp_level;
+    case photo::HorizonCue::none:
+      break;
+  }
+  return EstimateSource::fallback;
+}
+
+GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annotations& annotations,
+                          const EstimateOptions& options) {
   check_camera(camera);
   validate_annotations(annotations, "");
+  const bool automatic = photo && options.automatic;
+  if (photo && (photo->width() != camera.width || photo->height() != camera.height))
+    throw Error(ErrorCode::size_mismatch,
+                "estimate: photo is " + std::to_string(photo->width()) + "x" +
+                    std::to_string(photo->height()) + ", camera is " + std::to_string(camera.width) +
+                    "x" + std::to_string(camera.height));
   GeometryEstimate g;
   g.pose.position_m = {0, 1, 0};
+  std::optional<photo::AutoHorizon> auto_horizon;
+  if (!annotations.horizon && automatic) {
+    auto_horizon = photo::estimate_horizon(photo->view(), camera);
+    if (auto_horizon->cue == photo::HorizonCue::none) auto_horizon.reset();
+  }
   if (annotations.horizon) {
     g.pose = pose_from_horizon(camera, *annotations.horizon, 1.0);
     g.horizon_source = EstimateSource::annotations;
     g.confidence = 1;
+  } else if (auto_horizon) {
+    g.pose = pose_from_horizon(camera, auto_horizon->points, 1.0);
+    g.horizon_source = source_of(auto_horizon->cue);
+    g.confidence = auto_horizon->confidence;
   } else {
     g.pose.pitch_deg = g.pose.roll_deg = 0;  // level: the horizon through the principal point
     g.horizon_source = EstimateSource::fallback;
@@ -116,7 +162,66 @@ GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& anno
   g.ground_pixels = map.counts[int(photo::Coverage::ground)];
   g.plane_pixels = map.counts[int(photo::Coverage::plane)];
   g.hint_pixels = map.counts[int(photo::Coverage::hint)];
+  if (!automatic) return g;
+
+  // The automatic sky: carve it out of the planes; what is above the horizon and not sky
+  // becomes the far billboard, and so does the ground behind it.
+  const photo::SkyMask mask = photo::estimate_sky_mask(photo->view(), g.horizon);
+  g.sky_from_mask = true;
+  const int w = camera.width, h = camera.height;
+  const double depression = options.billboard_depression_deg;
+  if (!(depression > 0 && depression < 90))
+    throw Error(ErrorCode::invalid_argument,
+                "billboard_depression_deg: must be in (0, 90), found " + fmt("%g", depression));
+  const double forward = height / std::tan(depression * kDeg);
+  const Vec3 f = g.pose.axes()[0];
+  const double fl = std::hypot(f.x, f.z);
+  const Vec3 fwd{f.x / fl, 0, f.z / fl};  // the camera's horizontal viewing direction
+  auto billboard = [&](int x, int y) {
+    const Vec3 d = g.pose.ray_direction(camera, x, y);
+    const double along = d.x * fwd.x + d.z * fwd.z;
+    return float(forward / std::max(along, 0.05));  // rays nearly sideways: 20 x forward at most
+  };
+  const double slope = (g.horizon[1][1] - g.horizon[0][1]) / std::max(1.0, g.horizon[1][0] - g.horizon[0][0]);
+  std::vector<std::uint8_t> billboard_above(std::size_t(w), 0);  // the column's structure reaches the horizon
+  std::size_t counts[5] = {0, 0, 0, 0, 0};  // sky, ground, plane, hint, billboard
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      float& d = g.distance_m.at(x, y, 0);
+      int cov = int(map.coverage[i]);
+      if (mask.sky[i] && map.coverage[i] == photo::Coverage::plane) {
+        d = std::numeric_limits<float>::infinity(), cov = int(photo::Coverage::sky);
+      } else if (!mask.sky[i] && map.coverage[i] == photo::Coverage::sky) {
+        d = billboard(x, y), cov = 4;
+      } else if (map.coverage[i] == photo::Coverage::ground && billboard_above[std::size_t(x)]) {
+        const float b = billboard(x, y);
+        if (b < d) d = b, cov = 4;
+      }
+      ++counts[cov];
+      // The pixel just above the horizon in this column decides whether a billboard stands there.
+      const double yh = g.horizon[0][1] + (x - g.horizon[0][0]) * slope;
+      if (y < yh && y + 1 >= yh) billboard_above[std::size_t(x)] = cov == 4;
+    }
+  }
+  g.sky_pixels = counts[0];
+  g.ground_pixels = counts[1];
+  g.plane_pixels = counts[2];
+  g.hint_pixels = counts[3];
+  g.billboard_pixels = counts[4];
   return g;
+}
+
+}  // namespace
+
+GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
+                                   const EstimateOptions& options) {
+  return geometry(nullptr, camera, annotations, options);
+}
+
+GeometryEstimate estimate_geometry(const Image& photo, const Camera& camera,
+                                   const Annotations& annotations, const EstimateOptions& options) {
+  return geometry(&photo, camera, annotations, options);
 }
 
 SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
@@ -132,13 +237,20 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                 "estimate: the photo has " + std::to_string(photo.channels()) +
                     " channel(s); RGB is needed");
   SceneEstimate est;
-  est.geometry = estimate_geometry(camera, annotations, options);
+  est.geometry = estimate_geometry(photo, camera, annotations, options);
   const GeometryEstimate& g = est.geometry;
   est.scene.pose = g.pose;
-  est.notes.push_back(std::string("horizon: ") +
-                      (g.horizon_source == EstimateSource::annotations
-                           ? "annotated"
-                           : "not annotated; assumed level through the image centre") +
+  const char* horizon_how =
+      g.horizon_source == EstimateSource::annotations      ? "annotated"
+      : g.horizon_source == EstimateSource::horizontal_vps ? "automatic, through two horizontal vanishing points"
+      : g.horizon_source == EstimateSource::horizontal_vp_and_zenith
+          ? "automatic, from a horizontal and the vertical vanishing point"
+      : g.horizon_source == EstimateSource::zenith ? "automatic, from the vertical vanishing point"
+      : g.horizon_source == EstimateSource::horizontal_vp_level
+          ? "automatic, level through a horizontal vanishing point"
+      : options.automatic ? "not annotated, no usable lines; assumed level through the image centre"
+                          : "not annotated; assumed level through the image centre";
+  est.notes.push_back(std::string("horizon: ") + horizon_how + " (" + to_string(g.horizon_source) + ")" +
                       ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " +
                       fmt("%.2f", g.pose.roll_deg) + " deg, confidence " + fmt("%.2f", g.confidence));
   est.notes.push_back(std::string("camera height: ") + fmt("%.3f", g.pose.position_m.y) + " m (" +
@@ -151,7 +263,13 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
   est.notes.push_back("depth: " + fmt("%.1f", 100.0 * g.ground_pixels / n) + " % ground, " +
                       fmt("%.1f", 100.0 * g.plane_pixels / n) + " % planes, " +
                       fmt("%.1f", 100.0 * g.hint_pixels / n) + " % hints, " +
-                      fmt("%.1f", 100.0 * g.sky_pixels / n) + " % sky");
+                      fmt("%.1f", 100.0 * g.sky_pixels / n) + " % sky" +
+                      (g.sky_from_mask ? " (automatic sky mask), " + fmt("%.1f", 100.0 * g.billboard_pixels / n) +
+                                             " % far billboard at " +
+                                             fmt("%.0f", g.pose.position_m.y /
+                                                             std::tan(options.billboard_depression_deg * kDeg)) +
+                                             " m"
+                                       : std::string()));
 
   if (!annotations.shadow_pairs.empty()) {
     std::vector<photo::ShadowPair> pairs;

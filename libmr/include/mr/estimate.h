@@ -24,6 +24,13 @@ namespace mr {
 struct EstimateOptions {
   /// Camera height when the annotations give neither camera_height_m nor known_length.
   double default_camera_height_m = 1.6;
+  /// With a photo: find the horizon (when not annotated) and the sky automatically.
+  bool automatic = true;
+  /// Pixels above the horizon that are neither sky nor annotated become a billboard facing the
+  /// camera, standing on the ground where it is this many degrees below the horizon
+  /// (forward distance h / tan(angle): 46 m for 1.6 m and 2 degrees). Far, so that fog errs
+  /// towards too much on unknown structures rather than none.
+  double billboard_depression_deg = 2.0;
 };
 
 /// Where a value came from.
@@ -31,6 +38,11 @@ enum class EstimateSource {
   annotations,   ///< given by the user
   known_length,  ///< camera height from the known length on the ground
   fallback,      ///< a conservative default (level camera; default camera height)
+  // The horizon found automatically from the photo's line segments (photo/horizon.h):
+  horizontal_vps,            ///< through two horizontal vanishing points
+  horizontal_vp_and_zenith,  ///< through one, perpendicular to the vertical vanishing point
+  zenith,                    ///< from the vertical vanishing point alone (and the focal length)
+  horizontal_vp_level,       ///< through one horizontal vanishing point, roll assumed 0
 };
 const char* to_string(EstimateSource source) noexcept;
 
@@ -43,12 +55,18 @@ struct GeometryEstimate {
   EstimateSource horizon_source = EstimateSource::fallback;
   EstimateSource height_source = EstimateSource::fallback;
   /// How far to trust the geometry, in [0, 1]: 1 for an annotated horizon, 0.1 for the level
-  /// fall-back (a guess: right for photos taken level, several percent off per degree of tilt).
+  /// fall-back (a guess: right for photos taken level, several percent off per degree of tilt),
+  /// in between for an automatic horizon (at most 0.9; photo/horizon.h says how it is scored).
   double confidence = 0;
+  /// Whether the sky is the automatic sky mask (else: everything above the horizon that no
+  /// annotation covers).
+  bool sky_from_mask = false;
   /// One channel "Z": metres along each pixel's ray, +inf for the sky. What mr::fog takes.
   Image distance_m;
   /// Pixels of the map that are sky, ground, on a vertical plane, inside a distance hint.
   std::size_t sky_pixels = 0, ground_pixels = 0, plane_pixels = 0, hint_pixels = 0;
+  /// Pixels on the far billboard (EstimateOptions::billboard_depression_deg).
+  std::size_t billboard_pixels = 0;
 };
 
 /// The camera pose whose horizon passes through the two points (pixel-centre coordinates), at
@@ -65,6 +83,17 @@ CameraPose pose_from_horizon(const Camera& camera, const std::array<PixelPoint, 
 /// Throws mr::Error(invalid_argument) "/json/pointer: problem" for annotations that do not
 /// fit this camera (a plane or known length on or above the horizon, ...) or are invalid.
 GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
+                                   const EstimateOptions& options = {});
+
+/// The same with the photo (scene-linear, the camera's size; size_mismatch otherwise) and, when
+/// options.automatic: without an annotated horizon, the horizon from the photo's vanishing points
+/// (horizon_source says which cue; the level fall-back when none is usable); and the sky from
+/// the automatic sky mask: above the horizon, sky-coloured, smooth, connected to the top border.
+/// The mask also carves the sky out of plane polygons; pixels above the horizon that are
+/// neither sky nor annotated become the far billboard (billboard_depression_deg), and so do
+/// ground pixels beneath it that would lie behind it.
+GeometryEstimate estimate_geometry(const Image& photo, const Camera& camera,
+                                   const Annotations& annotations,
                                    const EstimateOptions& options = {});
 
 /// The sun as fitted to the annotations' shadow pairs.

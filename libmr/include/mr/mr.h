@@ -5,6 +5,7 @@
 #include "mr/camera.h"
 #include "mr/color.h"
 #include "mr/depth.h"
+#include "mr/depth_fit.h"
 #include "mr/error.h"
 #include "mr/estimate.h"
 #include "mr/fog.h"

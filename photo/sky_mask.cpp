@@ -1,0 +1,200 @@
+#include "photo/sky_mask.h"
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/ximgproc/edge_filter.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+#include "cv_bridge.h"
+
+namespace mr::photo {
+
+namespace {
+
+// Display-referred RGB (CV_32FC3, [0, 1]) of a scene-linear photo with any channel count.
+cv::Mat display_rgb(ConstImageView photo) {
+  const cv::Mat src = detail::as_mat(photo);
+  cv::Mat out(src.rows, src.cols, CV_32FC3);
+  const int ch = photo.channels;
+  for (int y = 0; y < src.rows; ++y) {
+    const float* row = src.ptr<float>(y);
+    cv::Vec3f* o = out.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < src.cols; ++x) {
+      const float* p = row + std::ptrdiff_t(x) * ch;
+      for (int c = 0; c < 3; ++c) {
+        float v = p[ch >= 3 ? c : 0];
+        if (!std::isfinite(v)) v = 0;
+        o[x][c] = std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f);
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
+                          const SkyMaskOptions& o) {
+  SkyMask out;
+  out.width = photo.width;
+  out.height = photo.height;
+  out.sky.assign(std::size_t(photo.width) * photo.height, 0);
+  if (photo.width < 4 || photo.height < 4 || photo.channels < 1) return out;
+  const double dx = horizon[1][0] - horizon[0][0];
+  const double slope = std::abs(dx) > 1e-9 ? (horizon[1][1] - horizon[0][1]) / dx : 0.0;
+  // Row of the horizon at column x (full-resolution pixel-centre coordinates).
+  auto horizon_y = [&](double x) { return horizon[0][1] + (x - horizon[0][0]) * slope; };
+
+  const cv::Mat full = display_rgb(photo);
+  cv::Mat small = full;
+  double s = 1;
+  const double area = double(photo.width) * photo.height;
+  if (area > o.working_pixels) {
+    s = std::sqrt(o.working_pixels / area);
+    cv::resize(full, small, cv::Size(), s, s, cv::INTER_AREA);
+  }
+  const int w = small.cols, h = small.rows;
+  const double sx = double(w) / photo.width, sy = double(h) / photo.height;
+  auto above = [&](int xw, int yw) {  // working pixel centre above the horizon
+    const double x = (xw + 0.5) / sx - 0.5, y = (yw + 0.5) / sy - 0.5;
+    return y < horizon_y(x);
+  };
+
+  cv::Mat luma(h, w, CV_32F);
+  for (int y = 0; y < h; ++y) {
+    const cv::Vec3f* p = small.ptr<cv::Vec3f>(y);
+    float* l = luma.ptr<float>(y);
+    for (int x = 0; x < w; ++x) l[x] = 0.2126f * p[x][0] + 0.7152f * p[x][1] + 0.0722f * p[x][2];
+  }
+  // Texture: mean gradient magnitude (Sobel / 8 = per-pixel difference) over a small window,
+  // measured at full resolution (downscaling first would average fine texture such as foliage
+  // or noise away) and then area-averaged to the working size.
+  cv::Mat full_luma, blurred, gx, gy, texture;
+  cv::cvtColor(full, full_luma, cv::COLOR_RGB2GRAY);
+  cv::GaussianBlur(full_luma, blurred, cv::Size(0, 0), 1.0);
+  cv::Sobel(blurred, gx, CV_32F, 1, 0, 3, 1.0 / 8);
+  cv::Sobel(blurred, gy, CV_32F, 0, 1, 3, 1.0 / 8);
+  cv::magnitude(gx, gy, texture);
+  if (s < 1) cv::resize(texture, texture, cv::Size(w, h), 0, 0, cv::INTER_AREA);
+  const int win = std::max(3, int(std::lround(0.006 * std::hypot(w, h))) | 1);
+  cv::blur(texture, texture, cv::Size(win, win));
+
+  // Bright reference: 95th percentile of the luma above the horizon.
+  std::vector<float> lum_above;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (above(x, y)) lum_above.push_back(luma.at<float>(y, x));
+  if (lum_above.empty()) return out;  // the horizon is above the frame: no sky
+  const std::size_t k = std::size_t(0.95 * double(lum_above.size() - 1));
+  std::nth_element(lum_above.begin(), lum_above.begin() + k, lum_above.end());
+  const float bright_ref = lum_above[k];
+
+  cv::Mat cand(h, w, CV_8U, cv::Scalar(0)), colour(h, w, CV_8U, cv::Scalar(0));
+  cv::Mat blueish(h, w, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < h; ++y) {
+    const cv::Vec3f* p = small.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < w; ++x) {
+      if (!above(x, y)) continue;
+      const float r = p[x][0], g = p[x][1], b = p[x][2], l = luma.at<float>(y, x);
+      const float mx = std::max({r, g, b}), mn = std::min({r, g, b});
+      const float sat = mx > 1e-4f ? (mx - mn) / mx : 0;
+      const bool blue = b > r + 0.03f && b >= g - 0.02f && l > 0.2f;
+      const bool grey_bright = sat < 0.2f && l > 0.35f && l >= o.bright_fraction * bright_ref;
+      if (!blue && !grey_bright) continue;
+      colour.at<std::uint8_t>(y, x) = 1;
+      blueish.at<std::uint8_t>(y, x) = blue;
+      if (texture.at<float>(y, x) <= o.max_texture) cand.at<std::uint8_t>(y, x) = 1;
+    }
+  }
+  // Which candidate components are sky. Blue ones: touching the top or a side border, or
+  // large (blue sky seen between branches); grey-bright ones: touching the top border and, when
+  // the photo shows blue sky, touching it (clouds do; white walls and panels mostly do not).
+  cv::Mat labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(cand, labels, stats, centroids, 8, CV_32S);
+  std::vector<int> blue_count(std::size_t(n), 0);
+  std::vector<std::uint8_t> top(std::size_t(n), 0), side(std::size_t(n), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int lab = labels.at<int>(y, x);
+      if (lab == 0) continue;
+      blue_count[lab] += blueish.at<std::uint8_t>(y, x);
+      if (y == 0) top[lab] = 1;
+      if (x == 0 || x == w - 1) side[lab] = 1;
+    }
+  std::vector<std::uint8_t> keep(std::size_t(n), 0), is_blue(std::size_t(n), 0);
+  double blue_area = 0;
+  for (int i = 1; i < n; ++i) {
+    const int area = stats.at<int>(i, cv::CC_STAT_AREA);
+    is_blue[i] = 2 * blue_count[i] > area;
+    if (is_blue[i] && (top[i] || side[i] || area > 0.002 * w * h)) keep[i] = 1, blue_area += area;
+  }
+  cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) sky.at<std::uint8_t>(y, x) = keep[labels.at<int>(y, x)];
+  const bool blue_sky = blue_area > 0.01 * w * h;
+  cv::Mat near_blue;
+  cv::dilate(sky, near_blue, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
+  std::vector<std::uint8_t> touches_blue(std::size_t(n), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (near_blue.at<std::uint8_t>(y, x)) touches_blue[labels.at<int>(y, x)] = 1;
+  for (int i = 1; i < n; ++i)
+    if (!is_blue[i] && top[i] && (!blue_sky || touches_blue[i])) keep[i] = 1;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) sky.at<std::uint8_t>(y, x) = keep[labels.at<int>(y, x)];
+  // The texture window widens every edge by about its radius: grow the sky back over pixels of
+  // sky colour within that distance (the guided filter then places the edge).
+  {
+    cv::Mat grown;
+    const int r = win / 2 + 2;
+    cv::dilate(sky, grown, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
+    sky |= grown & colour;
+  }
+  // Fill small enclosed holes (non-sky components not touching the border).
+  {
+    cv::Mat not_sky = 1 - sky, hl, stats, centroids;
+    const int m = cv::connectedComponentsWithStats(not_sky, hl, stats, centroids, 4, CV_32S);
+    const double max_hole = o.max_hole_fraction * w * h;
+    std::vector<std::uint8_t> fill(std::size_t(m), 0);
+    for (int i = 1; i < m; ++i) {
+      const int x0 = stats.at<int>(i, cv::CC_STAT_LEFT), y0 = stats.at<int>(i, cv::CC_STAT_TOP);
+      const int x1 = x0 + stats.at<int>(i, cv::CC_STAT_WIDTH), y1 = y0 + stats.at<int>(i, cv::CC_STAT_HEIGHT);
+      const bool border = x0 == 0 || y0 == 0 || x1 == w || y1 == h;
+      if (!border && stats.at<int>(i, cv::CC_STAT_AREA) <= max_hole) fill[i] = 1;
+    }
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (fill[hl.at<int>(y, x)]) sky.at<std::uint8_t>(y, x) = 1;
+  }
+
+  // Full resolution: upsample, refine the edges with a guided filter, clip to the horizon.
+  cv::Mat soft;
+  sky.convertTo(soft, CV_32F);
+  if (s < 1) cv::resize(soft, soft, cv::Size(photo.width, photo.height), 0, 0, cv::INTER_LINEAR);
+  const int radius = std::max(2, int(std::lround(0.004 * std::hypot(photo.width, photo.height))));
+  cv::Mat refined, binary, grown, shrunk;
+  cv::ximgproc::guidedFilter(full, soft, refined, radius, 1e-3);
+  // Only within `radius` of the mask's edges does the filter decide; elsewhere the mask stands.
+  binary = soft >= 0.5f;
+  const cv::Mat disk =
+      cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * radius + 1, 2 * radius + 1));
+  cv::dilate(binary, grown, disk);
+  cv::erode(binary, shrunk, disk);
+  for (int y = 0; y < photo.height; ++y) {
+    const float* r = refined.ptr<float>(y);
+    const float* so = soft.ptr<float>(y);
+    const std::uint8_t* gr = grown.ptr<std::uint8_t>(y);
+    const std::uint8_t* sh = shrunk.ptr<std::uint8_t>(y);
+    for (int x = 0; x < photo.width; ++x) {
+      const float v = gr[x] != sh[x] ? r[x] : so[x];
+      const bool is_sky = v >= 0.5f && y < horizon_y(x);
+      out.sky[std::size_t(y) * photo.width + x] = is_sky;
+      out.pixels += is_sky;
+    }
+  }
+  return out;
+}
+
+}  // namespace mr::photo

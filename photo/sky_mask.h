@@ -1,0 +1,40 @@
+// Private to libmr: the sky found automatically (issue 4 item 2). Per pixel of a working copy
+// (about 0.5 MP, display-referred: scene-linear ^ (1 / 2.2)), a pixel is a sky candidate when it
+// is above the horizon, has little texture (mean gradient magnitude over a small window below
+// `max_texture` per pixel) and is blue-ish (B > R, B >= G, not dark) or grey and bright (low
+// saturation, luma at least `bright_fraction` of the above-horizon 95th percentile). The sky is
+// the candidates' 8-connected components that touch the top border, with small enclosed holes
+// (birds, specks: below `max_hole_fraction` of the image) filled; at full resolution its edges
+// are refined with a guided filter (cv::ximgproc::guidedFilter, guide = the display-referred
+// photo) and clipped to the horizon again. Never throws for any image content.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "mr/annotations.h"
+#include "mr/image.h"
+
+namespace mr::photo {
+
+struct SkyMaskOptions {
+  double working_pixels = 0.5e6;
+  double max_texture = 0.012;      ///< mean |gradient| of the display-referred luma per pixel
+  double bright_fraction = 0.6;    ///< grey sky: luma >= this x the bright reference
+  double max_hole_fraction = 5e-4;  ///< enclosed non-sky specks filled up to this image fraction
+};
+
+struct SkyMask {
+  int width = 0, height = 0;
+  std::vector<std::uint8_t> sky;  ///< row-major, 1 = sky
+  std::size_t pixels = 0;         ///< sky pixels
+};
+
+/// The sky of `photo` (scene-linear, >= 1 channel), only above the horizon through the two
+/// points (pixel-centre coordinates, the photo's pixels).
+SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
+                          const SkyMaskOptions& options = {});
+
+}  // namespace mr::photo
