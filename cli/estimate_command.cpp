@@ -6,6 +6,7 @@
 
 #include "mr/annotations.h"
 #include "mr/camera.h"
+#include "mr/depth_network.h"
 #include "mr/error.h"
 #include "mr/estimate.h"
 #include "mr/io.h"
@@ -35,6 +36,11 @@ CLI::App* add_estimate_command(CLI::App& app, EstimateCommandOptions& o) {
                   "Distance map to write (float EXR, channel Z, metres along the ray, +inf = sky)");
   cmd->add_option("--overlay", o.overlay_out,
                   "Debug picture to write: horizon, sky, depth colour map, annotations");
+  cmd->add_option("--depth-network", o.depth_network,
+                  "ONNX monocular depth network (MiDaS v2.1 small conventions: 256x256, RGB, "
+                  "ImageNet mean/std, inverse depth); its map, fitted to the ground plane, "
+                  "replaces the estimated depth")
+      ->check(CLI::ExistingFile);
   cmd->add_flag("-q,--quiet", o.quiet, "Print only errors");
   return cmd;
 }
@@ -80,10 +86,28 @@ int run_estimate_command(const EstimateCommandOptions& o) {
                     : o.fov_deg ? Camera::from_horizontal_fov(photo.width(), photo.height(), *o.fov_deg)
                                 : Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
     est = estimate_scene(photo, camera, annotations);
+    std::optional<NetworkDepth> network_depth;
+    if (!o.depth_network.empty()) {
+      try {  // the network's and the fit's messages name the model
+        const DepthNetwork network(o.depth_network);
+        network_depth = estimate_network_depth(network, photo, camera, est.geometry);
+      } catch (const Error& e) {
+        std::fprintf(stderr, "ERROR: %s: %s\n", o.photo.c_str(), e.what());
+        return 1;
+      }
+      est.geometry.distance_m = network_depth->fit.distance_m;
+    }
     if (!o.quiet) {
       std::printf("%s: %dx%d, focal %.1f px (%.1f deg across)\n", o.photo.c_str(), camera.width,
                   camera.height, camera.focal_px, camera.horizontal_fov_deg());
       for (const auto& note : est.notes) std::printf("  %s\n", note.c_str());
+      if (network_depth) {
+        const DepthFit& f = network_depth->fit;
+        std::printf("  depth network: %s, 1/depth = %.4g * r %+.4g (1/m), inliers %zu/%zu ground "
+                    "pixels, residual %.2f%% RMS (inliers), %.2f%% median\n",
+                    o.depth_network.c_str(), f.scale, f.shift, f.inliers, f.reference_pixels,
+                    100 * f.rms_inlier_residual, 100 * f.median_abs_residual);
+      }
     }
   } catch (const Error& e) {
     // Problems with the annotations name their JSON pointer; say which file they are in.

@@ -19,6 +19,7 @@ struct EstimateCommandOptions {
   std::string scene_out;    ///< -o scene.json
   std::string depth_out;    ///< --depth-out d.exr
   std::string overlay_out;  ///< --overlay o.png
+  std::string depth_network;  ///< --depth-network model.onnx; empty: none
   bool quiet = false;
 };
 

@@ -73,7 +73,10 @@ TEST(CliRobustness, AutoDepthOverSamplesAndAdversarialImagesNeverCrashes) {
                       jpeg.substr(0, 2) + std::string(reinterpret_cast<const char*>(app1), sizeof app1) +
                           jpeg.substr(2));
   }
-  EXPECT_EQ(read_image(in / "rotated.jpg").metadata().get_number("Orientation").value_or(0), 6.0);
+  ReadOptions as_stored;
+  as_stored.apply_orientation = false;
+  EXPECT_EQ(read_image(in / "rotated.jpg", as_stored).metadata().get_number("Orientation").value_or(0), 6.0);
+  EXPECT_EQ(probe_image(in / "rotated.jpg").orientation, 6);
   EXPECT_FALSE(read_image(in / "no_exif.jpg").metadata().contains("Exif:FocalLengthIn35mmFilm"));
 
   const auto before = checksums(in);
@@ -91,9 +94,13 @@ TEST(CliRobustness, AutoDepthOverSamplesAndAdversarialImagesNeverCrashes) {
     if (fs::exists(output)) {
       ++outputs;
       EXPECT_FALSE(has_error) << name << ": both an output and an error";
+      // The output is the photo as displayed: turned by its EXIF Orientation (5..8 swap the
+      // sides) and tagged Orientation 1, so that viewers do not turn it again.
       const ImageFileInfo a = probe_image(photo), b = probe_image(output);
-      EXPECT_EQ(a.width, b.width) << name;
-      EXPECT_EQ(a.height, b.height) << name;
+      const bool swapped = a.orientation >= 5;
+      EXPECT_EQ(swapped ? a.height : a.width, b.width) << name;
+      EXPECT_EQ(swapped ? a.width : a.height, b.height) << name;
+      EXPECT_EQ(b.orientation, 1) << name;
     } else {
       ++errors;
       EXPECT_TRUE(has_error) << name << ": neither an output nor an ERROR line\n" << r.output;
@@ -105,6 +112,10 @@ TEST(CliRobustness, AutoDepthOverSamplesAndAdversarialImagesNeverCrashes) {
   for (const char* name : {"black_fog.png", "white_fog.jpg", "noise_fog.png", "no_exif_fog.jpg", "rotated_fog.jpg",
                            "panorama_fog.jpg"})
     EXPECT_TRUE(fs::exists(out / name)) << name;
+  // rotated.jpg (stored 96 x 64, Orientation 6) comes out upright: 64 wide, 96 high.
+  const ImageFileInfo rotated = probe_image(out / "rotated_fog.jpg");
+  EXPECT_EQ(rotated.width, 64);
+  EXPECT_EQ(rotated.height, 96);
   EXPECT_EQ(r.exit_code, errors ? 1 : 0);
   std::printf("%d outputs, %d per-file errors\n", outputs, errors);
 }

@@ -316,5 +316,64 @@ TEST(AutoSkyMask, CarvesAnnotatedPlaneReachingIntoTheSky) {
   EXPECT_EQ(with.horizon_source, EstimateSource::annotations);
 }
 
+// Overcast fall-back (issue 4 item 5): no shadow pairs, so no sun; the sky light is the median
+// of the sky pixels. The horizon is annotated so that only the sky mask is under test.
+Annotations level_horizon(const Rig& rig) {
+  Annotations a;
+  a.horizon = std::array<PixelPoint, 2>{PixelPoint{0, rig.horizon_y(0)}, PixelPoint{639, rig.horizon_y(639)}};
+  a.camera_height_m = 1.6;
+  return a;
+}
+
+TEST(AutoSkyLight, OvercastSkyRadianceIsTheSkyColour) {
+  const Rig rig(-6, 2, 0, 1.6);
+  Canvas c(rig);
+  c.sky_and_ground(5);
+  const cv::Vec3f sky_display(0.62f, 0.68f, 0.78f);  // uniform grey-blue overcast sky
+  for (int y = 0; y < c.img.rows; ++y)
+    for (int x = 0; x < c.img.cols; ++x)
+      if (y < rig.horizon_y(x)) c.img.at<cv::Vec3f>(y, x) = sky_display;
+  const Image photo = c.photo();
+  const SceneEstimate est = estimate_scene(photo, rig.camera, level_horizon(rig));
+  EXPECT_FALSE(est.scene.lighting.sun);
+  ASSERT_TRUE(est.geometry.sky_from_mask);
+  ASSERT_TRUE(est.scene.lighting.sky_radiance);
+  // Every sky pixel holds exactly the colour (scene-linear: display ^ 2.2) and the mask's few
+  // edge pixels cannot move a median: equal to float rounding, held at 1e-4 relative.
+  for (int k = 0; k < 3; ++k) {
+    const float expected = std::pow(sky_display[k], 2.2f);
+    EXPECT_NEAR((*est.scene.lighting.sky_radiance)[k], expected, 1e-4f * expected) << "channel " << k;
+  }
+  bool noted = false;
+  for (const std::string& n : est.notes) {
+    std::printf("%s\n", n.c_str());
+    noted |= n.find("sky: radiance from " + std::to_string(est.geometry.sky_pixels) + " sky pixels (overcast)") == 0;
+  }
+  EXPECT_TRUE(noted);
+}
+
+TEST(AutoSkyLight, WithoutSkyTheRadianceIsLeftToTheDarkChannelPrior) {
+  const Rig rig(-6, 2, 0, 1.6);
+  // Textured ground colours everywhere, above the horizon too (a hedge up to the top border).
+  Image photo(640, 480, 3);
+  std::mt19937 rng(13);
+  std::normal_distribution<float> noise(0, 0.06f);
+  for (int y = 0; y < 480; ++y)
+    for (int x = 0; x < 640; ++x) {
+      const float n = noise(rng);
+      const float display[3] = {0.30f + n, 0.38f + n, 0.22f + n};
+      for (int k = 0; k < 3; ++k) photo.at(x, y, k) = std::pow(std::clamp(display[k], 0.0f, 1.0f), 2.2f);
+    }
+  const SceneEstimate est = estimate_scene(photo, rig.camera, level_horizon(rig));
+  EXPECT_EQ(est.geometry.sky_pixels, 0u);
+  EXPECT_FALSE(est.scene.lighting.sky_radiance);
+  bool noted = false;
+  for (const std::string& n : est.notes) {
+    std::printf("%s\n", n.c_str());
+    noted |= n.rfind("sky: ", 0) == 0 && n.find("dark channel prior") != std::string::npos;
+  }
+  EXPECT_TRUE(noted);
+}
+
 }  // namespace
 }  // namespace mr

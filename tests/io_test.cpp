@@ -3,10 +3,13 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <array>
 #include <cmath>
 #include <csignal>
 #include <random>
 
+#include "mr/camera.h"
+#include "mr/depth.h"
 #include "mr/error.h"
 #include "mr/io.h"
 #include "oiio_bridge.h"
@@ -169,6 +172,173 @@ TEST(Io, MetadataTravelsFromInputToOutput) {
   EXPECT_EQ(second.metadata().get_number("Exif:PhotographicSensitivity"), 400.0);
   write_image(dir / "third.exr", second);
   EXPECT_EQ(read_image(dir / "third.exr").metadata().get_string("Make"), "libmr test camera");
+}
+
+// EXIF Orientation. A 5x3 stored image whose 8-bit codes name their stored position:
+// R = 16 y + x + 1, G = x, B = y. Written with OIIO directly so that the (SHORT) tag is stored.
+constexpr int kOrientW = 5, kOrientH = 3;
+
+std::array<int, 3> orient_codes(int x, int y) { return {16 * y + x + 1, x, y}; }
+
+void write_oriented(const fs::path& path, int orientation, int channels = 3) {
+  std::vector<unsigned char> codes;
+  for (int y = 0; y < kOrientH; ++y)
+    for (int x = 0; x < kOrientW; ++x)
+      for (int c = 0; c < channels; ++c) codes.push_back((unsigned char)orient_codes(x, y)[c]);
+  OIIO::ImageSpec spec(kOrientW, kOrientH, channels, OIIO::TypeDesc::UINT8);
+  spec.attribute("Orientation", orientation);
+  if (path.extension() == ".jpg") {
+    spec.attribute("Compression", "jpeg:100");
+    spec.attribute("jpeg:subsampling", "4:4:4");
+  }
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out);
+  ASSERT_TRUE(out->open(path.string(), spec)) << out->geterror();
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, codes.data()));
+  ASSERT_TRUE(out->close());
+}
+
+// The stored pixel shown at displayed (dx, dy), straight from the EXIF 2.3 table (where row 0
+// and column 0 of the stored image end up): 2 row 0 top / col 0 right, 3 bottom / right,
+// 4 bottom / left, 5 left / top, 6 right / top, 7 right / bottom, 8 left / bottom.
+std::array<int, 2> stored_position(int orientation, int dx, int dy) {
+  const int w = kOrientW, h = kOrientH;
+  switch (orientation) {
+    case 2: return {w - 1 - dx, dy};
+    case 3: return {w - 1 - dx, h - 1 - dy};
+    case 4: return {dx, h - 1 - dy};
+    case 5: return {dy, dx};
+    case 6: return {dy, h - 1 - dx};
+    case 7: return {w - 1 - dy, h - 1 - dx};
+    case 8: return {w - 1 - dy, dx};
+    default: return {dx, dy};
+  }
+}
+
+float code_value(int code) { return float(code) / 255.0f; }
+
+TEST(IoOrientation, Orientation6And3TurnThePixelsAsExifSays) {
+  test::ScratchDir dir;
+  ReadOptions raw;
+  raw.to_scene_linear = false;
+  constexpr float kExact = 1e-6f;  // lossless TIFF, 8-bit codes / 255: exact
+  {
+    write_oriented(dir / "o6.tif", 6);
+    EXPECT_EQ(probe_image(dir / "o6.tif").orientation, 6);
+    const Image im = read_image(dir / "o6.tif", raw);
+    ASSERT_EQ(im.width(), kOrientH);   // turned 90 degrees clockwise: 3 wide,
+    ASSERT_EQ(im.height(), kOrientW);  // 5 high
+    // Stored row 0 becomes the right-hand column, stored column 0 the top row.
+    EXPECT_NEAR(im.at(2, 0, 0), code_value(orient_codes(0, 0)[0]), kExact);  // top-right = stored (0,0)
+    EXPECT_NEAR(im.at(0, 0, 0), code_value(orient_codes(0, 2)[0]), kExact);  // top-left = stored (0,2)
+    EXPECT_NEAR(im.at(2, 4, 0), code_value(orient_codes(4, 0)[0]), kExact);  // bottom-right = stored (4,0)
+    EXPECT_NEAR(im.at(0, 4, 0), code_value(orient_codes(4, 2)[0]), kExact);  // bottom-left = stored (4,2)
+    EXPECT_NEAR(im.at(1, 3, 0), code_value(orient_codes(3, 1)[0]), kExact);
+    EXPECT_EQ(im.metadata().get_number("Orientation"), 1.0);
+  }
+  {
+    write_oriented(dir / "o3.tif", 3);
+    const Image im = read_image(dir / "o3.tif", raw);
+    ASSERT_EQ(im.width(), kOrientW);
+    ASSERT_EQ(im.height(), kOrientH);
+    EXPECT_NEAR(im.at(0, 0, 0), code_value(orient_codes(4, 2)[0]), kExact);
+    EXPECT_NEAR(im.at(4, 2, 0), code_value(orient_codes(0, 0)[0]), kExact);
+    EXPECT_NEAR(im.at(1, 0, 0), code_value(orient_codes(3, 2)[0]), kExact);
+    EXPECT_NEAR(im.at(4, 0, 0), code_value(orient_codes(0, 2)[0]), kExact);
+    EXPECT_EQ(im.metadata().get_number("Orientation"), 1.0);
+  }
+}
+
+TEST(IoOrientation, EveryOrientationMatchesTheExifTableAndCanBeSwitchedOff) {
+  test::ScratchDir dir;
+  ReadOptions raw;
+  raw.to_scene_linear = false;
+  for (int orientation = 1; orientation <= 8; ++orientation) {
+    SCOPED_TRACE("Orientation " + std::to_string(orientation));
+    const fs::path path = dir / ("o" + std::to_string(orientation) + ".tif");
+    write_oriented(path, orientation);
+    const Image im = read_image(path, raw);
+    const bool swapped = orientation >= 5;
+    ASSERT_EQ(im.width(), swapped ? kOrientH : kOrientW);
+    ASSERT_EQ(im.height(), swapped ? kOrientW : kOrientH);
+    for (int dy = 0; dy < im.height(); ++dy)
+      for (int dx = 0; dx < im.width(); ++dx) {
+        const auto [sx, sy] = stored_position(orientation, dx, dy);
+        for (int c = 0; c < 3; ++c)
+          ASSERT_NEAR(im.at(dx, dy, c), code_value(orient_codes(sx, sy)[c]), 1e-6f)
+              << "displayed (" << dx << ", " << dy << ") channel " << c;
+      }
+    EXPECT_EQ(im.metadata().get_number("Orientation").value_or(1), 1.0);
+
+    ReadOptions stored = raw;
+    stored.apply_orientation = false;
+    const Image as_stored = read_image(path, stored);
+    ASSERT_EQ(as_stored.width(), kOrientW);
+    ASSERT_EQ(as_stored.height(), kOrientH);
+    for (int y = 0; y < kOrientH; ++y)
+      for (int x = 0; x < kOrientW; ++x)
+        ASSERT_NEAR(as_stored.at(x, y, 0), code_value(orient_codes(x, y)[0]), 1e-6f);
+    EXPECT_EQ(as_stored.metadata().get_number("Orientation").value_or(1), double(orientation));
+  }
+}
+
+TEST(IoOrientation, PhoneJpegIsReadUprightAndWrittenWithOrientation1) {
+  test::ScratchDir dir;
+  write_oriented(dir / "phone.jpg", 6);
+  ReadOptions stored;
+  stored.apply_orientation = false;
+  ASSERT_EQ(read_image(dir / "phone.jpg", stored).metadata().get_number("Orientation"), 6.0);
+  const Image upright = read_image(dir / "phone.jpg");  // scene-linear, turned
+  ASSERT_EQ(upright.width(), kOrientH);
+  ASSERT_EQ(upright.height(), kOrientW);
+  EXPECT_EQ(upright.metadata().get_number("Orientation"), 1.0);
+  // Written and read again: not turned a second time (the copy says Orientation 1).
+  write_image(dir / "copy.png", upright);
+  write_image(dir / "copy.jpg", upright);
+  for (const char* name : {"copy.png", "copy.jpg"}) {
+    SCOPED_TRACE(name);
+    const Image again = read_image(dir / name);
+    ASSERT_EQ(again.width(), kOrientH);
+    ASSERT_EQ(again.height(), kOrientW);
+    EXPECT_EQ(again.metadata().get_number("Orientation").value_or(1), 1.0);
+    // Same pixels as first read: 8-bit sRGB re-encoding plus JPEG q95 on tiny code values;
+    // scene-linear of codes <= 37 is below 0.02, so 0.01 absolute is a loose bound.
+    for (int y = 0; y < again.height(); ++y)
+      for (int x = 0; x < again.width(); ++x)
+        EXPECT_NEAR(again.at(x, y, 0), upright.at(x, y, 0), 0.01f) << x << "," << y;
+  }
+}
+
+TEST(IoOrientation, DepthMapsAreNotTurnedByThePhotosOrientation) {
+  test::ScratchDir dir;
+  // A phone photo (Orientation 6) is displayed 3 x 5; its depth map is stored as displayed,
+  // without an Orientation tag, and read_depth takes it as it is.
+  write_oriented(dir / "phone.jpg", 6);
+  const Image photo = read_image(dir / "phone.jpg");
+  const Camera camera = Camera::from_focal_px(photo.width(), photo.height(), 10.0);
+  Image depth(kOrientH, kOrientW, 1);
+  for (int y = 0; y < kOrientW; ++y)
+    for (int x = 0; x < kOrientH; ++x) depth.at(x, y, 0) = float(1 + x + 10 * y);
+  WriteOptions w;
+  w.pixel_type = PixelType::float32;
+  write_image(dir / "depth.exr", depth, w);
+  DepthOptions as_distance;
+  as_distance.kind = DepthKind::distance;
+  const DepthMap read = read_depth(dir / "depth.exr", camera, as_distance);
+  ASSERT_EQ(read.distance_m.width(), kOrientH);
+  ASSERT_EQ(read.distance_m.height(), kOrientW);
+  for (int y = 0; y < kOrientW; ++y)
+    for (int x = 0; x < kOrientH; ++x) EXPECT_EQ(read.distance_m.at(x, y, 0), depth.at(x, y, 0));
+  // A depth file with its own Orientation tag is turned by it (stored 5 x 3, displayed 3 x 5).
+  write_oriented(dir / "depth_o6.tif", 6, 1);
+  const DepthMap turned = read_depth(dir / "depth_o6.tif", camera, as_distance);
+  ASSERT_EQ(turned.distance_m.width(), kOrientH);
+  ASSERT_EQ(turned.distance_m.height(), kOrientW);
+  for (int dy = 0; dy < kOrientW; ++dy)
+    for (int dx = 0; dx < kOrientH; ++dx) {
+      const auto [sx, sy] = stored_position(6, dx, dy);
+      EXPECT_EQ(turned.distance_m.at(dx, dy, 0), float(orient_codes(sx, sy)[0]));  // 8-bit codes
+    }
 }
 
 TEST(Io, LayeredExrHasStandardChannelNamesThatOiioReads) {

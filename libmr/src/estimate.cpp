@@ -57,6 +57,43 @@ std::vector<std::array<float, 3>> pixels_in(const Image& photo, const std::vecto
   return out;
 }
 
+// Overcast fall-back: the sky radiance is taken from the sky pixels only when the automatic
+// sky mask found at least this many of them and this fraction of the image (fewer: a sliver
+// whose colour is mostly edge, haze or a bright facade; mr fog then uses the dark channel prior).
+constexpr std::size_t kMinOvercastSkyPixels = 64;
+constexpr double kMinOvercastSkyFraction = 0.01;
+
+// Per-channel median of the photo (scene-linear RGB) over the pixels where the distance map is
+// +inf (the sky), over at most about a million of them (an even stride); non-finite values are
+// skipped, negative medians clamped to 0. The median ignores birds, wires and a bright sun halo
+// up to half the sky.
+Rgb median_sky_radiance(const Image& photo, const Image& distance_m) {
+  std::size_t count = 0;
+  for (const float d : distance_m.pixels()) count += std::isinf(d) && d > 0;
+  const std::size_t stride = std::max<std::size_t>(1, count / 1'000'000 + (count % 1'000'000 != 0));
+  std::array<std::vector<float>, 3> values;
+  for (auto& v : values) v.reserve(count / stride + 1);
+  std::size_t k = 0;
+  for (int y = 0; y < photo.height(); ++y)
+    for (int x = 0; x < photo.width(); ++x) {
+      const float d = distance_m.at(x, y, 0);
+      if (!(std::isinf(d) && d > 0) || k++ % stride != 0) continue;
+      for (int c = 0; c < 3; ++c)
+        if (const float v = photo.at(x, y, c); std::isfinite(v)) values[c].push_back(v);
+    }
+  Rgb out{0, 0, 0};
+  for (int c = 0; c < 3; ++c) {
+    auto& v = values[c];
+    if (v.empty()) continue;
+    auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    float m = *mid;
+    if (v.size() % 2 == 0) m = 0.5f * (m + *std::max_element(v.begin(), mid));
+    out[c] = std::max(0.0f, m);
+  }
+  return out;
+}
+
 }  // namespace
 
 const char* to_string(EstimateSource source) noexcept {
@@ -325,6 +362,23 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
     est.scene.lighting.sun = s;
   } else {
     est.notes.push_back("sun: no shadow pairs; sky light only (overcast)");
+    // Overcast fall-back (issue 4 item 5): the sky light is what the sky pixels show.
+    const std::size_t min_sky = std::max<std::size_t>(
+        kMinOvercastSkyPixels, std::size_t(std::ceil(kMinOvercastSkyFraction * n)));
+    if (g.sky_from_mask && g.sky_pixels >= min_sky) {
+      const Rgb sky = median_sky_radiance(photo, g.distance_m);
+      est.scene.lighting.sky_radiance = sky;
+      est.notes.push_back("sky: radiance from " + std::to_string(g.sky_pixels) +
+                          " sky pixels (overcast), median " + fmt("%.4g", sky[0]) + " " +
+                          fmt("%.4g", sky[1]) + " " + fmt("%.4g", sky[2]));
+    } else {
+      est.notes.push_back(
+          std::string("sky: ") +
+          (g.sky_from_mask ? "only " + std::to_string(g.sky_pixels) + " sky pixels (fewer than " +
+                                 std::to_string(min_sky) + ")"
+                           : std::string("no automatic sky mask")) +
+          "; radiance left to mr fog (dark channel prior)");
+    }
   }
   return est;
 }

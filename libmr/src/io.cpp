@@ -2,6 +2,7 @@
 
 #include <OpenImageIO/imageio.h>
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
@@ -120,6 +121,37 @@ Image expand_grey(const Image& grey) {
   return rgb;
 }
 
+// The stored pixels turned as EXIF Orientation `orientation` (2..8) says they are displayed:
+// each displayed pixel (dx, dy) is the stored pixel (sx, sy) of the stored W x H image below.
+// 2 mirrored left-right, 3 turned 180 degrees, 4 mirrored top-bottom, 5 transposed, 6 turned 90
+// degrees clockwise, 7 transversed, 8 turned 90 degrees counter-clockwise (the same as
+// OIIO::ImageBufAlgo::reorient). Exact: pixels are moved, never resampled.
+Image reorient(const Image& stored, int orientation) {
+  const int w = stored.width(), h = stored.height(), n = stored.channels();
+  const bool swapped = orientation >= 5;
+  const int dw = swapped ? h : w, dh = swapped ? w : h;
+  Image out = Image::uninitialized(dw, dh, n, stored.channel_names());
+  tbb::parallel_for(tbb::blocked_range<int>(0, dh), [&](const tbb::blocked_range<int>& rows) {
+    for (int dy = rows.begin(); dy < rows.end(); ++dy)
+      for (int dx = 0; dx < dw; ++dx) {
+        int sx = dx, sy = dy;
+        switch (orientation) {
+          case 2: sx = w - 1 - dx, sy = dy; break;
+          case 3: sx = w - 1 - dx, sy = h - 1 - dy; break;
+          case 4: sx = dx, sy = h - 1 - dy; break;
+          case 5: sx = dy, sy = dx; break;
+          case 6: sx = dy, sy = h - 1 - dx; break;
+          case 7: sx = w - 1 - dy, sy = h - 1 - dx; break;
+          case 8: sx = w - 1 - dy, sy = dx; break;
+          default: break;
+        }
+        std::copy_n(stored.pixel(sx, sy), n, out.pixel(dx, dy));
+      }
+  });
+  out.metadata() = stored.metadata();
+  return out;
+}
+
 // Attributes that describe the input file's encoding, not the picture: never carried over.
 void drop_encoding_attributes(OIIO::ParamValueList& attrs) {
   for (const char* name : {"oiio:BitsPerSample", "oiio:ColorSpace", "oiio:Gamma", "Compression",
@@ -181,7 +213,9 @@ const char* to_string(PixelType type) noexcept {
 ImageFileInfo probe_image(const std::filesystem::path& path) {
   auto in = open_input(path);
   const auto& spec = in->spec();
-  return {spec.width, spec.height, spec.nchannels, from_oiio(spec.format), in->format_name()};
+  const int orientation = spec.get_int_attribute("Orientation", 1);
+  return {spec.width,         spec.height,         spec.nchannels,
+          from_oiio(spec.format), in->format_name(), orientation >= 1 && orientation <= 8 ? orientation : 1};
 }
 
 Image read_image(const std::filesystem::path& path, const ReadOptions& options) {
@@ -247,6 +281,21 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
   in->close();
   image.metadata().impl().attributes = spec.extra_attribs;
   if (options.to_scene_linear) drop_encoding_attributes(image.metadata().impl().attributes);
+  const int orientation = spec.get_int_attribute("Orientation", 1);
+  if (options.apply_orientation && orientation >= 2 && orientation <= 8) {
+    image = reorient(image, orientation);
+    auto& attrs = image.metadata().impl().attributes;
+    // The pixels are now as displayed: a written copy must not be turned again.
+    attrs.attribute("Orientation", 1);
+    if (orientation >= 5) {
+      const int px = spec.get_int_attribute("Exif:PixelXDimension", 0);
+      const int py = spec.get_int_attribute("Exif:PixelYDimension", 0);
+      if (px > 0 && py > 0) {
+        attrs.attribute("Exif:PixelXDimension", py);
+        attrs.attribute("Exif:PixelYDimension", px);
+      }
+    }
+  }
   return image;
 }
 

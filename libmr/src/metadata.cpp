@@ -1,5 +1,7 @@
 #include "mr/metadata.h"
 
+#include <cstdint>
+
 #include "oiio_bridge.h"
 
 namespace mr {
@@ -46,7 +48,21 @@ std::optional<double> Metadata::get_number(const std::string& name) const {
     const int* v = static_cast<const int*>(it->data());
     return v[1] == 0 ? std::nullopt : std::optional<double>(double(v[0]) / v[1]);
   }
-  return it->get_float_indexed(0);
+  // The first element, read by type: OIIO 2.4's get_float_indexed returns 0 for INT values.
+  const void* d = it->data();
+  switch (t.basetype) {
+    case OIIO::TypeDesc::INT8: return double(*static_cast<const std::int8_t*>(d));
+    case OIIO::TypeDesc::UINT8: return double(*static_cast<const std::uint8_t*>(d));
+    case OIIO::TypeDesc::INT16: return double(*static_cast<const std::int16_t*>(d));
+    case OIIO::TypeDesc::UINT16: return double(*static_cast<const std::uint16_t*>(d));
+    case OIIO::TypeDesc::INT32: return double(*static_cast<const std::int32_t*>(d));
+    case OIIO::TypeDesc::UINT32: return double(*static_cast<const std::uint32_t*>(d));
+    case OIIO::TypeDesc::INT64: return double(*static_cast<const std::int64_t*>(d));
+    case OIIO::TypeDesc::UINT64: return double(*static_cast<const std::uint64_t*>(d));
+    case OIIO::TypeDesc::FLOAT: return double(*static_cast<const float*>(d));
+    case OIIO::TypeDesc::DOUBLE: return *static_cast<const double*>(d);
+    default: return it->get_float_indexed(0);  // HALF
+  }
 }
 
 void Metadata::set(const std::string& name, const std::string& value) {

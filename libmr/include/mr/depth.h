@@ -38,7 +38,10 @@ struct DepthMap {
 
 /// Reads a depth file (float EXR/TIFF/PFM, 16-bit PNG/TIFF, ...; channel "Z", "depth.Z", "Y"
 /// or the first) and converts it to distance along the ray with `camera` (whose focal length
-/// is also the disparity focal length). Throws mr::Error: io / corrupt_input naming the file;
+/// is also the disparity focal length). A depth map must match the photo as displayed, i.e.
+/// after read_image turned the photo by its EXIF Orientation: the photo's orientation is never
+/// applied to the depth map; only the depth file's own Orientation tag is (files without one,
+/// the usual case for EXR/PFM/PNG depth, are taken as stored). Throws mr::Error: io / corrupt_input naming the file;
 /// size_mismatch naming both sizes if it differs from the camera's; invalid_argument for
 /// absurd options (scale <= 0, disparity without baseline).
 DepthMap read_depth(const std::filesystem::path& path, const Camera& camera,

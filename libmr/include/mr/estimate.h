@@ -109,6 +109,9 @@ struct SceneEstimate {
   std::optional<SunEstimate> sun;  ///< with shadow pairs
   /// The scene for mr::fog: geometry.pose; the sun when fitted (its irradiance from the sun/sky
   /// ratio of the marked patches, with the sky radiance from the photo, when both are marked);
+  /// without a fitted sun (overcast: sky light only) and with an automatic sky mask of at least
+  /// 64 pixels and 1 % of the image, lighting.sky_radiance = the per-channel median of the sky
+  /// pixels (else left unset: mr fog estimates it with the dark channel prior);
   /// everything else at FogScene's defaults.
   FogScene scene;
   /// One line per estimate made, for a person to read ("horizon: annotated, pitch -2.1 deg").

@@ -24,6 +24,9 @@ struct ImageFileInfo {
   PixelType pixel_type = PixelType::float32;  ///< as stored (integer types other than 8/16 map
                                               ///< to float32)
   std::string format;                         ///< OIIO format name: "jpeg", "openexr", ...
+  /// EXIF Orientation of the stored pixels, 1..8 (1: none or absent or invalid). width and
+  /// height are as stored; read_image (apply_orientation) swaps them for 5..8.
+  int orientation = 1;
 };
 
 /// Reads the header of an image file. Throws mr::Error(io) naming the file if it cannot be
@@ -41,9 +44,15 @@ struct ReadOptions {
   const ColorConfig* color = nullptr;
   /// Fail with corrupt_input if any pixel is NaN or infinite.
   bool reject_non_finite = true;
+  /// Turn the pixels as the file's own EXIF Orientation tag (2..8; phones write 6 and 8) says
+  /// they are displayed, exactly (pixels moved, not resampled; width and height swap for 5..8),
+  /// and set the metadata's Orientation to 1 so that a written copy is not turned twice.
+  /// false: the stored layout, with the file's Orientation left in the metadata.
+  bool apply_orientation = true;
 };
 
-/// Reads a whole image (first subimage, all channels) as float32 with its metadata.
+/// Reads a whole image (first subimage, all channels) as float32 with its metadata, turned
+/// upright by its EXIF Orientation (ReadOptions::apply_orientation).
 /// Throws mr::Error: io (missing, unreadable, not an image), corrupt_input (truncated,
 /// non-finite pixels), color. The message names the file.
 Image read_image(const std::filesystem::path& path, const ReadOptions& options = {});

@@ -6,6 +6,7 @@
 #include "mr/color.h"
 #include "mr/depth.h"
 #include "mr/depth_fit.h"
+#include "mr/depth_network.h"
 #include "mr/error.h"
 #include "mr/estimate.h"
 #include "mr/fog.h"
