@@ -207,8 +207,11 @@ TEST_F(CliBatch, InterruptLeavesNoPartialFiles) {
   EXPECT_TRUE(r.exit_code == 130 || r.exit_code == 0) << r.exit_code << "\n" << info;
   EXPECT_FALSE(has_temp_files(dir.path())) << info;
   // On a loaded machine the signal can arrive before mr has even made the output folder.
-  if (fs::exists(out))
-    for (const auto& e : fs::directory_iterator(out)) EXPECT_NO_THROW(read_image(e.path())) << e.path();
+  if (fs::exists(out)) {
+    for (const auto& e : fs::directory_iterator(out)) {
+      EXPECT_NO_THROW(read_image(e.path())) << e.path();
+    }
+  }
   EXPECT_EQ(checksums(many), before);
 }
 

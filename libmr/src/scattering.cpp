@@ -117,17 +117,15 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       out.backend_notice = "vulkan: not probed in sanitizer builds; the CPU backend renders";
     } else if (scene.render.backend != Backend::cpu) {
       try {
-        render::vulkan::Backend& b = render::vulkan::Backend::shared();
-        if (scene.render.backend == Backend::vulkan || !b.device().cpu_implementation)
-          gpu = &b;
-        else
-          out.backend_notice = "vulkan: only a software device (" + b.device().name +
-                               "); the CPU backend renders (render.backend 'vulkan' forces it)";
+        gpu = scene.render.backend == Backend::vulkan ? &render::vulkan::Backend::shared()
+                                                      : &render::vulkan::Backend::shared_hardware();
       } catch (const render::vulkan::Unavailable& e) {
         if (scene.render.backend == Backend::vulkan)
           throw Error(ErrorCode::invalid_argument,
                       std::string("render.backend is 'vulkan' but ") + e.what());
         out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
+        if (std::string(e.what()).find("software device") != std::string::npos)
+          out.backend_notice += " (render.backend 'vulkan' forces it)";
       }
     }
     render::TriangleMesh occluder_mesh;  // the Vulkan backend rasterizes it into shadow maps

@@ -156,6 +156,8 @@ Context::Context(const ContextOptions& options) {
     info.name = properties.deviceName;
     info.type = type_name(properties.deviceType);
     info.cpu_implementation = properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
+    if (options.reject_cpu_implementation && info.cpu_implementation)
+      throw Unavailable("only a software device (" + info.name + ")");
     vk.vkGetPhysicalDeviceMemoryProperties(physical, &memory);
 
     const float priority = 1.0f;

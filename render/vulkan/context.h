@@ -25,6 +25,9 @@ T make(VkStructureType type) {
 struct ContextOptions {
   bool validation = false;
   std::string device_filter;  ///< substring of the device name; empty: the best device
+  /// Throw Unavailable when the best device is a CPU implementation (lavapipe), before a
+  /// device is created or a pipeline compiled: Backend::automatic's cheap probe.
+  bool reject_cpu_implementation = false;
 };
 
 class Context {

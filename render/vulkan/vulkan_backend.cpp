@@ -985,25 +985,57 @@ std::vector<float> Backend::Impl::echo_layout(const void* params, std::size_t pa
 Backend::Backend(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Backend::~Backend() = default;
 
-Backend& Backend::shared() {
-  static std::mutex mutex;
-  static std::unique_ptr<Backend> backend;
-  static std::optional<std::string> failure;
-  std::lock_guard lock(mutex);
-  if (backend) return *backend;
-  if (failure) throw Unavailable(*failure);
+namespace {
+// The process's one backend (devices and compiled pipelines are expensive), and why it could
+// not be made: for any device, and for hardware devices only (Backend::automatic's probe).
+std::mutex g_shared_mutex;
+std::unique_ptr<Backend> g_shared;
+std::optional<std::string> g_failure, g_hardware_failure;
+
+ContextOptions options_from_environment() {
   ContextOptions options;
   if (const char* v = std::getenv("MR_VULKAN_VALIDATION")) options.validation = std::string(v) == "1";
   if (const char* v = std::getenv("MR_VULKAN_DEVICE")) options.device_filter = v;
+  return options;
+}
+
+std::string without_prefix(std::string what) {
+  if (what.rfind("vulkan: ", 0) == 0) what = what.substr(8);
+  return what;
+}
+}  // namespace
+
+Backend& Backend::shared() {
+  std::lock_guard lock(g_shared_mutex);
+  if (g_shared) return *g_shared;
+  if (g_failure) throw Unavailable(*g_failure);
   try {
-    backend.reset(new Backend(std::make_unique<Impl>(options)));
+    g_shared.reset(new Backend(std::make_unique<Impl>(options_from_environment())));
   } catch (const Unavailable& e) {
-    std::string what = e.what();
-    if (what.rfind("vulkan: ", 0) == 0) what = what.substr(8);
-    failure = what;
+    g_failure = without_prefix(e.what());
     throw;
   }
-  return *backend;
+  return *g_shared;
+}
+
+Backend& Backend::shared_hardware() {
+  std::lock_guard lock(g_shared_mutex);
+  if (g_shared) {
+    if (g_shared->device().cpu_implementation)
+      throw Unavailable("only a software device (" + g_shared->device().name + ")");
+    return *g_shared;
+  }
+  if (g_failure) throw Unavailable(*g_failure);
+  if (g_hardware_failure) throw Unavailable(*g_hardware_failure);
+  ContextOptions options = options_from_environment();
+  options.reject_cpu_implementation = true;
+  try {
+    g_shared.reset(new Backend(std::make_unique<Impl>(options)));
+  } catch (const Unavailable& e) {
+    g_hardware_failure = without_prefix(e.what());  // a later shared() may still use lavapipe
+    throw;
+  }
+  return *g_shared;
 }
 
 const DeviceInfo& Backend::device() const { return impl_->ctx.info; }

@@ -59,6 +59,10 @@ class Backend {
   /// $MR_VULKAN_DEVICE names (a substring of) a device. $MR_VULKAN_VALIDATION=1 enables the
   /// Khronos validation layer and counts its warnings and errors (validation_messages()).
   static Backend& shared();
+  /// shared(), for Backend::automatic: throws Unavailable when the best device is a CPU
+  /// implementation, found out before any device is created (a probe of ~0.1 s instead of a
+  /// device and its pipelines); a later shared() may still create that device.
+  static Backend& shared_hardware();
 
   ~Backend();
   Backend(const Backend&) = delete;
