@@ -195,7 +195,8 @@ Annotations from_document(const Json& doc, const Reader& r) {
   r.object(doc, "");
   r.check_keys(doc, "",
                {"format", "version", "horizon", "camera_height_m", "known_length", "planes",
-                "distance_hints", "shadow_pairs", "sunlit_patch", "shadowed_patch"});
+                "distance_hints", "shadow_pairs", "sunlit_patch", "shadowed_patch", "lamps",
+                "lamp_patches"});
   const Json* format = member(doc, "format");
   if (!format) r.fail("/format", std::string("missing; expected \"") + kAnnotationsFormatName + "\"");
   if (!format->is_string() || format->get<std::string>() != kAnnotationsFormatName)
@@ -267,6 +268,44 @@ Annotations from_document(const Json& doc, const Reader& r) {
   if (const Json* s = member(doc, "sunlit_patch")) a.sunlit_patch = r.points(*s, "/sunlit_patch");
   if (const Json* s = member(doc, "shadowed_patch"))
     a.shadowed_patch = r.points(*s, "/shadowed_patch");
+  // An RGB triple [r, g, b]; a single number means grey (the same in all three channels).
+  auto rgb = [&](const Json& j, const std::string& p) -> std::array<double, 3> {
+    if (j.is_number()) {
+      const double v = r.number(j, p);
+      return {v, v, v};
+    }
+    if (!j.is_array() || j.size() != 3) r.expected(p, "a number or [r, g, b] (3 numbers)", j);
+    return {r.number(j[0], p + "/0"), r.number(j[1], p + "/1"), r.number(j[2], p + "/2")};
+  };
+  if (const Json* lamps = member(doc, "lamps")) {
+    if (!lamps->is_array()) r.expected("/lamps", "an array of lamps", *lamps);
+    for (std::size_t i = 0; i < lamps->size(); ++i) {
+      const std::string p = "/lamps/" + std::to_string(i);
+      const Json& j = (*lamps)[i];
+      r.object(j, p);
+      r.check_keys(j, p, {"pixel", "offset_m", "color"});
+      if (!member(j, "pixel")) r.fail(p + "/pixel", "missing");
+      Annotations::Lamp lamp;
+      lamp.pixel = r.point(j["pixel"], p + "/pixel");
+      if (const Json* o = member(j, "offset_m")) lamp.offset_m = r.number(*o, p + "/offset_m");
+      if (const Json* c = member(j, "color")) lamp.color = rgb(*c, p + "/color");
+      a.lamps.push_back(lamp);
+    }
+  }
+  if (const Json* patches = member(doc, "lamp_patches")) {
+    if (!patches->is_array()) r.expected("/lamp_patches", "an array of lamp patches", *patches);
+    for (std::size_t i = 0; i < patches->size(); ++i) {
+      const std::string p = "/lamp_patches/" + std::to_string(i);
+      const Json& j = (*patches)[i];
+      r.object(j, p);
+      r.check_keys(j, p, {"polygon", "albedo"});
+      if (!member(j, "polygon")) r.fail(p + "/polygon", "missing");
+      Annotations::LampPatch patch;
+      patch.polygon = r.points(j["polygon"], p + "/polygon");
+      if (const Json* al = member(j, "albedo")) patch.albedo = rgb(*al, p + "/albedo");
+      a.lamp_patches.push_back(std::move(patch));
+    }
+  }
   validate_annotations(a, "");  // re-thrown below with the source name
   return a;
 }
@@ -343,6 +382,35 @@ void validate_annotations(const Annotations& a, const std::string& source_name) 
   }
   if (!a.sunlit_patch.empty()) polygon(a.sunlit_patch, "/sunlit_patch");
   if (!a.shadowed_patch.empty()) polygon(a.shadowed_patch, "/shadowed_patch");
+  for (std::size_t i = 0; i < a.lamps.size(); ++i) {
+    const std::string p = "/lamps/" + std::to_string(i);
+    point(a.lamps[i].pixel, p + "/pixel");
+    finite(a.lamps[i].offset_m, p + "/offset_m");
+    if (a.lamps[i].offset_m < 0)
+      fail(p + "/offset_m", "must be >= 0, found " + std::to_string(a.lamps[i].offset_m));
+    if (const auto& c = a.lamps[i].color) {
+      for (int k = 0; k < 3; ++k) {
+        finite((*c)[k], p + "/color/" + std::to_string(k));
+        if ((*c)[k] < 0)
+          fail(p + "/color/" + std::to_string(k), "must be >= 0, found " + std::to_string((*c)[k]));
+      }
+      if (!((*c)[0] > 0 || (*c)[1] > 0 || (*c)[2] > 0)) fail(p + "/color", "must not be black");
+    }
+  }
+  for (std::size_t i = 0; i < a.lamp_patches.size(); ++i) {
+    const std::string p = "/lamp_patches/" + std::to_string(i);
+    polygon(a.lamp_patches[i].polygon, p + "/polygon");
+    if (const auto& al = a.lamp_patches[i].albedo)
+      for (int k = 0; k < 3; ++k) {
+        finite((*al)[k], p + "/albedo/" + std::to_string(k));
+        if (!((*al)[k] > 0 && (*al)[k] <= 1))
+          fail(p + "/albedo/" + std::to_string(k),
+               "must be in (0, 1], found " + std::to_string((*al)[k]));
+      }
+  }
+  if (a.lamps.empty() != a.lamp_patches.empty())
+    fail(a.lamps.empty() ? "/lamps" : "/lamp_patches",
+         "missing: lamps are fitted to the shading of lamp_patches; mark both or neither");
   if (a.sunlit_patch.empty() != a.shadowed_patch.empty())
     fail(a.sunlit_patch.empty() ? "/sunlit_patch" : "/shadowed_patch",
          "missing: sunlit_patch and shadowed_patch are marked together");
@@ -396,6 +464,26 @@ std::string annotations_to_json(const Annotations& a) {
   }
   if (!a.sunlit_patch.empty()) doc["sunlit_patch"] = points_json(a.sunlit_patch);
   if (!a.shadowed_patch.empty()) doc["shadowed_patch"] = points_json(a.shadowed_patch);
+  auto rgb_json = [](const std::array<double, 3>& c) { return Json::array({c[0], c[1], c[2]}); };
+  if (!a.lamps.empty()) {
+    Json lamps = Json::array();
+    for (const auto& l : a.lamps) {
+      Json j = {{"pixel", point_json(l.pixel)}};
+      if (l.offset_m != 0 || std::signbit(l.offset_m)) j["offset_m"] = l.offset_m;
+      if (l.color) j["color"] = rgb_json(*l.color);
+      lamps.push_back(std::move(j));
+    }
+    doc["lamps"] = std::move(lamps);
+  }
+  if (!a.lamp_patches.empty()) {
+    Json patches = Json::array();
+    for (const auto& p : a.lamp_patches) {
+      Json j = {{"polygon", points_json(p.polygon)}};
+      if (p.albedo) j["albedo"] = rgb_json(*p.albedo);
+      patches.push_back(std::move(j));
+    }
+    doc["lamp_patches"] = std::move(patches);
+  }
   return doc.dump(2) + "\n";
 }
 

@@ -18,6 +18,7 @@
 #include "photo/geometry.h"
 #include "photo/horizon.h"
 #include "photo/illumination.h"
+#include "photo/lamps.h"
 #include "photo/sky_mask.h"
 
 namespace mr {
@@ -380,6 +381,45 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
           "; radiance left to mr fog (dark channel prior)");
     }
   }
+
+  if (!annotations.lamps.empty()) {
+    // Interior lamps (issue 4 item 5): lifted with the distance map, intensities fitted to the
+    // shading of the lamp patches (photo/lamps.h states the model).
+    std::vector<photo::LampMark> marks;
+    for (const auto& l : annotations.lamps) marks.push_back({l.pixel, l.offset_m, l.color});
+    std::vector<photo::LampPatch> patches;
+    for (const auto& p : annotations.lamp_patches) {
+      photo::LampPatch patch;
+      patch.polygon = p.polygon;
+      if (p.albedo) patch.albedo = *p.albedo;
+      patches.push_back(std::move(patch));
+    }
+    photo::LampFit fit;
+    try {
+      fit = photo::fit_lamps(photo, g.distance_m, camera, g.pose, marks, patches);
+    } catch (const Error& e) {
+      throw Error(e.code(), std::string("/lamps, /lamp_patches: ") + e.what());
+    }
+    for (std::size_t i = 0; i < marks.size(); ++i) {
+      Lamp lamp;
+      lamp.position_m = fit.positions_m[i];
+      const auto& I = fit.intensity_per_sr[i];
+      lamp.intensity_per_sr = Rgb{float(I[0]), float(I[1]), float(I[2])};
+      est.scene.lighting.lamps.push_back(lamp);
+      const Vec3& q = fit.positions_m[i];
+      est.notes.push_back("lamp " + std::to_string(i) + ": at (" + fmt("%.2f", q.x) + ", " +
+                          fmt("%.2f", q.y) + ", " + fmt("%.2f", q.z) + ") m, intensity " +
+                          fmt("%.4g", I[0]) + " " + fmt("%.4g", I[1]) + " " + fmt("%.4g", I[2]) +
+                          " per sr");
+    }
+    est.notes.push_back("lamps: " + std::to_string(marks.size()) + " lamp(s) fitted to " +
+                        std::to_string(fit.pixels_used) + " pixels of " +
+                        std::to_string(patches.size()) + " patch(es), residual " +
+                        fmt("%.1f", 100 * fit.rms_residual) + " % RMS, " +
+                        fmt("%.1f", 100 * fit.median_abs_residual) +
+                        " % median (of the median patch radiance)" +
+                        (fit.converged ? "" : "; Ceres did not report convergence"));
+  }
   return est;
 }
 
@@ -448,6 +488,11 @@ Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
   for (const auto& s : annotations.shadow_pairs) {
     cv::line(m, pt(s.caster_foot), pt(s.caster_top), cv::Scalar(1, 0, 1), thick, cv::LINE_AA, kShift);
     cv::line(m, pt(s.caster_top), pt(s.shadow_tip), cv::Scalar(1, 0, 1), thick, cv::LINE_AA, kShift);
+  }
+  for (const auto& p : annotations.lamp_patches) polygon(p.polygon, cv::Scalar(1, 0.5, 0));
+  for (const auto& l : annotations.lamps) {
+    const int r = std::max(3, std::min(w, h) / 80) << kShift;
+    cv::circle(m, pt(l.pixel), r, cv::Scalar(1, 0.6, 0), thick + 1, cv::LINE_AA, kShift);
   }
   cv::line(m, pt(g.horizon[0]), pt(g.horizon[1]), cv::Scalar(1, 0, 0), thick + 1, cv::LINE_AA, kShift);
   if (estimate.sun) {

@@ -58,6 +58,23 @@ struct Annotations {
   std::vector<ShadowPair> shadow_pairs;
   /// Polygons over one material in sun and in shadow (empty: not marked). Both or neither.
   std::vector<PixelPoint> sunlit_patch, shadowed_patch;
+  /// An interior lamp: the pixel it is seen at, lifted to 3D with the distance map, `offset_m`
+  /// metres (>= 0) in front of the surface seen there (along the pixel's ray).
+  struct Lamp {
+    PixelPoint pixel{};
+    double offset_m = 0;
+    /// Optional linear RGB colour (>= 0, not all 0): the fit then keeps this chromaticity and
+    /// fits one intensity; without it the three channels are fitted freely.
+    std::optional<std::array<double, 3>> color;
+  };
+  std::vector<Lamp> lamps;
+  /// A surface the lamps light (one material, unshadowed): their intensities are fitted to its
+  /// shading. `albedo` per channel in (0, 1]; unset: 0.5 (intensities scale with 1 / albedo).
+  struct LampPatch {
+    std::vector<PixelPoint> polygon;  ///< >= 3 points
+    std::optional<std::array<double, 3>> albedo;
+  };
+  std::vector<LampPatch> lamp_patches;  ///< both lamps and lamp_patches, or neither
 };
 
 /// The value of the document's "format" key.
@@ -67,7 +84,9 @@ inline constexpr int kAnnotationsFormatVersion = 1;
 
 /// Checks what can be checked without the photo: every coordinate and number finite, heights,
 /// lengths and distances > 0, not both camera_height_m and known_length, polygons with >= 3
-/// points, horizon points and known-length points >= 1 px apart, both patches or neither.
+/// points, horizon points and known-length points >= 1 px apart, both patches or neither,
+/// lamp offsets >= 0, lamp colours >= 0 and not black, lamp-patch albedos in (0, 1], both lamps
+/// and lamp_patches or neither.
 /// Throws mr::Error(invalid_argument) "source: /json/pointer: problem", e.g.
 ///   "a.json: /planes/2/polygon: expected at least 3 points, found 2".
 void validate_annotations(const Annotations& annotations,

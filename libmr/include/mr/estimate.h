@@ -112,6 +112,8 @@ struct SceneEstimate {
   /// without a fitted sun (overcast: sky light only) and with an automatic sky mask of at least
   /// 64 pixels and 1 % of the image, lighting.sky_radiance = the per-channel median of the sky
   /// pixels (else left unset: mr fog estimates it with the dark channel prior);
+  /// with lamps and lamp_patches annotated, lighting.lamps: one per marked lamp, lifted to 3D
+  /// with the distance map, its intensity fitted to the patches' shading (photo/lamps.h);
   /// everything else at FogScene's defaults.
   FogScene scene;
   /// One line per estimate made, for a person to read ("horizon: annotated, pitch -2.1 deg").
@@ -120,7 +122,9 @@ struct SceneEstimate {
 
 /// Everything estimate_geometry does, plus the light: the sun direction fitted to the shadow
 /// pairs (Ceres; throws mr::Error(invalid_argument) naming the pair for bad or contradictory
-/// pairs) and, with sunlit and shadowed patches, the sun/sky ratio. `photo` is scene-linear
+/// pairs) and, with sunlit and shadowed patches, the sun/sky ratio; with lamps and lamp patches,
+/// the lamps (throws mr::Error(invalid_argument) "/lamps, /lamp_patches: lamp <i>: ..." for a
+/// lamp outside the image, in the sky or behind the camera, or contradictory shading). `photo` is scene-linear
 /// RGB of the camera's size (size_mismatch otherwise).
 SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                              const Annotations& annotations, const EstimateOptions& options = {});
@@ -129,7 +133,8 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
 /// depth colour-mapped over it (log distance, near = red to far = blue, half blended), the sky
 /// washed out towards white, the horizon as a red line, the plane polygons in yellow, the distance hints in
 /// cyan, the shadow pairs in magenta and the patches in green / dark green; an arrow toward the
-/// sun's azimuth at the top when the sun was fitted. Scene-linear RGB, the photo's size.
+/// sun's azimuth at the top when the sun was fitted; lamps as orange circles, their patches as
+/// orange polygons. Scene-linear RGB, the photo's size.
 Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
                               const Annotations& annotations);
 

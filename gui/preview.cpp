@@ -1,0 +1,121 @@
+#include "preview.h"
+
+#include <QFileInfo>
+#include <chrono>
+#include <filesystem>
+
+#include "image_convert.h"
+
+namespace fs = std::filesystem;
+
+namespace mrstudio {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+const char* to_string(mr::Quality quality) {
+  switch (quality) {
+    case mr::Quality::draft: return "draft";
+    case mr::Quality::normal: return "normal";
+    case mr::Quality::final: return "final";
+  }
+  return "?";
+}
+
+std::shared_ptr<const Document> load_document(const QString& path, const mr::ColorConfig& color) {
+  auto doc = std::make_shared<Document>();
+  doc->photo_path = QFileInfo(path).absoluteFilePath();
+  const fs::path photo_path = path.toStdString();
+  mr::ReadOptions read;
+  read.color = &color;
+  mr::Image photo = mr::read_image(photo_path, read);
+  if (photo.channels() >= 3) {
+    doc->photo = photo.channels() == 3 ? std::move(photo) : photo.select_channels(std::array{0, 1, 2});
+  } else {
+    doc->photo = photo.select_channels(std::array{0, 0, 0});
+  }
+  doc->camera = mr::Camera::from_metadata(doc->photo.width(), doc->photo.height(), doc->photo.metadata());
+  const float sigma = float(mr::extinction_from_visibility(150.0));
+  doc->scene.medium.sigma_t_per_m = {sigma, sigma, sigma};
+
+  std::error_code ec;
+  fs::path depth_path;
+  for (const char* ext : {".exr", ".tif", ".tiff", ".pfm", ".png"}) {
+    fs::path candidate = photo_path.parent_path() / (photo_path.stem().string() + "_depth" + ext);
+    if (fs::exists(candidate, ec)) {
+      depth_path = candidate;
+      break;
+    }
+  }
+  if (!depth_path.empty()) {
+    mr::DepthMap depth = mr::read_depth(depth_path, doc->camera);
+    doc->depth_source = QString::fromStdString(depth_path.string());
+    if (depth.invalid_pixels > 0)
+      doc->notes << QString("%1: %2 pixels are NaN or negative: treated as sky")
+                        .arg(doc->depth_source)
+                        .arg(depth.invalid_pixels);
+    if (depth.no_surface_pixels == depth.distance_m.pixel_count())
+      doc->notes << QString("%1: no pixel has a surface: all sky").arg(doc->depth_source);
+    doc->distance_m = std::move(depth.distance_m);
+  } else {
+    mr::Annotations annotations;
+    const fs::path annotations_path =
+        photo_path.parent_path() / (photo_path.stem().string() + "_annotations.json");
+    const bool annotated = fs::exists(annotations_path, ec);
+    if (annotated) annotations = mr::load_annotations(annotations_path);
+    try {
+      mr::SceneEstimate est = mr::estimate_scene(doc->photo, doc->camera, annotations);
+      doc->scene.pose = est.scene.pose;
+      doc->scene.lighting.sun = est.scene.lighting.sun;
+      doc->scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
+      doc->distance_m = std::move(est.geometry.distance_m);
+      for (const std::string& note : est.notes) doc->notes << QString::fromStdString(note);
+    } catch (const mr::Error& e) {
+      throw mr::Error(e.code(), photo_path.string() + ": estimating the geometry: " + e.what());
+    }
+    doc->depth_estimated = true;
+    doc->depth_source = annotated ? QString("estimated with %1").arg(QString::fromStdString(annotations_path.string()))
+                                  : QString("estimated automatically");
+  }
+  doc->photo_display = to_display(doc->photo, color);
+  return doc;
+}
+
+void preview_inputs(const Document& document, double max_pixels, mr::Image& photo,
+                    mr::Image& distance_m, mr::Camera& camera) {
+  const QSize size = fit_pixels(document.photo.width(), document.photo.height(), max_pixels);
+  photo = downscale_area(document.photo, size.width(), size.height());
+  distance_m = downscale_nearest(document.distance_m, size.width(), size.height());
+  camera = scale_camera(document.camera, size.width(), size.height());
+}
+
+std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
+                                              const mr::ColorConfig& color) {
+  const auto start = std::chrono::steady_clock::now();
+  auto result = std::make_shared<PreviewResult>();
+  result->generation = request.generation;
+  result->quality = request.quality;
+  preview_inputs(*request.document, request.max_pixels, result->photo, result->distance_m, result->camera);
+  result->scene = request.scene;
+  result->scene.render.quality = request.quality;
+  const auto render_start = std::chrono::steady_clock::now();
+  mr::ScatteringLayers aovs;
+  result->layers = mr::fog(result->photo, result->distance_m, result->camera, result->scene, &aovs);
+  result->render_s = seconds_since(render_start);
+  result->backend = aovs.backend;
+  result->backend_notice = aovs.backend_notice;
+  result->composite = to_display(result->layers.composite, color);
+  result->photo_image = to_display(result->photo, color);
+  result->transmittance = to_display(result->layers.transmittance, color);
+  result->inscatter = to_display(result->layers.inscatter, color);
+  result->depth = depth_colormap(result->distance_m);
+  result->total_s = seconds_since(start);
+  return result;
+}
+
+}  // namespace mrstudio

@@ -1,0 +1,115 @@
+// Private to libmr: interior lamps of a photo from a few user marks (DESIGN.md section 4, issue 4
+// item 5): each marked lamp pixel is lifted to 3D with the distance map, and the lamps' radiant
+// intensities are fitted with Ceres to the photo's shading on marked surfaces ("lamp patches").
+// Ceres is used in lamps.cpp only.
+//
+// Model (per colour channel c; a closed-form direct-light model evaluated here, the same
+// quantity the scattering core integrates for a lamp's surface term, without fog):
+//
+//   L_p,c = (rho_k,c / pi) * sum_i I_i,c * V * max(0, n_p . (P_i - X_p)) / |P_i - X_p|^3
+//           + A_k,c
+//
+//   L_p      the photo's scene-linear radiance at pixel p of lamp patch k
+//   X_p, n_p the surface point seen at p (camera + ray * distance) and its normal, from the
+//            distance map (one-sided differences with the neighbour of smaller depth change on
+//            each axis, so creases and depth edges are not smeared), turned toward the camera
+//   P_i      lamp i's position (lift_lamp); I_i,c its radiant intensity per steradian (unknown,
+//            >= 0); irradiance I cos / r^2 as mr::Lamp defines it
+//   rho_k,c  the patch's Lambertian albedo: GIVEN (LampPatch::albedo, default 0.5). The albedo
+//            and the intensities only appear as their product, so the intensities scale with
+//            1 / albedo; a wrong albedo guess scales every lamp alike
+//   A_k,c    per patch, unknown, >= 0: everything else that lights it (ambient / sky /
+//            interreflections), i.e. the patch's albedo times its ambient irradiance / pi,
+//            taken as constant over the patch
+//   V        visibility, taken as 1 (no shadows between lamp and patch: mark unshadowed surfaces)
+//
+// The fit is linear in the unknowns (I, A). It runs in three Ceres stages: a plain squared loss
+// from the start point (converges from any start), then a Cauchy loss from there with no bounds
+// (to see whether the data need a negative intensity: contradictory marks), then the Cauchy loss
+// with I >= 0, A >= 0. Residuals are relative: (model - L) / m_c, m_c the median patch radiance
+// of channel c.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <optional>
+#include <vector>
+
+#include "mr/annotations.h"
+#include "mr/camera.h"
+#include "mr/image.h"
+#include "mr/scene.h"
+
+namespace mr::photo {
+
+/// A lamp marked in the photo: its pixel (CameraPose::ray_direction convention) and how far in
+/// front of the surface seen there it hangs (metres along the pixel's ray, >= 0).
+struct LampMark {
+  std::array<double, 2> pixel{};
+  double offset_m = 0;
+  /// Optional colour (linear RGB, >= 0, not all 0): the lamp's intensity is then s * colour /
+  /// luminance(colour) with one unknown s >= 0, instead of three free channels.
+  std::optional<std::array<double, 3>> color;
+};
+
+/// A surface lit by the lamps (floor, wall, table top), over one material.
+struct LampPatch {
+  std::vector<PixelPoint> polygon;  ///< >= 3 points; pixel centres inside (even-odd rule) count
+  std::array<double, 3> albedo{0.5, 0.5, 0.5};  ///< in (0, 1] per channel (see the model)
+};
+
+struct LampFitOptions {
+  /// Scale of the Cauchy loss on the relative residual (0.1: pixels more than ~10 % off the
+  /// model, e.g. a mis-marked patch corner over another material, are down-weighted).
+  double robust_scale = 0.1;
+  /// The marks are contradictory when the unconstrained robust fit needs an intensity below
+  /// -max_negative_fraction * (the largest |intensity| of that channel), or a patch's ambient
+  /// term below -max_negative_fraction * (the median patch radiance of that channel).
+  double max_negative_fraction = 0.05;
+  /// At most this many pixels per patch are used (an even stride over the patch).
+  std::size_t max_pixels_per_patch = 4000;
+  /// Start point of the intensities, per lamp (RGB; a coloured lamp uses their luminance).
+  /// Empty: every lamp alike, explaining half the patches' mean radiance.
+  std::vector<std::array<double, 3>> initial_intensity;
+};
+
+struct LampFit {
+  std::vector<Vec3> positions_m;                      ///< per lamp, world frame
+  std::vector<std::array<double, 3>> intensity_per_sr;  ///< per lamp, RGB, >= 0
+  std::vector<std::array<double, 3>> ambient;           ///< per patch: A_k (radiance units)
+  /// Relative residual (model - photo) / median patch radiance, over the used pixels and the
+  /// three channels: RMS and median of the absolute value; and the RMS per patch.
+  double rms_residual = 0, median_abs_residual = 0;
+  std::vector<double> patch_rms_residual;
+  std::size_t pixels_used = 0;
+  bool converged = false;  ///< the last Ceres stage reported convergence
+  int iterations = 0;      ///< all stages together
+};
+
+/// The 3D position of a marked lamp: camera + ray(pixel) * (distance - offset), the distance
+/// bilinear in the map where the four nearest pixels are finite and within 10 % of each other,
+/// else the nearest pixel's. Throws mr::Error(invalid_argument) "lamp <index>: ..." when the
+/// pixel or offset is not finite, the pixel lies outside the image, the map shows sky (+inf)
+/// or no valid depth there, the offset is negative, or offset >= distance (the lamp would be
+/// at or behind the camera).
+Vec3 lift_lamp(const Image& distance_m, const Camera& camera, const CameraPose& pose,
+               const LampMark& lamp, std::size_t index);
+
+/// The surface point and normal the fit uses at pixel (x, y) (see the model); false where the
+/// depth is not finite or no neighbour gives a normal.
+bool surface_point(const Image& distance_m, const Camera& camera, const CameraPose& pose, int x,
+                   int y, Vec3& position, Vec3& normal);
+
+/// Lifts the lamps and fits their intensities (model above). `photo`: scene-linear RGB of the
+/// camera's size; `distance_m`: metres along each ray (+inf = sky), the same size.
+/// Throws mr::Error(invalid_argument) naming the lamp or patch index when: a lamp cannot be
+/// lifted (lift_lamp); there are no lamps or no patches; a patch has an albedo outside (0, 1],
+/// fewer than 3 points or no pixel with a finite depth, normal and photo value; a lamp lights
+/// none of the patch pixels (its intensity is then undetermined); the patches are black; or the
+/// data are contradictory (a lamp needs a negative intensity or a patch a negative ambient term,
+/// see LampFitOptions::max_negative_fraction). size_mismatch for images of the wrong size.
+LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& camera,
+                  const CameraPose& pose, const std::vector<LampMark>& lamps,
+                  const std::vector<LampPatch>& patches, const LampFitOptions& options = {});
+
+}  // namespace mr::photo
