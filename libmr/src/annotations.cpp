@@ -17,6 +17,7 @@
 #include <utility>
 
 #include "atomic_file.h"
+#include "json_reading.h"
 #include "mr/error.h"
 
 namespace mr {
@@ -24,103 +25,15 @@ namespace mr {
 namespace {
 
 namespace fs = std::filesystem;
-using Json = nlohmann::ordered_json;
-using Keys = std::initializer_list<std::string_view>;
+using json::Json;
+using json::Keys;
+using json::member;
+using json::parse_text;
 
-std::string describe(const Json& j) {
-  switch (j.type()) {
-    case Json::value_t::null:
-      return "null";
-    case Json::value_t::boolean:
-      return std::string("a boolean (") + (j.get<bool>() ? "true" : "false") + ")";
-    case Json::value_t::number_integer:
-    case Json::value_t::number_unsigned:
-    case Json::value_t::number_float:
-      return "a number (" + j.dump() + ")";
-    case Json::value_t::string: {
-      std::string s = j.dump();
-      if (s.size() > 40) s = s.substr(0, 40) + "...";
-      return "a string (" + s + ")";
-    }
-    case Json::value_t::array:
-      if (j.empty()) return "an empty array";
-      return "an array of " + std::to_string(j.size()) + (j.size() == 1 ? " element" : " elements");
-    case Json::value_t::object:
-      return "an object";
-    default:
-      return "an unsupported value";
-  }
-}
-
-std::string pointer_token(std::string_view key) {
-  std::string t;
-  for (char c : key) {
-    if (c == '~') t += "~0";
-    else if (c == '/') t += "~1";
-    else if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) t += '?';
-    else t += c;
-  }
-  return t;
-}
-
-std::size_t edit_distance(std::string_view a, std::string_view b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diag = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
-                        std::tolower(static_cast<unsigned char>(b[j - 1]));
-      const std::size_t next = std::min({row[j] + 1, row[j - 1] + 1, diag + (same ? 0 : 1)});
-      diag = row[j];
-      row[j] = next;
-    }
-  }
-  return row[b.size()];
-}
-
-class Reader {
+// The shared strict reader, plus the annotations' own value kinds.
+class Reader : public json::JsonReader {
  public:
-  explicit Reader(std::string source) : source_(std::move(source)) {}
-
-  [[noreturn]] void fail(const std::string& pointer, const std::string& problem) const {
-    throw Error(ErrorCode::invalid_argument,
-                source_ + ": " + (pointer.empty() ? "" : pointer + ": ") + problem);
-  }
-  [[noreturn]] void expected(const std::string& pointer, const std::string& what,
-                             const Json& found) const {
-    fail(pointer, "expected " + what + ", found " + describe(found));
-  }
-
-  void object(const Json& j, const std::string& pointer) const {
-    if (!j.is_object()) expected(pointer, "an object", j);
-  }
-
-  void check_keys(const Json& obj, const std::string& pointer, Keys known) const {
-    for (const auto& [key, value] : obj.items()) {
-      if (std::find(known.begin(), known.end(), key) != known.end()) continue;
-      std::string_view best;
-      std::size_t best_distance = std::numeric_limits<std::size_t>::max();
-      for (std::string_view k : known) {
-        const std::size_t d = edit_distance(key, k);
-        if (d < best_distance) best_distance = d, best = k;
-      }
-      std::string hint;
-      if (best_distance <= std::max<std::size_t>(2, key.size() / 4)) {
-        hint = "; did you mean \"" + std::string(best) + "\"?";
-      } else {
-        hint = "; expected one of: ";
-        for (std::string_view k : known) hint += (k == *known.begin() ? "" : ", ") + std::string(k);
-      }
-      fail(pointer + "/" + pointer_token(key), "unknown key" + hint);
-    }
-  }
-
-  double number(const Json& j, const std::string& pointer) const {
-    if (!j.is_number()) expected(pointer, "a number", j);
-    return j.get<double>();
-  }
+  using JsonReader::JsonReader;
 
   PixelPoint point(const Json& j, const std::string& pointer) const {
     if (!j.is_array() || j.size() != 2) expected(pointer, "a point [x, y] (2 numbers)", j);
@@ -141,55 +54,7 @@ class Reader {
     return {point(j[0], pointer + "/0"), point(j[1], pointer + "/1")};
   }
 
- private:
-  std::string source_;
 };
-
-const Json* member(const Json& obj, const char* key) {
-  const auto it = obj.find(key);
-  return it == obj.end() ? nullptr : &*it;
-}
-
-// Parses, rejecting duplicate keys and turning syntax errors into "source: line L, column C:".
-Json parse_text(const std::string& text, const Reader& r) {
-  std::vector<std::set<std::string>> keys;  // per open object (arrays push an unused set)
-  std::vector<std::string> path;            // for the duplicate-key message
-  using Event = Json::parse_event_t;
-  auto callback = [&](int, Event event, Json& parsed) {
-    switch (event) {
-      case Event::object_start:
-      case Event::array_start:
-        keys.emplace_back();
-        break;
-      case Event::key: {
-        const std::string k = parsed.get<std::string>();
-        if (!keys.back().insert(k).second) r.fail("", "duplicate key \"" + k + "\"");
-        break;
-      }
-      case Event::object_end:
-      case Event::array_end:
-        keys.pop_back();
-        break;
-      case Event::value:
-        break;
-    }
-    return true;
-  };
-  try {
-    return Json::parse(text, callback, /*allow_exceptions=*/true, /*ignore_comments=*/false);
-  } catch (const nlohmann::json::parse_error& e) {
-    std::size_t line = 1, column = 1;
-    const std::size_t end = std::min<std::size_t>(e.byte > 0 ? e.byte - 1 : 0, text.size());
-    for (std::size_t i = 0; i < end; ++i) {
-      if (text[i] == '\n') ++line, column = 1;
-      else if ((static_cast<unsigned char>(text[i]) & 0xC0) != 0x80) ++column;
-    }
-    std::string what = e.what();
-    if (const auto p = what.find("syntax error"); p != std::string::npos) what = what.substr(p);
-    else if (const auto q = what.rfind(": "); q != std::string::npos) what = what.substr(q + 2);
-    r.fail("", "line " + std::to_string(line) + ", column " + std::to_string(column) + ": " + what);
-  }
-}
 
 Annotations from_document(const Json& doc, const Reader& r) {
   r.object(doc, "");
