@@ -1,5 +1,5 @@
 // mr-studio's main window: the photo view with a before/after split, the layer switcher, the
-// fog panel, the live preview (rendered on a worker thread: a draft pass on <= 0.5 MP, then a
+// fog panel, the live preview (rendered on a worker thread: a draft pass on <= 0.25 MP, then a
 // normal pass at the view's resolution; stale results are discarded by a generation counter),
 // project files and export. Errors are shown in non-modal message boxes (and errorShown).
 #pragma once

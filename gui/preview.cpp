@@ -86,12 +86,25 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
   return doc;
 }
 
-void preview_inputs(const Document& document, double max_pixels, mr::Image& photo,
-                    mr::Image& distance_m, mr::Camera& camera) {
+std::shared_ptr<const PreviewInputs> preview_inputs(const Document& document, double max_pixels,
+                                                    const mr::ColorConfig& color) {
   const QSize size = fit_pixels(document.photo.width(), document.photo.height(), max_pixels);
-  photo = downscale_area(document.photo, size.width(), size.height());
-  distance_m = downscale_nearest(document.distance_m, size.width(), size.height());
-  camera = scale_camera(document.camera, size.width(), size.height());
+  {
+    const std::lock_guard<std::mutex> lock(document.inputs_mutex);
+    for (const auto& cached : document.inputs_cache)
+      if (cached->photo.width() == size.width() && cached->photo.height() == size.height()) return cached;
+  }
+  auto inputs = std::make_shared<PreviewInputs>();
+  inputs->photo = downscale_area(document.photo, size.width(), size.height());
+  inputs->distance_m = downscale_nearest(document.distance_m, size.width(), size.height());
+  inputs->camera = scale_camera(document.camera, size.width(), size.height());
+  inputs->photo_image = to_display(inputs->photo, color);
+  inputs->depth = depth_colormap(inputs->distance_m);
+  const std::lock_guard<std::mutex> lock(document.inputs_mutex);
+  constexpr std::size_t kCachedSizes = 3;  // the draft's, the view's and one more (a resize, 100 %)
+  if (document.inputs_cache.size() >= kCachedSizes) document.inputs_cache.erase(document.inputs_cache.begin());
+  document.inputs_cache.push_back(inputs);
+  return inputs;
 }
 
 std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
@@ -100,7 +113,10 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   auto result = std::make_shared<PreviewResult>();
   result->generation = request.generation;
   result->quality = request.quality;
-  preview_inputs(*request.document, request.max_pixels, result->photo, result->distance_m, result->camera);
+  const std::shared_ptr<const PreviewInputs> inputs = preview_inputs(*request.document, request.max_pixels, color);
+  result->photo = inputs->photo;
+  result->distance_m = inputs->distance_m;
+  result->camera = inputs->camera;
   result->scene = request.scene;
   result->scene.render.quality = request.quality;
   const auto render_start = std::chrono::steady_clock::now();
@@ -110,10 +126,10 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   result->backend = aovs.backend;
   result->backend_notice = aovs.backend_notice;
   result->composite = to_display(result->layers.composite, color);
-  result->photo_image = to_display(result->photo, color);
+  result->photo_image = inputs->photo_image;  // QImage: shared, not copied
   result->transmittance = to_display(result->layers.transmittance, color);
   result->inscatter = to_display(result->layers.inscatter, color);
-  result->depth = depth_colormap(result->distance_m);
+  result->depth = inputs->depth;
   result->total_s = seconds_since(start);
   return result;
 }

@@ -7,11 +7,21 @@
 #include <QString>
 #include <QStringList>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <vector>
 
 #include "mr/mr.h"
 
 namespace mrstudio {
+
+/// The downscaled inputs of a preview at one size (photo area-averaged, depth nearest, camera
+/// scaled) and their display images.
+struct PreviewInputs {
+  mr::Image photo, distance_m;
+  mr::Camera camera;
+  QImage photo_image, depth;  ///< 8-bit sRGB photo; depth colour map
+};
 
 struct Document {
   QString photo_path;
@@ -23,6 +33,11 @@ struct Document {
   mr::FogScene scene;    ///< starting scene: estimated pose / sun / sky, default medium
   QStringList notes;     ///< estimation notes, depth warnings
   QImage photo_display;  ///< the photo as 8-bit sRGB, full resolution
+
+  /// Downscaled inputs already made, newest last (a few sizes: the draft's, the view's): an edit
+  /// re-renders without resizing the full-resolution photo again. Filled by preview_inputs.
+  mutable std::mutex inputs_mutex;
+  mutable std::vector<std::shared_ptr<const PreviewInputs>> inputs_cache;
 };
 
 /// Reads the photo, its depth ({stem}_depth.{exr,tif,tiff,pfm,png} next to it, as `mr fog`
@@ -37,7 +52,7 @@ struct PreviewRequest {
   std::shared_ptr<const Document> document;
   mr::FogScene scene;  ///< render.quality is set from `quality`
   mr::Quality quality = mr::Quality::draft;
-  double max_pixels = 0.5e6;  ///< the render's size: the photo's aspect, at most this many pixels
+  double max_pixels = 0.25e6;  ///< the render's size: the photo's aspect, at most this many pixels
   int generation = 0;
 };
 
@@ -54,9 +69,10 @@ struct PreviewResult {
   double render_s = 0, total_s = 0;  ///< mr::fog alone; everything (downscale, display)
 };
 
-/// The downscaled inputs of a request (photo area-averaged, depth nearest, camera scaled).
-void preview_inputs(const Document& document, double max_pixels, mr::Image& photo,
-                    mr::Image& distance_m, mr::Camera& camera);
+/// The downscaled inputs of a request at fit_pixels(photo, max_pixels): from the document's
+/// cache, or made (and cached) now. Thread-safe.
+std::shared_ptr<const PreviewInputs> preview_inputs(const Document& document, double max_pixels,
+                                                    const mr::ColorConfig& color);
 
 /// Renders a request. Throws mr::Error.
 std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,

@@ -274,7 +274,7 @@ void GuiTest::draftThenRefineOnLargePhoto() {
   openAndSettle(w, QStringLiteral(MR_SOURCE_DIR "/sample_photos/aloe.jpg"));  // 1282 x 1110, 1.4 MP
   QVERIFY(passes.size() >= 2);
   QCOMPARE(passes.front().first, int(mr::Quality::draft));
-  QVERIFY(passes.front().second <= 500000);
+  QVERIFY(passes.front().second <= 250000);
   QCOMPARE(passes.back().first, int(mr::Quality::normal));
   const QSize display = w.imageView()->displayPixels();
   QVERIFY(passes.back().second >= std::min<qint64>(qint64(display.width()) * display.height(), 1282 * 1110) * 9 / 10);
