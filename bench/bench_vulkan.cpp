@@ -9,67 +9,23 @@
 //   build/bench/mr_bench_vulkan --benchmark_filter='w:1920/h:1080/q:1'   # 1080p normal only
 #include <benchmark/benchmark.h>
 
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imagebufalgo.h>
-
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <map>
 
+#include "leuven_scene.h"
 #include "mr/mr.h"
-
-namespace fs = std::filesystem;
 
 namespace {
 
-struct Inputs {
-  mr::Image photo, depth;
-  mr::Camera camera;
-};
-
-mr::Image to_image(const OIIO::ImageBuf& buf) {
-  const auto& spec = buf.spec();
-  mr::Image im(spec.width, spec.height, spec.nchannels);
-  buf.get_pixels(buf.roi(), OIIO::TypeDesc::FLOAT, im.data());
-  return im;
-}
+using mr::bench::Inputs;
 
 const Inputs& inputs(int width, int height) {
-  static std::map<std::pair<int, int>, Inputs> cache;
-  const auto key = std::make_pair(width, height);
-  if (auto it = cache.find(key); it != cache.end()) return it->second;
-  const fs::path dir = fs::path(MR_SOURCE_DIR) / "sample_photos";
-  const mr::Image photo = mr::read_image(dir / "leuven.jpg");
-  mr::ReadOptions raw;
-  raw.to_scene_linear = false;
-  raw.reject_non_finite = false;
-  const mr::Image depth = mr::read_image(dir / "leuven_depth.exr", raw);
-  OIIO::ImageBuf photo_buf(OIIO::ImageSpec(photo.width(), photo.height(), 3, OIIO::TypeDesc::FLOAT),
-                           const_cast<float*>(photo.data()));
-  OIIO::ImageBuf depth_buf(OIIO::ImageSpec(depth.width(), depth.height(), 1, OIIO::TypeDesc::FLOAT),
-                           const_cast<float*>(depth.data()));
-  Inputs in;
-  in.photo = to_image(OIIO::ImageBufAlgo::resize(photo_buf, "", 0, OIIO::ROI(0, width, 0, height, 0, 1, 0, 3)));
-  in.depth = to_image(OIIO::ImageBufAlgo::resample(depth_buf, false, OIIO::ROI(0, width, 0, height, 0, 1, 0, 1)));
-  in.depth.set_channel_names({"Z"});
-  for (float& d : in.depth.pixels())
-    if (!(d > 0) || !std::isfinite(d)) d = INFINITY;
-  in.camera = mr::Camera::from_horizontal_fov(width, height, 60.0);
-  return cache[key] = std::move(in);
+  return mr::bench::leuven_inputs(width, height);
 }
 
 mr::FogScene scene(mr::Quality quality, mr::Backend backend) {
-  mr::FogScene s;
-  const float sigma = float(mr::extinction_from_visibility(120.0));
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.albedo = {0.9f, 0.9f, 0.9f};
-  s.medium.g = 0.5;
-  s.medium.layer_bottom_m = 0;
-  s.medium.layer_top_m = 15;
-  s.pose.pitch_deg = 7.05;
-  s.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-70, 18), {4, 3.8f, 3.4f}, 0.27};
-  s.render.quality = quality;
+  mr::FogScene s = mr::bench::leuven_sun_scene(quality);
   s.render.backend = backend;
   return s;
 }
@@ -94,7 +50,7 @@ void BM_Vulkan(benchmark::State& state) {
     return;
   }
   state.SetLabel(device);
-  state.counters["mesh_ms"] = t.mesh_s * 1e3;  // CPU: depth -> normals + occluder mesh
+  state.counters["mesh_ms"] = t.mesh_s * 1e3;        // CPU: depth -> normals + occluder mesh
   state.counters["scatter_ms"] = t.scatter_s * 1e3;  // the backend call, wall time
   if (backend == mr::Backend::vulkan) {
     state.counters["upload_ms"] = t.upload_s * 1e3;
