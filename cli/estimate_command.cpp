@@ -22,10 +22,12 @@ CLI::App* add_estimate_command(CLI::App& app, EstimateCommandOptions& o) {
       "Estimate a fog scene (camera pose, sun) and a metric depth map from one photo and its "
       "annotations (docs/annotations.md)");
   cmd->add_option("photo", o.photo, "The photo")->required();
+  // Without --fov / --focal-px: EXIF, else orthogonal vanishing points when confident, else 60.
   cmd->add_option("--annotations", o.annotations,
                   "Annotations JSON: horizon, camera height, planes, distance hints, shadow pairs");
   auto* fov = cmd->add_option("--fov", o.fov_deg,
-                              "Horizontal field of view in degrees [default: EXIF, else 60]")
+                              "Horizontal field of view in degrees [default: EXIF, else from "
+                              "orthogonal vanishing points when confident, else 60]")
                   ->check(CLI::Range(0.0, 180.0));
   cmd->add_option("--focal-px", o.focal_px, "Focal length in pixels")
       ->excludes(fov)
@@ -56,11 +58,13 @@ int run_estimate_command(const EstimateCommandOptions& o) {
     }
   }
   if (!o.depth_out.empty() && !is_writable_image_extension(o.depth_out)) {
-    std::fprintf(stderr, "ERROR: %s: not an image format that can be written\n", o.depth_out.c_str());
+    std::fprintf(stderr, "ERROR: %s: not an image format that can be written\n",
+                 o.depth_out.c_str());
     return 2;
   }
   if (!o.overlay_out.empty() && !is_writable_image_extension(o.overlay_out)) {
-    std::fprintf(stderr, "ERROR: %s: not an image format that can be written\n", o.overlay_out.c_str());
+    std::fprintf(stderr, "ERROR: %s: not an image format that can be written\n",
+                 o.overlay_out.c_str());
     return 2;
   }
 
@@ -82,9 +86,22 @@ int run_estimate_command(const EstimateCommandOptions& o) {
   }
   SceneEstimate est;
   try {
-    Camera camera = o.focal_px ? Camera::from_focal_px(photo.width(), photo.height(), *o.focal_px)
-                    : o.fov_deg ? Camera::from_horizontal_fov(photo.width(), photo.height(), *o.fov_deg)
-                                : Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
+    std::string focal_source = "given";
+    Camera camera;
+    if (o.focal_px) {
+      camera = Camera::from_focal_px(photo.width(), photo.height(), *o.focal_px);
+    } else if (o.fov_deg) {
+      camera = Camera::from_horizontal_fov(photo.width(), photo.height(), *o.fov_deg);
+    } else {
+      const PhotoCamera pc = camera_for_photo(photo);
+      camera = pc.camera;
+      focal_source = pc.source;
+      if (pc.source == "vanishing points") {
+        char conf[32];
+        std::snprintf(conf, sizeof conf, ", confidence %.2f", pc.confidence);
+        focal_source += conf;
+      }
+    }
     est = estimate_scene(photo, camera, annotations);
     std::optional<NetworkDepth> network_depth;
     if (!o.depth_network.empty()) {
@@ -98,15 +115,17 @@ int run_estimate_command(const EstimateCommandOptions& o) {
       est.geometry.distance_m = network_depth->fit.distance_m;
     }
     if (!o.quiet) {
-      std::printf("%s: %dx%d, focal %.1f px (%.1f deg across)\n", o.photo.c_str(), camera.width,
-                  camera.height, camera.focal_px, camera.horizontal_fov_deg());
+      std::printf("%s: %dx%d, focal %.1f px (%.1f deg across; %s)\n", o.photo.c_str(), camera.width,
+                  camera.height, camera.focal_px, camera.horizontal_fov_deg(),
+                  focal_source.c_str());
       for (const auto& note : est.notes) std::printf("  %s\n", note.c_str());
       if (network_depth) {
         const DepthFit& f = network_depth->fit;
-        std::printf("  depth network: %s, 1/depth = %.4g * r %+.4g (1/m), inliers %zu/%zu ground "
-                    "pixels, residual %.2f%% RMS (inliers), %.2f%% median\n",
-                    o.depth_network.c_str(), f.scale, f.shift, f.inliers, f.reference_pixels,
-                    100 * f.rms_inlier_residual, 100 * f.median_abs_residual);
+        std::printf(
+            "  depth network: %s, 1/depth = %.4g * r %+.4g (1/m), inliers %zu/%zu ground "
+            "pixels, residual %.2f%% RMS (inliers), %.2f%% median\n",
+            o.depth_network.c_str(), f.scale, f.shift, f.inliers, f.reference_pixels,
+            100 * f.rms_inlier_residual, 100 * f.median_abs_residual);
       }
     }
   } catch (const Error& e) {

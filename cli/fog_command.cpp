@@ -40,7 +40,8 @@ struct Job {
 constexpr const char* kDepthExtensions[] = {".exr", ".tif", ".tiff", ".pfm", ".png"};
 
 fs::path find_depth(const FogCommandOptions& o, const fs::path& photo) {
-  if (!o.depth.empty() && o.depth != "auto") return is_pattern(o.depth) ? expand_pattern(o.depth, photo) : fs::path(o.depth);
+  if (!o.depth.empty() && o.depth != "auto")
+    return is_pattern(o.depth) ? expand_pattern(o.depth, photo) : fs::path(o.depth);
   // Default: <dir>/<stem>_depth.<ext> with the first extension that exists.
   std::error_code ec;
   for (const char* ext : kDepthExtensions) {
@@ -55,8 +56,8 @@ FogPlan make_plan(const FogCommandOptions& o) {
   plan.color = ColorConfig::from_environment(o.ocio_config);
   for (const std::string* cs : {&o.input_colorspace, &o.output_colorspace})
     if (!cs->empty() && !plan.color.has_colorspace(*cs))
-      throw Error(ErrorCode::invalid_argument, "colour space '" + *cs + "' is not in OCIO config " +
-                                                   plan.color.source());
+      throw Error(ErrorCode::invalid_argument,
+                  "colour space '" + *cs + "' is not in OCIO config " + plan.color.source());
   if (!o.visibility.empty() && !o.density.empty())
     throw Error(ErrorCode::invalid_argument, "--visibility and --density are exclusive");
   FogScene& scene = plan.scene;
@@ -65,11 +66,14 @@ FogPlan make_plan(const FogCommandOptions& o) {
     if (!o.density.empty()) {
       scene.medium.sigma_t_per_m = parse_rgb(o.density);
     } else if (!o.visibility.empty() || o.scene_path.empty()) {
-      const float sigma = float(extinction_from_visibility(parse_distance_m(o.visibility.empty() ? "150m" : o.visibility)));
+      const float sigma = float(extinction_from_visibility(
+          parse_distance_m(o.visibility.empty() ? "150m" : o.visibility)));
       scene.medium.sigma_t_per_m = {sigma, sigma, sigma};
     }
-    if (o.airlight != "auto") scene.lighting.sky_radiance = parse_rgb(o.airlight);
-    else if (o.scene_path.empty()) scene.lighting.sky_radiance.reset();
+    if (o.airlight != "auto")
+      scene.lighting.sky_radiance = parse_rgb(o.airlight);
+    else if (o.scene_path.empty())
+      scene.lighting.sky_radiance.reset();
     if (!o.albedo.empty()) scene.medium.albedo = parse_rgb(o.albedo);
     if (o.g) scene.medium.g = *o.g;
     if (!o.height_fog.empty()) {
@@ -90,9 +94,9 @@ FogPlan make_plan(const FogCommandOptions& o) {
       // Whole numbers in range before the casts (a double out of an int's range is UB).
       const auto whole = [&](double x, double lo, double hi, const std::string& name) {
         if (!(x >= lo && x <= hi && x == std::floor(x)))
-          throw std::invalid_argument("--noise '" + o.noise + "': " + name + " must be a whole number in " +
-                                      std::to_string(std::uint32_t(lo)) + ".." +
-                                      std::to_string(std::uint32_t(hi)));
+          throw std::invalid_argument(
+              "--noise '" + o.noise + "': " + name + " must be a whole number in " +
+              std::to_string(std::uint32_t(lo)) + ".." + std::to_string(std::uint32_t(hi)));
         return x;
       };
       if (n > 2) scene.medium.noise.octaves = int(whole(v[2], 1, 8, "octaves"));
@@ -110,7 +114,8 @@ FogPlan make_plan(const FogCommandOptions& o) {
           throw std::invalid_argument("--sun-azimuth and --sun-elevation go together");
         if (!(std::abs(*o.sun_elevation_deg) <= 90))  // as in scene files
           throw std::invalid_argument("--sun-elevation must be in [-90, 90] degrees");
-        sun.direction_to_sun = direction_from_azimuth_elevation(*o.sun_azimuth_deg, *o.sun_elevation_deg);
+        sun.direction_to_sun =
+            direction_from_azimuth_elevation(*o.sun_azimuth_deg, *o.sun_elevation_deg);
       }
       if (!o.sun_irradiance.empty()) sun.irradiance = parse_rgb(o.sun_irradiance);
       if (o.sun_radius_deg) sun.angular_radius_deg = *o.sun_radius_deg;
@@ -127,7 +132,8 @@ FogPlan make_plan(const FogCommandOptions& o) {
         pos = semi + 1;
       }
       if (parts.size() != 2 && parts.size() != 4)
-        throw std::invalid_argument("--lamp '" + text + "': expected x,y,z;R,G,B[;dx,dy,dz;inner,outer]");
+        throw std::invalid_argument("--lamp '" + text +
+                                    "': expected x,y,z;R,G,B[;dx,dy,dz;inner,outer]");
       Lamp lamp;
       const auto p = parse_numbers(parts[0], 3, "--lamp position");
       lamp.position_m = {p[0], p[1], p[2]};
@@ -152,24 +158,39 @@ FogPlan make_plan(const FogCommandOptions& o) {
   if (o.march_steps) scene.render.march_steps = *o.march_steps;
   if (o.no_shadows) scene.render.volumetric_shadows = false;
   if (!o.quality.empty()) {
-    if (o.quality == "draft") scene.render.quality = Quality::draft;
-    else if (o.quality == "normal") scene.render.quality = Quality::normal;
-    else if (o.quality == "final") scene.render.quality = Quality::final;
-    else throw Error(ErrorCode::invalid_argument, "--quality '" + o.quality + "': expected draft, normal or final");
+    if (o.quality == "draft")
+      scene.render.quality = Quality::draft;
+    else if (o.quality == "normal")
+      scene.render.quality = Quality::normal;
+    else if (o.quality == "final")
+      scene.render.quality = Quality::final;
+    else
+      throw Error(ErrorCode::invalid_argument,
+                  "--quality '" + o.quality + "': expected draft, normal or final");
   }
   if (!o.backend.empty()) {
-    if (o.backend == "auto") scene.render.backend = Backend::automatic;
-    else if (o.backend == "cpu") scene.render.backend = Backend::cpu;
-    else if (o.backend == "vulkan") scene.render.backend = Backend::vulkan;
-    else throw Error(ErrorCode::invalid_argument, "--backend '" + o.backend + "': expected auto, cpu or vulkan");
+    if (o.backend == "auto")
+      scene.render.backend = Backend::automatic;
+    else if (o.backend == "cpu")
+      scene.render.backend = Backend::cpu;
+    else if (o.backend == "vulkan")
+      scene.render.backend = Backend::vulkan;
+    else
+      throw Error(ErrorCode::invalid_argument,
+                  "--backend '" + o.backend + "': expected auto, cpu or vulkan");
   }
   // Photos in parallel already use the cores; each render gets what its arena allows.
   validate_scene(scene);
 
-  if (o.depth_kind == "distance") plan.depth.kind = DepthKind::distance;
-  else if (o.depth_kind == "z") plan.depth.kind = DepthKind::planar_z;
-  else if (o.depth_kind == "disparity") plan.depth.kind = DepthKind::disparity;
-  else throw Error(ErrorCode::invalid_argument, "--depth-kind '" + o.depth_kind + "': expected distance, z or disparity");
+  if (o.depth_kind == "distance")
+    plan.depth.kind = DepthKind::distance;
+  else if (o.depth_kind == "z")
+    plan.depth.kind = DepthKind::planar_z;
+  else if (o.depth_kind == "disparity")
+    plan.depth.kind = DepthKind::disparity;
+  else
+    throw Error(ErrorCode::invalid_argument,
+                "--depth-kind '" + o.depth_kind + "': expected distance, z or disparity");
   plan.depth.scale = o.depth_scale;
   plan.depth.baseline_m = o.baseline_m;
   plan.depth.doffs_px = o.doffs_px;
@@ -181,14 +202,35 @@ FogPlan make_plan(const FogCommandOptions& o) {
     throw Error(ErrorCode::invalid_argument, "--annotations needs --depth auto");
   plan.pixel_type = parse_pixel_type(o.bit_depth);
   if (!o.format.empty() && !is_writable_image_extension("x." + o.format))
-    throw Error(ErrorCode::invalid_argument, "--format '" + o.format + "' is not a writable image format");
+    throw Error(ErrorCode::invalid_argument,
+                "--format '" + o.format + "' is not a writable image format");
   // Last, so that a usage error writes nothing; like the images, it never replaces an input.
-  if (!o.save_scene_path.empty()) {
+  // A pattern is written per photo, once its scene is resolved (run_job); here only checked.
+  if (!o.save_scene_path.empty() && is_pattern(o.save_scene_path)) {
+    const std::vector<fs::path> photos = expand_inputs(o.inputs, {"_depth", "_disparity", "_aovs"});
+    std::vector<std::pair<fs::path, fs::path>> targets;  // scene file, its photo
+    for (const fs::path& photo : photos) {
+      const fs::path target = expand_pattern(o.save_scene_path, photo);
+      for (const fs::path& input : {photo, find_depth(o, photo)})
+        if (same_file(target, input))
+          throw Error(ErrorCode::invalid_argument,
+                      "--save-scene " + o.save_scene_path + ": " + target.string() +
+                          " is an input file; refusing to overwrite it");
+      for (const auto& [other, other_photo] : targets)
+        if (other.lexically_normal() == target.lexically_normal())
+          throw Error(ErrorCode::invalid_argument, "--save-scene " + o.save_scene_path + " gives " +
+                                                       target.string() + " for both " +
+                                                       other_photo.string() + " and " +
+                                                       photo.string() + "; use {stem} or {name}");
+      targets.emplace_back(target, photo);
+    }
+  } else if (!o.save_scene_path.empty()) {
     for (const fs::path& photo : expand_inputs(o.inputs))
       for (const fs::path& input : {photo, find_depth(o, photo)})
         if (same_file(o.save_scene_path, input))
-          throw Error(ErrorCode::invalid_argument, "--save-scene " + o.save_scene_path +
-                                                       " is an input file; refusing to overwrite it");
+          throw Error(
+              ErrorCode::invalid_argument,
+              "--save-scene " + o.save_scene_path + " is an input file; refusing to overwrite it");
     save_scene(o.save_scene_path, scene);
   }
   return plan;
@@ -204,20 +246,22 @@ Camera make_camera(const FogCommandOptions& o, const Image& photo) {
 // annotations when --annotations finds them, else the automatic / level-camera estimate). The
 // estimated pose (and sun, sky, when the annotations give them) replace the plan's; options on
 // the command line still win. --camera-height also scales the estimated depth.
-DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image& photo, const Camera& camera,
-                        FogScene& scene) {
+DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image& photo,
+                        const Camera& camera, FogScene& scene) {
   try {
     Annotations annotations;
     if (!o.annotations.empty()) {
       const bool pattern = is_pattern(o.annotations);
-      const fs::path path = pattern ? expand_pattern(o.annotations, job.photo) : fs::path(o.annotations);
+      const fs::path path =
+          pattern ? expand_pattern(o.annotations, job.photo) : fs::path(o.annotations);
       std::error_code ec;
       if (!pattern || fs::exists(path, ec)) annotations = load_annotations(path);
     }
     EstimateOptions options;
     if (o.camera_height_m) options.default_camera_height_m = *o.camera_height_m;
-    SceneEstimate est = estimate_scene(photo.channels() >= 3 ? photo : photo.select_channels(std::array{0, 0, 0}),
-                                       camera, annotations, options);
+    SceneEstimate est =
+        estimate_scene(photo.channels() >= 3 ? photo : photo.select_channels(std::array{0, 0, 0}),
+                       camera, annotations, options);
     scene.pose = est.scene.pose;
     if (o.camera_height_m) scene.pose.position_m.y = *o.camera_height_m;
     if (o.pitch_deg) scene.pose.pitch_deg = *o.pitch_deg;
@@ -226,13 +270,15 @@ DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image&
     const bool sun_given = o.sun_azimuth_deg || o.sun_elevation_deg || !o.sun_direction.empty() ||
                            !o.sun_irradiance.empty() || o.sun_radius_deg;
     if (est.scene.lighting.sun && !sun_given) scene.lighting.sun = est.scene.lighting.sun;
-    if (est.scene.lighting.sky_radiance && o.airlight == "auto") scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
+    if (est.scene.lighting.sky_radiance && o.airlight == "auto")
+      scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
     DepthMap depth;
     depth.distance_m = std::move(est.geometry.distance_m);
     depth.no_surface_pixels = est.geometry.sky_pixels;
     return depth;
   } catch (const Error& e) {
-    throw Error(e.code(), job.photo.string() + ": estimating the geometry (--depth auto): " + e.what());
+    throw Error(e.code(),
+                job.photo.string() + ": estimating the geometry (--depth auto): " + e.what());
   }
 }
 
@@ -240,7 +286,8 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
                 const std::atomic<bool>& interrupted) {
   std::error_code ec;
   const bool want_aovs_file = !job.aovs_output.empty();
-  if (!o.overwrite && fs::exists(job.output, ec) && (!want_aovs_file || fs::exists(job.aovs_output, ec)))
+  if (!o.overwrite && fs::exists(job.output, ec) &&
+      (!want_aovs_file || fs::exists(job.aovs_output, ec)))
     return Outcome::skipped;
   for (const fs::path* out : {&job.output, &job.aovs_output}) {
     if (out->empty()) continue;
@@ -254,16 +301,22 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   read.color = &plan.color;
   const Image photo = read_image(job.photo, read);
   const ImageFileInfo info = probe_image(job.photo);
-  const Camera camera = make_camera(o, photo);
   FogScene scene = plan.scene;
   const bool estimated = o.depth == "auto" && !fs::exists(job.depth, ec);
-  const DepthMap depth = estimated ? estimate_depth(o, job, photo, camera, scene) : read_depth(job.depth, camera, plan.depth);
-  const std::string depth_name = estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
+  // Estimating the geometry, a photo without EXIF focal length may get it from its vanishing
+  // points (camera_for_photo); a supplied depth map keeps the documented default.
+  const Camera camera = estimated && !o.focal_px && !o.fov_deg ? camera_for_photo(photo).camera
+                                                               : make_camera(o, photo);
+  const DepthMap depth = estimated ? estimate_depth(o, job, photo, camera, scene)
+                                   : read_depth(job.depth, camera, plan.depth);
+  const std::string depth_name =
+      estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   // Sky stored as 0 or +inf is the documented encoding; NaN or negative values are not, and an
   // all-sky map is almost certainly the wrong file or scale.
   auto percent = [&](std::size_t n) {
     char text[64];
-    std::snprintf(text, sizeof text, "%.1f", 100.0 * double(n) / double(depth.distance_m.pixel_count()));
+    std::snprintf(text, sizeof text, "%.1f",
+                  100.0 * double(n) / double(depth.distance_m.pixel_count()));
     return std::string(text);
   };
   if (depth.invalid_pixels > 0)
@@ -287,8 +340,11 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   const bool exr_out = out_ext == ".exr" || out_ext == ".EXR";
   if (write.pixel_type == PixelType::automatic) {
     // Keep the input's precision where the output format can hold it.
-    if (exr_out) write.pixel_type = info.pixel_type == PixelType::float32 ? PixelType::float32 : PixelType::half;
-    else if (info.pixel_type == PixelType::uint16 && (out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff"))
+    if (exr_out)
+      write.pixel_type =
+          info.pixel_type == PixelType::float32 ? PixelType::float32 : PixelType::half;
+    else if (info.pixel_type == PixelType::uint16 &&
+             (out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff"))
       write.pixel_type = PixelType::uint16;
   }
   // R,G,B + transmittance.RGB + inscatter.RGB + depth.Z + sun_visibility.Y + optical_depth.RGB
@@ -304,11 +360,19 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   };
   if (o.aovs && exr_out) {
     if (!o.output_colorspace.empty())
-      report.warning(job.output.string() + ": layered EXR output is scene-linear; --output-colorspace ignored");
-    write_layers(job.output, write.pixel_type == PixelType::float32 ? PixelType::float32 : PixelType::half);
+      report.warning(job.output.string() +
+                     ": layered EXR output is scene-linear; --output-colorspace ignored");
+    write_layers(job.output,
+                 write.pixel_type == PixelType::float32 ? PixelType::float32 : PixelType::half);
   } else {
     write_image(job.output, layers.composite, write);
     if (want_aovs_file) write_layers(job.aovs_output, PixelType::half);
+  }
+  // The scene this photo was rendered with (with --depth auto: its estimated pose, sun, sky).
+  if (!o.save_scene_path.empty() && is_pattern(o.save_scene_path)) {
+    const fs::path target = expand_pattern(o.save_scene_path, job.photo);
+    if (target.has_parent_path()) fs::create_directories(target.parent_path(), ec);  // as -o
+    save_scene(target, scene);
   }
   return Outcome::done;
 }
@@ -322,13 +386,15 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
                   "Photos: files, folders or globs (in folders and globs, *_depth, *_disparity "
                   "and *_aovs files are not photos)")
       ->required();
-  cmd->add_option("--depth", o.depth,
-                  "Depth map: a pattern with {dir} {stem} {name} {ext}, or one file for all "
-                  "[default: {dir}/{stem}_depth.{exr,tif,tiff,pfm,png}, first that exists]; 'auto': "
-                  "that search, and where it finds nothing the geometry is estimated from the photo");
-  cmd->add_option("--annotations", o.annotations,
-                  "With --depth auto: annotations JSON (docs/annotations.md), a pattern like --depth "
-                  "(a photo without its file: automatic)");
+  cmd->add_option(
+      "--depth", o.depth,
+      "Depth map: a pattern with {dir} {stem} {name} {ext}, or one file for all "
+      "[default: {dir}/{stem}_depth.{exr,tif,tiff,pfm,png}, first that exists]; 'auto': "
+      "that search, and where it finds nothing the geometry is estimated from the photo");
+  cmd->add_option(
+      "--annotations", o.annotations,
+      "With --depth auto: annotations JSON (docs/annotations.md), a pattern like --depth "
+      "(a photo without its file: automatic)");
   cmd->add_option("--depth-kind", o.depth_kind, "distance (along the ray), z (planar) or disparity")
       ->capture_default_str();
   cmd->add_option("--depth-scale", o.depth_scale,
@@ -336,53 +402,79 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
       ->capture_default_str();
   cmd->add_option("--baseline", o.baseline_m, "Stereo baseline in metres (disparity maps)");
   cmd->add_option("--doffs", o.doffs_px, "Disparity offset in pixels (Middlebury 'doffs')");
-  auto* fov = cmd->add_option("--fov", o.fov_deg, "Horizontal field of view in degrees [default: EXIF, else 60]");
+  auto* fov =
+      cmd->add_option("--fov", o.fov_deg,
+                      "Horizontal field of view in degrees [default: EXIF, else 60; with an "
+                      "estimated depth (--depth auto): EXIF, else from orthogonal vanishing "
+                      "points when confident, else 60]");
   cmd->add_option("--focal-px", o.focal_px, "Focal length in pixels")->excludes(fov);
-  auto* vis = cmd->add_option("--visibility", o.visibility,
-                              "Meteorological visibility, e.g. 150m or 1.2km (sigma = 3.912 / V) [default: 150m]");
-  cmd->add_option("--density", o.density, "Extinction coefficient in 1/m: one value or R,G,B")->excludes(vis);
+  auto* vis = cmd->add_option(
+      "--visibility", o.visibility,
+      "Meteorological visibility, e.g. 150m or 1.2km (sigma = 3.912 / V) [default: 150m]");
+  cmd->add_option("--density", o.density, "Extinction coefficient in 1/m: one value or R,G,B")
+      ->excludes(vis);
   cmd->add_option("--airlight", o.airlight,
                   "Fog colour, scene-linear: 'auto' (dark channel prior), one value or R,G,B")
       ->capture_default_str();
-  cmd->add_option("-o,--out-dir", o.out_dir, "Output folder (created if missing)")->capture_default_str();
+  cmd->add_option("-o,--out-dir", o.out_dir, "Output folder (created if missing)")
+      ->capture_default_str();
   cmd->add_option("--suffix", o.suffix, "Appended to each output's name")->capture_default_str();
-  cmd->add_option("--format", o.format, "Output format by extension: jpg, png, tif, exr, ... [default: the input's]");
-  cmd->add_option("--bit-depth", o.bit_depth, "8, 16, half, float or auto (the input's where possible)")
+  cmd->add_option("--format", o.format,
+                  "Output format by extension: jpg, png, tif, exr, ... [default: the input's]");
+  cmd->add_option("--bit-depth", o.bit_depth,
+                  "8, 16, half, float or auto (the input's where possible)")
       ->capture_default_str();
   cmd->add_flag("--aovs", o.aovs,
                 "Also write layers R,G,B + transmittance.RGB + inscatter.RGB + depth.Z "
                 "(into the output if it is .exr, else into <name>_aovs.exr)");
-  cmd->add_option("-j,--threads", o.threads, "Worker threads [default: all cores]")->check(CLI::NonNegativeNumber);
+  cmd->add_option("-j,--threads", o.threads, "Worker threads [default: all cores]")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_flag("-q,--quiet", o.quiet, "Print errors and the summary only");
   cmd->add_flag("--overwrite", o.overwrite, "Redo photos whose outputs exist (default: skip them)");
   cmd->add_option("--scene", o.scene_path, "Scene JSON (docs/scene.md); options below override it");
-  cmd->add_option("--save-scene", o.save_scene_path, "Write the resolved scene JSON here");
+  cmd->add_option(
+      "--save-scene", o.save_scene_path,
+      "Write the resolved scene JSON here; a pattern with {dir} {stem} {name} {ext}: one "
+      "per photo, the scene it was rendered with (--depth auto: its estimated pose, "
+      "sun and sky)");
   cmd->add_option("--quality", o.quality, "draft, normal or final [default: normal]");
-  cmd->add_option("--backend", o.backend,
-                  "auto, cpu or vulkan [default: auto: Vulkan on a GPU, else the CPU with a notice]");
-  cmd->add_option("--sun-azimuth", o.sun_azimuth_deg, "Sun azimuth, degrees (0 = the camera's forward at yaw 0, 90 = right)");
-  cmd->add_option("--sun-elevation", o.sun_elevation_deg, "Sun elevation above the horizon, degrees");
+  cmd->add_option(
+      "--backend", o.backend,
+      "auto, cpu or vulkan [default: auto: Vulkan on a GPU, else the CPU with a notice]");
+  cmd->add_option("--sun-azimuth", o.sun_azimuth_deg,
+                  "Sun azimuth, degrees (0 = the camera's forward at yaw 0, 90 = right)");
+  cmd->add_option("--sun-elevation", o.sun_elevation_deg,
+                  "Sun elevation above the horizon, degrees");
   cmd->add_option("--sun-dir", o.sun_direction, "Direction to the sun x,y,z (world: +Y up)");
-  cmd->add_option("--sun-irradiance", o.sun_irradiance, "Sun irradiance above the fog: v or R,G,B [default: 3]");
-  cmd->add_option("--sun-radius", o.sun_radius_deg, "Sun's angular radius, degrees (soft shafts) [default: 0.27]");
-  cmd->add_option("--lamp", o.lamps, "A lamp: x,y,z;R,G,B (position m; intensity per sr), spot: add ;dx,dy,dz;inner,outer (degrees). Repeatable");
-  cmd->add_option("--height-fog", o.height_fog, "Exponential height fog: base,scale (m); density exp(-(y - base) / scale)");
+  cmd->add_option("--sun-irradiance", o.sun_irradiance,
+                  "Sun irradiance above the fog: v or R,G,B [default: 3]");
+  cmd->add_option("--sun-radius", o.sun_radius_deg,
+                  "Sun's angular radius, degrees (soft shafts) [default: 0.27]");
+  cmd->add_option("--lamp", o.lamps,
+                  "A lamp: x,y,z;R,G,B (position m; intensity per sr), spot: add "
+                  ";dx,dy,dz;inner,outer (degrees). Repeatable");
+  cmd->add_option("--height-fog", o.height_fog,
+                  "Exponential height fog: base,scale (m); density exp(-(y - base) / scale)");
   cmd->add_option("--layer", o.layer, "Fog only between heights bottom,top (m)");
   cmd->add_option("--albedo", o.albedo, "Single-scattering albedo: v or R,G,B [default: 1]");
   cmd->add_option("--g", o.g, "Henyey-Greenstein asymmetry in (-1, 1) [default: 0]");
   cmd->add_option("--noise", o.noise, "Wisps: amplitude[,scale m[,octaves[,seed]]]");
-  cmd->add_option("--camera-height", o.camera_height_m, "Camera height above the ground, m [default: 1.6]");
+  cmd->add_option("--camera-height", o.camera_height_m,
+                  "Camera height above the ground, m [default: 1.6]");
   cmd->add_option("--pitch", o.pitch_deg, "Camera pitch, degrees (positive looks up)");
   cmd->add_option("--roll", o.roll_deg, "Camera roll, degrees");
   cmd->add_option("--yaw", o.yaw_deg, "Camera yaw, degrees");
   cmd->add_option("--seed", o.seed, "Jitter / noise seed");
   cmd->add_option("--march-steps", o.march_steps, "View-ray steps (overrides the quality preset)");
   cmd->add_flag("--no-shadows", o.no_shadows, "No volumetric shadows (lights are never blocked)");
-  cmd->add_option("--ocio-config", o.ocio_config, "OpenColorIO config [default: $OCIO, else the built-in one]");
-  cmd->add_option("--input-colorspace", o.input_colorspace,
-                  "Colour space of the photos [default: sRGB for 8/16-bit, scene-linear for float]");
-  cmd->add_option("--output-colorspace", o.output_colorspace,
-                  "Colour space of the outputs [default: sRGB for 8/16-bit, scene-linear for float]");
+  cmd->add_option("--ocio-config", o.ocio_config,
+                  "OpenColorIO config [default: $OCIO, else the built-in one]");
+  cmd->add_option(
+      "--input-colorspace", o.input_colorspace,
+      "Colour space of the photos [default: sRGB for 8/16-bit, scene-linear for float]");
+  cmd->add_option(
+      "--output-colorspace", o.output_colorspace,
+      "Colour space of the outputs [default: sRGB for 8/16-bit, scene-linear for float]");
   return cmd;
 }
 
@@ -408,7 +500,8 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
     for (std::size_t i = 0; i < photos.size(); ++i) {
       const fs::path& p = photos[i];
       bool is_depth = false;
-      for (const auto& d : depths) is_depth = is_depth || p.lexically_normal() == d.lexically_normal();
+      for (const auto& d : depths)
+        is_depth = is_depth || p.lexically_normal() == d.lexically_normal();
       // Our own earlier outputs in the same folder are not inputs.
       const bool is_output = p.stem().string().ends_with(o.suffix) && !o.suffix.empty() &&
                              same_file(p.parent_path().empty() ? "." : p.parent_path(), out_dir);
@@ -453,7 +546,8 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
         if (outcome == Outcome::failed) ++interrupted_jobs;
       } catch (const std::exception& e) {
         // mr::Error names the file; anything else (bad_alloc) gets the photo's name.
-        std::string msg = dynamic_cast<const Error*>(&e) ? e.what() : job.photo.string() + ": " + e.what();
+        std::string msg =
+            dynamic_cast<const Error*>(&e) ? e.what() : job.photo.string() + ": " + e.what();
         report.error(msg);
         std::lock_guard lock(failures_mutex);
         failures.push_back(std::move(msg));
@@ -471,7 +565,8 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::fprintf(stderr, "mr fog: %zu done, %zu skipped (outputs exist), %zu failed", done.load(),
                skipped.load(), failed.load());
-  if (interrupted_jobs) std::fprintf(stderr, ", %zu not started (interrupted)", interrupted_jobs.load());
+  if (interrupted_jobs)
+    std::fprintf(stderr, ", %zu not started (interrupted)", interrupted_jobs.load());
   std::fprintf(stderr, " in %.1f s; outputs in %s\n", seconds, o.out_dir.c_str());
   if (!failures.empty() && failures.size() < jobs.size() && !o.quiet) {
     std::fprintf(stderr, "failed:\n");

@@ -21,13 +21,17 @@ std::string fmt(double v) {
   std::snprintf(buf, sizeof buf, "%.4g", v);
   return buf;
 }
-std::string fmt(const PixelPoint& p) { return "(" + fmt(p[0]) + ", " + fmt(p[1]) + ")"; }
+std::string fmt(const PixelPoint& p) {
+  return "(" + fmt(p[0]) + ", " + fmt(p[1]) + ")";
+}
 
 [[noreturn]] void fail(const std::string& pointer, const std::string& problem) {
   throw Error(ErrorCode::invalid_argument, pointer + ": " + problem);
 }
 
-double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+double dot(const Vec3& a, const Vec3& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 
 // Normalised image coordinates of a pixel-centre point.
 std::array<double, 2> normalised(const Camera& c, const PixelPoint& p) {
@@ -86,7 +90,8 @@ std::array<PixelPoint, 2> horizon_of_pose(const Camera& camera, const CameraPose
   return out;
 }
 
-std::optional<Vec3> ground_point(const Camera& camera, const CameraPose& pose, const PixelPoint& p) {
+std::optional<Vec3> ground_point(const Camera& camera, const CameraPose& pose,
+                                 const PixelPoint& p) {
   const Vec3 d = pose.ray_direction(camera, p[0], p[1]);
   if (!(d.y < -1e-12)) return std::nullopt;
   const double t = pose.position_m.y / -d.y;
@@ -99,9 +104,13 @@ double camera_height_from_known_length(const Camera& camera, const CameraPose& p
   CameraPose unit = pose;
   unit.position_m = {0, 1, 0};
   const auto a = ground_point(camera, unit, known.a);
-  if (!a) fail("/known_length/a", fmt(known.a) + " is on or above the horizon; it must be a ground point");
+  if (!a)
+    fail("/known_length/a",
+         fmt(known.a) + " is on or above the horizon; it must be a ground point");
   const auto b = ground_point(camera, unit, known.b);
-  if (!b) fail("/known_length/b", fmt(known.b) + " is on or above the horizon; it must be a ground point");
+  if (!b)
+    fail("/known_length/b",
+         fmt(known.b) + " is on or above the horizon; it must be a ground point");
   const double d = std::hypot(a->x - b->x, a->z - b->z);
   if (!(d > 1e-9)) fail("/known_length", "the two points are the same point on the ground");
   return known.length_m / d;
@@ -139,9 +148,128 @@ VerticalPlane plane_of_polygon(const Camera& camera, const CameraPose& pose,
   }
   if (!g)
     fail(pointer + "/polygon",
-         "lies entirely on or above the horizon; a plane standing on the ground must reach below it");
+         "lies entirely on or above the horizon; a plane standing on the ground must reach below "
+         "it");
   out.offset = dot(out.normal, *g);
   return out;
+}
+
+double Room::distance(const Vec3& o, const Vec3& d) const {
+  double t = kInf;
+  if (d.y < 0) t = o.y / -d.y;
+  if (ceiling_height_m && d.y > 0) t = std::min(t, (*ceiling_height_m - o.y) / d.y);
+  for (const VerticalPlane& w : walls) {
+    const double nd = dot(w.normal, d);
+    if (nd < 0) t = std::min(t, std::max(0.0, (w.offset - dot(w.normal, o)) / nd));
+  }
+  return t;
+}
+
+namespace {
+
+// The walls of the box's floor points at `pose`, without the ceiling.
+Room walls_of_box(const Camera& camera, const CameraPose& pose,
+                  const Annotations::InteriorBox& box) {
+  Room room;
+  const std::string ptr = "/interior_box/floor";
+  for (std::size_t i = 0; i < box.floor.size(); ++i) {
+    const auto g = ground_point(camera, pose, box.floor[i]);
+    if (!g)
+      fail(ptr + "/" + std::to_string(i),
+           fmt(box.floor[i]) + " is on or above the horizon; floor points must be below it");
+    room.floor_m.push_back(*g);
+  }
+  const Vec3 cam{pose.position_m.x, 0, pose.position_m.z};
+  // Lengths below this (relative to the floor's extent) count as zero: the tolerance of the
+  // collinearity and convexity tests.
+  double extent = 0;
+  for (const Vec3& g : room.floor_m)
+    extent = std::max(extent, std::hypot(g.x - cam.x, g.z - cam.z));
+  const double eps = 1e-6 * extent;
+  for (std::size_t i = 0; i + 1 < room.floor_m.size(); ++i) {
+    const Vec3 &a = room.floor_m[i], &b = room.floor_m[i + 1];
+    const double dx = b.x - a.x, dz = b.z - a.z, len = std::hypot(dx, dz);
+    if (!(len > eps))
+      fail(ptr + "/" + std::to_string(i + 1), "points " + std::to_string(i) + " and " +
+                                                  std::to_string(i + 1) +
+                                                  " meet the floor at the same place");
+    VerticalPlane w{{-dz / len, 0, dx / len}, 0};
+    w.offset = dot(w.normal, a);
+    const double side = dot(w.normal, cam) - w.offset;
+    if (std::abs(side) <= eps)
+      fail(ptr, "the camera stands on the line of wall " + std::to_string(i) + " (points " +
+                    std::to_string(i) + " and " + std::to_string(i + 1) + ")");
+    if (side < 0) w.normal = {-w.normal.x, 0, -w.normal.z}, w.offset = -w.offset;
+    room.walls.push_back(w);
+  }
+  for (std::size_t i = 0; i + 2 < room.floor_m.size(); ++i) {
+    const VerticalPlane& w = room.walls[i];
+    if (std::abs(dot(w.normal, room.floor_m[i + 2]) - w.offset) <= 1e-4 * extent)
+      fail(ptr + "/" + std::to_string(i + 1),
+           "points " + std::to_string(i) + ", " + std::to_string(i + 1) + " and " +
+               std::to_string(i + 2) +
+               " meet the floor on one line (collinear): they span one wall; drop the middle one");
+  }
+  for (std::size_t i = 0; i < room.walls.size(); ++i)
+    for (std::size_t j = 0; j < room.floor_m.size(); ++j)
+      if (dot(room.walls[i].normal, room.floor_m[j]) - room.walls[i].offset < -eps)
+        fail(ptr, "the points do not bound a convex room around the camera: point " +
+                      std::to_string(j) + " lies outside wall " + std::to_string(i) +
+                      " (through points " + std::to_string(i) + " and " + std::to_string(i + 1) +
+                      ")");
+  return room;
+}
+
+// The height above the floor where the ceiling point's ray meets the nearest wall.
+double ceiling_hit_height(const Camera& camera, const CameraPose& pose, const Room& walls,
+                          const PixelPoint& p) {
+  const std::string ptr = "/interior_box/ceiling_point";
+  const Vec3 d = pose.ray_direction(camera, p[0], p[1]);
+  if (!(d.y > 1e-12))
+    fail(ptr, fmt(p) + " is on or below the horizon; the ceiling meets the walls above it");
+  const Vec3 o = pose.position_m;
+  double t = kInf;
+  for (const VerticalPlane& w : walls.walls) {
+    const double nd = dot(w.normal, d);
+    if (nd < 0) t = std::min(t, (w.offset - dot(w.normal, o)) / nd);
+  }
+  if (!std::isfinite(t))
+    fail(ptr, fmt(p) + " looks past every wall; it must be on a wall's top edge");
+  return o.y + t * d.y;
+}
+
+}  // namespace
+
+Room room_of_box(const Camera& camera, const CameraPose& pose,
+                 const Annotations::InteriorBox& box) {
+  Room room = walls_of_box(camera, pose, box);
+  const double h = pose.position_m.y;
+  if (box.ceiling_height_m) {
+    room.ceiling_height_m = *box.ceiling_height_m;
+    if (!(*room.ceiling_height_m > h))
+      fail("/interior_box/ceiling_height_m",
+           fmt(*room.ceiling_height_m) + " m is not above the camera (" + fmt(h) + " m)");
+  } else if (box.ceiling_point) {
+    room.ceiling_height_m = ceiling_hit_height(camera, pose, room, *box.ceiling_point);
+  }
+  return room;
+}
+
+double ceiling_over_camera_height(const Camera& camera, const CameraPose& pose,
+                                  const Annotations::InteriorBox& box) {
+  if (!box.ceiling_point) fail("/interior_box/ceiling_point", "missing");
+  CameraPose unit = pose;
+  unit.position_m = {pose.position_m.x, 1, pose.position_m.z};
+  return ceiling_hit_height(camera, unit, walls_of_box(camera, unit, box), *box.ceiling_point);
+}
+
+std::optional<PixelPoint> project(const Camera& camera, const CameraPose& pose, const Vec3& p) {
+  const auto [f, r, u] = pose.axes();
+  const Vec3 v{p.x - pose.position_m.x, p.y - pose.position_m.y, p.z - pose.position_m.z};
+  const double z = dot(v, f);
+  if (!(z > 1e-3)) return std::nullopt;
+  return PixelPoint{camera.focal_px * dot(v, r) / z + camera.cx - 0.5,
+                    camera.focal_px * -dot(v, u) / z + camera.cy - 0.5};
 }
 
 bool inside_polygon(const std::vector<PixelPoint>& poly, double x, double y) {
@@ -154,14 +282,16 @@ bool inside_polygon(const std::vector<PixelPoint>& poly, double x, double y) {
   return in;
 }
 
-DistanceMap distance_map(const Camera& camera, const CameraPose& pose, const Annotations& annotations) {
+DistanceMap distance_map(const Camera& camera, const CameraPose& pose,
+                         const Annotations& annotations) {
   const int w = camera.width, h = camera.height;
   const double height = pose.position_m.y;
   if (!(height > 0) || !std::isfinite(height))
     fail("/camera_height_m", "the camera must be above the ground, found " + fmt(height) + " m");
   std::vector<VerticalPlane> planes;
   for (std::size_t i = 0; i < annotations.planes.size(); ++i)
-    planes.push_back(plane_of_polygon(camera, pose, annotations.planes[i], "/planes/" + std::to_string(i)));
+    planes.push_back(
+        plane_of_polygon(camera, pose, annotations.planes[i], "/planes/" + std::to_string(i)));
 
   // Integer pixel bounding boxes of the polygons, so each is tested only where it can be.
   struct Box {
@@ -181,6 +311,7 @@ DistanceMap distance_map(const Camera& camera, const CameraPose& pose, const Ann
   for (const auto& hnt : annotations.distance_hints) hint_boxes.push_back(box_of(hnt.polygon));
 
   DistanceMap out;
+  if (annotations.interior_box) out.room = room_of_box(camera, pose, *annotations.interior_box);
   out.distance_m = Image(w, h, 1, {"Z"});
   out.coverage.assign(std::size_t(w) * h, Coverage::sky);
   const Vec3 o = pose.position_m;
@@ -190,6 +321,10 @@ DistanceMap distance_map(const Camera& camera, const CameraPose& pose, const Ann
       double dist = kInf;
       Coverage cov = Coverage::sky;
       if (d.y < 0) dist = height / -d.y, cov = Coverage::ground;
+      if (out.room) {
+        const double t = out.room->distance(o, d);
+        if (std::isfinite(t)) dist = t, cov = Coverage::room;
+      }
       double best_plane = kInf;
       for (std::size_t i = 0; i < planes.size(); ++i) {
         const Box& b = plane_boxes[i];

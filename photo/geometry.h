@@ -56,22 +56,56 @@ struct VerticalPlane {
 VerticalPlane plane_of_polygon(const Camera& camera, const CameraPose& pose,
                                const Annotations::Plane& plane, const std::string& pointer);
 
+/// The convex room of an interior_box annotation: vertical walls standing on the floor y = 0
+/// through consecutive floor points, and the ceiling y = ceiling_height_m when known.
+struct Room {
+  std::vector<Vec3> floor_m;  ///< the floor points on y = 0 (world, metres)
+  /// Wall i through floor_m[i] and floor_m[i + 1]; its normal points into the room (towards
+  /// the camera), so the room is where normal . X > offset for every wall.
+  std::vector<VerticalPlane> walls;
+  std::optional<double> ceiling_height_m;
+  /// Metres along the unit ray `d` from `origin` (inside the room) to the first surface of the
+  /// room it meets: the floor, the ceiling or a wall; +inf when it meets none (a horizontal ray
+  /// leaving through the open side of the walls, without a ceiling above).
+  double distance(const Vec3& origin, const Vec3& d) const;
+};
+
+/// The room seen by the camera at `pose` (its height is pose.position_m.y): the floor points'
+/// ground points, the walls through them and the ceiling (box.ceiling_height_m, else from
+/// box.ceiling_point at this camera height, else none). Throws mr::Error(invalid_argument)
+/// naming "/interior_box/...": a floor point on or above the horizon, two consecutive points
+/// meeting the floor at the same place, three consecutive points on one line (collinear),
+/// points that do not bound a convex room around the camera, a ceiling point on or below the
+/// horizon or meeting no wall, a ceiling not above the camera.
+Room room_of_box(const Camera& camera, const CameraPose& pose, const Annotations::InteriorBox& box);
+
+/// The height of the box's ceiling_point over the camera height (> 1: the point's ray meets the
+/// nearest wall above the camera). Independent of pose.position_m.y. Throws as room_of_box.
+double ceiling_over_camera_height(const Camera& camera, const CameraPose& pose,
+                                  const Annotations::InteriorBox& box);
+
+/// Pixel-centre coordinates of a world point; nullopt behind (or within 1 mm of) the camera.
+std::optional<PixelPoint> project(const Camera& camera, const CameraPose& pose, const Vec3& p);
+
 /// What covers each pixel of a distance map.
-enum class Coverage : unsigned char { sky = 0, ground = 1, plane = 2, hint = 3 };
+enum class Coverage : unsigned char { sky = 0, ground = 1, plane = 2, hint = 3, room = 4 };
 
 struct DistanceMap {
-  Image distance_m;             ///< 1 channel "Z": metres along each ray, +inf = sky
-  std::vector<Coverage> coverage;  ///< per pixel, row-major
-  std::size_t counts[4] = {0, 0, 0, 0};  ///< pixels per Coverage
+  Image distance_m;                         ///< 1 channel "Z": metres along each ray, +inf = sky
+  std::vector<Coverage> coverage;           ///< per pixel, row-major
+  std::size_t counts[5] = {0, 0, 0, 0, 0};  ///< pixels per Coverage
+  std::optional<Room> room;                 ///< with an interior_box annotation
 };
 
 /// The distance map of the annotated scene seen by `camera` at `pose` (pose.position_m.y is the
-/// camera height, > 0): per pixel centre, the ground where the ray meets y = 0; inside a plane
+/// camera height, > 0): per pixel centre, the ground where the ray meets y = 0 (with an
+/// interior box: the room's floor, walls or ceiling, room_of_box); inside a plane
 /// polygon the nearest such plane where the ray meets it at or above the ground (below the
 /// plane's base the ground is nearer); inside a distance hint its distance (hints are applied
 /// in order, a later one over an earlier one); +inf for rays above the horizon that nothing
 /// covers. Polygons are tested at pixel centres with the even-odd rule.
-DistanceMap distance_map(const Camera& camera, const CameraPose& pose, const Annotations& annotations);
+DistanceMap distance_map(const Camera& camera, const CameraPose& pose,
+                         const Annotations& annotations);
 
 /// Even-odd point-in-polygon test.
 bool inside_polygon(const std::vector<PixelPoint>& polygon, double x, double y);

@@ -24,8 +24,12 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 V3 cross(const V3& a, const V3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
-double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-double norm(const V3& a) { return std::sqrt(dot(a, a)); }
+double dot(const V3& a, const V3& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+double norm(const V3& a) {
+  return std::sqrt(dot(a, a));
+}
 std::optional<V3> unit(const V3& a) {
   const double n = norm(a);
   if (!(n > 1e-12) || !std::isfinite(n)) return std::nullopt;
@@ -33,8 +37,8 @@ std::optional<V3> unit(const V3& a) {
 }
 
 struct Segment {
-  V3 line;       // unit great-circle normal of the segment (normalised image coordinates)
-  V3 mid;        // midpoint (a, b, 1)
+  V3 line;        // unit great-circle normal of the segment (normalised image coordinates)
+  V3 mid;         // midpoint (a, b, 1)
   double length;  // working-image pixels
 };
 
@@ -187,7 +191,9 @@ std::optional<std::array<PixelPoint, 2>> points_of(const Camera& camera, const V
   return pts;
 }
 
-double strength(double support) { return 1 - std::exp(-support / 1.5); }
+double strength(double support) {
+  return 1 - std::exp(-support / 1.5);
+}
 
 }  // namespace
 
@@ -209,10 +215,10 @@ const char* to_string(HorizonCue cue) noexcept {
 
 AutoHorizon estimate_horizon(ConstImageView photo, const Camera& camera, const HorizonOptions& o) {
   if (photo.width != camera.width || photo.height != camera.height)
-    throw Error(ErrorCode::size_mismatch,
-                "horizon: photo is " + std::to_string(photo.width) + "x" +
-                    std::to_string(photo.height) + ", camera is " + std::to_string(camera.width) +
-                    "x" + std::to_string(camera.height));
+    throw Error(ErrorCode::size_mismatch, "horizon: photo is " + std::to_string(photo.width) + "x" +
+                                              std::to_string(photo.height) + ", camera is " +
+                                              std::to_string(camera.width) + "x" +
+                                              std::to_string(camera.height));
   AutoHorizon out;
   {
     CameraPose level;
@@ -229,7 +235,8 @@ AutoHorizon estimate_horizon(ConstImageView photo, const Camera& camera, const H
   // plane without a zenith; the focal length may be off, so not tighter).
   const VanishingPoint* zenith = nullptr;
   for (const auto& vp : out.vanishing_points)
-    if (std::abs(vp.direction[1]) > std::cos(40 * kDeg) && (!zenith || vp.support > zenith->support))
+    if (std::abs(vp.direction[1]) > std::cos(40 * kDeg) &&
+        (!zenith || vp.support > zenith->support))
       zenith = &vp;
   std::vector<const VanishingPoint*> horizontal;
   for (const auto& vp : out.vanishing_points) {
@@ -248,7 +255,8 @@ AutoHorizon estimate_horizon(ConstImageView photo, const Camera& camera, const H
   bool separated = false;
   for (std::size_t i = 0; i < horizontal.size(); ++i)
     for (std::size_t j = i + 1; j < horizontal.size(); ++j)
-      separated |= std::abs(dot(horizontal[i]->direction, horizontal[j]->direction)) < std::cos(20 * kDeg);
+      separated |=
+          std::abs(dot(horizontal[i]->direction, horizontal[j]->direction)) < std::cos(20 * kDeg);
   if (zenith || separated) {
     // The great circle's normal n: least squares over n . d_i = 0 for the horizontal vanishing
     // points and n = z for the zenith, each weighted by its support: the smallest eigenvector
@@ -280,9 +288,11 @@ AutoHorizon estimate_horizon(ConstImageView photo, const Camera& camera, const H
       if (auto pts = points_of(camera, *n)) {
         double residual = 0;  // largest angle (degrees) between the fit and a cue
         for (const VanishingPoint* vp : horizontal)
-          residual = std::max(residual, std::asin(std::min(1.0, std::abs(dot(*n, vp->direction)))) / kDeg);
+          residual =
+              std::max(residual, std::asin(std::min(1.0, std::abs(dot(*n, vp->direction)))) / kDeg);
         if (zenith)
-          residual = std::max(residual, std::acos(std::min(1.0, std::abs(dot(*n, zenith->direction)))) / kDeg);
+          residual = std::max(
+              residual, std::acos(std::min(1.0, std::abs(dot(*n, zenith->direction)))) / kDeg);
         double base = 0.5;  // zenith alone: right only with the right focal length
         out.cue = HorizonCue::zenith;
         if (separated) {
@@ -309,6 +319,65 @@ AutoHorizon estimate_horizon(ConstImageView photo, const Camera& camera, const H
     }
   }
   return out;
+}
+
+std::optional<FocalFromVanishingPoints> estimate_focal_px(ConstImageView photo,
+                                                          const Camera& camera,
+                                                          const FocalOptions& fo,
+                                                          const HorizonOptions& o) {
+  if (photo.width != camera.width || photo.height != camera.height)
+    throw Error(ErrorCode::size_mismatch, "focal: photo is " + std::to_string(photo.width) + "x" +
+                                              std::to_string(photo.height) + ", camera is " +
+                                              std::to_string(camera.width) + "x" +
+                                              std::to_string(camera.height));
+  if (photo.width < 2 || photo.height < 2 || photo.channels < 1) return std::nullopt;
+  double diagonal = 1;
+  const std::vector<Segment> segs = detect_segments(photo, camera, o, diagonal);
+  const std::vector<VanishingPoint> vps = find_vanishing_points(segs, diagonal, o);
+  // Image positions relative to the principal point, pixels; points near infinity (parallel
+  // lines in the image) constrain nothing and are left out.
+  struct Point {
+    double x, y, support;
+  };
+  std::vector<Point> pts;
+  const double limit = 20.0 * std::max(camera.width, camera.height);
+  for (const auto& vp : vps) {
+    const auto& d = vp.direction;
+    if (!(std::abs(d[2]) > 1e-9)) continue;
+    const Point p{camera.focal_px * d[0] / d[2], camera.focal_px * d[1] / d[2], vp.support};
+    if (std::hypot(p.x, p.y) < limit) pts.push_back(p);
+  }
+  const double f_min = 0.5 * camera.width / std::tan(0.5 * fo.max_fov_deg * kDeg);
+  const double f_max = 0.5 * camera.width / std::tan(0.5 * fo.min_fov_deg * kDeg);
+  auto pair_focal = [](const Point& a, const Point& b) -> std::optional<double> {
+    const double f2 = -(a.x * b.x + a.y * b.y);
+    if (!(f2 > 0)) return std::nullopt;
+    return std::sqrt(f2);
+  };
+  std::optional<FocalFromVanishingPoints> best;
+  auto consider = [&](double f, double confidence, int count) {
+    if (!(f >= f_min && f <= f_max) || confidence < fo.min_confidence) return;
+    if (!best || confidence > best->confidence)
+      best = FocalFromVanishingPoints{f, confidence, count};
+  };
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    for (std::size_t j = i + 1; j < pts.size(); ++j)
+      for (std::size_t k = j + 1; k < pts.size(); ++k) {
+        const auto a = pair_focal(pts[i], pts[j]), b = pair_focal(pts[j], pts[k]),
+                   c = pair_focal(pts[i], pts[k]);
+        if (!a || !b || !c) continue;
+        const double mean = std::cbrt(*a * *b * *c);
+        const double spread =
+            std::max({std::abs(*a - mean), std::abs(*b - mean), std::abs(*c - mean)}) / mean;
+        if (spread > fo.max_spread) continue;
+        const double weakest = std::min({pts[i].support, pts[j].support, pts[k].support});
+        consider(mean, 0.9 * strength(weakest), 3);
+      }
+  if (!best && pts.size() >= 2) {
+    if (const auto f = pair_focal(pts[0], pts[1]))
+      consider(*f, 0.5 * strength(std::min(pts[0].support, pts[1].support)), 2);
+  }
+  return best;
 }
 
 }  // namespace mr::photo

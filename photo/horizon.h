@@ -20,6 +20,7 @@
 #pragma once
 
 #include <array>
+#include <optional>
 #include <vector>
 
 #include "mr/annotations.h"
@@ -39,7 +40,7 @@ const char* to_string(HorizonCue cue) noexcept;
 
 struct VanishingPoint {
   std::array<double, 3> direction{};  ///< unit view direction (a, b, 1)-space: a right, b down
-  double support = 0;   ///< inlier segment length over the working image's diagonal
+  double support = 0;                 ///< inlier segment length over the working image's diagonal
   int inliers = 0;
 };
 
@@ -51,17 +52,17 @@ struct AutoHorizon {
   double confidence = 0.1;
   HorizonCue cue = HorizonCue::none;
   std::vector<VanishingPoint> vanishing_points;  ///< all found, strongest first
-  int segments = 0;  ///< line segments used (after the length filter)
+  int segments = 0;                              ///< line segments used (after the length filter)
 };
 
 struct HorizonOptions {
-  double working_pixels = 1.0e6;     ///< downscale to about this many pixels first
+  double working_pixels = 1.0e6;        ///< downscale to about this many pixels first
   double min_segment_fraction = 0.025;  ///< shortest segment used, as a fraction of the diagonal
-  double inlier_angle_deg = 1.5;     ///< segment-to-vanishing-point angle of an inlier
-  double min_support = 0.6;          ///< inlier length / diagonal for a vanishing point to count
+  double inlier_angle_deg = 1.5;        ///< segment-to-vanishing-point angle of an inlier
+  double min_support = 0.6;             ///< inlier length / diagonal for a vanishing point to count
   int max_vanishing_points = 4;
   int ransac_iterations = 600;
-  unsigned seed = 1;                 ///< the RANSAC draws (equal seeds, equal results)
+  unsigned seed = 1;  ///< the RANSAC draws (equal seeds, equal results)
 };
 
 /// The horizon of `photo` (scene-linear, >= 1 channel; the camera's size). Never throws for any
@@ -69,5 +70,31 @@ struct HorizonOptions {
 /// mr::Error(size_mismatch) when the photo and the camera differ in size.
 AutoHorizon estimate_horizon(ConstImageView photo, const Camera& camera,
                              const HorizonOptions& options = {});
+
+/// The focal length from orthogonal vanishing points (issue 4 item 1, when EXIF has none): for
+/// two vanishing points v1, v2 of orthogonal directions and the principal point c,
+/// f = sqrt(-(v1 - c) . (v2 - c)). The vanishing points are found as for the horizon (the
+/// camera's focal length only parametrises them; the result does not depend on it). Accepted:
+///   three vanishing points whose three pairs give focal lengths within `max_spread` of their
+///   geometric mean (a Manhattan scene): that mean, confidence 0.9 x strength;
+///   else the two strongest finite vanishing points, when their pair gives a focal length:
+///   confidence 0.5 x strength (orthogonality assumed).
+/// strength = 1 - exp(-s / 1.5) for s the weaker point's support. nullopt when no pair gives a
+/// real focal length, when the horizontal field of view it implies is outside
+/// [min_fov_deg, max_fov_deg], or the confidence is below min_confidence.
+struct FocalOptions {
+  double min_fov_deg = 20, max_fov_deg = 120;
+  double max_spread = 0.1;
+  double min_confidence = 0.3;
+};
+struct FocalFromVanishingPoints {
+  double focal_px = 0;
+  double confidence = 0;
+  int vanishing_points = 0;  ///< 3: a consistent orthogonal triple; 2: one pair
+};
+std::optional<FocalFromVanishingPoints> estimate_focal_px(ConstImageView photo,
+                                                          const Camera& camera,
+                                                          const FocalOptions& options = {},
+                                                          const HorizonOptions& lines = {});
 
 }  // namespace mr::photo

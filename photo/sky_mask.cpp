@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "cv_bridge.h"
 
@@ -149,7 +150,8 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   {
     cv::Mat grown;
     const int r = win / 2 + 2;
-    cv::dilate(sky, grown, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
+    cv::dilate(sky, grown,
+               cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
     sky |= grown & colour;
   }
   // Fill small enclosed holes (non-sky components not touching the border).
@@ -160,7 +162,8 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     std::vector<std::uint8_t> fill(std::size_t(m), 0);
     for (int i = 1; i < m; ++i) {
       const int x0 = stats.at<int>(i, cv::CC_STAT_LEFT), y0 = stats.at<int>(i, cv::CC_STAT_TOP);
-      const int x1 = x0 + stats.at<int>(i, cv::CC_STAT_WIDTH), y1 = y0 + stats.at<int>(i, cv::CC_STAT_HEIGHT);
+      const int x1 = x0 + stats.at<int>(i, cv::CC_STAT_WIDTH),
+                y1 = y0 + stats.at<int>(i, cv::CC_STAT_HEIGHT);
       const bool border = x0 == 0 || y0 == 0 || x1 == w || y1 == h;
       if (!border && stats.at<int>(i, cv::CC_STAT_AREA) <= max_hole) fill[i] = 1;
     }
@@ -194,6 +197,79 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       out.pixels += is_sky;
     }
   }
+  return out;
+}
+
+GroundMask estimate_ground_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
+                                const std::vector<std::uint8_t>& sky, const GroundMaskOptions& o) {
+  GroundMask out;
+  out.width = photo.width;
+  out.height = photo.height;
+  const int w = photo.width, h = photo.height;
+  out.ground.assign(std::size_t(w) * h, 0);
+  if (w < 8 || h < 8 || photo.channels < 1) return out;
+  const bool have_sky = sky.size() == std::size_t(w) * h;
+  const double dx = horizon[1][0] - horizon[0][0];
+  const double slope = std::abs(dx) > 1e-9 ? (horizon[1][1] - horizon[0][1]) / dx : 0.0;
+  auto horizon_y = [&](double x) { return horizon[0][1] + (x - horizon[0][0]) * slope; };
+
+  cv::Mat rgb = display_rgb(photo);
+  cv::medianBlur(rgb, rgb, 5);  // texture averaged out, edges kept where they are
+  // Samples: the bottom band, well below the horizon, not sky (an even stride: <= ~200k).
+  const int band_top = h - std::max(2, int(std::lround(o.band_fraction * h)));
+  const double min_below = o.min_depression_fraction * h;
+  std::vector<cv::Vec3d> samples;
+  const std::size_t band_pixels = std::size_t(h - band_top) * w;
+  const int stride = int(std::max<std::size_t>(1, band_pixels / 200000));
+  const int x_begin = int(std::lround(0.5 * (1 - o.band_width_fraction) * w));
+  const int x_end = w - x_begin;
+  for (int y = band_top; y < h; ++y)
+    for (int x = x_begin + (y * 7) % stride; x < x_end; x += stride) {
+      if (y < horizon_y(x) + min_below) continue;
+      if (have_sky && sky[std::size_t(y) * w + x]) continue;
+      const cv::Vec3f& p = rgb.at<cv::Vec3f>(y, x);
+      samples.emplace_back(p[0], p[1], p[2]);
+    }
+  if (int(samples.size()) < o.min_samples) return out;
+  cv::Vec3d mean;
+  cv::Matx33d inverse;
+  std::vector<cv::Vec3d> kept = samples;
+  for (int pass = 0; pass < 4; ++pass) {
+    mean = cv::Vec3d(0, 0, 0);
+    for (const auto& v : kept) mean += v;
+    mean *= 1.0 / double(kept.size());
+    cv::Matx33d cov = cv::Matx33d::zeros();
+    for (const auto& v : kept) {
+      const cv::Vec3d d = v - mean;
+      cov += d * d.t();
+    }
+    cov *= 1.0 / double(kept.size());
+    for (int k = 0; k < 3; ++k) cov(k, k) += o.min_sigma * o.min_sigma;
+    inverse = cov.inv(cv::DECOMP_CHOLESKY);
+    if (pass == 3) break;
+    std::vector<cv::Vec3d> inliers;
+    for (const auto& v : samples) {
+      const cv::Vec3d d = v - mean;
+      if ((d.t() * inverse * d)(0) < 2.5 * 2.5) inliers.push_back(v);
+    }
+    if (int(inliers.size()) < o.min_samples) break;
+    kept = std::move(inliers);
+  }
+  cv::Mat not_ground(h, w, CV_8U, cv::Scalar(0));
+  const double limit = o.max_sigma * o.max_sigma;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!(y > horizon_y(x))) continue;
+      const cv::Vec3f& p = rgb.at<cv::Vec3f>(y, x);
+      const cv::Vec3d d = cv::Vec3d(p[0], p[1], p[2]) - mean;
+      if (!((d.t() * inverse * d)(0) < limit)) not_ground.at<std::uint8_t>(y, x) = 1;
+    }
+  cv::morphologyEx(not_ground, not_ground, cv::MORPH_OPEN,
+                   cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      out.ground[std::size_t(y) * w + x] = y > horizon_y(x) && !not_ground.at<std::uint8_t>(y, x);
+  out.valid = true;
   return out;
 }
 

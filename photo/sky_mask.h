@@ -21,8 +21,8 @@ namespace mr::photo {
 
 struct SkyMaskOptions {
   double working_pixels = 0.5e6;
-  double max_texture = 0.012;      ///< mean |gradient| of the display-referred luma per pixel
-  double bright_fraction = 0.6;    ///< grey sky: luma >= this x the bright reference
+  double max_texture = 0.012;       ///< mean |gradient| of the display-referred luma per pixel
+  double bright_fraction = 0.6;     ///< grey sky: luma >= this x the bright reference
   double max_hole_fraction = 5e-4;  ///< enclosed non-sky specks filled up to this image fraction
 };
 
@@ -36,5 +36,35 @@ struct SkyMask {
 /// points (pixel-centre coordinates, the photo's pixels).
 SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
                           const SkyMaskOptions& options = {});
+
+/// Ground-coloured pixels (issue 4 item 2: where structures meet the ground). The ground's
+/// colour is modelled from the bottom band of the photo (the lowest `band_fraction` of the rows,
+/// the middle `band_width_fraction` of the columns (walls and kerbs line the sides), at least
+/// `min_depression_fraction` of the height below the horizon, not sky): mean and covariance of
+/// the display-referred RGB after a 5x5 median filter (texture out, edges kept), refit three
+/// times without the samples beyond 2.5 sigma of the previous fit (markings, a wall reaching
+/// into the band), the covariance floored at `min_sigma`^2. A pixel below the horizon is
+/// ground-coloured when its Mahalanobis distance to that model is below `max_sigma`; isolated
+/// non-ground specks (3x3 opening) are ground too.
+struct GroundMaskOptions {
+  double band_fraction = 0.1;
+  double band_width_fraction = 0.5;
+  double min_depression_fraction = 0.05;
+  double min_sigma = 0.03;
+  double max_sigma = 4.0;
+  int min_samples = 50;
+};
+
+struct GroundMask {
+  bool valid = false;  ///< false: too few ground samples (ground then unknown: all 0)
+  int width = 0, height = 0;
+  std::vector<std::uint8_t> ground;  ///< row-major, 1 = ground-coloured, below the horizon
+};
+
+/// Never throws for any image content; `sky` (row-major, the photo's size, or empty) is left out
+/// of the samples.
+GroundMask estimate_ground_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
+                                const std::vector<std::uint8_t>& sky,
+                                const GroundMaskOptions& options = {});
 
 }  // namespace mr::photo

@@ -24,7 +24,8 @@ void expect_error(const std::string& text, std::initializer_list<std::string> fr
     EXPECT_EQ(e.code(), ErrorCode::invalid_argument);
     const std::string what = e.what();
     EXPECT_EQ(what.rfind("a.json: ", 0), 0u) << what;
-    for (const auto& f : fragments) EXPECT_NE(what.find(f), std::string::npos) << what << " lacks " << f;
+    for (const auto& f : fragments)
+      EXPECT_NE(what.find(f), std::string::npos) << what << " lacks " << f;
     EXPECT_EQ(what.find('\n'), std::string::npos) << what;
   }
 }
@@ -144,7 +145,8 @@ TEST(Annotations, UnknownKeysAreErrors) {
 }
 
 TEST(Annotations, ValueErrorsNameThePointer) {
-  expect_error(kHead + R"(, "horizon": [[0, 1], [2, null]]})", {"/horizon/1/1", "expected a number", "null"});
+  expect_error(kHead + R"(, "horizon": [[0, 1], [2, null]]})",
+               {"/horizon/1/1", "expected a number", "null"});
   expect_error(kHead + R"(, "horizon": [[0, 1]]})", {"/horizon", "two points"});
   expect_error(kHead + R"(, "horizon": [[5, 5], [5.5, 5.5]]})", {"/horizon", "less than 1 pixel"});
   expect_error(kHead + R"(, "camera_height_m": -1.6})", {"/camera_height_m", "> 0"});
@@ -152,13 +154,16 @@ TEST(Annotations, ValueErrorsNameThePointer) {
   expect_error(kHead + R"(, "camera_height_m": "1.6"})", {"/camera_height_m", "a string"});
   expect_error(kHead + R"(, "planes": [{"polygon": [[0, 0], [1, 1]]}]})",
                {"/planes/0/polygon", "at least 3 points", "found 2"});
-  expect_error(kHead + R"(, "planes": [{"base": [[0, 0], [1, 1]]}]})", {"/planes/0/polygon", "missing"});
-  expect_error(kHead + R"(, "distance_hints": [{"polygon": [[0,0],[1,0],[1,1]], "distance_m": -5}]})",
-               {"/distance_hints/0/distance_m", "> 0"});
+  expect_error(kHead + R"(, "planes": [{"base": [[0, 0], [1, 1]]}]})",
+               {"/planes/0/polygon", "missing"});
+  expect_error(
+      kHead + R"(, "distance_hints": [{"polygon": [[0,0],[1,0],[1,1]], "distance_m": -5}]})",
+      {"/distance_hints/0/distance_m", "> 0"});
   expect_error(kHead + R"(, "camera_height_m": 1.6,
                 "known_length": {"a": [0, 0], "b": [9, 9], "length_m": 2}})",
                {"/known_length", "not both"});
-  expect_error(kHead + R"(, "known_length": {"a": [0, 0], "b": [9, 9]}})", {"/known_length/length_m", "missing"});
+  expect_error(kHead + R"(, "known_length": {"a": [0, 0], "b": [9, 9]}})",
+               {"/known_length/length_m", "missing"});
   expect_error(kHead + R"(, "shadow_pairs": [{"caster_top": [0, 0], "caster_foot": [0, 5]}]})",
                {"/shadow_pairs/0/shadow_tip", "missing"});
   expect_error(kHead + R"(, "sunlit_patch": [[0,0],[1,0],[1,1]]})", {"/shadowed_patch", "missing"});
@@ -172,12 +177,52 @@ TEST(Annotations, ValidateRejectsNonFiniteValues) {
     ADD_FAILURE();
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::invalid_argument);
-    EXPECT_NE(std::string(e.what()).find("gui: /planes/1/polygon/2/1"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("gui: /planes/1/polygon/2/1"), std::string::npos)
+        << e.what();
   }
   EXPECT_THROW(annotations_to_json(a), Error);  // never writes what it could not read back
   Annotations b;
   b.camera_height_m = std::numeric_limits<double>::infinity();
   EXPECT_THROW(validate_annotations(b), Error);
+}
+
+// The interior box (optional, added to version 1): parsed, round-tripped, errors by pointer.
+TEST(Annotations, InteriorBox) {
+  const Annotations a = annotations_from_json(kHead + R"(, "camera_height_m": 1.5,
+    "interior_box": {"floor": [[10, 400], [200, 300.5], [500, 310], [630, 420]],
+                     "ceiling_point": [300, 40]}})");
+  ASSERT_TRUE(a.interior_box);
+  EXPECT_EQ(a.interior_box->floor.size(), 4u);
+  EXPECT_EQ(a.interior_box->floor[1], (PixelPoint{200, 300.5}));
+  EXPECT_FALSE(a.interior_box->ceiling_height_m);
+  EXPECT_EQ(a.interior_box->ceiling_point, (PixelPoint{300, 40}));
+  Annotations b = full();
+  b.interior_box = Annotations::InteriorBox{{{1, 2}, {3.25, 4}, {5, 6.5}}, 2.7, std::nullopt};
+  const Annotations c = annotations_from_json(annotations_to_json(b));
+  ASSERT_TRUE(c.interior_box);
+  EXPECT_EQ(c.interior_box->floor, b.interior_box->floor);
+  EXPECT_EQ(c.interior_box->ceiling_height_m, 2.7);
+  EXPECT_FALSE(c.interior_box->ceiling_point);
+  expect_error(kHead + R"(, "interior_box": {"floor": [[0, 0], [9, 9]]}})",
+               {"/interior_box/floor", "at least 3 points", "found 2"});
+  expect_error(kHead + R"(, "interior_box": {"ceiling_height_m": 2.5}})",
+               {"/interior_box/floor", "missing"});
+  expect_error(
+      kHead + R"(, "interior_box": {"floor": [[0, 0], [9, 9], [20, 0]], "ceiling_height_m": 0}})",
+      {"/interior_box/ceiling_height_m", "> 0"});
+  expect_error(
+      kHead + R"(, "interior_box": {"floor": [[0, 0], [9, 9], [20, 0]], "ceiling_point": [1]}})",
+      {"/interior_box/ceiling_point", "a point"});
+  expect_error(kHead + R"(, "interior_box": {"floor": [[0, 0], [9, 9], [20, 0]], "walls": 3}})",
+               {"/interior_box/walls", "unknown key"});
+  expect_error(kHead + R"(, "interior_box": {"floor": [[0, 0], [0.5, 0.5], [20, 0]]}})",
+               {"/interior_box/floor/1", "less than 1 pixel"});
+  expect_error(kHead + R"(, "interior_box": {"floor": [[0, 0], [9, null], [20, 0]]}})",
+               {"/interior_box/floor/1/1", "expected a number"});
+  expect_error(
+      kHead + R"(, "camera_height_m": 1.5, "interior_box": {"floor": [[0, 0], [9, 9], [20, 0]],
+                "ceiling_height_m": 2.5, "ceiling_point": [5, 1]}})",
+      {"/interior_box/ceiling_height_m", "fixes the camera height"});
 }
 
 }  // namespace

@@ -18,7 +18,9 @@ namespace {
 
 const std::string kMr = MR_CLI_PATH;
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+std::string q(const fs::path& p) {
+  return "'" + p.string() + "'";
+}
 
 class EstimateCli : public ::testing::Test {
  protected:
@@ -82,8 +84,9 @@ TEST_F(EstimateCli, WithoutAnnotationsFallsBackToLevelCamera) {
 }
 
 TEST_F(EstimateCli, BadAnnotationsAreUsageErrorsNamingFileAndPointer) {
-  test::write_bytes(dir / "bad.json",
-                    R"({"format": "libmr-annotations", "version": 1, "planes": [{"polygon": [[1, 2], [3, 4]]}]})");
+  test::write_bytes(
+      dir / "bad.json",
+      R"({"format": "libmr-annotations", "version": 1, "planes": [{"polygon": [[1, 2], [3, 4]]}]})");
   auto r = test::run(kMr + " estimate " + q(dir / "photo.png") + " --annotations " +
                      q(dir / "bad.json") + " -o " + q(dir / "s.json"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
@@ -115,6 +118,48 @@ TEST_F(EstimateCli, UnreadablePhotoFails) {
 TEST_F(EstimateCli, MissingOutputIsUsageError) {
   const auto r = test::run(kMr + " estimate " + q(dir / "photo.png"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
+}
+
+// `mr fog --depth auto --save-scene PATTERN`: one scene per photo, the one it was rendered with:
+// the annotated photo's pose from its annotations, the other's from the automatic estimate.
+TEST_F(EstimateCli, FogSavesOneEstimatedScenePerPhoto) {
+  const fs::path in = dir / "in";
+  fs::create_directories(in);
+  write_image(in / "a.png", test::make_test_photo(160, 120));
+  write_image(in / "b.png", test::make_test_photo(120, 90));
+  save_annotations(in / "a.json", annotations);
+  const std::string pattern = (dir / "scenes" / "{stem}.scene.json").string();
+  const auto r = test::run(
+      kMr + " fog " + q(in) + " --depth auto --annotations '{dir}/{stem}.json' --fov 50 " +
+      "--quality draft -q -o " + q(dir / "out") + " --save-scene '" + pattern + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(dir / "scenes" / "a.scene.json")) << r.output;
+  ASSERT_TRUE(fs::exists(dir / "scenes" / "b.scene.json")) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "scenes" / "a.json.scene.json"));  // annotations are not photos
+
+  const FogScene a = load_scene(dir / "scenes" / "a.scene.json");
+  const CameraPose pa = estimate_geometry(read_image(in / "a.png"),
+                                          Camera::from_horizontal_fov(160, 120, 50), annotations)
+                            .pose;
+  EXPECT_EQ(a.pose.pitch_deg, pa.pitch_deg);
+  EXPECT_EQ(a.pose.roll_deg, pa.roll_deg);
+  EXPECT_EQ(a.pose.position_m.y, 1.5);
+  const FogScene b = load_scene(dir / "scenes" / "b.scene.json");
+  const GeometryEstimate gb = estimate_geometry(
+      read_image(in / "b.png"), Camera::from_horizontal_fov(120, 90, 50), Annotations{});
+  EXPECT_EQ(b.pose.pitch_deg, gb.pose.pitch_deg);
+  EXPECT_EQ(b.pose.position_m.y, 1.6);
+  EXPECT_NE(a.pose.pitch_deg, b.pose.pitch_deg);
+  EXPECT_FLOAT_EQ(a.medium.sigma_t_per_m[0], float(3.912 / 150));  // the command line's medium
+
+  // A pattern that gives one file for two photos is a usage error; nothing is written.
+  const auto clash =
+      test::run(kMr + " fog " + q(in) + " --depth auto --quality draft -o " + q(dir / "out2") +
+                " --save-scene '" + (dir / "scenes" / "same.json").string() + "{ext}'");
+  EXPECT_EQ(clash.exit_code, 2) << clash.output;
+  EXPECT_NE(clash.output.find("for both"), std::string::npos) << clash.output;
+  EXPECT_FALSE(fs::exists(dir / "out2"));
+  EXPECT_FALSE(fs::exists(dir / "scenes" / "same.json.png"));
 }
 
 }  // namespace

@@ -53,7 +53,6 @@ class Reader : public json::JsonReader {
     if (!j.is_array() || j.size() != 2) expected(pointer, "two points [[x0, y0], [x1, y1]]", j);
     return {point(j[0], pointer + "/0"), point(j[1], pointer + "/1")};
   }
-
 };
 
 Annotations from_document(const Json& doc, const Reader& r) {
@@ -61,9 +60,10 @@ Annotations from_document(const Json& doc, const Reader& r) {
   r.check_keys(doc, "",
                {"format", "version", "horizon", "camera_height_m", "known_length", "planes",
                 "distance_hints", "shadow_pairs", "sunlit_patch", "shadowed_patch", "lamps",
-                "lamp_patches"});
+                "lamp_patches", "interior_box"});
   const Json* format = member(doc, "format");
-  if (!format) r.fail("/format", std::string("missing; expected \"") + kAnnotationsFormatName + "\"");
+  if (!format)
+    r.fail("/format", std::string("missing; expected \"") + kAnnotationsFormatName + "\"");
   if (!format->is_string() || format->get<std::string>() != kAnnotationsFormatName)
     r.expected("/format", std::string("\"") + kAnnotationsFormatName + "\"", *format);
   const Json* version = member(doc, "version");
@@ -72,12 +72,14 @@ Annotations from_document(const Json& doc, const Reader& r) {
     r.expected("/version", "an integer", *version);
   const long long v = version->get<long long>();
   if (v < 1 || v > kAnnotationsFormatVersion)
-    r.fail("/version", "version " + std::to_string(v) + " is not supported (this libmr reads 1 to " +
+    r.fail("/version", "version " + std::to_string(v) +
+                           " is not supported (this libmr reads 1 to " +
                            std::to_string(kAnnotationsFormatVersion) + ")");
 
   Annotations a;
   if (const Json* h = member(doc, "horizon")) a.horizon = r.two_points(*h, "/horizon");
-  if (const Json* h = member(doc, "camera_height_m")) a.camera_height_m = r.number(*h, "/camera_height_m");
+  if (const Json* h = member(doc, "camera_height_m"))
+    a.camera_height_m = r.number(*h, "/camera_height_m");
   if (const Json* k = member(doc, "known_length")) {
     r.object(*k, "/known_length");
     r.check_keys(*k, "/known_length", {"a", "b", "length_m"});
@@ -171,11 +173,25 @@ Annotations from_document(const Json& doc, const Reader& r) {
       a.lamp_patches.push_back(std::move(patch));
     }
   }
+  if (const Json* box = member(doc, "interior_box")) {
+    r.object(*box, "/interior_box");
+    r.check_keys(*box, "/interior_box", {"floor", "ceiling_height_m", "ceiling_point"});
+    if (!member(*box, "floor")) r.fail("/interior_box/floor", "missing");
+    Annotations::InteriorBox b;
+    b.floor = r.points((*box)["floor"], "/interior_box/floor");
+    if (const Json* c = member(*box, "ceiling_height_m"))
+      b.ceiling_height_m = r.number(*c, "/interior_box/ceiling_height_m");
+    if (const Json* c = member(*box, "ceiling_point"))
+      b.ceiling_point = r.point(*c, "/interior_box/ceiling_point");
+    a.interior_box = std::move(b);
+  }
   validate_annotations(a, "");  // re-thrown below with the source name
   return a;
 }
 
-Json point_json(const PixelPoint& p) { return Json::array({p[0], p[1]}); }
+Json point_json(const PixelPoint& p) {
+  return Json::array({p[0], p[1]});
+}
 Json points_json(const std::vector<PixelPoint>& ps) {
   Json j = Json::array();
   for (const auto& p : ps) j.push_back(point_json(p));
@@ -218,8 +234,7 @@ void validate_annotations(const Annotations& a, const std::string& source_name) 
   }
   if (a.camera_height_m) positive(*a.camera_height_m, "/camera_height_m");
   if (a.known_length) {
-    if (a.camera_height_m)
-      fail("/known_length", "give camera_height_m or known_length, not both");
+    if (a.camera_height_m) fail("/known_length", "give camera_height_m or known_length, not both");
     point(a.known_length->a, "/known_length/a");
     point(a.known_length->b, "/known_length/b");
     positive(a.known_length->length_m, "/known_length/length_m");
@@ -273,6 +288,22 @@ void validate_annotations(const Annotations& a, const std::string& source_name) 
                "must be in (0, 1], found " + std::to_string((*al)[k]));
       }
   }
+  if (const auto& box = a.interior_box) {
+    for (std::size_t i = 0; i < box->floor.size(); ++i)
+      point(box->floor[i], "/interior_box/floor/" + std::to_string(i));
+    if (box->floor.size() < 3)
+      fail("/interior_box/floor",
+           "expected at least 3 points (two walls), found " + std::to_string(box->floor.size()));
+    for (std::size_t i = 1; i < box->floor.size(); ++i)
+      apart(box->floor[i - 1], box->floor[i], "/interior_box/floor/" + std::to_string(i),
+            "consecutive floor");
+    if (box->ceiling_height_m) positive(*box->ceiling_height_m, "/interior_box/ceiling_height_m");
+    if (box->ceiling_point) point(*box->ceiling_point, "/interior_box/ceiling_point");
+    if (box->ceiling_height_m && box->ceiling_point && (a.camera_height_m || a.known_length))
+      fail("/interior_box/ceiling_height_m",
+           "with ceiling_point it fixes the camera height; give camera_height_m or known_length, "
+           "or drop one of ceiling_height_m and ceiling_point");
+  }
   if (a.lamps.empty() != a.lamp_patches.empty())
     fail(a.lamps.empty() ? "/lamps" : "/lamp_patches",
          "missing: lamps are fitted to the shading of lamp_patches; mark both or neither");
@@ -298,7 +329,8 @@ std::string annotations_to_json(const Annotations& a) {
   Json doc = Json::object();
   doc["format"] = kAnnotationsFormatName;
   doc["version"] = kAnnotationsFormatVersion;
-  if (a.horizon) doc["horizon"] = Json::array({point_json((*a.horizon)[0]), point_json((*a.horizon)[1])});
+  if (a.horizon)
+    doc["horizon"] = Json::array({point_json((*a.horizon)[0]), point_json((*a.horizon)[1])});
   if (a.camera_height_m) doc["camera_height_m"] = *a.camera_height_m;
   if (a.known_length)
     doc["known_length"] = {{"a", point_json(a.known_length->a)},
@@ -348,6 +380,12 @@ std::string annotations_to_json(const Annotations& a) {
       patches.push_back(std::move(j));
     }
     doc["lamp_patches"] = std::move(patches);
+  }
+  if (const auto& box = a.interior_box) {
+    Json j = {{"floor", points_json(box->floor)}};
+    if (box->ceiling_height_m) j["ceiling_height_m"] = *box->ceiling_height_m;
+    if (box->ceiling_point) j["ceiling_point"] = point_json(*box->ceiling_point);
+    doc["interior_box"] = std::move(j);
   }
   return doc.dump(2) + "\n";
 }

@@ -36,21 +36,25 @@ std::string fmt(const char* format, double v) {
 void check_camera(const Camera& camera) {
   if (camera.width <= 0 || camera.height <= 0 || !(camera.focal_px > 0) ||
       !std::isfinite(camera.focal_px) || !std::isfinite(camera.cx) || !std::isfinite(camera.cy))
-    throw Error(ErrorCode::invalid_argument,
-                "estimate: invalid camera (" + std::to_string(camera.width) + "x" +
-                    std::to_string(camera.height) + ", focal " + fmt("%g", camera.focal_px) + " px)");
+    throw Error(ErrorCode::invalid_argument, "estimate: invalid camera (" +
+                                                 std::to_string(camera.width) + "x" +
+                                                 std::to_string(camera.height) + ", focal " +
+                                                 fmt("%g", camera.focal_px) + " px)");
 }
 
 // Mean-free helper: the photo's RGB pixels inside a polygon (pixel centres, even-odd rule).
-std::vector<std::array<float, 3>> pixels_in(const Image& photo, const std::vector<PixelPoint>& poly) {
+std::vector<std::array<float, 3>> pixels_in(const Image& photo,
+                                            const std::vector<PixelPoint>& poly) {
   double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
   for (const auto& p : poly) {
     x0 = std::min(x0, p[0]), x1 = std::max(x1, p[0]);
     y0 = std::min(y0, p[1]), y1 = std::max(y1, p[1]);
   }
   std::vector<std::array<float, 3>> out;
-  const int xa = std::max(0, int(std::floor(x0))), xb = std::min(photo.width() - 1, int(std::ceil(x1)));
-  const int ya = std::max(0, int(std::floor(y0))), yb = std::min(photo.height() - 1, int(std::ceil(y1)));
+  const int xa = std::max(0, int(std::floor(x0))),
+            xb = std::min(photo.width() - 1, int(std::ceil(x1)));
+  const int ya = std::max(0, int(std::floor(y0))),
+            yb = std::min(photo.height() - 1, int(std::ceil(y1)));
   for (int y = ya; y <= yb; ++y)
     for (int x = xa; x <= xb; ++x)
       if (photo::inside_polygon(poly, x, y))
@@ -113,6 +117,8 @@ const char* to_string(EstimateSource source) noexcept {
       return "zenith";
     case EstimateSource::horizontal_vp_level:
       return "horizontal_vp_level";
+    case EstimateSource::interior_box:
+      return "interior_box";
   }
   return "?";
 }
@@ -156,10 +162,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   validate_annotations(annotations, "");
   const bool automatic = photo && options.automatic;
   if (photo && (photo->width() != camera.width || photo->height() != camera.height))
-    throw Error(ErrorCode::size_mismatch,
-                "estimate: photo is " + std::to_string(photo->width()) + "x" +
-                    std::to_string(photo->height()) + ", camera is " + std::to_string(camera.width) +
-                    "x" + std::to_string(camera.height));
+    throw Error(ErrorCode::size_mismatch, "estimate: photo is " + std::to_string(photo->width()) +
+                                              "x" + std::to_string(photo->height()) +
+                                              ", camera is " + std::to_string(camera.width) + "x" +
+                                              std::to_string(camera.height));
   GeometryEstimate g;
   g.pose.position_m = {0, 1, 0};
   std::optional<photo::AutoHorizon> auto_horizon;
@@ -188,6 +194,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   } else if (annotations.known_length) {
     height = photo::camera_height_from_known_length(camera, g.pose, *annotations.known_length);
     g.height_source = EstimateSource::known_length;
+  } else if (const auto& box = annotations.interior_box;
+             box && box->ceiling_height_m && box->ceiling_point) {
+    // The marked ceiling gives its height in camera heights; the known ceiling height scales it.
+    height = *box->ceiling_height_m / photo::ceiling_over_camera_height(camera, g.pose, *box);
+    g.height_source = EstimateSource::interior_box;
   }
   if (!(height > 0) || !std::isfinite(height))
     throw Error(ErrorCode::invalid_argument,
@@ -200,53 +211,214 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   g.ground_pixels = map.counts[int(photo::Coverage::ground)];
   g.plane_pixels = map.counts[int(photo::Coverage::plane)];
   g.hint_pixels = map.counts[int(photo::Coverage::hint)];
-  if (!automatic) return g;
+  g.room_pixels = map.counts[int(photo::Coverage::room)];
+  if (map.room) {
+    const photo::Room& room = *map.room;
+    g.room_ceiling_height_m = room.ceiling_height_m;
+    // The edges, clipped to 5 cm in front of the camera before projecting.
+    const auto [fwd_axis, right_axis, up_axis] = g.pose.axes();
+    auto add_edge = [&](Vec3 a, Vec3 b) {
+      const Vec3& o = g.pose.position_m;
+      auto depth = [&](const Vec3& p) {
+        return (p.x - o.x) * fwd_axis.x + (p.y - o.y) * fwd_axis.y + (p.z - o.z) * fwd_axis.z;
+      };
+      const double near = 0.05, da = depth(a), db = depth(b);
+      if (da < near && db < near) return;
+      if (da < near || db < near) {
+        const double t = (near - da) / (db - da);
+        const Vec3 m{a.x + t * (b.x - a.x), a.y + t * (b.y - a.y), a.z + t * (b.z - a.z)};
+        (da < near ? a : b) = m;
+      }
+      const auto pa = photo::project(camera, g.pose, a), pb = photo::project(camera, g.pose, b);
+      if (pa && pb) g.room_edges.push_back({*pa, *pb});
+    };
+    const double top = room.ceiling_height_m.value_or(2 * height);
+    for (std::size_t i = 0; i + 1 < room.floor_m.size(); ++i) {
+      const Vec3 &a = room.floor_m[i], &b = room.floor_m[i + 1];
+      add_edge(a, b);
+      if (room.ceiling_height_m) add_edge({a.x, top, a.z}, {b.x, top, b.z});
+    }
+    for (std::size_t i = 1; i + 1 < room.floor_m.size(); ++i) {
+      const Vec3& a = room.floor_m[i];
+      add_edge(a, {a.x, top, a.z});
+    }
+  }
+  // Indoors the room covers every pixel: no sky to find, no billboards.
+  if (!automatic || map.room) return g;
 
-  // The automatic sky: carve it out of the planes; what is above the horizon and not sky
-  // becomes the far billboard, and so does the ground behind it.
+  // The automatic sky: carve it out of the planes. What is above the horizon and not sky is
+  // structure: standing on the ground where it meets it (ground_contact), else on the far
+  // billboard; the ground behind a column's structure takes the structure's distance.
   const photo::SkyMask mask = photo::estimate_sky_mask(photo->view(), g.horizon);
   g.sky_from_mask = true;
   const int w = camera.width, h = camera.height;
+  const std::size_t n = std::size_t(w) * h;
   const double depression = options.billboard_depression_deg;
   if (!(depression > 0 && depression < 90))
     throw Error(ErrorCode::invalid_argument,
                 "billboard_depression_deg: must be in (0, 90), found " + fmt("%g", depression));
-  const double forward = height / std::tan(depression * kDeg);
+  const double far_forward = height / std::tan(depression * kDeg);
   const Vec3 f = g.pose.axes()[0];
   const double fl = std::hypot(f.x, f.z);
   const Vec3 fwd{f.x / fl, 0, f.z / fl};  // the camera's horizontal viewing direction
-  auto billboard = [&](int x, int y) {
+  // Distance along the ray to the vertical plane facing the camera `forward` metres ahead.
+  auto billboard = [&](int x, int y, double forward) {
     const Vec3 d = g.pose.ray_direction(camera, x, y);
     const double along = d.x * fwd.x + d.z * fwd.z;
     return float(forward / std::max(along, 0.05));  // rays nearly sideways: 20 x forward at most
   };
-  const double slope = (g.horizon[1][1] - g.horizon[0][1]) / std::max(1.0, g.horizon[1][0] - g.horizon[0][0]);
-  std::vector<std::uint8_t> billboard_above(std::size_t(w), 0);  // the column's structure reaches the horizon
-  std::size_t counts[5] = {0, 0, 0, 0, 0};  // sky, ground, plane, hint, billboard
+  const double slope =
+      (g.horizon[1][1] - g.horizon[0][1]) / std::max(1.0, g.horizon[1][0] - g.horizon[0][0]);
+  auto horizon_y = [&](double x) { return g.horizon[0][1] + (x - g.horizon[0][0]) * slope; };
+
+  // Per pixel: the forward distance of the structure it is on where it meets the ground (0:
+  // none found).
+  std::vector<float> contact_forward(n, 0.0f);
+  if (options.ground_contact) {
+    const photo::GroundMask ground =
+        photo::estimate_ground_mask(photo->view(), g.horizon, mask.sky);
+    if (ground.valid) {
+      // Structure: not sky, not annotated; below the horizon where not ground-coloured.
+      cv::Mat structure(h, w, CV_8U, cv::Scalar(0));
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          const auto c = map.coverage[i];
+          structure.at<std::uint8_t>(y, x) =
+              !mask.sky[i] &&
+              (c == photo::Coverage::sky || (c == photo::Coverage::ground && !ground.ground[i]));
+        }
+      cv::Mat labels, stats, centroids;
+      const int count =
+          cv::connectedComponentsWithStats(structure, labels, stats, centroids, 8, CV_32S);
+      // Only components that rise above the horizon stand on the ground; blobs entirely below
+      // it (markings, shadows, low objects) stay ground.
+      std::vector<std::uint8_t> rises(std::size_t(count), 0);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (map.coverage[std::size_t(y) * w + x] == photo::Coverage::sky)
+            rises[std::size_t(labels.at<int>(y, x))] = 1;
+      rises[0] = 0;  // the background
+      std::vector<std::size_t> offset(std::size_t(count), 0);
+      std::size_t total = 0;
+      for (int l = 1; l < count; ++l)
+        if (rises[l]) offset[l] = total, total += std::size_t(stats.at<int>(l, cv::CC_STAT_WIDTH));
+      // The lowest row of each rising component in each of its columns.
+      std::vector<int> lowest(total, -1);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          const int l = labels.at<int>(y, x);
+          if (rises[std::size_t(l)])
+            lowest[offset[l] + std::size_t(x - stats.at<int>(l, cv::CC_STAT_LEFT))] = y;
+        }
+      // Its contact: the pixel edge below that row, when it is below the horizon and the pixel
+      // beneath is ground-coloured (a structure running off the bottom has no contact).
+      const Vec3 o = g.pose.position_m;
+      std::vector<double> forward(total, 0.0);
+      for (int l = 1; l < count; ++l) {
+        if (!rises[l]) continue;
+        const int left = stats.at<int>(l, cv::CC_STAT_LEFT),
+                  width = stats.at<int>(l, cv::CC_STAT_WIDTH);
+        for (int k = 0; k < width; ++k) {
+          const int x = left + k, yc = lowest[offset[l] + k];
+          if (yc < 0 || yc + 1 >= h || !(yc >= horizon_y(x) + 1)) continue;
+          if (!ground.ground[std::size_t(yc + 1) * w + x]) continue;
+          const auto gp = photo::ground_point(camera, g.pose, {double(x), yc + 0.5});
+          if (!gp) continue;
+          const double fd = (gp->x - o.x) * fwd.x + (gp->z - o.z) * fwd.z;
+          // No farther than the far billboard: a contact just below the horizon is the least
+          // certain (a pixel there spans many metres), and fog should err towards too much.
+          if (fd > 0 && std::isfinite(fd)) forward[offset[l] + k] = std::min(fd, far_forward);
+        }
+      }
+      // Smoothed: the median of the contacts within a few columns of the same component; its
+      // columns without a contact take the nearest column's that has one. A component with
+      // contacts in fewer than kMinContactColumns of its columns (a facade behind hedges and
+      // cars, touching the ground-coloured band here and there) keeps the far billboard: its
+      // few contacts are more likely foreground clutter than its own foot.
+      constexpr double kMinContactColumns = 0.3;
+      const int half = std::max(2, w / 100);
+      std::vector<double> smooth(total, 0.0), window;
+      for (int l = 1; l < count; ++l) {
+        if (!rises[l]) continue;
+        const int width = stats.at<int>(l, cv::CC_STAT_WIDTH);
+        const double* fw = forward.data() + offset[l];
+        double* sm = smooth.data() + offset[l];
+        int valid = 0;
+        for (int k = 0; k < width; ++k) valid += fw[k] > 0;
+        if (valid == 0 || valid < kMinContactColumns * width) continue;
+        for (int k = 0; k < width; ++k) {
+          if (!(fw[k] > 0)) continue;
+          window.clear();
+          for (int j = std::max(0, k - half); j <= std::min(width - 1, k + half); ++j)
+            if (fw[j] > 0) window.push_back(fw[j]);
+          std::nth_element(window.begin(), window.begin() + std::ptrdiff_t(window.size() / 2),
+                           window.end());
+          sm[k] = window[window.size() / 2];
+        }
+        // Gaps: the nearest contact column (left or right) of the same component.
+        std::vector<double> filled(sm, sm + width);
+        int last = -1;
+        for (int k = 0; k < width; ++k) {
+          if (sm[k] > 0) {
+            last = k;
+            continue;
+          }
+          int next = k + 1;
+          while (next < width && !(sm[next] > 0)) ++next;
+          const bool use_left = last >= 0 && (next >= width || k - last <= next - k);
+          filled[k] = use_left ? sm[last] : sm[next];
+        }
+        std::copy(filled.begin(), filled.end(), sm);
+      }
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          const int l = labels.at<int>(y, x);
+          if (rises[std::size_t(l)])
+            contact_forward[std::size_t(y) * w + x] =
+                float(smooth[offset[l] + std::size_t(x - stats.at<int>(l, cv::CC_STAT_LEFT))]);
+        }
+    }
+  }
+
+  constexpr int kFar = 5, kContact = 6;
+  std::vector<double> column_forward(std::size_t(w), 0.0);  // the structure above the horizon
+  std::vector<int> column_cov(std::size_t(w), 0);
+  std::size_t counts[7] = {0, 0, 0, 0, 0, 0, 0};  // sky, ground, plane, hint, room, far, contact
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
       float& d = g.distance_m.at(x, y, 0);
       int cov = int(map.coverage[i]);
+      const bool open =
+          map.coverage[i] == photo::Coverage::sky || map.coverage[i] == photo::Coverage::ground;
       if (mask.sky[i] && map.coverage[i] == photo::Coverage::plane) {
         d = std::numeric_limits<float>::infinity(), cov = int(photo::Coverage::sky);
+      } else if (open && contact_forward[i] > 0) {
+        d = billboard(x, y, contact_forward[i]), cov = kContact;
       } else if (!mask.sky[i] && map.coverage[i] == photo::Coverage::sky) {
-        d = billboard(x, y), cov = 4;
-      } else if (map.coverage[i] == photo::Coverage::ground && billboard_above[std::size_t(x)]) {
-        const float b = billboard(x, y);
-        if (b < d) d = b, cov = 4;
+        d = billboard(x, y, far_forward), cov = kFar;
+      } else if (map.coverage[i] == photo::Coverage::ground && column_forward[std::size_t(x)] > 0) {
+        const float b = billboard(x, y, column_forward[std::size_t(x)]);
+        if (b < d) d = b, cov = column_cov[std::size_t(x)];
       }
       ++counts[cov];
-      // The pixel just above the horizon in this column decides whether a billboard stands there.
-      const double yh = g.horizon[0][1] + (x - g.horizon[0][0]) * slope;
-      if (y < yh && y + 1 >= yh) billboard_above[std::size_t(x)] = cov == 4;
+      // The pixel just above the horizon in this column decides whether a structure stands there.
+      const double yh = horizon_y(x);
+      if (y < yh && y + 1 >= yh) {
+        column_cov[std::size_t(x)] = cov;
+        column_forward[std::size_t(x)] = cov == kFar       ? far_forward
+                                         : cov == kContact ? contact_forward[i]
+                                                           : 0.0;
+      }
     }
   }
   g.sky_pixels = counts[0];
   g.ground_pixels = counts[1];
   g.plane_pixels = counts[2];
   g.hint_pixels = counts[3];
-  g.billboard_pixels = counts[4];
+  g.billboard_pixels = counts[kFar];
+  g.contact_pixels = counts[kContact];
   return g;
 }
 
@@ -266,21 +438,22 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                              const Annotations& annotations, const EstimateOptions& options) {
   check_camera(camera);
   if (photo.width() != camera.width || photo.height() != camera.height)
-    throw Error(ErrorCode::size_mismatch,
-                "estimate: photo is " + std::to_string(photo.width()) + "x" +
-                    std::to_string(photo.height()) + ", camera is " + std::to_string(camera.width) +
-                    "x" + std::to_string(camera.height));
+    throw Error(ErrorCode::size_mismatch, "estimate: photo is " + std::to_string(photo.width()) +
+                                              "x" + std::to_string(photo.height()) +
+                                              ", camera is " + std::to_string(camera.width) + "x" +
+                                              std::to_string(camera.height));
   if (photo.channels() < 3)
-    throw Error(ErrorCode::invalid_argument,
-                "estimate: the photo has " + std::to_string(photo.channels()) +
-                    " channel(s); RGB is needed");
+    throw Error(ErrorCode::invalid_argument, "estimate: the photo has " +
+                                                 std::to_string(photo.channels()) +
+                                                 " channel(s); RGB is needed");
   SceneEstimate est;
   est.geometry = estimate_geometry(photo, camera, annotations, options);
   const GeometryEstimate& g = est.geometry;
   est.scene.pose = g.pose;
   const char* horizon_how =
-      g.horizon_source == EstimateSource::annotations      ? "annotated"
-      : g.horizon_source == EstimateSource::horizontal_vps ? "automatic, through two horizontal vanishing points"
+      g.horizon_source == EstimateSource::annotations ? "annotated"
+      : g.horizon_source == EstimateSource::horizontal_vps
+          ? "automatic, through two horizontal vanishing points"
       : g.horizon_source == EstimateSource::horizontal_vp_and_zenith
           ? "automatic, from a horizontal and the vertical vanishing point"
       : g.horizon_source == EstimateSource::zenith ? "automatic, from the vertical vanishing point"
@@ -288,26 +461,36 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
           ? "automatic, level through a horizontal vanishing point"
       : options.automatic ? "not annotated, no usable lines; assumed level through the image centre"
                           : "not annotated; assumed level through the image centre";
-  est.notes.push_back(std::string("horizon: ") + horizon_how + " (" + to_string(g.horizon_source) + ")" +
-                      ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " +
-                      fmt("%.2f", g.pose.roll_deg) + " deg, confidence " + fmt("%.2f", g.confidence));
+  est.notes.push_back(std::string("horizon: ") + horizon_how + " (" + to_string(g.horizon_source) +
+                      ")" + ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " +
+                      fmt("%.2f", g.pose.roll_deg) + " deg, confidence " +
+                      fmt("%.2f", g.confidence));
   est.notes.push_back(std::string("camera height: ") + fmt("%.3f", g.pose.position_m.y) + " m (" +
-                      (g.height_source == EstimateSource::annotations
-                           ? "annotated"
-                           : g.height_source == EstimateSource::known_length ? "from the known length"
-                                                                             : "default") +
+                      (g.height_source == EstimateSource::annotations    ? "annotated"
+                       : g.height_source == EstimateSource::known_length ? "from the known length"
+                       : g.height_source == EstimateSource::interior_box
+                           ? "from the interior box's ceiling height and ceiling point"
+                           : "default") +
                       ")");
   const double n = double(photo.width()) * photo.height();
-  est.notes.push_back("depth: " + fmt("%.1f", 100.0 * g.ground_pixels / n) + " % ground, " +
-                      fmt("%.1f", 100.0 * g.plane_pixels / n) + " % planes, " +
-                      fmt("%.1f", 100.0 * g.hint_pixels / n) + " % hints, " +
-                      fmt("%.1f", 100.0 * g.sky_pixels / n) + " % sky" +
-                      (g.sky_from_mask ? " (automatic sky mask), " + fmt("%.1f", 100.0 * g.billboard_pixels / n) +
-                                             " % far billboard at " +
-                                             fmt("%.0f", g.pose.position_m.y /
-                                                             std::tan(options.billboard_depression_deg * kDeg)) +
-                                             " m"
-                                       : std::string()));
+  est.notes.push_back(
+      "depth: " + fmt("%.1f", 100.0 * g.ground_pixels / n) + " % ground, " +
+      fmt("%.1f", 100.0 * g.plane_pixels / n) + " % planes, " +
+      fmt("%.1f", 100.0 * g.hint_pixels / n) + " % hints, " +
+      (g.room_pixels ? fmt("%.1f", 100.0 * g.room_pixels / n) + " % interior box" +
+                           (g.room_ceiling_height_m
+                                ? " (ceiling " + fmt("%.2f", *g.room_ceiling_height_m) + " m)"
+                                : std::string(" (no ceiling)")) +
+                           ", "
+                     : std::string()) +
+      fmt("%.1f", 100.0 * g.sky_pixels / n) + " % sky" +
+      (g.sky_from_mask ? " (automatic sky mask), " + fmt("%.1f", 100.0 * g.contact_pixels / n) +
+                             " % structures standing where they meet the ground, " +
+                             fmt("%.1f", 100.0 * g.billboard_pixels / n) + " % far billboard at " +
+                             fmt("%.0f", g.pose.position_m.y /
+                                             std::tan(options.billboard_depression_deg * kDeg)) +
+                             " m"
+                       : std::string()));
 
   if (!annotations.shadow_pairs.empty()) {
     std::vector<photo::ShadowPair> pairs;
@@ -341,7 +524,8 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
         throw Error(e.code(), std::string("/sunlit_patch: ") + e.what());
       }
       try {
-        patches.shadowed = photo::PatchStats::from_pixels(pixels_in(photo, annotations.shadowed_patch));
+        patches.shadowed =
+            photo::PatchStats::from_pixels(pixels_in(photo, annotations.shadowed_patch));
       } catch (const Error& e) {
         throw Error(e.code(), std::string("/shadowed_patch: ") + e.what());
       }
@@ -373,12 +557,12 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                           " sky pixels (overcast), median " + fmt("%.4g", sky[0]) + " " +
                           fmt("%.4g", sky[1]) + " " + fmt("%.4g", sky[2]));
     } else {
-      est.notes.push_back(
-          std::string("sky: ") +
-          (g.sky_from_mask ? "only " + std::to_string(g.sky_pixels) + " sky pixels (fewer than " +
-                                 std::to_string(min_sky) + ")"
-                           : std::string("no automatic sky mask")) +
-          "; radiance left to mr fog (dark channel prior)");
+      est.notes.push_back(std::string("sky: ") +
+                          (g.sky_from_mask
+                               ? "only " + std::to_string(g.sky_pixels) +
+                                     " sky pixels (fewer than " + std::to_string(min_sky) + ")"
+                               : std::string("no automatic sky mask")) +
+                          "; radiance left to mr fog (dark channel prior)");
     }
   }
 
@@ -412,15 +596,37 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                           fmt("%.4g", I[0]) + " " + fmt("%.4g", I[1]) + " " + fmt("%.4g", I[2]) +
                           " per sr");
     }
-    est.notes.push_back("lamps: " + std::to_string(marks.size()) + " lamp(s) fitted to " +
-                        std::to_string(fit.pixels_used) + " pixels of " +
-                        std::to_string(patches.size()) + " patch(es), residual " +
-                        fmt("%.1f", 100 * fit.rms_residual) + " % RMS, " +
-                        fmt("%.1f", 100 * fit.median_abs_residual) +
-                        " % median (of the median patch radiance)" +
-                        (fit.converged ? "" : "; Ceres did not report convergence"));
+    est.notes.push_back(
+        "lamps: " + std::to_string(marks.size()) + " lamp(s) fitted to " +
+        std::to_string(fit.pixels_used) + " pixels of " + std::to_string(patches.size()) +
+        " patch(es), residual " + fmt("%.1f", 100 * fit.rms_residual) + " % RMS, " +
+        fmt("%.1f", 100 * fit.median_abs_residual) + " % median (of the median patch radiance)" +
+        (fit.converged ? "" : "; Ceres did not report convergence"));
   }
   return est;
+}
+
+PhotoCamera camera_for_photo(const Image& photo, double fallback_fov_deg) {
+  if (photo.width() <= 0 || photo.height() <= 0)
+    throw Error(ErrorCode::invalid_argument, "camera_for_photo: empty photo");
+  PhotoCamera out;
+  out.camera = Camera::from_horizontal_fov(photo.width(), photo.height(), fallback_fov_deg);
+  out.source = "default";
+  auto f35 = photo.metadata().get_number("Exif:FocalLengthIn35mmFilm");
+  if (!f35) f35 = photo.metadata().get_number("Exif:FocalLengthIn35mmFormat");
+  if (f35 && *f35 > 0) {
+    out.camera =
+        Camera::from_metadata(photo.width(), photo.height(), photo.metadata(), fallback_fov_deg);
+    out.source = "exif";
+    out.confidence = 1;
+    return out;
+  }
+  if (const auto f = photo::estimate_focal_px(photo.view(), out.camera)) {
+    out.camera = Camera::from_focal_px(photo.width(), photo.height(), f->focal_px);
+    out.source = "vanishing points";
+    out.confidence = f->confidence;
+  }
+  return out;
 }
 
 Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
@@ -430,11 +636,10 @@ Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
   if (photo.channels() < 3)
     throw Error(ErrorCode::invalid_argument, "overlay: the photo needs RGB channels");
   if (g.distance_m.width() != w || g.distance_m.height() != h)
-    throw Error(ErrorCode::size_mismatch, "overlay: the estimate's distance map is " +
-                                              std::to_string(g.distance_m.width()) + "x" +
-                                              std::to_string(g.distance_m.height()) +
-                                              ", the photo " + std::to_string(w) + "x" +
-                                              std::to_string(h));
+    throw Error(ErrorCode::size_mismatch,
+                "overlay: the estimate's distance map is " + std::to_string(g.distance_m.width()) +
+                    "x" + std::to_string(g.distance_m.height()) + ", the photo " +
+                    std::to_string(w) + "x" + std::to_string(h));
   Image out(w, h, 3);
   // Log-distance colour map over the finite range.
   float dmin = std::numeric_limits<float>::infinity(), dmax = 0;
@@ -471,7 +676,8 @@ Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
   const int thick = std::max(1, std::min(w, h) / 300);
   constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
   auto pt = [](const PixelPoint& p) {
-    return cv::Point(int(std::lround(p[0] * (1 << kShift))), int(std::lround(p[1] * (1 << kShift))));
+    return cv::Point(int(std::lround(p[0] * (1 << kShift))),
+                     int(std::lround(p[1] * (1 << kShift))));
   };
   auto polygon = [&](const std::vector<PixelPoint>& poly, const cv::Scalar& colour) {
     std::vector<cv::Point> pts;
@@ -486,15 +692,28 @@ Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
   if (!annotations.shadowed_patch.empty())
     polygon(annotations.shadowed_patch, cv::Scalar(0, 0.35, 0));
   for (const auto& s : annotations.shadow_pairs) {
-    cv::line(m, pt(s.caster_foot), pt(s.caster_top), cv::Scalar(1, 0, 1), thick, cv::LINE_AA, kShift);
-    cv::line(m, pt(s.caster_top), pt(s.shadow_tip), cv::Scalar(1, 0, 1), thick, cv::LINE_AA, kShift);
+    cv::line(m, pt(s.caster_foot), pt(s.caster_top), cv::Scalar(1, 0, 1), thick, cv::LINE_AA,
+             kShift);
+    cv::line(m, pt(s.caster_top), pt(s.shadow_tip), cv::Scalar(1, 0, 1), thick, cv::LINE_AA,
+             kShift);
   }
   for (const auto& p : annotations.lamp_patches) polygon(p.polygon, cv::Scalar(1, 0.5, 0));
   for (const auto& l : annotations.lamps) {
     const int r = std::max(3, std::min(w, h) / 80) << kShift;
     cv::circle(m, pt(l.pixel), r, cv::Scalar(1, 0.6, 0), thick + 1, cv::LINE_AA, kShift);
   }
-  cv::line(m, pt(g.horizon[0]), pt(g.horizon[1]), cv::Scalar(1, 0, 0), thick + 1, cv::LINE_AA, kShift);
+  for (const auto& e : g.room_edges)
+    cv::line(m, pt(e[0]), pt(e[1]), cv::Scalar(1, 1, 1), thick + 1, cv::LINE_AA, kShift);
+  if (annotations.interior_box) {
+    const int r = std::max(3, std::min(w, h) / 100) << kShift;
+    for (const auto& p : annotations.interior_box->floor)
+      cv::circle(m, pt(p), r, cv::Scalar(1, 1, 1), thick, cv::LINE_AA, kShift);
+    if (annotations.interior_box->ceiling_point)
+      cv::circle(m, pt(*annotations.interior_box->ceiling_point), r, cv::Scalar(1, 1, 1), thick,
+                 cv::LINE_AA, kShift);
+  }
+  cv::line(m, pt(g.horizon[0]), pt(g.horizon[1]), cv::Scalar(1, 0, 0), thick + 1, cv::LINE_AA,
+           kShift);
   if (estimate.sun) {
     // Compass at the top centre: up = the camera's horizontal forward, right = its right.
     const double az = (estimate.sun->azimuth_deg - g.pose.yaw_deg) * kDeg;
@@ -502,7 +721,8 @@ Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
     const PixelPoint c{w / 2.0, len * 1.2};
     const PixelPoint tip{c[0] + len * std::sin(az), c[1] - len * std::cos(az)};
     cv::circle(m, pt(c), int(len * (1 << kShift)), cv::Scalar(1, 1, 1), thick, cv::LINE_AA, kShift);
-    cv::arrowedLine(m, pt(c), pt(tip), cv::Scalar(1, 0.85, 0.2), thick + 1, cv::LINE_AA, kShift, 0.25);
+    cv::arrowedLine(m, pt(c), pt(tip), cv::Scalar(1, 0.85, 0.2), thick + 1, cv::LINE_AA, kShift,
+                    0.25);
   }
   return out;
 }

@@ -75,6 +75,23 @@ struct Annotations {
     std::optional<std::array<double, 3>> albedo;
   };
   std::vector<LampPatch> lamp_patches;  ///< both lamps and lamp_patches, or neither
+  /// An interior: the camera stands in a convex room whose walls are vertical planes on the
+  /// floor (the ground y = 0) and whose ceiling, when known, is the plane y = ceiling height.
+  /// Every pixel is then on the floor, a wall or the ceiling (no sky); planes and distance hints
+  /// still override it.
+  struct InteriorBox {
+    /// >= 3 points where walls meet the floor, in order along the floor's edge (e.g. a point
+    /// on the left wall's base, the back-left corner, the back-right corner, a point on the
+    /// right wall's base): each two consecutive points span one wall. All below the horizon.
+    std::vector<PixelPoint> floor;
+    /// Ceiling height above the floor, metres (> 0).
+    std::optional<double> ceiling_height_m;
+    /// A point where the ceiling meets a wall (above the horizon): gives the ceiling height
+    /// relative to the camera height; with ceiling_height_m too it fixes the camera height
+    /// (then neither camera_height_m nor known_length may be given).
+    std::optional<PixelPoint> ceiling_point;
+  };
+  std::optional<InteriorBox> interior_box;
 };
 
 /// The value of the document's "format" key.
@@ -86,7 +103,9 @@ inline constexpr int kAnnotationsFormatVersion = 1;
 /// lengths and distances > 0, not both camera_height_m and known_length, polygons with >= 3
 /// points, horizon points and known-length points >= 1 px apart, both patches or neither,
 /// lamp offsets >= 0, lamp colours >= 0 and not black, lamp-patch albedos in (0, 1], both lamps
-/// and lamp_patches or neither.
+/// and lamp_patches or neither; an interior box with >= 3 floor points, consecutive ones >= 1 px
+/// apart, and not ceiling_height_m and ceiling_point together with camera_height_m or
+/// known_length.
 /// Throws mr::Error(invalid_argument) "source: /json/pointer: problem", e.g.
 ///   "a.json: /planes/2/polygon: expected at least 3 points, found 2".
 void validate_annotations(const Annotations& annotations,

@@ -31,6 +31,15 @@ struct EstimateOptions {
   /// (forward distance h / tan(angle): 46 m for 1.6 m and 2 degrees). Far, so that fog errs
   /// towards too much on unknown structures rather than none.
   double billboard_depression_deg = 2.0;
+  /// Structures standing on the ground (issue 4 item 2): a non-sky structure above the horizon
+  /// is followed down to where it meets ground-coloured pixels (photo/sky_mask.h's ground
+  /// model); in each column where that contact lies below the horizon, the structure is a
+  /// billboard facing the camera at the ground's forward distance there (median over nearby
+  /// columns of the structure, at most the far billboard's; its columns without a contact take
+  /// the nearest contact's). A structure with contacts in fewer than 30 % of its columns, or
+  /// a photo whose ground colour cannot be modelled, keeps the far billboard. false: the far
+  /// billboard everywhere.
+  bool ground_contact = true;
 };
 
 /// Where a value came from.
@@ -43,6 +52,7 @@ enum class EstimateSource {
   horizontal_vp_and_zenith,  ///< through one, perpendicular to the vertical vanishing point
   zenith,                    ///< from the vertical vanishing point alone (and the focal length)
   horizontal_vp_level,       ///< through one horizontal vanishing point, roll assumed 0
+  interior_box,              ///< camera height from the interior box's ceiling height and point
 };
 const char* to_string(EstimateSource source) noexcept;
 
@@ -67,6 +77,16 @@ struct GeometryEstimate {
   std::size_t sky_pixels = 0, ground_pixels = 0, plane_pixels = 0, hint_pixels = 0;
   /// Pixels on the far billboard (EstimateOptions::billboard_depression_deg).
   std::size_t billboard_pixels = 0;
+  /// Pixels on structures standing where they meet the ground (EstimateOptions::ground_contact).
+  std::size_t contact_pixels = 0;
+  /// With an interior_box annotation: pixels on the room's floor, walls or ceiling; the
+  /// ceiling height (metres above the floor; unset when neither given nor marked); and the
+  /// room's edges in the image (floor lines, wall corners up to the ceiling or twice the camera
+  /// height, ceiling lines; pixel-centre coordinates, clipped in front of the camera) for
+  /// render_estimate_overlay.
+  std::size_t room_pixels = 0;
+  std::optional<double> room_ceiling_height_m;
+  std::vector<std::array<PixelPoint, 2>> room_edges;
 };
 
 /// The camera pose whose horizon passes through the two points (pixel-centre coordinates), at
@@ -78,8 +98,10 @@ CameraPose pose_from_horizon(const Camera& camera, const std::array<PixelPoint, 
 
 /// The geometry of the annotated photo: pose from the horizon (else a level camera: horizon
 /// through the principal point, low confidence) and camera height (else from known_length,
-/// else options.default_camera_height_m); distance map from the ground plane, the vertical
-/// planes and the distance hints (docs/annotations.md says which covers which).
+/// else from the interior box's ceiling height and ceiling point, else
+/// options.default_camera_height_m); distance map from the ground plane (or the interior
+/// box's room), the vertical planes and the distance hints (docs/annotations.md says which
+/// covers which).
 /// Throws mr::Error(invalid_argument) "/json/pointer: problem" for annotations that do not
 /// fit this camera (a plane or known length on or above the horizon, ...) or are invalid.
 GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
@@ -90,8 +112,10 @@ GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& anno
 /// (horizon_source says which cue; the level fall-back when none is usable); and the sky from
 /// the automatic sky mask: above the horizon, sky-coloured, smooth, connected to the top border.
 /// The mask also carves the sky out of plane polygons; pixels above the horizon that are
-/// neither sky nor annotated become the far billboard (billboard_depression_deg), and so do
-/// ground pixels beneath it that would lie behind it.
+/// neither sky nor annotated are structures standing where they meet the ground
+/// (EstimateOptions::ground_contact; docs/annotations.md gives the rules), else on the far
+/// billboard (billboard_depression_deg), and so are ground pixels beneath them that would lie
+/// behind them. With an interior_box the room covers every pixel: no sky mask, no billboards.
 GeometryEstimate estimate_geometry(const Image& photo, const Camera& camera,
                                    const Annotations& annotations,
                                    const EstimateOptions& options = {});
@@ -100,8 +124,8 @@ GeometryEstimate estimate_geometry(const Image& photo, const Camera& camera,
 struct SunEstimate {
   Vec3 direction_to_sun;
   double azimuth_deg = 0, elevation_deg = 0;
-  double rms_residual_deg = 0;     ///< angular residual of the pairs (RMS)
-  double median_residual_px = 0;   ///< reprojection residual of the marks (median over pairs)
+  double rms_residual_deg = 0;    ///< angular residual of the pairs (RMS)
+  double median_residual_px = 0;  ///< reprojection residual of the marks (median over pairs)
 };
 
 struct SceneEstimate {
@@ -124,17 +148,35 @@ struct SceneEstimate {
 /// pairs (Ceres; throws mr::Error(invalid_argument) naming the pair for bad or contradictory
 /// pairs) and, with sunlit and shadowed patches, the sun/sky ratio; with lamps and lamp patches,
 /// the lamps (throws mr::Error(invalid_argument) "/lamps, /lamp_patches: lamp <i>: ..." for a
-/// lamp outside the image, in the sky or behind the camera, or contradictory shading). `photo` is scene-linear
-/// RGB of the camera's size (size_mismatch otherwise).
+/// lamp outside the image, in the sky or behind the camera, or contradictory shading). `photo` is
+/// scene-linear RGB of the camera's size (size_mismatch otherwise).
 SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                              const Annotations& annotations, const EstimateOptions& options = {});
 
+/// The camera of a photo for estimation (issue 4 item 1), principal point at the centre.
+struct PhotoCamera {
+  Camera camera;
+  /// Where the focal length came from: "exif" (35 mm equivalent focal length),
+  /// "vanishing points" (two or three orthogonal ones, f = sqrt(-(v1 - c) . (v2 - c))), or
+  /// "default" (fallback_fov_deg across).
+  std::string source;
+  /// For "vanishing points": in (0, 0.9]; 0.9 x strength for a consistent orthogonal triple,
+  /// 0.5 x strength for a single pair (orthogonality assumed); 1 for "exif", 0 for "default".
+  double confidence = 0;
+};
+/// EXIF's focal length when the photo has one (as Camera::from_metadata); else the focal length
+/// from the photo's orthogonal vanishing points when confident (>= 0.3) and the horizontal
+/// field of view it implies is within [20, 120] degrees; else `fallback_fov_deg` across.
+/// Throws mr::Error(invalid_argument) for an empty photo or a fallback outside (0, 180).
+PhotoCamera camera_for_photo(const Image& photo, double fallback_fov_deg = 60.0);
+
 /// A picture for a person to check the estimate with: the photo (scene-linear, RGB) with the
 /// depth colour-mapped over it (log distance, near = red to far = blue, half blended), the sky
-/// washed out towards white, the horizon as a red line, the plane polygons in yellow, the distance hints in
-/// cyan, the shadow pairs in magenta and the patches in green / dark green; an arrow toward the
-/// sun's azimuth at the top when the sun was fitted; lamps as orange circles, their patches as
-/// orange polygons. Scene-linear RGB, the photo's size.
+/// washed out towards white, the horizon as a red line, the plane polygons in yellow, the distance
+/// hints in cyan, the shadow pairs in magenta and the patches in green / dark green; an arrow
+/// toward the sun's azimuth at the top when the sun was fitted; lamps as orange circles, their
+/// patches as orange polygons; the interior box's edges in white with its floor points as white
+/// circles. Scene-linear RGB, the photo's size.
 Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
                               const Annotations& annotations);
 
