@@ -2,17 +2,21 @@
 
 #include <QCheckBox>
 #include <QColorDialog>
+#include <QComboBox>
 #include <QDoubleSpinBox>
 #include <QFormLayout>
 #include <QGroupBox>
 #include <QHBoxLayout>
 #include <QLabel>
+#include <QListWidget>
 #include <QPushButton>
 #include <QSignalBlocker>
 #include <QSlider>
 #include <QVBoxLayout>
 #include <algorithm>
 #include <cmath>
+
+#include "sun_dial.h"
 
 namespace mrstudio {
 
@@ -50,8 +54,24 @@ double FogPanel::visibilityFromSlider(int value) {
   return kMinVisibility * std::pow(kMaxVisibility / kMinVisibility, double(value) / kSliderSteps);
 }
 
+QStringList FogPanel::presetNames() {
+  return {tr("Morning mist"), tr("Dense fog"), tr("Valley fog"), tr("Haze"),
+          tr("Night street with lamps")};
+}
+
 FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   auto* layout = new QVBoxLayout(this);
+
+  auto* preset_row = new QHBoxLayout;
+  preset_box_ = new QComboBox;
+  preset_box_->setObjectName("presetBox");
+  preset_box_->addItem(tr("Custom"));
+  preset_box_->addItems(presetNames());
+  preset_box_->setToolTip(
+      tr("Starting points: each sets the medium and the light; adjust from there"));
+  preset_row->addWidget(new QLabel(tr("Preset")));
+  preset_row->addWidget(preset_box_, 1);
+  layout->addLayout(preset_row);
 
   auto* medium = new QGroupBox(tr("Medium"));
   auto* medium_form = new QFormLayout(medium);
@@ -59,21 +79,48 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   visibility_slider_->setObjectName("visibilitySlider");
   visibility_slider_->setRange(0, kSliderSteps);
   visibility_slider_->setPageStep(kSliderSteps / 20);
-  visibility_slider_->setToolTip(tr("Meteorological visibility: the distance at which a black "
-                                    "object fades to 2 % contrast (log scale)"));
+  visibility_slider_->setToolTip(
+      tr("Meteorological visibility: the distance at which a black "
+         "object fades to 2 % contrast (log scale)"));
   visibility_spin_ = spin(kMinVisibility, kMaxVisibility, 150, 0, tr(" m"), 10);
   visibility_spin_->setObjectName("visibilitySpin");
   medium_form->addRow(tr("Visibility"), visibility_spin_);
   medium_form->addRow(visibility_slider_);
   g_spin_ = spin(-0.95, 0.95, 0.0, 2, QString(), 0.05);
-  g_spin_->setToolTip(tr("Henyey-Greenstein asymmetry: > 0 scatters forward (bright halo "
-                         "toward the sun)"));
+  g_spin_->setToolTip(
+      tr("Henyey-Greenstein asymmetry: > 0 scatters forward (bright halo "
+         "toward the sun)"));
   medium_form->addRow(tr("Anisotropy g"), g_spin_);
   top_enabled_ = new QCheckBox(tr("Fog layer top"));
   top_spin_ = spin(0.1, 5000, 10, 1, tr(" m"), 1);
   top_spin_->setToolTip(tr("Height above the ground where the fog ends"));
   medium_form->addRow(top_enabled_, top_spin_);
+  albedo_spin_ = spin(0, 1, 1, 2, QString(), 0.05);
+  albedo_spin_->setToolTip(
+      tr("Single-scattering albedo: the fraction of the light the fog removes that it "
+         "scatters (1: water droplets, < 1: smoke, smog)"));
+  medium_form->addRow(tr("Albedo"), albedo_spin_);
+  noise_amplitude_ = spin(0, 1, 0, 2, QString(), 0.05);
+  noise_amplitude_->setToolTip(tr("Wisps: how strongly the density varies (0 = uniform)"));
+  noise_scale_ = spin(0.1, 1000, 10, 1, tr(" m"), 1);
+  noise_scale_->setToolTip(tr("Size of the largest wisps"));
+  medium_form->addRow(tr("Wisps"), noise_amplitude_);
+  medium_form->addRow(tr("Wisp size"), noise_scale_);
   layout->addWidget(medium);
+
+  height_box_ = new QGroupBox(tr("Height fog"));
+  height_box_->setCheckable(true);
+  height_box_->setChecked(false);
+  height_box_->setToolTip(
+      tr("Density falls off with height: exp(-(height - base) / scale height)"));
+  auto* height_form = new QFormLayout(height_box_);
+  height_base_ = spin(-1000, 5000, 0, 1, tr(" m"), 1);
+  height_base_->setToolTip(tr("Height (above the ground) where the density is the visibility's"));
+  height_scale_ = spin(0.1, 5000, 20, 1, tr(" m"), 1);
+  height_scale_->setToolTip(tr("Height over which the density falls to 1/e"));
+  height_form->addRow(tr("Base"), height_base_);
+  height_form->addRow(tr("Scale height"), height_scale_);
+  layout->addWidget(height_box_);
 
   auto* sky = new QGroupBox(tr("Sky light"));
   auto* sky_form = new QFormLayout(sky);
@@ -96,10 +143,27 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   sun_azimuth_->setToolTip(tr("0 = straight ahead, 90 = to the right"));
   sun_elevation_ = spin(-90, 90, 30, 1, tr(" °"), 1);
   sun_irradiance_ = spin(0, 1000, 3, 2, QString(), 0.5);
+  sun_dial_ = new SunDial;
+  sun_dial_->setObjectName("sunDial");
+  sun_form->addRow(sun_dial_);
   sun_form->addRow(tr("Azimuth"), sun_azimuth_);
   sun_form->addRow(tr("Elevation"), sun_elevation_);
+  sun_irradiance_->setToolTip(
+      tr("Sunlight above the fog (scene-linear, perpendicular to the rays)"));
   sun_form->addRow(tr("Irradiance"), sun_irradiance_);
   layout->addWidget(sun_box_);
+
+  lamp_box_ = new QGroupBox(tr("Lamps"));
+  auto* lamp_form = new QFormLayout(lamp_box_);
+  lamp_list_ = new QListWidget;
+  lamp_list_->setObjectName("lampList");
+  lamp_list_->setMaximumHeight(80);
+  lamp_form->addRow(lamp_list_);
+  lamp_intensity_ = spin(0, 1e6, 100, 1, tr(" /sr"), 10);
+  lamp_intensity_->setToolTip(tr(
+      "Radiant intensity of the selected lamp (scene-linear per steradian; its colour is kept)"));
+  lamp_form->addRow(tr("Intensity"), lamp_intensity_);
+  layout->addWidget(lamp_box_);
   layout->addStretch(1);
 
   setScene(base_);
@@ -115,20 +179,146 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
     visibility_spin_->setValue(visibilityFromSlider(v));
     changed();
   });
-  connect(visibility_spin_, qOverload<double>(&QDoubleSpinBox::valueChanged), this, [this, changed](double v) {
-    if (updating_) return;
-    const QSignalBlocker block(visibility_slider_);
-    visibility_slider_->setValue(sliderFromVisibility(v));
+  connect(visibility_spin_, qOverload<double>(&QDoubleSpinBox::valueChanged), this,
+          [this, changed](double v) {
+            if (updating_) return;
+            const QSignalBlocker block(visibility_slider_);
+            visibility_slider_->setValue(sliderFromVisibility(v));
+            changed();
+          });
+  for (QDoubleSpinBox* s : {g_spin_, top_spin_, sky_brightness_, sun_irradiance_, albedo_spin_,
+                            height_base_, height_scale_, noise_amplitude_, noise_scale_})
+    connect(s, qOverload<double>(&QDoubleSpinBox::valueChanged), this, changed);
+  for (QDoubleSpinBox* s : {sun_azimuth_, sun_elevation_})
+    connect(s, qOverload<double>(&QDoubleSpinBox::valueChanged), this, [this, changed] {
+      sun_dial_->setSun(sun_azimuth_->value(), sun_elevation_->value());
+      changed();
+    });
+  connect(sun_dial_, &SunDial::changed, this, [this, changed](double az, double el) {
+    {
+      const QSignalBlocker a(sun_azimuth_), e(sun_elevation_);
+      sun_azimuth_->setValue(az);
+      sun_elevation_->setValue(el);
+    }
     changed();
   });
-  for (QDoubleSpinBox* s : {g_spin_, top_spin_, sky_brightness_, sun_azimuth_, sun_elevation_, sun_irradiance_})
-    connect(s, qOverload<double>(&QDoubleSpinBox::valueChanged), this, changed);
   for (QCheckBox* c : {top_enabled_, sky_auto_}) connect(c, &QCheckBox::toggled, this, changed);
   connect(sun_box_, &QGroupBox::toggled, this, changed);
+  connect(height_box_, &QGroupBox::toggled, this, changed);
+  connect(lamp_list_, &QListWidget::currentRowChanged, this, [this](int row) {
+    if (row < 0 || row >= int(lamps_.size())) return;
+    const QSignalBlocker block(lamp_intensity_);
+    const mr::Rgb& i = lamps_[row].intensity_per_sr;
+    lamp_intensity_->setValue((double(i[0]) + i[1] + i[2]) / 3);
+  });
+  connect(lamp_intensity_, qOverload<double>(&QDoubleSpinBox::valueChanged), this,
+          [this, changed](double v) {
+            const int row = lamp_list_->currentRow();
+            if (row < 0 || row >= int(lamps_.size())) return;
+            mr::Rgb& i = lamps_[row].intensity_per_sr;
+            const double mean = (double(i[0]) + i[1] + i[2]) / 3;
+            for (float& c : i) c = mean > 0 ? float(c / mean * v) : float(v);
+            changed();
+          });
+  connect(preset_box_, qOverload<int>(&QComboBox::activated), this, [this](int index) {
+    if (index > 0) applyPreset(Preset(index - 1));
+  });
+  // A hand edit after a preset: the settings are the user's now.
+  connect(this, &FogPanel::sceneChanged, this, [this] {
+    if (!updating_) preset_box_->setCurrentIndex(0);
+  });
   connect(sky_button_, &QPushButton::clicked, this, [this] {
     const QColor c = QColorDialog::getColor(sky_color_, this, tr("Sky light colour"));
     if (c.isValid()) setSkyColor(c);
   });
+}
+
+void FogPanel::applyPreset(Preset preset) {
+  mr::FogScene scene = this->scene();
+  mr::Medium& m = scene.medium;
+  auto visibility = [&](double metres) {
+    const float sigma = float(3.912 / metres);  // Koschmieder, 2 % contrast (as the panel)
+    m.sigma_t_per_m = {sigma, sigma, sigma};
+  };
+  m.height_fog.reset();
+  m.layer_top_m = std::numeric_limits<double>::infinity();
+  m.noise.amplitude = 0;
+  m.albedo = {1, 1, 1};
+  auto sun_at = [&](double elevation_deg, double irradiance) {
+    mr::Sun sun = scene.lighting.sun.value_or(mr::Sun{});
+    const double az = scene.lighting.sun ? sun_azimuth_->value() : 150.0;
+    sun.direction_to_sun = mr::direction_from_azimuth_elevation(az, elevation_deg);
+    sun.irradiance = {float(irradiance), float(irradiance * 0.92), float(irradiance * 0.8)};
+    scene.lighting.sun = sun;
+  };
+  switch (preset) {
+    case Preset::morning_mist:  // thin, low, lit by a low sun, some wisps
+      visibility(400);
+      m.g = 0.5;
+      m.height_fog = mr::Medium::HeightFog{0, 8};
+      m.layer_top_m = 25;  // a top: sunlight enters the fog through it
+      m.noise.amplitude = 0.3;
+      m.noise.scale_m = 15;
+      sun_at(8, 3);
+      break;
+    case Preset::dense_fog:  // overcast: sky light only
+      visibility(40);
+      m.g = 0.2;
+      m.noise.amplitude = 0.1;
+      m.noise.scale_m = 10;
+      scene.lighting.sun.reset();
+      break;
+    case Preset::valley_fog:  // a dense layer lying in the valley, clear above
+      visibility(80);
+      m.g = 0.3;
+      m.height_fog = mr::Medium::HeightFog{0, 15};
+      m.layer_top_m = 30;
+      m.noise.amplitude = 0.25;
+      m.noise.scale_m = 25;
+      sun_at(20, 3);
+      break;
+    case Preset::haze:  // fine aerosols: far visibility, strongly forward, slightly absorbing
+      visibility(3000);
+      m.g = 0.7;
+      m.albedo = {0.9f, 0.9f, 0.9f};
+      m.layer_top_m = 1500;  // the boundary layer
+      sun_at(35, 3);
+      break;
+    case Preset::night_street: {  // a dark blue sky, lamps in the fog
+      visibility(120);
+      m.g = 0.6;
+      scene.lighting.sun.reset();
+      scene.lighting.sky_radiance = mr::Rgb{0.004f, 0.006f, 0.012f};
+      if (scene.lighting.lamps.empty()) {
+        // No lamp marked yet (Lamp tool + re-estimate places them): one street lamp to start
+        // with, 4 m up, 3 m left, 12 m ahead.
+        mr::Lamp lamp;
+        lamp.position_m = {-3, 4, 12};
+        lamp.intensity_per_sr = {400, 330, 220};
+        scene.lighting.lamps.push_back(lamp);
+      }
+      break;
+    }
+  }
+  setScene(scene);
+  preset_box_->setCurrentIndex(int(preset) + 1);
+  emit sceneChanged();
+  preset_box_->setCurrentIndex(int(preset) + 1);  // sceneChanged resets it to Custom
+}
+
+void FogPanel::refreshLamps() {
+  const int row = std::max(0, lamp_list_->currentRow());
+  lamp_list_->clear();
+  for (std::size_t i = 0; i < lamps_.size(); ++i) {
+    const mr::Vec3& p = lamps_[i].position_m;
+    lamp_list_->addItem(tr("Lamp %1 at (%2, %3, %4) m")
+                            .arg(i + 1)
+                            .arg(p.x, 0, 'f', 1)
+                            .arg(p.y, 0, 'f', 1)
+                            .arg(p.z, 0, 'f', 1));
+  }
+  lamp_box_->setVisible(!lamps_.empty());
+  if (!lamps_.empty()) lamp_list_->setCurrentRow(std::min(row, int(lamps_.size()) - 1));
 }
 
 void FogPanel::setSkyColor(const QColor& color) {
@@ -155,7 +345,9 @@ void FogPanel::setVisibility(double metres) {
   visibility_spin_->setValue(metres);  // syncs the slider, emits sceneChanged
 }
 
-double FogPanel::visibility() const { return visibility_spin_->value(); }
+double FogPanel::visibility() const {
+  return visibility_spin_->value();
+}
 
 void FogPanel::setScene(const mr::FogScene& scene) {
   updating_ = true;
@@ -184,9 +376,23 @@ void FogPanel::setScene(const mr::FogScene& scene) {
       sun_elevation_->setValue(std::asin(std::clamp(d.y / n, -1.0, 1.0)) * 180 / M_PI);
       sun_azimuth_->setValue(std::atan2(d.x, d.z) * 180 / M_PI);
     }
-    sun_irradiance_->setValue((scene.lighting.sun->irradiance[0] + scene.lighting.sun->irradiance[1] +
-                               scene.lighting.sun->irradiance[2]) / 3.0);
+    sun_irradiance_->setValue((scene.lighting.sun->irradiance[0] +
+                               scene.lighting.sun->irradiance[1] +
+                               scene.lighting.sun->irradiance[2]) /
+                              3.0);
   }
+  albedo_spin_->setValue(
+      (double(scene.medium.albedo[0]) + scene.medium.albedo[1] + scene.medium.albedo[2]) / 3);
+  height_box_->setChecked(bool(scene.medium.height_fog));
+  if (scene.medium.height_fog) {
+    height_base_->setValue(scene.medium.height_fog->base_height_m);
+    height_scale_->setValue(scene.medium.height_fog->scale_height_m);
+  }
+  noise_amplitude_->setValue(scene.medium.noise.amplitude);
+  noise_scale_->setValue(scene.medium.noise.scale_m);
+  sun_dial_->setSun(sun_azimuth_->value(), sun_elevation_->value());
+  lamps_ = scene.lighting.lamps;
+  refreshLamps();
   updateSkyButton();
   updateEnabled();
   updating_ = false;
@@ -197,19 +403,34 @@ mr::FogScene FogPanel::scene() const {
   const float sigma = float(3.912 / visibility_spin_->value());
   scene.medium.sigma_t_per_m = {sigma, sigma, sigma};
   scene.medium.g = g_spin_->value();
-  scene.medium.layer_top_m = top_enabled_->isChecked() ? top_spin_->value()
-                                                       : std::numeric_limits<double>::infinity();
+  scene.medium.layer_top_m =
+      top_enabled_->isChecked() ? top_spin_->value() : std::numeric_limits<double>::infinity();
   if (sky_auto_->isChecked()) {
     scene.lighting.sky_radiance.reset();
   } else {
     const float b = float(sky_brightness_->value());
-    scene.lighting.sky_radiance = mr::Rgb{srgb_to_linear(sky_color_.redF()) * b,
-                                          srgb_to_linear(sky_color_.greenF()) * b,
-                                          srgb_to_linear(sky_color_.blueF()) * b};
+    scene.lighting.sky_radiance =
+        mr::Rgb{srgb_to_linear(sky_color_.redF()) * b, srgb_to_linear(sky_color_.greenF()) * b,
+                srgb_to_linear(sky_color_.blueF()) * b};
   }
+  // Albedo: one grey value; a base with a coloured albedo keeps its colour when unchanged.
+  const double albedo_mean =
+      (double(base_.medium.albedo[0]) + base_.medium.albedo[1] + base_.medium.albedo[2]) / 3;
+  if (std::abs(albedo_mean - albedo_spin_->value()) > 0.005) {
+    const float a = float(albedo_spin_->value());
+    scene.medium.albedo = {a, a, a};
+  }
+  if (height_box_->isChecked())
+    scene.medium.height_fog = mr::Medium::HeightFog{height_base_->value(), height_scale_->value()};
+  else
+    scene.medium.height_fog.reset();
+  scene.medium.noise.amplitude = noise_amplitude_->value();
+  scene.medium.noise.scale_m = noise_scale_->value();
+  scene.lighting.lamps = lamps_;
   if (sun_box_->isChecked()) {
     mr::Sun sun = base_.lighting.sun.value_or(mr::Sun{});
-    sun.direction_to_sun = mr::direction_from_azimuth_elevation(sun_azimuth_->value(), sun_elevation_->value());
+    sun.direction_to_sun =
+        mr::direction_from_azimuth_elevation(sun_azimuth_->value(), sun_elevation_->value());
     const float e = float(sun_irradiance_->value());
     // Keep the base's colour when it had one; the spin box sets the mean.
     const double mean = (double(sun.irradiance[0]) + sun.irradiance[1] + sun.irradiance[2]) / 3;

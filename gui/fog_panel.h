@@ -1,7 +1,9 @@
-// The fog panel: visibility (log slider + spin box, metres), sky radiance (auto or a colour and
-// a brightness), Henyey-Greenstein g, the sun (on/off, azimuth, elevation, irradiance) and the
-// fog layer's top. It edits a mr::FogScene: scene() is the base scene (setScene) with the
-// panel's values written into it.
+// The fog panel: presets; the medium (visibility on a log slider, metres; albedo; Henyey-
+// Greenstein g; the fog layer's top; exponential height fog base and scale height, metres;
+// noise wisps amplitude and size, metres); sky radiance (auto or a colour and a brightness);
+// the sun (on/off, on a sky dial and as azimuth / elevation, degrees, and irradiance); the
+// lamps (intensity per steradian of the selected one). It edits a mr::FogScene: scene() is the
+// base scene (setScene) with the panel's values written into it.
 #pragma once
 #include <QColor>
 #include <QWidget>
@@ -11,11 +13,15 @@
 class QCheckBox;
 class QDoubleSpinBox;
 class QGroupBox;
+class QComboBox;
 class QLabel;
+class QListWidget;
 class QPushButton;
 class QSlider;
 
 namespace mrstudio {
+
+class SunDial;
 
 class FogPanel : public QWidget {
   Q_OBJECT
@@ -32,6 +38,16 @@ class FogPanel : public QWidget {
   /// Sky colour (sRGB, as picked) used when "auto" is off.
   void setSkyColor(const QColor& color);
 
+  /// The presets, in the preset box's order after "Custom".
+  enum class Preset { morning_mist, dense_fog, valley_fog, haze, night_street };
+  static QStringList presetNames();
+  /// Applies a preset to the medium and light (emits sceneChanged once).
+  void applyPreset(Preset preset);
+
+  QComboBox* presetBox() const { return preset_box_; }
+  SunDial* sunDial() const { return sun_dial_; }
+  QListWidget* lampList() const { return lamp_list_; }
+  QDoubleSpinBox* lampIntensitySpin() const { return lamp_intensity_; }
   QSlider* visibilitySlider() const { return visibility_slider_; }
   QDoubleSpinBox* visibilitySpin() const { return visibility_spin_; }
 
@@ -46,6 +62,7 @@ class FogPanel : public QWidget {
  private:
   void updateEnabled();
   void updateSkyButton();
+  void refreshLamps();
 
   mr::FogScene base_;
   QColor sky_color_{200, 205, 212};
@@ -62,6 +79,18 @@ class FogPanel : public QWidget {
   QDoubleSpinBox* sun_irradiance_;
   QCheckBox* top_enabled_;
   QDoubleSpinBox* top_spin_;
+  QComboBox* preset_box_;
+  QDoubleSpinBox* albedo_spin_;
+  QGroupBox* height_box_;
+  QDoubleSpinBox* height_base_;
+  QDoubleSpinBox* height_scale_;
+  QDoubleSpinBox* noise_amplitude_;
+  QDoubleSpinBox* noise_scale_;
+  SunDial* sun_dial_;
+  QGroupBox* lamp_box_;
+  QListWidget* lamp_list_;
+  QDoubleSpinBox* lamp_intensity_;
+  std::vector<mr::Lamp> lamps_;
 };
 
 }  // namespace mrstudio

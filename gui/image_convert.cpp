@@ -53,7 +53,8 @@ mr::Image downscale_area(const mr::Image& image, int width, int height) {
           const float* p = image.pixel(xx, yy);
           for (int k = 0; k < c; ++k) q[k] += p[k];
         }
-      const float n = float((std::min(y1, image.height()) - y0) * (std::min(x1, image.width()) - x0));
+      const float n =
+          float((std::min(y1, image.height()) - y0) * (std::min(x1, image.width()) - x0));
       for (int k = 0; k < c; ++k) q[k] /= n;
     }
   }
@@ -104,11 +105,21 @@ QImage depth_colormap(const mr::Image& distance_m) {
         const double hue = t * 240.0 / 60.0;
         const double f = hue - std::floor(hue);
         switch (int(std::floor(hue))) {
-          case 0: rgb = {1, f, 0}; break;
-          case 1: rgb = {1 - f, 1, 0}; break;
-          case 2: rgb = {0, 1, f}; break;
-          case 3: rgb = {0, 1 - f, 1}; break;
-          default: rgb = {0, 0, 1}; break;
+          case 0:
+            rgb = {1, f, 0};
+            break;
+          case 1:
+            rgb = {1 - f, 1, 0};
+            break;
+          case 2:
+            rgb = {0, 1, f};
+            break;
+          case 3:
+            rgb = {0, 1 - f, 1};
+            break;
+          default:
+            rgb = {0, 0, 1};
+            break;
         }
       }
       for (int k = 0; k < 3; ++k) line[3 * x + k] = uchar(std::lround(rgb[k] * 255));

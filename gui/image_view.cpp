@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "annotation_editor.h"
+
 namespace mrstudio {
 
 ImageView::ImageView(QWidget* parent) : QWidget(parent) {
@@ -16,6 +18,35 @@ ImageView::ImageView(QWidget* parent) : QWidget(parent) {
   QPalette p = palette();
   p.setColor(QPalette::Window, QColor(40, 40, 44));
   setPalette(p);
+  setMouseTracking(true);
+}
+
+void ImageView::setEditor(AnnotationEditor* editor) {
+  editor_ = editor;
+  auto repaint = [this] { update(); };
+  for (auto signal : {&AnnotationEditor::changed, &AnnotationEditor::pendingChanged,
+                      &AnnotationEditor::selectionChanged})
+    connect(editor_, signal, this, repaint);
+  connect(editor_, &AnnotationEditor::toolChanged, this, [this] {
+    setCursor(editor_->tool() == Tool::navigate ? Qt::OpenHandCursor
+              : editor_->tool() == Tool::select ? Qt::ArrowCursor
+                                                : Qt::CrossCursor);
+  });
+  update();
+}
+
+void ImageView::setShowAnnotations(bool show) {
+  show_annotations_ = show;
+  update();
+}
+
+QPointF ImageView::viewFromImage(const mr::PixelPoint& p) const {
+  return offset_ + QPointF(p[0] + 0.5, p[1] + 0.5) * zoom_;
+}
+
+mr::PixelPoint ImageView::imageFromView(const QPointF& p) const {
+  const QPointF q = (p - offset_) / zoom_;
+  return {q.x() - 0.5, q.y() - 0.5};
 }
 
 void ImageView::setBefore(const QImage& image) {
@@ -49,7 +80,8 @@ void ImageView::fitToWindow() {
   if (before_.isNull()) return;
   const double z = std::min(double(width()) / before_.width(), double(height()) / before_.height());
   zoom_ = std::max(1e-3, z);
-  offset_ = QPointF((width() - before_.width() * zoom_) / 2, (height() - before_.height() * zoom_) / 2);
+  offset_ =
+      QPointF((width() - before_.width() * zoom_) / 2, (height() - before_.height() * zoom_) / 2);
   update();
   emit zoomChanged(zoom_);
 }
@@ -87,8 +119,7 @@ void ImageView::paintEvent(QPaintEvent*) {
   QPainter painter(this);
   if (before_.isNull()) {
     painter.setPen(QColor(170, 170, 175));
-    painter.drawText(rect(), Qt::AlignCenter,
-                     tr("Open a photo (File > Open, or drop it here)"));
+    painter.drawText(rect(), Qt::AlignCenter, tr("Open a photo (File > Open, or drop it here)"));
     return;
   }
   painter.setRenderHint(QPainter::SmoothPixmapTransform, zoom_ < 2.0);
@@ -98,7 +129,8 @@ void ImageView::paintEvent(QPaintEvent*) {
   const double split_x = target.left() + split_ * target.width();
   if (split_ > 0) {
     painter.save();
-    painter.setClipRect(QRectF(target.left(), target.top(), split_x - target.left(), target.height()));
+    painter.setClipRect(
+        QRectF(target.left(), target.top(), split_x - target.left(), target.height()));
     painter.drawImage(target, before_);
     painter.restore();
     if (split_ < 1) {
@@ -113,11 +145,21 @@ void ImageView::paintEvent(QPaintEvent*) {
       painter.drawText(label_after, Qt::AlignCenter, tr("after"));
     }
   }
+  if (editor_ && show_annotations_) {
+    painter.setClipRect(target.adjusted(-8, -8, 8, 8));  // handles on the border stay whole
+    QTransform to_view;
+    to_view.translate(offset_.x(), offset_.y());
+    to_view.scale(zoom_, zoom_);
+    to_view.translate(0.5, 0.5);
+    editor_->paint(painter, to_view);
+  }
 }
 
 void ImageView::resizeEvent(QResizeEvent*) {
-  if (fit_) fitToWindow();
-  else clampOffset();
+  if (fit_)
+    fitToWindow();
+  else
+    clampOffset();
 }
 
 void ImageView::wheelEvent(QWheelEvent* event) {
@@ -127,7 +169,11 @@ void ImageView::wheelEvent(QWheelEvent* event) {
 }
 
 void ImageView::mousePressEvent(QMouseEvent* event) {
-  if (event->button() == Qt::LeftButton) {
+  setFocus(Qt::MouseFocusReason);
+  if (event->button() == Qt::LeftButton && editor_ && !before_.isNull() &&
+      editor_->press(imageFromView(event->pos()), zoom_))
+    return;
+  if (event->button() == Qt::LeftButton || event->button() == Qt::MiddleButton) {
     panning_ = true;
     last_mouse_ = event->pos();
     setCursor(Qt::ClosedHandCursor);
@@ -135,7 +181,10 @@ void ImageView::mousePressEvent(QMouseEvent* event) {
 }
 
 void ImageView::mouseMoveEvent(QMouseEvent* event) {
-  if (!panning_) return;
+  if (!panning_) {
+    if (editor_ && !before_.isNull()) editor_->move(imageFromView(event->pos()), zoom_);
+    return;
+  }
   offset_ += event->pos() - last_mouse_;
   last_mouse_ = event->pos();
   fit_ = false;
@@ -143,23 +192,65 @@ void ImageView::mouseMoveEvent(QMouseEvent* event) {
   update();
 }
 
-void ImageView::mouseReleaseEvent(QMouseEvent*) {
-  panning_ = false;
-  unsetCursor();
+void ImageView::mouseReleaseEvent(QMouseEvent* event) {
+  if (panning_) {
+    panning_ = false;
+    if (editor_ && editor_->tool() != Tool::navigate)
+      setCursor(editor_->tool() == Tool::select ? Qt::ArrowCursor : Qt::CrossCursor);
+    else
+      setCursor(Qt::OpenHandCursor);
+    return;
+  }
+  if (event->button() == Qt::LeftButton && editor_ && !before_.isNull())
+    editor_->release(imageFromView(event->pos()), zoom_);
+}
+
+void ImageView::mouseDoubleClickEvent(QMouseEvent* event) {
+  if (event->button() == Qt::LeftButton && editor_ && !before_.isNull() &&
+      editor_->doubleClick(imageFromView(event->pos()), zoom_))
+    return;
+  QWidget::mouseDoubleClickEvent(event);
 }
 
 void ImageView::keyPressEvent(QKeyEvent* event) {
+  if (editor_ && editor_->key(event->key())) return;
   const double step = 40;
   switch (event->key()) {
-    case Qt::Key_Plus: case Qt::Key_Equal: setZoom(zoom_ * 1.25, rect().center()); break;
-    case Qt::Key_Minus: setZoom(zoom_ / 1.25, rect().center()); break;
-    case Qt::Key_0: fitToWindow(); break;
-    case Qt::Key_1: zoomActualSize(); break;
-    case Qt::Key_Left: offset_.rx() += step; clampOffset(); update(); break;
-    case Qt::Key_Right: offset_.rx() -= step; clampOffset(); update(); break;
-    case Qt::Key_Up: offset_.ry() += step; clampOffset(); update(); break;
-    case Qt::Key_Down: offset_.ry() -= step; clampOffset(); update(); break;
-    default: QWidget::keyPressEvent(event);
+    case Qt::Key_Plus:
+    case Qt::Key_Equal:
+      setZoom(zoom_ * 1.25, rect().center());
+      break;
+    case Qt::Key_Minus:
+      setZoom(zoom_ / 1.25, rect().center());
+      break;
+    case Qt::Key_0:
+      fitToWindow();
+      break;
+    case Qt::Key_1:
+      zoomActualSize();
+      break;
+    case Qt::Key_Left:
+      offset_.rx() += step;
+      clampOffset();
+      update();
+      break;
+    case Qt::Key_Right:
+      offset_.rx() -= step;
+      clampOffset();
+      update();
+      break;
+    case Qt::Key_Up:
+      offset_.ry() += step;
+      clampOffset();
+      update();
+      break;
+    case Qt::Key_Down:
+      offset_.ry() -= step;
+      clampOffset();
+      update();
+      break;
+    default:
+      QWidget::keyPressEvent(event);
   }
 }
 

@@ -5,7 +5,11 @@
 #include <QPointF>
 #include <QWidget>
 
+#include "mr/annotations.h"
+
 namespace mrstudio {
+
+class AnnotationEditor;
 
 class ImageView : public QWidget {
   Q_OBJECT
@@ -17,6 +21,7 @@ class ImageView : public QWidget {
   /// The "after" image (any size: drawn stretched over the photo).
   void setAfter(const QImage& image);
   void clear();
+  const QImage& afterImage() const { return after_; }
   /// Split position as a fraction of the photo's width: 0 shows only "after", 1 only "before".
   void setSplit(double fraction);
   double split() const { return split_; }
@@ -31,6 +36,17 @@ class ImageView : public QWidget {
   /// preview's resolution), at most the photo's size.
   QSize displayPixels() const;
 
+  /// Annotations drawn over the photo and edited with the left button (its tool decides; the
+  /// navigate tool pans). The middle button always pans. Not owned.
+  void setEditor(AnnotationEditor* editor);
+  /// Draw the annotations (editing works either way).
+  void setShowAnnotations(bool show);
+  bool showAnnotations() const { return show_annotations_; }
+  /// View (widget) position of a photo pixel coordinate (annotations.h convention: (0, 0) is
+  /// the centre of the top-left pixel) and back.
+  QPointF viewFromImage(const mr::PixelPoint& p) const;
+  mr::PixelPoint imageFromView(const QPointF& p) const;
+
  signals:
   void zoomChanged(double zoom);
 
@@ -41,6 +57,7 @@ class ImageView : public QWidget {
   void mousePressEvent(QMouseEvent*) override;
   void mouseMoveEvent(QMouseEvent*) override;
   void mouseReleaseEvent(QMouseEvent*) override;
+  void mouseDoubleClickEvent(QMouseEvent*) override;
   void keyPressEvent(QKeyEvent*) override;
 
  private:
@@ -54,6 +71,8 @@ class ImageView : public QWidget {
   QPointF offset_;  ///< widget position of the photo's top-left corner
   bool panning_ = false;
   QPointF last_mouse_;
+  AnnotationEditor* editor_ = nullptr;
+  bool show_annotations_ = true;
 };
 
 }  // namespace mrstudio

@@ -2,19 +2,33 @@
 // fog panel, the live preview (rendered on a worker thread: a draft pass on <= 0.25 MP, then a
 // normal pass at the view's resolution; stale results are discarded by a generation counter),
 // project files and export. Errors are shown in non-modal message boxes (and errorShown).
+// The annotation tools (annotation_editor.h) edit the photo's annotations over the view; every
+// edit is undoable and re-estimates the scene (mr::estimate_scene) on the worker, which updates
+// the pose, the sun, the sky, the lamps (and the distance map when it was estimated) and the
+// "Estimation overlay" layer. Unsaved changes are asked about on close and open, autosaved to
+// a recovery file and offered back at start; recent files are kept in QSettings.
 #pragma once
 #include <QElapsedTimer>
 #include <QFutureWatcher>
 #include <QMainWindow>
+#include <QMessageBox>
 #include <QThreadPool>
 #include <QTimer>
+#include <atomic>
 #include <memory>
 
+#include "annotation_editor.h"
 #include "mr/color.h"
 #include "preview.h"
 
+class QActionGroup;
+class QCheckBox;
 class QComboBox;
+class QDockWidget;
+class QDoubleSpinBox;
 class QLabel;
+class QListWidget;
+class QMenu;
 class QSlider;
 
 namespace mrstudio {
@@ -48,9 +62,48 @@ class MainWindow : public QMainWindow {
   bool saveProject(const QString& path);
   /// Reads a project and opens its photo with its scene.
   void openProject(const QString& path);
-  /// Renders at full resolution (normal quality) and writes the composite; blocks the caller
-  /// while waiting but keeps the event loop running. true on success.
-  bool exportImage(const QString& path);
+  /// Export settings (the export dialog edits them).
+  struct ExportSettings {
+    mr::PixelType pixel_type = mr::PixelType::automatic;
+    std::string colorspace;  ///< empty: the format's default (sRGB / scene_linear)
+    bool aovs = false;       ///< EXR: + transmittance, inscatter, depth layers (scene-linear)
+  };
+  /// Renders at full resolution (normal quality) and writes the composite (with `settings`);
+  /// blocks the caller while waiting but keeps the event loop running (a progress dialog with
+  /// Cancel is shown when `show_progress`). true on success; false on error or cancel.
+  bool exportImage(const QString& path, const ExportSettings& settings, bool show_progress = false);
+  bool exportImage(const QString& path) { return exportImage(path, ExportSettings{}); }
+  /// Cancels a running export (nothing is written).
+  void cancelExport();
+
+  AnnotationEditor* annotationEditor() const { return editor_; }
+  void setTool(Tool tool);
+  /// Re-estimates the scene from the annotations on the worker; estimateFinished follows.
+  /// `apply_scene`: false only updates the overlay (a project's saved scene stays as saved).
+  void reestimate(bool apply_scene = true);
+  /// An estimate is running or about to start (an edit's debounce).
+  /// Snaps the selected plane / lamp-patch polygon to the object it outlines (OpenCV GrabCut,
+  /// on the worker); one undoable edit. snapFinished follows.
+  void snapSelectedPolygon();
+  bool estimating() const { return estimating_ || estimate_timer_.isActive(); }
+  QImage estimateOverlay() const { return estimate_overlay_; }
+  QString projectPath() const { return project_path_; }
+
+  /// Unsaved edits (fog panel or annotations) since the last save or open.
+  bool isModified() const;
+  /// Tests: answer every following question (unsaved changes: Save / Discard / Cancel; recovery:
+  /// Yes / No) with `answer` instead of showing a box. NoButton: ask with a message box.
+  void setPromptAnswer(QMessageBox::StandardButton answer) { prompt_answer_ = answer; }
+  /// Asks what to do with unsaved changes; true when the caller may go on (saved or discarded).
+  bool maybeSave();
+  /// The recovery file and how often it is written while there are unsaved changes.
+  void setAutosave(const QString& recovery_path, int interval_ms);
+  QString recoveryPath() const { return recovery_path_; }
+  /// Writes the recovery file now (when there is a photo). true on success.
+  bool autosaveNow();
+  /// At start: when a recovery file exists, offers to reopen it. true when it was reopened.
+  bool offerRecovery();
+  QStringList recentFiles() const;
 
   FogPanel* fogPanel() const { return fog_panel_; }
   ImageView* imageView() const { return view_; }
@@ -68,10 +121,13 @@ class MainWindow : public QMainWindow {
   void photoLoaded();
   void previewUpdated(int generation, int quality);  ///< quality: int(mr::Quality)
   void errorShown(const QString& message);
+  void estimateFinished(bool ok, const QString& message);
+  void snapFinished(bool ok, const QString& message);
 
  protected:
   void dragEnterEvent(QDragEnterEvent*) override;
   void dropEvent(QDropEvent*) override;
+  void closeEvent(QCloseEvent*) override;
 
  private:
   void buildMenus();
@@ -85,6 +141,17 @@ class MainWindow : public QMainWindow {
   void onSaveProject();
   void onOpenProject();
   void onExport();
+  void buildAnnotationDock();
+  void refreshAnnotationList();
+  void onEstimateDone(std::shared_ptr<EstimateResult> result, QString error, int generation,
+                      bool apply);
+  QMessageBox::StandardButton ask(QMessageBox::Icon icon, const QString& title, const QString& text,
+                                  QMessageBox::StandardButtons buttons);
+  QByteArray projectJson(const QString& path) const;  ///< throws mr::Error
+  void writeFileAtomically(const QString& path, const QByteArray& data) const;
+  void addRecentFile(const QString& path);
+  void rebuildRecentMenu();
+  void openAny(const QString& path);  ///< photo or project, after maybeSave
 
   mr::ColorConfig color_;
   ImageView* view_;
@@ -93,6 +160,7 @@ class MainWindow : public QMainWindow {
   QSlider* split_slider_;
   QLabel* backend_label_;
   QLabel* timing_label_;
+  QLabel* warning_label_;  ///< the preview scene's warnings (mr::scene_warnings)
   QLabel* zoom_label_;
   EventLoopMonitor* monitor_;
 
@@ -100,9 +168,35 @@ class MainWindow : public QMainWindow {
   std::shared_ptr<const PreviewResult> preview_;
   QString project_path_;
   std::unique_ptr<mr::FogScene> pending_scene_;  ///< scene to apply when the photo loads (project)
+  std::unique_ptr<mr::Annotations> pending_annotations_;  ///< the project's annotations
+
+  AnnotationEditor* editor_;
+  QActionGroup* tool_group_;
+  QDockWidget* fog_dock_;
+  QDockWidget* annotation_dock_;
+  QListWidget* annotation_list_;
+  QCheckBox* height_check_;
+  QDoubleSpinBox* height_spin_;
+  QDoubleSpinBox* length_spin_;
+  QCheckBox* auto_estimate_;
+  QLabel* estimate_label_;
+  QTimer estimate_timer_;  ///< debounces re-estimates after edits
+  QImage estimate_overlay_;
+  int estimate_generation_ = 0;
+  bool estimating_ = false;
+  bool estimate_pending_ = false;
+  bool estimate_pending_apply_ = false;
+  QString unpaired_note_;  ///< what the running estimate leaves out (lamps without a patch)
+
+  bool scene_modified_ = false;
+  QMessageBox::StandardButton prompt_answer_ = QMessageBox::NoButton;
+  QString recovery_path_;
+  QTimer autosave_timer_;
+  QMenu* recent_menu_ = nullptr;
+  std::shared_ptr<std::atomic<bool>> export_cancel_;  ///< the running export's cancel flag
   int load_generation_ = 0;
-  int generation_ = 0;         ///< bumped by every edit; results of older ones are discarded
-  bool rendering_ = false;     ///< a render job is on the worker
+  int generation_ = 0;           ///< bumped by every edit; results of older ones are discarded
+  bool rendering_ = false;       ///< a render job is on the worker
   bool render_pending_ = false;  ///< an edit arrived while rendering: render again when done
   bool exporting_ = false;
   /// Runs loads, renders and exports; the destructor waits for it (jobs post back to `this`).

@@ -20,14 +20,18 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 
 const char* to_string(mr::Quality quality) {
   switch (quality) {
-    case mr::Quality::draft: return "draft";
-    case mr::Quality::normal: return "normal";
-    case mr::Quality::final: return "final";
+    case mr::Quality::draft:
+      return "draft";
+    case mr::Quality::normal:
+      return "normal";
+    case mr::Quality::final:
+      return "final";
   }
   return "?";
 }
 
-std::shared_ptr<const Document> load_document(const QString& path, const mr::ColorConfig& color) {
+std::shared_ptr<const Document> load_document(const QString& path, const mr::ColorConfig& color,
+                                              const mr::Annotations* given_annotations) {
   auto doc = std::make_shared<Document>();
   doc->photo_path = QFileInfo(path).absoluteFilePath();
   const fs::path photo_path = path.toStdString();
@@ -35,15 +39,24 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
   read.color = &color;
   mr::Image photo = mr::read_image(photo_path, read);
   if (photo.channels() >= 3) {
-    doc->photo = photo.channels() == 3 ? std::move(photo) : photo.select_channels(std::array{0, 1, 2});
+    doc->photo =
+        photo.channels() == 3 ? std::move(photo) : photo.select_channels(std::array{0, 1, 2});
   } else {
     doc->photo = photo.select_channels(std::array{0, 0, 0});
   }
-  doc->camera = mr::Camera::from_metadata(doc->photo.width(), doc->photo.height(), doc->photo.metadata());
+  doc->camera =
+      mr::Camera::from_metadata(doc->photo.width(), doc->photo.height(), doc->photo.metadata());
   const float sigma = float(mr::extinction_from_visibility(150.0));
   doc->scene.medium.sigma_t_per_m = {sigma, sigma, sigma};
 
   std::error_code ec;
+  const fs::path annotations_path =
+      photo_path.parent_path() / (photo_path.stem().string() + "_annotations.json");
+  const bool annotated = !given_annotations && fs::exists(annotations_path, ec);
+  if (given_annotations)
+    doc->annotations = *given_annotations;
+  else if (annotated)
+    doc->annotations = mr::load_annotations(annotations_path);
   fs::path depth_path;
   for (const char* ext : {".exr", ".tif", ".tiff", ".pfm", ".png"}) {
     fs::path candidate = photo_path.parent_path() / (photo_path.stem().string() + "_depth" + ext);
@@ -63,13 +76,8 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
       doc->notes << QString("%1: no pixel has a surface: all sky").arg(doc->depth_source);
     doc->distance_m = std::move(depth.distance_m);
   } else {
-    mr::Annotations annotations;
-    const fs::path annotations_path =
-        photo_path.parent_path() / (photo_path.stem().string() + "_annotations.json");
-    const bool annotated = fs::exists(annotations_path, ec);
-    if (annotated) annotations = mr::load_annotations(annotations_path);
     try {
-      mr::SceneEstimate est = mr::estimate_scene(doc->photo, doc->camera, annotations);
+      mr::SceneEstimate est = mr::estimate_scene(doc->photo, doc->camera, doc->annotations);
       doc->scene.pose = est.scene.pose;
       doc->scene.lighting.sun = est.scene.lighting.sun;
       doc->scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
@@ -79,11 +87,87 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
       throw mr::Error(e.code(), photo_path.string() + ": estimating the geometry: " + e.what());
     }
     doc->depth_estimated = true;
-    doc->depth_source = annotated ? QString("estimated with %1").arg(QString::fromStdString(annotations_path.string()))
-                                  : QString("estimated automatically");
+    doc->depth_source =
+        annotated
+            ? QString("estimated with %1").arg(QString::fromStdString(annotations_path.string()))
+        : given_annotations ? QString("estimated with the project's annotations")
+                            : QString("estimated automatically");
   }
   doc->photo_display = to_display(doc->photo, color);
   return doc;
+}
+
+std::shared_ptr<const Document> with_distance(const Document& document, mr::Image distance_m,
+                                              const QString& depth_source) {
+  auto doc = std::make_shared<Document>();
+  doc->photo_path = document.photo_path;
+  doc->photo = document.photo;
+  doc->camera = document.camera;
+  doc->distance_m = std::move(distance_m);
+  doc->depth_estimated = true;
+  doc->depth_source = depth_source;
+  doc->scene = document.scene;
+  doc->notes = document.notes;
+  doc->photo_display = document.photo_display;
+  doc->annotations = document.annotations;
+  return doc;
+}
+
+mr::Annotations scale_annotations(const mr::Annotations& annotations, double sx, double sy) {
+  mr::Annotations a = annotations;
+  // Pixel-centre coordinates: the continuous position (p + 0.5) scales.
+  auto scale = [&](mr::PixelPoint& p) { p = {(p[0] + 0.5) * sx - 0.5, (p[1] + 0.5) * sy - 0.5}; };
+  auto scale_all = [&](std::vector<mr::PixelPoint>& points) {
+    for (auto& p : points) scale(p);
+  };
+  if (a.horizon) scale((*a.horizon)[0]), scale((*a.horizon)[1]);
+  if (a.known_length) scale(a.known_length->a), scale(a.known_length->b);
+  for (auto& plane : a.planes) {
+    scale_all(plane.polygon);
+    if (plane.base) scale((*plane.base)[0]), scale((*plane.base)[1]);
+  }
+  for (auto& hint : a.distance_hints) scale_all(hint.polygon);
+  for (auto& pair : a.shadow_pairs)
+    scale(pair.caster_top), scale(pair.caster_foot), scale(pair.shadow_tip);
+  scale_all(a.sunlit_patch);
+  scale_all(a.shadowed_patch);
+  for (auto& lamp : a.lamps) scale(lamp.pixel);
+  for (auto& patch : a.lamp_patches) scale_all(patch.polygon);
+  if (a.interior_box) {
+    scale_all(a.interior_box->floor);
+    if (a.interior_box->ceiling_point) scale(*a.interior_box->ceiling_point);
+  }
+  return a;
+}
+
+std::shared_ptr<EstimateResult> run_estimate(const std::shared_ptr<const Document>& document,
+                                             const mr::Annotations& annotations,
+                                             const mr::ColorConfig& color) {
+  const auto start = std::chrono::steady_clock::now();
+  auto result = std::make_shared<EstimateResult>();
+  if (document->depth_estimated ||
+      double(document->photo.width()) * document->photo.height() <= kEstimatePixels) {
+    result->estimate = mr::estimate_scene(document->photo, document->camera, annotations);
+    result->overlay = to_display(
+        mr::render_estimate_overlay(document->photo, result->estimate, annotations), color);
+  } else {
+    // The depth is measured (a depth file): only the pose, the light and the overlay are wanted,
+    // and they do not need every pixel. The horizon's pose is exact at any scale (the camera
+    // scales with it); the sun fit sees the same marks.
+    const std::shared_ptr<const PreviewInputs> inputs =
+        preview_inputs(*document, kEstimatePixels, color);
+    const mr::Annotations scaled =
+        scale_annotations(annotations, double(inputs->photo.width()) / document->photo.width(),
+                          double(inputs->photo.height()) / document->photo.height());
+    result->estimate = mr::estimate_scene(inputs->photo, inputs->camera, scaled);
+    result->overlay =
+        to_display(mr::render_estimate_overlay(inputs->photo, result->estimate, scaled), color);
+  }
+  if (document->depth_estimated)
+    result->document = with_distance(*document, result->estimate.geometry.distance_m,
+                                     QStringLiteral("estimated from the annotations"));
+  result->seconds = seconds_since(start);
+  return result;
 }
 
 std::shared_ptr<const PreviewInputs> preview_inputs(const Document& document, double max_pixels,
@@ -92,7 +176,8 @@ std::shared_ptr<const PreviewInputs> preview_inputs(const Document& document, do
   {
     const std::lock_guard<std::mutex> lock(document.inputs_mutex);
     for (const auto& cached : document.inputs_cache)
-      if (cached->photo.width() == size.width() && cached->photo.height() == size.height()) return cached;
+      if (cached->photo.width() == size.width() && cached->photo.height() == size.height())
+        return cached;
   }
   auto inputs = std::make_shared<PreviewInputs>();
   inputs->photo = downscale_area(document.photo, size.width(), size.height());
@@ -102,9 +187,27 @@ std::shared_ptr<const PreviewInputs> preview_inputs(const Document& document, do
   inputs->depth = depth_colormap(inputs->distance_m);
   const std::lock_guard<std::mutex> lock(document.inputs_mutex);
   constexpr std::size_t kCachedSizes = 3;  // the draft's, the view's and one more (a resize, 100 %)
-  if (document.inputs_cache.size() >= kCachedSizes) document.inputs_cache.erase(document.inputs_cache.begin());
+  if (document.inputs_cache.size() >= kCachedSizes)
+    document.inputs_cache.erase(document.inputs_cache.begin());
   document.inputs_cache.push_back(inputs);
   return inputs;
+}
+
+const QImage& PreviewResult::displayLayer(Layer layer, const mr::ColorConfig& color) const {
+  switch (layer) {
+    case Layer::transmittance:
+      if (transmittance.isNull()) transmittance = to_display(layers.transmittance, color);
+      return transmittance;
+    case Layer::inscatter:
+      if (inscatter.isNull()) inscatter = to_display(layers.inscatter, color);
+      return inscatter;
+    case Layer::depth:
+      return depth;
+    case Layer::photo:
+      return photo_image;
+    default:
+      return composite;
+  }
 }
 
 std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
@@ -113,7 +216,8 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   auto result = std::make_shared<PreviewResult>();
   result->generation = request.generation;
   result->quality = request.quality;
-  const std::shared_ptr<const PreviewInputs> inputs = preview_inputs(*request.document, request.max_pixels, color);
+  const std::shared_ptr<const PreviewInputs> inputs =
+      preview_inputs(*request.document, request.max_pixels, color);
   result->photo = inputs->photo;
   result->distance_m = inputs->distance_m;
   result->camera = inputs->camera;
@@ -127,8 +231,10 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   result->backend_notice = aovs.backend_notice;
   result->composite = to_display(result->layers.composite, color);
   result->photo_image = inputs->photo_image;  // QImage: shared, not copied
-  result->transmittance = to_display(result->layers.transmittance, color);
-  result->inscatter = to_display(result->layers.inscatter, color);
+  if (request.display_aovs) {
+    result->transmittance = to_display(result->layers.transmittance, color);
+    result->inscatter = to_display(result->layers.inscatter, color);
+  }
   result->depth = inputs->depth;
   result->total_s = seconds_since(start);
   return result;

@@ -33,6 +33,9 @@ struct Document {
   mr::FogScene scene;    ///< starting scene: estimated pose / sun / sky, default medium
   QStringList notes;     ///< estimation notes, depth warnings
   QImage photo_display;  ///< the photo as 8-bit sRGB, full resolution
+  /// The annotations the document opened with (the project's, else {stem}_annotations.json,
+  /// else none); the editor edits a copy.
+  mr::Annotations annotations;
 
   /// Downscaled inputs already made, newest last (a few sizes: the draft's, the view's): an edit
   /// re-renders without resizing the full-resolution photo again. Filled by preview_inputs.
@@ -42,17 +45,43 @@ struct Document {
 
 /// Reads the photo, its depth ({stem}_depth.{exr,tif,tiff,pfm,png} next to it, as `mr fog`
 /// finds it) or, without one, the geometry from mr::estimate_scene (automatic; with
-/// {stem}_annotations.json when it exists). Throws mr::Error naming the file.
-std::shared_ptr<const Document> load_document(const QString& path, const mr::ColorConfig& color);
+/// `annotations` when given, else {stem}_annotations.json when it exists). Throws mr::Error
+/// naming the file.
+std::shared_ptr<const Document> load_document(const QString& path, const mr::ColorConfig& color,
+                                              const mr::Annotations* annotations = nullptr);
+
+/// A copy of `document` with another distance map (an estimate from edited annotations).
+std::shared_ptr<const Document> with_distance(const Document& document, mr::Image distance_m,
+                                              const QString& depth_source);
+
+/// A re-estimate of the scene from edited annotations (run on a worker thread).
+struct EstimateResult {
+  int generation = 0;
+  mr::SceneEstimate estimate;
+  QImage overlay;  ///< mr::render_estimate_overlay as 8-bit sRGB
+  /// The document with the estimated distance map when its depth was estimated (a depth file,
+  /// being measured, is kept); else nullptr.
+  std::shared_ptr<const Document> document;
+  double seconds = 0;
+};
+/// Photos above this size with a measured depth are estimated on a downscaled copy.
+inline constexpr double kEstimatePixels = 2.0e6;
+/// Annotations of a photo resized by sx, sy (pixel-centre convention kept).
+mr::Annotations scale_annotations(const mr::Annotations& annotations, double sx, double sy);
+/// Throws mr::Error (annotations that do not fit the photo, contradictory shadow pairs, ...).
+std::shared_ptr<EstimateResult> run_estimate(const std::shared_ptr<const Document>& document,
+                                             const mr::Annotations& annotations,
+                                             const mr::ColorConfig& color);
 
 /// The layers the view can show.
-enum class Layer { composite, photo, transmittance, inscatter, depth };
+enum class Layer { composite, photo, transmittance, inscatter, depth, estimate };
 
 struct PreviewRequest {
   std::shared_ptr<const Document> document;
   mr::FogScene scene;  ///< render.quality is set from `quality`
   mr::Quality quality = mr::Quality::draft;
   double max_pixels = 0.25e6;  ///< the render's size: the photo's aspect, at most this many pixels
+  bool display_aovs = false;   ///< convert the transmittance and in-scatter for display too
   int generation = 0;
 };
 
@@ -64,7 +93,12 @@ struct PreviewResult {
   mr::Camera camera;
   mr::FogScene scene;
   mr::FogLayers layers;
-  QImage composite, photo_image, transmittance, inscatter, depth;  ///< 8-bit sRGB for display
+  QImage composite, photo_image, depth;  ///< 8-bit sRGB for display
+  /// The transmittance and in-scatter layers for display: made by the render job only when
+  /// PreviewRequest::display_aovs (they are shown rarely; each costs a colour conversion), else
+  /// on first use by displayLayer on the UI thread.
+  mutable QImage transmittance, inscatter;
+  const QImage& displayLayer(Layer layer, const mr::ColorConfig& color) const;
   std::string backend, backend_notice;
   double render_s = 0, total_s = 0;  ///< mr::fog alone; everything (downscale, display)
 };

@@ -3,22 +3,33 @@
 // shows an error and leaves the app usable; project save / reopen; export; a screenshot of the
 // main window with a foggy preview goes to out/gui/.
 #include <QApplication>
+#include <QCheckBox>
 #include <QComboBox>
 #include <QDir>
+#include <QDockWidget>
+#include <QDoubleSpinBox>
 #include <QFile>
+#include <QLineEdit>
+#include <QListWidget>
 #include <QMessageBox>
 #include <QMimeData>
+#include <QPainter>
 #include <QSignalSpy>
 #include <QSlider>
 #include <QTemporaryDir>
+#include <QUndoStack>
 #include <QtTest>
 #include <cmath>
 
+#include "annotation_editor.h"
+#include "export_dialog.h"
 #include "fog_panel.h"
+#include "grabcut_assist.h"
 #include "image_convert.h"
 #include "image_view.h"
 #include "main_window.h"
 #include "mr/mr.h"
+#include "sun_dial.h"
 
 using namespace mrstudio;
 
@@ -28,7 +39,8 @@ const QString kLeuven = QStringLiteral(MR_SOURCE_DIR "/sample_photos/leuven.jpg"
 
 QString outDir() {
   const QByteArray env = qgetenv("MR_GUI_OUT");
-  const QString dir = env.isEmpty() ? QStringLiteral(MR_SOURCE_DIR "/out/gui") : QString::fromLocal8Bit(env);
+  const QString dir =
+      env.isEmpty() ? QStringLiteral(MR_SOURCE_DIR "/out/gui") : QString::fromLocal8Bit(env);
   QDir().mkpath(dir);
   return dir;
 }
@@ -36,7 +48,8 @@ QString outDir() {
 // The newest edit's normal-quality pass is on screen and nothing is rendering.
 bool settled(const MainWindow& w) {
   const auto p = w.preview();
-  return p && p->generation == w.generation() && p->quality == mr::Quality::normal && !w.rendering();
+  return p && p->generation == w.generation() && p->quality == mr::Quality::normal &&
+         !w.rendering();
 }
 
 double meanCode(const QImage& image) {
@@ -54,7 +67,8 @@ double meanAbsDiff(const QImage& a, const QImage& b) {
   for (int y = 0; y < a.height(); ++y)
     for (int x = 0; x < a.width(); ++x) {
       const QRgb p = a.pixel(x, y), q = b.pixel(x, y);
-      sum += std::abs(qRed(p) - qRed(q)) + std::abs(qGreen(p) - qGreen(q)) + std::abs(qBlue(p) - qBlue(q));
+      sum += std::abs(qRed(p) - qRed(q)) + std::abs(qGreen(p) - qGreen(q)) +
+             std::abs(qBlue(p) - qBlue(q));
     }
   return sum / (3.0 * a.width() * a.height());
 }
@@ -64,6 +78,70 @@ void openAndSettle(MainWindow& w, const QString& path) {
   w.openPhoto(path);
   QVERIFY(loaded.wait(60000));
   QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+}
+
+// A copy of leuven.jpg with its depth map but without its annotations file, in `dir`.
+QString leuvenCopy(const QTemporaryDir& dir) {
+  const QString photo = dir.filePath("street.jpg");
+  QFile::copy(kLeuven, photo);
+  QFile::copy(QStringLiteral(MR_SOURCE_DIR "/sample_photos/leuven_depth.exr"),
+              dir.filePath("street_depth.exr"));
+  return photo;
+}
+
+mr::Vec3 sub(const mr::Vec3& a, const mr::Vec3& b) {
+  return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+double dot(const mr::Vec3& a, const mr::Vec3& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+// Where the camera sees world point p (pixel-centre coordinates), the inverse of
+// CameraPose::ray_direction: x = f (d.right / d.forward) + cx - 0.5, y = -f (d.up / d.forward) + cy
+// - 0.5.
+mr::PixelPoint project(const mr::Camera& camera, const mr::CameraPose& pose, const mr::Vec3& p) {
+  const auto [forward, right, up] = pose.axes();
+  const mr::Vec3 d = sub(p, pose.position_m);
+  const double z = dot(d, forward);
+  return {camera.focal_px * dot(d, right) / z + camera.cx - 0.5,
+          -camera.focal_px * dot(d, up) / z + camera.cy - 0.5};
+}
+
+// A left click on the view at a photo pixel coordinate (rounded to the view's pixel grid).
+void clickImage(ImageView* view, const mr::PixelPoint& p) {
+  QTest::mouseClick(view, Qt::LeftButton, Qt::NoModifier, view->viewFromImage(p).toPoint());
+}
+
+double angleDeg(const mr::Vec3& a, const mr::Vec3& b) {
+  return std::acos(std::clamp(dot(a, b) / std::sqrt(dot(a, a) * dot(b, b)), -1.0, 1.0)) * 180 /
+         M_PI;
+}
+
+// Clicks two shadow pairs of 2 m poles under a sun at azimuth 150 deg, elevation 35 deg (behind
+// the camera, to the right) with the shadow tool: projected with the pose the horizon gives
+// (1.6 m camera, the estimation's default height), each shadow tip 2 m / tan(35 deg) from its
+// foot, away from the sun. Returns that pose.
+mr::CameraPose clickShadowPairs(MainWindow& w, const std::array<mr::PixelPoint, 2>& horizon) {
+  const Document& doc = *w.document();
+  const mr::CameraPose pose = mr::pose_from_horizon(doc.camera, horizon, 1.6);
+  const double az = 150 * M_PI / 180, el = 35 * M_PI / 180, pole_m = 2.0;
+  w.setTool(Tool::shadow_pair);
+  for (const mr::Vec3 foot : {mr::Vec3{-3, 0, 15}, mr::Vec3{4, 0, 20}}) {
+    const double shadow_m = pole_m / std::tan(el);
+    const mr::Vec3 top{foot.x, pole_m, foot.z};
+    const mr::Vec3 tip{foot.x - shadow_m * std::sin(az), 0, foot.z - shadow_m * std::cos(az)};
+    for (const mr::Vec3& p : {top, foot, tip}) {
+      const mr::PixelPoint q = project(doc.camera, pose, p);
+      if (!(q[0] > 0 && q[0] < doc.camera.width - 1 && q[1] > 0 && q[1] < doc.camera.height - 1))
+        qFatal("shadow pair point outside the photo");
+      clickImage(w.imageView(), q);
+    }
+  }
+  return pose;
+}
+
+QString annotationsJson(const mr::Annotations& a) {
+  return QString::fromStdString(mr::annotations_to_json(a));
 }
 
 }  // namespace
@@ -76,6 +154,18 @@ class GuiTest : public QObject {
   void projectRoundTripAndExport();
   void photoWithoutDepthIsEstimated();
   void draftThenRefineOnLargePhoto();
+  void annotateEstimateUndoSaveExport();
+  void annotationToolsSelectMoveDeletePolygon();
+  void unsavedChangesPrompt();
+  void autosaveAndRecovery();
+  void exportDialogAndCancel();
+  void fogPanelPresetsDialAndLamps();
+  void screenshots();
+  void scaledAnnotationsKeepThePose();
+  void grabCutSnapsRoughPolygon();
+
+ private:
+  void annotateEstimateUndoSaveExportBody();
 };
 
 void GuiTest::previewFollowsVisibilitySlider() {
@@ -103,8 +193,10 @@ void GuiTest::previewFollowsVisibilitySlider() {
   QVERIFY(std::abs(visibility - FogPanel::visibilityFromSlider(slider->value())) <= 0.5);
   QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
   const double max_gap_ms = w.eventLoopMonitor()->maxGapMs();
-  qInfo("visibility %.0f m -> %.0f m: %d preview updates; longest event-loop gap while rendering: %.1f ms",
-        visibility_before, visibility, int(updates.count()), max_gap_ms);
+  qInfo(
+      "visibility %.0f m -> %.0f m: %d preview updates; longest event-loop gap while rendering: "
+      "%.1f ms",
+      visibility_before, visibility, int(updates.count()), max_gap_ms);
   // The UI thread only swaps images; rendering is on the worker. Loose bound (2 shared cores).
   QVERIFY2(max_gap_ms < 1000, qPrintable(QString("event loop blocked for %1 ms").arg(max_gap_ms)));
   QVERIFY(updates.count() >= 1);
@@ -113,7 +205,8 @@ void GuiTest::previewFollowsVisibilitySlider() {
   // Not black, and foggier than the photo.
   QVERIFY2(meanCode(p->composite) > 40, qPrintable(QString::number(meanCode(p->composite))));
   const double diff = meanAbsDiff(p->composite, p->photo_image);
-  QVERIFY2(diff > 5, qPrintable(QString("preview differs from the photo by %1 codes only").arg(diff)));
+  QVERIFY2(diff > 5,
+           qPrintable(QString("preview differs from the photo by %1 codes only").arg(diff)));
 
   // The same render done here with the public API on the same scene at the same size.
   const Document& doc = *w.document();
@@ -131,15 +224,27 @@ void GuiTest::previewFollowsVisibilitySlider() {
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x)
       for (int c = 0; c < 3; ++c)
-        max_diff = std::max(max_diff, double(std::abs(expected.composite.at(x, y, c) - p->layers.composite.at(x, y, c))));
+        max_diff = std::max(max_diff, double(std::abs(expected.composite.at(x, y, c) -
+                                                      p->layers.composite.at(x, y, c))));
   qInfo("preview %dx%d vs mr::fog: max |difference| %.3g (scene-linear)", width, height, max_diff);
-  QVERIFY2(max_diff <= 1e-4, qPrintable(QString::number(max_diff)));  // tolerance: 1e-4 scene-linear
+  QVERIFY2(max_diff <= 1e-4,
+           qPrintable(QString::number(max_diff)));  // tolerance: 1e-4 scene-linear
 
   // Every layer can be shown; the view's after image is the selected layer.
-  for (Layer layer : {Layer::photo, Layer::transmittance, Layer::inscatter, Layer::depth, Layer::composite}) {
+  // (transmittance and in-scatter are converted for display on first use).
+  const mr::ColorConfig color = mr::ColorConfig::builtin();
+  for (Layer layer :
+       {Layer::photo, Layer::transmittance, Layer::inscatter, Layer::depth, Layer::composite}) {
     w.setLayer(layer);
     QCOMPARE(Layer(w.layerBox()->currentData().toInt()), layer);
+    QVERIFY(!w.imageView()->afterImage().isNull());
   }
+  w.setLayer(Layer::transmittance);
+  QCOMPARE(w.imageView()->afterImage(), to_display(p->layers.transmittance, color));
+  w.setLayer(Layer::inscatter);
+  QCOMPARE(w.imageView()->afterImage(), to_display(p->layers.inscatter, color));
+  w.setLayer(Layer::composite);
+  QCOMPARE(w.imageView()->afterImage(), p->composite);
   w.splitSlider()->setValue(40);
   QCOMPARE(w.imageView()->split(), 0.4);
 
@@ -196,7 +301,8 @@ void GuiTest::corruptFileShowsErrorAndAppStaysUsable() {
   QApplication::sendEvent(&w, &drop);
   QVERIFY(loaded.wait(60000));
   QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
-  QCOMPARE(QFileInfo(w.document()->photo_path).canonicalFilePath(), QFileInfo(kLeuven).canonicalFilePath());
+  QCOMPARE(QFileInfo(w.document()->photo_path).canonicalFilePath(),
+           QFileInfo(kLeuven).canonicalFilePath());
 }
 
 void GuiTest::projectRoundTripAndExport() {
@@ -221,8 +327,10 @@ void GuiTest::projectRoundTripAndExport() {
   QSignalSpy loaded(&reopened, &MainWindow::photoLoaded);
   reopened.openProject(project);
   QVERIFY(loaded.wait(60000));
-  QCOMPARE(QFileInfo(reopened.document()->photo_path).canonicalFilePath(), QFileInfo(kLeuven).canonicalFilePath());
-  QCOMPARE(mr::scene_to_json(reopened.fogPanel()->scene()), mr::scene_to_json(w.fogPanel()->scene()));
+  QCOMPARE(QFileInfo(reopened.document()->photo_path).canonicalFilePath(),
+           QFileInfo(kLeuven).canonicalFilePath());
+  QCOMPARE(mr::scene_to_json(reopened.fogPanel()->scene()),
+           mr::scene_to_json(w.fogPanel()->scene()));
   QTRY_VERIFY_WITH_TIMEOUT(settled(reopened), 120000);
 
   // Export at full resolution: the file holds mr::fog of the scene (float EXR: exact).
@@ -239,7 +347,8 @@ void GuiTest::projectRoundTripAndExport() {
   for (int y = 0; y < written.height(); ++y)
     for (int x = 0; x < written.width(); ++x)
       for (int c = 0; c < 3; ++c)
-        max_diff = std::max(max_diff, double(std::abs(written.at(x, y, c) - expected.composite.at(x, y, c))));
+        max_diff = std::max(max_diff,
+                            double(std::abs(written.at(x, y, c) - expected.composite.at(x, y, c))));
   QVERIFY2(max_diff <= 1e-4, qPrintable(QString::number(max_diff)));
 
   // A bad export path is an error dialog, not a crash.
@@ -277,23 +386,693 @@ void GuiTest::draftThenRefineOnLargePhoto() {
   QVERIFY(passes.front().second <= 250000);
   QCOMPARE(passes.back().first, int(mr::Quality::normal));
   const QSize display = w.imageView()->displayPixels();
-  QVERIFY(passes.back().second >= std::min<qint64>(qint64(display.width()) * display.height(), 1282 * 1110) * 9 / 10);
+  QVERIFY(passes.back().second >=
+          std::min<qint64>(qint64(display.width()) * display.height(), 1282 * 1110) * 9 / 10);
   // 100 %: the preview is refined to the photo's full resolution.
   w.imageView()->zoomActualSize();
   QTRY_VERIFY_WITH_TIMEOUT(settled(w) && w.preview()->photo.width() == 1282, 120000);
   QCOMPARE(w.preview()->photo.height(), 1110);
 }
 
+// The acceptance flow: a horizon and two shadow pairs clicked on the view, the scene re-estimated
+// (the sun fitted to the pairs must come back as the sun the marks were made from), the
+// visibility slider, undo / redo, project round trip, export with AOV layers checked against
+// mr::fog on the same scene.
+void GuiTest::annotateEstimateUndoSaveExport() {
+  try {
+    annotateEstimateUndoSaveExportBody();
+  } catch (const std::exception& e) {
+    QFAIL(e.what());
+  }
+}
+
+void GuiTest::annotateEstimateUndoSaveExportBody() {
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  const QString photo = leuvenCopy(dir);
+  MainWindow w;
+  w.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+  w.resize(1366, 768);
+  w.show();
+  QVERIFY(QTest::qWaitForWindowExposed(&w));
+  openAndSettle(w, photo);
+  AnnotationEditor* editor = w.annotationEditor();
+  ImageView* view = w.imageView();
+  QCOMPARE(annotation_count(editor->annotations()), 0);
+  const double tolerance_px = 0.5 / view->zoom() + 1e-6;  // a click lands on a view pixel
+
+  // Horizon: two clicks.
+  QSignalSpy estimates(&w, &MainWindow::estimateFinished);
+  w.setTool(Tool::horizon);
+  const mr::PixelPoint h0{40, 361.5}, h1{710, 361.5};
+  clickImage(view, h0);
+  QCOMPARE(annotation_count(editor->annotations()), 0);  // one point is not a horizon yet
+  clickImage(view, h1);
+  QCOMPARE(annotation_count(editor->annotations()), 1);
+  const auto horizon = *editor->annotations().horizon;
+  for (int k = 0; k < 2; ++k) {
+    QVERIFY(std::abs(horizon[0][k] - h0[k]) <= tolerance_px);
+    QVERIFY(std::abs(horizon[1][k] - h1[k]) <= tolerance_px);
+  }
+
+  // Two shadow pairs of 2 m poles under a sun at azimuth 150 deg, elevation 35 deg (behind the
+  // camera, to the right): projected with the pose the clicked horizon gives (1.6 m camera,
+  // the estimation's default height), the shadow tip 2 m / tan(35 deg) from the foot, away from
+  // the sun.
+  const mr::Vec3 sun_truth = mr::direction_from_azimuth_elevation(150, 35);
+  const mr::CameraPose pose = clickShadowPairs(w, horizon);
+  QCOMPARE(annotation_count(editor->annotations()), 3);
+  QCOMPARE(int(editor->annotations().shadow_pairs.size()), 2);
+  QCOMPARE(editor->undoStack()->count(), 3);
+  QVERIFY(w.isModified());
+
+  // The re-estimate runs on the worker; the fitted sun lands in the fog panel's scene.
+  QTRY_VERIFY_WITH_TIMEOUT(!w.estimating() && !estimates.isEmpty() &&
+                               estimates.last().at(0).toBool() &&
+                               w.fogPanel()->scene().lighting.sun.has_value(),
+                           60000);
+  const mr::Vec3 sun = w.fogPanel()->scene().lighting.sun->direction_to_sun;
+  const double sun_error_deg = angleDeg(sun, sun_truth);
+  qInfo("sun fitted to the clicked shadow pairs: %.2f deg from the truth", sun_error_deg);
+  // Tolerance: the clicks are rounded to view pixels (<= %.2f px on the photo); over shadows
+  // of ~25-40 px that moves the direction by about a degree.
+  QVERIFY2(sun_error_deg < 3.0, qPrintable(QString::number(sun_error_deg)));
+  QVERIFY(std::abs(w.fogPanel()->scene().pose.pitch_deg - pose.pitch_deg) < 1e-6);
+  QVERIFY(!w.estimateOverlay().isNull());
+  w.setLayer(Layer::estimate);
+  QTest::qWait(30);
+  QVERIFY(w.grab().save(outDir() + "/annotations_1366.png"));
+  w.setLayer(Layer::composite);
+
+  // The visibility slider; the UI thread stays responsive while the preview renders.
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+  w.eventLoopMonitor()->reset();
+  QSlider* slider = w.fogPanel()->visibilitySlider();
+  slider->setFocus();
+  QTest::keyClick(slider, Qt::Key_PageDown);
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+  qInfo("longest event-loop gap: %.1f ms", w.eventLoopMonitor()->maxGapMs());
+  QVERIFY(w.eventLoopMonitor()->maxGapMs() < 1000);
+
+  // Undo / redo with the keyboard shortcuts: the annotation count goes back and forth.
+  w.activateWindow();
+  QVERIFY(QTest::qWaitForWindowActive(&w));
+  view->setFocus();
+  QTest::keyClick(view, Qt::Key_Z, Qt::ControlModifier);
+  QCOMPARE(annotation_count(editor->annotations()), 2);
+  QTest::keyClick(view, Qt::Key_Z, Qt::ControlModifier);
+  QCOMPARE(annotation_count(editor->annotations()), 1);
+  QTest::keyClick(view, Qt::Key_Z, Qt::ControlModifier | Qt::ShiftModifier);
+  QCOMPARE(annotation_count(editor->annotations()), 2);
+  QTest::keyClick(view, Qt::Key_Z, Qt::ControlModifier | Qt::ShiftModifier);
+  QCOMPARE(annotation_count(editor->annotations()), 3);
+  QTRY_VERIFY_WITH_TIMEOUT(!w.estimating() && settled(w), 120000);
+  QVERIFY(angleDeg(w.fogPanel()->scene().lighting.sun->direction_to_sun, sun_truth) < 3.0);
+
+  // Save, reopen: the same scene and the same annotations.
+  const QString project = dir.filePath("street.mrstudio");
+  QVERIFY(w.saveProject(project));
+  QVERIFY(!w.isModified());
+  MainWindow reopened;
+  reopened.setAutosave(dir.filePath("recovery2.mrstudio"), 3600000);
+  reopened.show();
+  QSignalSpy loaded(&reopened, &MainWindow::photoLoaded);
+  reopened.openProject(project);
+  QVERIFY(loaded.wait(60000));
+  QCOMPARE(mr::scene_to_json(reopened.fogPanel()->scene()),
+           mr::scene_to_json(w.fogPanel()->scene()));
+  QCOMPARE(annotationsJson(reopened.annotationEditor()->annotations()),
+           annotationsJson(editor->annotations()));
+  QTRY_VERIFY_WITH_TIMEOUT(settled(reopened) && !reopened.estimating(), 120000);
+  // The overlay is made for the reopened annotations, the saved scene is left as it was.
+  QCOMPARE(mr::scene_to_json(reopened.fogPanel()->scene()),
+           mr::scene_to_json(w.fogPanel()->scene()));
+  QVERIFY(!reopened.estimateOverlay().isNull());
+  QVERIFY(!reopened.isModified());
+
+  // Export with the AOV layers (float EXR): every layer against mr::fog on the same scene.
+  const QString exported = dir.filePath("street_fog.exr");
+  MainWindow::ExportSettings settings;
+  settings.aovs = true;
+  settings.pixel_type = mr::PixelType::float32;
+  QVERIFY(w.exportImage(exported, settings));
+  QVERIFY(QFileInfo::exists(exported));
+  mr::ReadOptions raw;  // the stored floats: the sky's depth is +inf
+  raw.to_scene_linear = false;
+  raw.reject_non_finite = false;
+  const mr::Image written = mr::read_image(exported.toStdString(), raw);
+  const std::vector<std::string> expected_channels = {"R",
+                                                      "G",
+                                                      "B",
+                                                      "transmittance.R",
+                                                      "transmittance.G",
+                                                      "transmittance.B",
+                                                      "inscatter.R",
+                                                      "inscatter.G",
+                                                      "inscatter.B",
+                                                      "depth.Z"};
+  for (const std::string& name : expected_channels) {
+    const auto& names = written.channel_names();
+    QVERIFY2(std::find(names.begin(), names.end(), name) != names.end(), name.c_str());
+  }
+  const Document& d = *w.document();
+  mr::FogScene scene = w.fogPanel()->scene();
+  scene.render.quality = mr::Quality::normal;
+  const mr::FogLayers expected = mr::fog(d.photo, d.distance_m, d.camera, scene);
+  QCOMPARE(written.width(), d.photo.width());
+  auto channel = [&](const std::string& name) {
+    const auto& names = written.channel_names();
+    return int(std::find(names.begin(), names.end(), name) - names.begin());
+  };
+  double max_c = 0, max_t = 0, max_r = 0, max_z = 0;
+  const int cr = channel("R"), tr = channel("transmittance.R"), ir = channel("inscatter.R"),
+            z = channel("depth.Z");
+  for (int y = 0; y < written.height(); ++y)
+    for (int x = 0; x < written.width(); ++x) {
+      for (int c = 0; c < 3; ++c) {
+        max_c = std::max(
+            max_c, double(std::abs(written.at(x, y, cr + c) - expected.composite.at(x, y, c))));
+        max_t = std::max(
+            max_t, double(std::abs(written.at(x, y, tr + c) - expected.transmittance.at(x, y, c))));
+        max_r = std::max(
+            max_r, double(std::abs(written.at(x, y, ir + c) - expected.inscatter.at(x, y, c))));
+      }
+      const float dz = d.distance_m.at(x, y, 0), wz = written.at(x, y, z);
+      if (std::isfinite(dz))
+        max_z = std::max(max_z, double(std::abs(wz - dz)));
+      else
+        QVERIFY(std::isinf(wz));
+    }
+  qInfo("AOV export vs mr::fog: composite %.3g, transmittance %.3g, inscatter %.3g, depth %.3g",
+        max_c, max_t, max_r, max_z);
+  // float32 EXR: the same floats (1e-4 scene-linear allows for nothing but float rounding).
+  QVERIFY(max_c <= 1e-4 && max_t <= 1e-4 && max_r <= 1e-4 && max_z == 0);
+}
+
+// Select, move a point (drag a handle), delete, a polygon closed with Enter and one with a
+// double-click, Escape cancelling one; each edit one undo step.
+void GuiTest::annotationToolsSelectMoveDeletePolygon() {
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  MainWindow w;
+  w.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+  w.resize(1366, 768);
+  w.show();
+  openAndSettle(w, leuvenCopy(dir));
+  AnnotationEditor* editor = w.annotationEditor();
+  ImageView* view = w.imageView();
+  QUndoStack* undo = editor->undoStack();
+  const double tolerance_px = 0.5 / view->zoom() + 1e-6;
+
+  w.setTool(Tool::known_length);
+  clickImage(view, {300, 500});
+  clickImage(view, {450, 500});
+  QVERIFY(editor->annotations().known_length);
+  QCOMPARE(editor->annotations().known_length->length_m, editor->knownLength());
+
+  // A plane closed with Enter, a lamp patch with a double-click, an Escaped one discarded.
+  w.setTool(Tool::plane);
+  for (const mr::PixelPoint p : {mr::PixelPoint{100, 150}, {200, 150}, {200, 380}, {100, 380}})
+    clickImage(view, p);
+  QCOMPARE(editor->pendingPoints().size(), std::size_t(4));
+  QTest::keyClick(view, Qt::Key_Return);
+  QCOMPARE(int(editor->annotations().planes.size()), 1);
+  QCOMPARE(int(editor->annotations().planes[0].polygon.size()), 4);
+  clickImage(view, {500, 100});
+  clickImage(view, {600, 100});
+  QTest::keyClick(view, Qt::Key_Escape);
+  QVERIFY(editor->pendingPoints().empty());
+  QCOMPARE(int(editor->annotations().planes.size()), 1);
+  w.setTool(Tool::lamp_patch);
+  clickImage(view, {300, 450});
+  clickImage(view, {400, 450});
+  QCOMPARE(editor->pendingPoints().size(), std::size_t(2));
+  QSignalSpy rejections(editor, &AnnotationEditor::rejected);
+  QTest::mouseDClick(view, Qt::LeftButton, Qt::NoModifier,
+                     view->viewFromImage({350, 520}).toPoint());
+  QVERIFY2(rejections.isEmpty(),
+           rejections.isEmpty() ? "" : qPrintable(rejections.first().first().toString()));
+  QCOMPARE(int(editor->annotations().lamp_patches.size()), 1);
+  QCOMPARE(int(editor->annotations().lamp_patches[0].polygon.size()), 3);
+  w.setTool(Tool::lamp);
+  clickImage(view, {360, 120});
+  QCOMPARE(int(editor->annotations().lamps.size()), 1);
+  const int steps = undo->count();
+  QCOMPARE(steps, 4);  // known length, plane, lamp patch, lamp
+
+  // Move the plane's third corner by dragging its handle with the select tool.
+  w.setTool(Tool::select);
+  const mr::PixelPoint corner = editor->annotations().planes[0].polygon[2];
+  const QPoint from = view->viewFromImage(corner).toPoint();
+  const QPoint to = view->viewFromImage({corner[0] + 40, corner[1] + 20}).toPoint();
+  QTest::mousePress(view, Qt::LeftButton, Qt::NoModifier, from);
+  QCOMPARE(editor->selection().kind, ItemRef::Kind::plane);
+  QMouseEvent move(QEvent::MouseMove, to, Qt::NoButton, Qt::LeftButton, Qt::NoModifier);
+  QApplication::sendEvent(view, &move);
+  QTest::mouseRelease(view, Qt::LeftButton, Qt::NoModifier, to);
+  const mr::PixelPoint moved = editor->annotations().planes[0].polygon[2];
+  QVERIFY(std::abs(moved[0] - (corner[0] + 40)) <= 2 * tolerance_px);
+  QVERIFY(std::abs(moved[1] - (corner[1] + 20)) <= 2 * tolerance_px);
+  QCOMPARE(undo->count(), steps + 1);
+  undo->undo();
+  QCOMPARE(editor->annotations().planes[0].polygon[2], corner);
+  undo->redo();
+  QCOMPARE(editor->annotations().planes[0].polygon[2], moved);
+
+  // A click without a move selects and edits nothing.
+  clickImage(view, editor->annotations().known_length->a);
+  QCOMPARE(editor->selection().kind, ItemRef::Kind::known_length);
+  QCOMPARE(undo->count(), steps + 1);
+  // The panel's known length changes the selected one (undoable).
+  editor->setKnownLength(2.5);
+  QCOMPARE(editor->annotations().known_length->length_m, 2.5);
+  // Delete with the key, then undo brings it back.
+  const int before = annotation_count(editor->annotations());
+  QTest::keyClick(view, Qt::Key_Delete);
+  QCOMPARE(annotation_count(editor->annotations()), before - 1);
+  QVERIFY(!editor->annotations().known_length);
+  undo->undo();
+  QCOMPARE(annotation_count(editor->annotations()), before);
+  QCOMPARE(editor->annotations().known_length->length_m, 2.5);
+
+  // Camera height replaces the known length (the JSON allows one of them), undoably.
+  editor->setCameraHeight(1.7);
+  QVERIFY(editor->annotations().camera_height_m && !editor->annotations().known_length);
+  undo->undo();
+  QVERIFY(!editor->annotations().camera_height_m && editor->annotations().known_length);
+
+  // An edit that does not validate is rejected (a horizon whose points coincide).
+  QSignalSpy rejected(editor, &AnnotationEditor::rejected);
+  mr::Annotations bad = editor->annotations();
+  bad.horizon = std::array{mr::PixelPoint{10, 10}, mr::PixelPoint{10.2, 10}};
+  QVERIFY(!editor->edit(bad, "bad"));
+  QCOMPARE(rejected.count(), 1);
+  QVERIFY(rejected.first().first().toString().contains("/horizon"));
+  QVERIFY(!editor->annotations().horizon);
+}
+
+void GuiTest::unsavedChangesPrompt() {
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  MainWindow w;
+  w.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+  w.show();
+  openAndSettle(w, leuvenCopy(dir));
+  QVERIFY(!w.isModified());
+  QVERIFY(w.windowTitle().startsWith("street.jpg -"));
+  w.fogPanel()->setVisibility(60);
+  QVERIFY(w.isModified());
+  QVERIFY(w.windowTitle().startsWith("street.jpg* -"));
+
+  // Cancel: the window stays open and so does the photo (a dropped file is not opened).
+  w.setPromptAnswer(QMessageBox::Cancel);
+  QVERIFY(!w.close());
+  QVERIFY(w.isVisible());
+  QMimeData mime;
+  mime.setUrls({QUrl::fromLocalFile(QStringLiteral(MR_SOURCE_DIR "/sample_photos/aerial.jpg"))});
+  QDropEvent drop(QPointF(200, 200), Qt::CopyAction, &mime, Qt::LeftButton, Qt::NoModifier);
+  QApplication::sendEvent(&w, &drop);
+  QTest::qWait(200);
+  QVERIFY(w.document()->photo_path.endsWith("street.jpg"));
+
+  // Save: written to the project, then the window closes.
+  QVERIFY(w.saveProject(dir.filePath("p.mrstudio")));
+  w.fogPanel()->setVisibility(70);
+  // A lamp without its lamp patch yet (the JSON wants both): saved all the same.
+  w.setTool(Tool::lamp);
+  clickImage(w.imageView(), {196, 355});
+  const mr::PixelPoint lamp_pixel = w.annotationEditor()->annotations().lamps.at(0).pixel;
+  w.setPromptAnswer(QMessageBox::Save);
+  QVERIFY(w.close());
+  QFile f(dir.filePath("p.mrstudio"));
+  QVERIFY(f.open(QIODevice::ReadOnly));
+  const QJsonObject o = QJsonDocument::fromJson(f.readAll()).object();
+  const mr::FogScene saved =
+      mr::scene_from_json(QJsonDocument(o["scene"].toObject()).toJson().toStdString());
+  QVERIFY(std::abs(3.912 / saved.medium.sigma_t_per_m[0] - 70) < 1e-3);
+
+  QVERIFY(o.contains("unfinished_annotations"));
+
+  // Reopened: the lamp is back. Discard: closes without writing; the recent files list has the
+  // photo and the project.
+  MainWindow w2;
+  w2.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+  w2.show();
+  QSignalSpy loaded(&w2, &MainWindow::photoLoaded);
+  w2.openProject(dir.filePath("p.mrstudio"));
+  QVERIFY(loaded.wait(60000));
+  QCOMPARE(int(w2.annotationEditor()->annotations().lamps.size()), 1);
+  QCOMPARE(int(w2.annotationEditor()->annotations().lamp_patches.size()), 0);
+  QCOMPARE(w2.annotationEditor()->annotations().lamps[0].pixel, lamp_pixel);
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w2) && !w2.estimating(), 120000);
+  QVERIFY(!w2.isModified());
+  w2.fogPanel()->setVisibility(90);
+  w2.setPromptAnswer(QMessageBox::Discard);
+  QVERIFY(w2.close());
+  QVERIFY(w2.recentFiles().contains(QFileInfo(dir.filePath("street.jpg")).absoluteFilePath()));
+  QVERIFY(w2.recentFiles().contains(QFileInfo(dir.filePath("p.mrstudio")).absoluteFilePath()));
+}
+
+void GuiTest::autosaveAndRecovery() {
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  const QString recovery = dir.filePath("recovery/recovery.mrstudio");
+  mr::FogScene scene;
+  {
+    MainWindow w;
+    w.setAutosave(recovery, 100);
+    w.show();
+    openAndSettle(w, leuvenCopy(dir));
+    QTest::qWait(300);
+    QVERIFY(!QFileInfo::exists(recovery));  // nothing to save yet
+    w.fogPanel()->setVisibility(45);
+    w.setTool(Tool::lamp);
+    clickImage(w.imageView(), {200, 200});
+    w.setTool(Tool::lamp_patch);
+    for (const mr::PixelPoint p : {mr::PixelPoint{150, 450}, {300, 450}, {250, 520}})
+      clickImage(w.imageView(), p);
+    QTest::keyClick(w.imageView(), Qt::Key_Return);
+    QTRY_VERIFY_WITH_TIMEOUT(QFileInfo::exists(recovery), 5000);
+    QTRY_VERIFY_WITH_TIMEOUT(!w.estimating() && settled(w), 120000);
+    QVERIFY(w.autosaveNow());
+    scene = w.fogPanel()->scene();
+    // A crash: the window goes away without closing (no prompt, the recovery file stays).
+    w.hide();
+    w.setAutosave(dir.filePath("elsewhere.mrstudio"), 3600000);
+  }
+  QVERIFY(QFileInfo::exists(recovery));
+  MainWindow w;
+  w.setAutosave(recovery, 3600000);
+  w.setPromptAnswer(QMessageBox::Yes);
+  QSignalSpy loaded(&w, &MainWindow::photoLoaded);
+  QVERIFY(w.offerRecovery());
+  QVERIFY(loaded.wait(60000));
+  QCOMPARE(mr::scene_to_json(w.fogPanel()->scene()), mr::scene_to_json(scene));
+  QCOMPARE(int(w.annotationEditor()->annotations().lamps.size()), 1);
+  QCOMPARE(int(w.annotationEditor()->annotations().lamp_patches.size()), 1);
+  QVERIFY(w.projectPath().isEmpty());  // not the user's file: saving asks where
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w) && !w.estimating(), 120000);
+  // Declined: the recovery file is removed.
+  MainWindow w2;
+  w2.setAutosave(recovery, 3600000);
+  w2.setPromptAnswer(QMessageBox::No);
+  QVERIFY(!w2.offerRecovery());
+  QVERIFY(!QFileInfo::exists(recovery));
+}
+
+void GuiTest::exportDialogAndCancel() {
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  const mr::ColorConfig color = mr::ColorConfig::builtin();
+  ExportDialog dialog(color, "street_fog");
+  dialog.pathEdit()->setText(dir.filePath("street_fog.exr"));
+  QCOMPARE(dialog.extension(), QString(".exr"));
+  QVERIFY(dialog.aovCheck()->isEnabled());
+  QCOMPARE(dialog.colorspaceBox()->currentText(), QString(mr::colorspace::scene_linear));
+  QCOMPARE(dialog.depthBox()->count(), 2);
+  dialog.aovCheck()->setChecked(true);
+  QVERIFY(dialog.settings().aovs);
+  QVERIFY(!dialog.colorspaceBox()->isEnabled());
+  dialog.formatBox()->setCurrentIndex(1);  // PNG
+  QVERIFY(dialog.path().endsWith("street_fog.png"));
+  QVERIFY(!dialog.aovCheck()->isEnabled());
+  QVERIFY(!dialog.settings().aovs);
+  QCOMPARE(dialog.colorspaceBox()->currentText(), QString(mr::colorspace::srgb));
+  QVERIFY(dialog.colorspaceBox()->count() > 1);
+  dialog.depthBox()->setCurrentIndex(1);
+  QCOMPARE(dialog.settings().pixel_type, mr::PixelType::uint16);
+  dialog.formatBox()->setCurrentIndex(3);  // JPEG
+  QCOMPARE(dialog.depthBox()->count(), 1);
+  QVERIFY(dialog.path().endsWith(".jpg"));
+  dialog.formatBox()->setCurrentIndex(0);
+  dialog.resize(dialog.sizeHint());
+  dialog.show();
+  QTest::qWait(30);
+  QVERIFY(dialog.grab().save(outDir() + "/export_dialog.png"));
+
+  MainWindow w;
+  w.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+  w.show();
+  openAndSettle(w, leuvenCopy(dir));
+  // 16-bit PNG in sRGB: the written codes are the composite encoded by the config.
+  MainWindow::ExportSettings png;
+  png.pixel_type = mr::PixelType::uint16;
+  png.colorspace = mr::colorspace::srgb;
+  const QString png_path = dir.filePath("out16.png");
+  QVERIFY(w.exportImage(png_path, png));
+  QCOMPARE(mr::probe_image(png_path.toStdString()).pixel_type, mr::PixelType::uint16);
+  // Cancel right away: nothing is written.
+  const QString cancelled = dir.filePath("cancelled.exr");
+  QTimer::singleShot(0, &w, &MainWindow::cancelExport);
+  QVERIFY(!w.exportImage(cancelled, {}, true));
+  QVERIFY(!QFileInfo::exists(cancelled));
+  QVERIFY(QDir(dir.path()).entryList({"cancelled*"}).isEmpty());
+  // AOVs need EXR: a clear error, not a crash.
+  MainWindow::ExportSettings aovs;
+  aovs.aovs = true;
+  QSignalSpy errors(&w, &MainWindow::errorShown);
+  QVERIFY(!w.exportImage(dir.filePath("x.png"), aovs));
+  QCOMPARE(errors.count(), 1);
+}
+
+// Presets, the new medium controls, the lamps' intensity and the sun dial, each checked in the
+// scene the panel hands to mr::fog.
+void GuiTest::fogPanelPresetsDialAndLamps() {
+  FogPanel panel;
+  panel.resize(320, 900);
+  panel.show();
+  QVERIFY(QTest::qWaitForWindowExposed(&panel));
+  QSignalSpy changed(&panel, &FogPanel::sceneChanged);
+
+  panel.applyPreset(FogPanel::Preset::dense_fog);
+  QCOMPARE(changed.count(), 1);
+  mr::FogScene s = panel.scene();
+  QVERIFY(std::abs(3.912 / s.medium.sigma_t_per_m[0] - 40) < 1e-3);
+  QVERIFY(!s.lighting.sun);
+  QCOMPARE(panel.presetBox()->currentText(), QString("Dense fog"));
+
+  panel.applyPreset(FogPanel::Preset::valley_fog);
+  s = panel.scene();
+  QVERIFY(s.medium.height_fog);
+  QCOMPARE(s.medium.height_fog->scale_height_m, 15.0);
+  QCOMPARE(s.medium.layer_top_m, 30.0);
+  QCOMPARE(s.medium.noise.amplitude, 0.25);
+  QVERIFY(s.lighting.sun);
+
+  panel.applyPreset(FogPanel::Preset::haze);
+  s = panel.scene();
+  QVERIFY(std::abs(3.912 / s.medium.sigma_t_per_m[0] - 3000) < 1);
+  QVERIFY(mr::scene_warnings(s).empty());  // the sun reaches in: the haze has a top
+  QCOMPARE(s.medium.albedo[0], 0.9f);
+  QVERIFY(!s.medium.height_fog);
+
+  panel.applyPreset(FogPanel::Preset::night_street);
+  s = panel.scene();
+  QVERIFY(!s.lighting.sun && s.lighting.sky_radiance);
+  QCOMPARE(int(s.lighting.lamps.size()), 1);
+  // The panel shows what it was given: setScene(scene()) changes nothing.
+  panel.setScene(s);
+  QCOMPARE(mr::scene_to_json(panel.scene()), mr::scene_to_json(s));
+
+  // A hand edit makes the preset "Custom"; the lamp's intensity keeps its colour.
+  QCOMPARE(panel.lampList()->count(), 1);
+  panel.lampIntensitySpin()->setValue(650);
+  s = panel.scene();
+  const mr::Rgb& i = s.lighting.lamps[0].intensity_per_sr;
+  QVERIFY(std::abs((i[0] + i[1] + i[2]) / 3 - 650) < 1e-3);
+  QVERIFY(std::abs(i[0] / i[2] - 400.0 / 220.0) < 1e-5);
+  QCOMPARE(panel.presetBox()->currentIndex(), 0);
+
+  // The sun dial: a click at the position of (azimuth 90, elevation 45) puts the sun there.
+  panel.applyPreset(FogPanel::Preset::morning_mist);
+  QVERIFY(panel.scene().lighting.sun);
+  QVERIFY(mr::scene_warnings(panel.scene()).empty());
+  SunDial* dial = panel.sunDial();
+  QVERIFY(dial->isVisible());
+  QTest::mouseClick(dial, Qt::LeftButton, Qt::NoModifier, dial->positionOf(90, 45).toPoint());
+  // Tolerance: the click is rounded to a pixel; one pixel is 90 deg / radius (~2 deg).
+  const double px_deg = 90.0 / (std::min(dial->width(), dial->height()) / 2.0 - 8);
+  QVERIFY2(std::abs(dial->azimuth() - 90) < 2 * px_deg,
+           qPrintable(QString::number(dial->azimuth())));
+  QVERIFY2(std::abs(dial->elevation() - 45) < 2 * px_deg,
+           qPrintable(QString::number(dial->elevation())));
+  const mr::Vec3 d = panel.scene().lighting.sun->direction_to_sun;
+  const mr::Vec3 e = mr::direction_from_azimuth_elevation(dial->azimuth(), dial->elevation());
+  QVERIFY(angleDeg(d, e) < 0.2);  // the spin boxes keep 0.1 deg
+  // Dragging moves it on.
+  QTest::mousePress(dial, Qt::LeftButton, Qt::NoModifier, dial->positionOf(90, 45).toPoint());
+  QMouseEvent drag(QEvent::MouseMove, dial->positionOf(180, 20), Qt::LeftButton, Qt::LeftButton,
+                   Qt::NoModifier);
+  QApplication::sendEvent(dial, &drag);
+  QTest::mouseRelease(dial, Qt::LeftButton, Qt::NoModifier, dial->positionOf(180, 20).toPoint());
+  QVERIFY(std::abs(std::abs(dial->azimuth()) - 180) < 2 * px_deg);
+  QVERIFY(std::abs(dial->elevation() - 20) < 2 * px_deg);
+}
+
+// The main states at 1366x768 and 2560x1440, for a person to look at (out/gui/).
+void GuiTest::screenshots() {
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  for (const QSize size : {QSize(1366, 768), QSize(2560, 1440)}) {
+    const QString suffix = QString("_%1x%2.png").arg(size.width()).arg(size.height());
+    MainWindow w;
+    w.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+    w.resize(size);
+    w.show();
+    QVERIFY(QTest::qWaitForWindowExposed(&w));
+    QVERIFY(w.grab().save(outDir() + "/state0_empty" + suffix));
+    openAndSettle(w, leuvenCopy(dir));
+    w.splitSlider()->setValue(100);  // the photo alone
+    QTest::qWait(30);
+    QVERIFY(w.grab().save(outDir() + "/state1_opened" + suffix));
+
+    // Annotations: a horizon, two shadow pairs, a plane, a lamp.
+    ImageView* view = w.imageView();
+    w.setTool(Tool::horizon);
+    clickImage(view, {40, 361.5});
+    clickImage(view, {710, 361.5});
+    clickShadowPairs(w, *w.annotationEditor()->annotations().horizon);
+    w.setTool(Tool::plane);
+    for (const mr::PixelPoint p : {mr::PixelPoint{483, 50}, {750, 50}, {750, 373}, {483, 373}})
+      clickImage(view, p);
+    QTest::keyClick(view, Qt::Key_Return);
+    w.setTool(Tool::lamp);
+    clickImage(view, {196, 355});
+    w.setTool(Tool::select);
+    clickImage(view, w.annotationEditor()->annotations().shadow_pairs[0].caster_top);
+    QTRY_VERIFY_WITH_TIMEOUT(!w.estimating() && settled(w), 120000);
+    w.setLayer(Layer::estimate);
+    w.splitSlider()->setValue(50);
+    QTest::qWait(30);
+    QVERIFY(w.grab().save(outDir() + "/state2_annotations" + suffix));
+
+    // Foggy preview with the split slider, the fog panel in front.
+    w.setLayer(Layer::composite);
+    w.fogPanel()->applyPreset(FogPanel::Preset::morning_mist);
+    w.fogPanel()->setVisibility(120);
+    w.findChild<QDockWidget*>("fogDock")->raise();
+    w.splitSlider()->setValue(35);
+    QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+    QTest::qWait(30);
+    QVERIFY(w.grab().save(outDir() + "/state3_fog_split" + suffix));
+  }
+  ExportDialog dialog(mr::ColorConfig::builtin(), "street_fog");
+  dialog.show();
+  QVERIFY(QTest::qWaitForWindowExposed(&dialog));
+  QVERIFY(dialog.grab().save(outDir() + "/state4_export_dialog.png"));
+}
+
+// Large photos with a measured depth are estimated on a downscaled copy: the annotations scale
+// with the pixel-centre convention, and the pose from a horizon does not depend on the scale.
+void GuiTest::scaledAnnotationsKeepThePose() {
+  mr::Annotations a;
+  a.horizon = std::array{mr::PixelPoint{10, 300.25}, mr::PixelPoint{3990, 320.5}};
+  a.shadow_pairs.push_back({{100, 200}, {101, 900}, {300, 950}});
+  a.planes.push_back(
+      {{{0, 0}, {10, 0}, {10, 10}}, std::array{mr::PixelPoint{0, 10}, mr::PixelPoint{10, 10}}});
+  const mr::Annotations half = scale_annotations(a, 0.5, 0.5);
+  QCOMPARE((*half.horizon)[0][0], (10 + 0.5) * 0.5 - 0.5);
+  QCOMPARE(half.shadow_pairs[0].shadow_tip[1], (950 + 0.5) * 0.5 - 0.5);
+  const mr::Annotations back = scale_annotations(half, 2, 2);
+  QCOMPARE(annotationsJson(back), annotationsJson(a));
+  const mr::Camera camera = mr::Camera::from_metadata(4000, 3000, mr::Metadata{});
+  const mr::Camera small = scale_camera(camera, 2000, 1500);
+  const mr::CameraPose full = mr::pose_from_horizon(camera, *a.horizon, 1.6);
+  const mr::CameraPose scaled = mr::pose_from_horizon(small, *half.horizon, 1.6);
+  QVERIFY(std::abs(full.pitch_deg - scaled.pitch_deg) < 1e-9);
+  QVERIFY(std::abs(full.roll_deg - scaled.roll_deg) < 1e-9);
+}
+
+// GrabCut assist: a rough polygon around a textured object on a different background snaps to
+// the object's outline (intersection over union with the true rectangle, rasterised).
+void GuiTest::grabCutSnapsRoughPolygon() {
+  QImage photo(320, 240, QImage::Format_RGB888);
+  const QRect object(100, 60, 120, 110);  // pixels 100..219 x 60..169
+  for (int y = 0; y < photo.height(); ++y)
+    for (int x = 0; x < photo.width(); ++x) {
+      const int n = ((x * 7919 + y * 104729) >> 3) % 23;  // fixed pseudo-random texture
+      photo.setPixelColor(
+          x, y,
+          object.contains(x, y) ? QColor(190 + n, 60 + n, 40) : QColor(40, 110 + n, 60 + 2 * n));
+    }
+  const std::vector<mr::PixelPoint> rough = {{85, 48}, {236, 52}, {232, 185}, {88, 180}};
+  const std::vector<mr::PixelPoint> snapped = snap_polygon_grabcut(photo, rough);
+  auto raster = [&](const std::vector<mr::PixelPoint>& poly) {
+    QImage mask(photo.size(), QImage::Format_Grayscale8);
+    mask.fill(0);
+    QPainter p(&mask);
+    QPolygonF q;
+    for (const auto& pt : poly) q << QPointF(pt[0] + 0.5, pt[1] + 0.5);
+    p.setPen(Qt::NoPen);
+    p.setBrush(Qt::white);
+    p.drawPolygon(q);
+    return mask;
+  };
+  auto iou = [&](const QImage& mask) {
+    int both = 0, either = 0;
+    for (int y = 0; y < mask.height(); ++y)
+      for (int x = 0; x < mask.width(); ++x) {
+        const bool a = qGray(mask.pixel(x, y)) > 127, b = object.contains(x, y);
+        both += a && b;
+        either += a || b;
+      }
+    return double(both) / either;
+  };
+  const double rough_iou = iou(raster(rough)), snapped_iou = iou(raster(snapped));
+  qInfo("GrabCut: IoU with the object %.3f (rough polygon %.3f), %d points", snapped_iou, rough_iou,
+        int(snapped.size()));
+  // Tolerance: the outline is on pixel centres (half a pixel in) around a 120 x 110 object:
+  // IoU >= 0.97; the rough polygon is at ~0.6.
+  QVERIFY(snapped_iou > 0.97);
+  QVERIFY(rough_iou < 0.7);
+  QVERIFY_EXCEPTION_THROWN(snap_polygon_grabcut(photo, {{1, 1}, {2, 1}}), mr::Error);
+
+  // Through the window: the plane tool, Snap, one undoable edit.
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  QVERIFY(photo.save(dir.filePath("object.png")));
+  MainWindow w;
+  w.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+  w.resize(1366, 768);
+  w.show();
+  openAndSettle(w, dir.filePath("object.png"));
+  w.setTool(Tool::plane);
+  for (const mr::PixelPoint& p : rough) clickImage(w.imageView(), p);
+  QTest::keyClick(w.imageView(), Qt::Key_Return);
+  AnnotationEditor* editor = w.annotationEditor();
+  QCOMPARE(editor->selection().kind, ItemRef::Kind::plane);
+  const std::vector<mr::PixelPoint> drawn = editor->annotations().planes[0].polygon;
+  QSignalSpy snaps(&w, &MainWindow::snapFinished);
+  const int steps = editor->undoStack()->count();
+  w.snapSelectedPolygon();
+  QVERIFY(snaps.wait(30000));
+  QVERIFY2(snaps.first().first().toBool(), qPrintable(snaps.first().at(1).toString()));
+  QCOMPARE(editor->undoStack()->count(), steps + 1);
+  const double window_iou = iou(raster(editor->annotations().planes[0].polygon));
+  qInfo("GrabCut through the window: IoU %.3f", window_iou);
+  QVERIFY(window_iou > 0.97);
+  editor->undoStack()->undo();
+  QCOMPARE(editor->annotations().planes[0].polygon, drawn);
+  QTRY_VERIFY_WITH_TIMEOUT(!w.estimating() && settled(w), 60000);
+}
+
 // Sanitizer builds (MR_SANITIZE): Qt 5.15's offscreen platform plugin never deletes its screen
 // (QOffscreenIntegration), a leak LeakSanitizer reports at exit. Full malloc stacks (Qt is built
 // without frame pointers) so that the suppression can match the plugin in them; only this test
 // binary is affected. Unused in normal builds.
-extern "C" const char* __asan_default_options() { return "fast_unwind_on_malloc=0"; }
-extern "C" const char* __lsan_default_suppressions() { return "leak:libqoffscreen.so\n"; }
+extern "C" const char* __asan_default_options() {
+  return "fast_unwind_on_malloc=0";
+}
+extern "C" const char* __lsan_default_suppressions() {
+  return "leak:libqoffscreen.so\n";
+}
 
 int main(int argc, char** argv) {
   if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
   QApplication app(argc, argv);
+  // Recent files and the export folder go to a settings file of the tests, not the user's.
+  QCoreApplication::setOrganizationName("mr-studio-tests");
+  QCoreApplication::setApplicationName("mr-studio-tests");
   GuiTest test;
   return QTest::qExec(&test, argc, argv);
 }
