@@ -7,6 +7,7 @@
 
 #include "estimate_command.h"
 #include "fog_command.h"
+#include "material_command.h"
 #include "mr/version.h"
 
 namespace {
@@ -31,6 +32,8 @@ int main(int argc, char** argv) {
   CLI::App* fog = mr::cli::add_fog_command(app, fog_options);
   mr::cli::EstimateCommandOptions estimate_options;
   CLI::App* estimate = mr::cli::add_estimate_command(app, estimate_options);
+  mr::cli::MaterialCommandOptions material_options;
+  CLI::App* material = mr::cli::add_material_command(app, material_options);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -41,5 +44,6 @@ int main(int argc, char** argv) {
   std::signal(SIGTERM, on_signal);
   if (fog->parsed()) return mr::cli::run_fog_command(fog_options, g_interrupted);
   if (estimate->parsed()) return mr::cli::run_estimate_command(estimate_options);
+  if (material->parsed()) return mr::cli::run_material_command(material_options);
   return 2;
 }

@@ -1,0 +1,105 @@
+// Material style transfer (DESIGN.md section 5, seed 002 chapter 4): give regions of a photo the
+// material look of a sample image. Candidate materials are fitted to the sample's segments by
+// inverse rendering, an assignment of candidates to the target's regions is chosen by Tabu search
+// on a style objective, and the regions are re-rendered under the photo's lighting.
+#pragma once
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+#include "mr/camera.h"
+#include "mr/image.h"
+#include "mr/scene.h"
+
+namespace mr {
+
+/// A surface's reflectance: Lambert diffuse plus a GGX microfacet specular lobe with Smith
+/// (height-correlated) masking-shadowing and Schlick's Fresnel,
+///   f_r(l, v) = diffuse_albedo / pi + D(h) G2(l, v) F(v.h) / (4 |n.l| |n.v|),
+///   F(u) = F0 + (1 - F0) (1 - u)^5, F0 = specular_albedo, GGX alpha = roughness^2.
+struct Material {
+  Rgb diffuse_albedo{0.5f, 0.5f, 0.5f};  ///< in [0, 1] per channel
+  float specular_albedo = 0.04f;          ///< F0: reflectance at normal incidence, in [0, 1]
+  float roughness = 0.5f;                 ///< perceptual roughness in [0.02, 1]
+};
+
+/// Throws mr::Error(invalid_argument) naming `what` and the field for values outside the ranges
+/// above or not finite.
+void validate_material(const Material& material, const std::string& what = "material");
+
+/// A material fitted to one segment of the sample image.
+struct MaterialCandidate {
+  Material material;
+  int segment = -1;          ///< the segment's label in MaterialCandidates::segment_labels
+  int pixel_count = 0;       ///< pixels the fit used
+  double relative_rms = 0;   ///< RMS residual of the fit / mean radiance of the segment
+};
+
+/// What the sample image offered.
+struct MaterialCandidates {
+  std::vector<MaterialCandidate> candidates;  ///< distinct, well-fitted; at least one
+  Image segment_labels;  ///< 1 channel, the sample's size: segment id per pixel, -1 = unused
+  std::vector<std::string> notes;  ///< one line per decision, for a person to read
+};
+
+struct MaterialTransferOptions {
+  int max_candidates = 8;            ///< keep at most this many candidates (1..64)
+  double superpixel_size_px = 0;     ///< segmentation scale; 0 = from the sample's size
+  double max_relative_rms = 0.25;    ///< candidates fitting worse are dropped
+  double smoothness_weight = 0.1;    ///< weight of the material-gradient term (>= 0)
+  int tabu_max_iterations = 200;     ///< Tabu search: iterations at most
+  int tabu_patience = 40;            ///< stop after this many iterations without a new best
+  std::uint32_t seed = 1;            ///< equal seeds give identical results
+  bool keep_detail = true;           ///< carry the photo's fine texture into the new material
+  int threads = 0;                   ///< 0: all cores
+};
+
+/// A photo (or sample) with what shading it needs: scene-linear RGB, the distance map (metres
+/// along each pixel's ray; 0 or +inf = sky), the camera and the scene (pose and lighting; the
+/// medium is ignored). Views: the images must outlive the call.
+struct ShadedPhoto {
+  const Image* photo = nullptr;
+  const Image* distance_m = nullptr;
+  Camera camera;
+  FogScene scene;
+};
+
+/// Candidate materials from a sample image: segments it (superpixels merged by colour), fits the
+/// BRDF of each segment by inverse rendering under the sample's lighting (Ceres), drops poorly
+/// fitted ones and keeps the distinct ones. Throws mr::Error(invalid_argument) for a sample with no
+/// usable segment (too small, all sky, flat black, non-finite pixels everywhere) and
+/// mr::Error(size_mismatch) when the distance map or camera differ from the photo's size.
+MaterialCandidates extract_material_candidates(const ShadedPhoto& sample,
+                                               const MaterialTransferOptions& options = {});
+
+struct MaterialTransferResult {
+  Image image;  ///< the target photo with its regions re-materialed, scene-linear RGB
+  MaterialCandidates candidates;
+  std::vector<int> assignment;  ///< candidate index per region (region r = label r + 1)
+  double objective = 0;         ///< the style objective of the assignment (lower is better)
+  std::vector<double> best_objective_history;  ///< best-so-far per Tabu iteration
+  std::vector<std::string> notes;
+};
+
+/// Re-materials the regions of `target`: `region_labels` is 1 channel of the target's size with
+/// 0 = untouched and 1..n = region n (every id in 1..n must have pixels). Throws
+/// mr::Error(invalid_argument) for an empty region set, a region id with no pixels, or a region
+/// entirely in the sky; mr::Error(size_mismatch) for labels of another size.
+MaterialTransferResult transfer_material(const ShadedPhoto& sample, const ShadedPhoto& target,
+                                         const Image& region_labels,
+                                         const MaterialTransferOptions& options = {});
+
+/// Region labels from a mask image file: either one channel of integer ids (0 = none; renumbered
+/// 1..n in increasing order when there are gaps) or a colour image whose distinct non-black
+/// colours are regions (numbered in order of first appearance, row by row); or, for a ".json"
+/// file, an annotations document (mr/annotations.h) whose plane polygons are the regions (plane
+/// i = region i + 1, later polygons paint over earlier ones). Throws mr::Error(io) if
+/// unreadable, mr::Error(size_mismatch) if its size is not width x height,
+/// mr::Error(invalid_argument) if it has no region (or a polygon covers no pixel).
+Image load_region_labels(const std::filesystem::path& path, int width, int height);
+
+/// The chosen materials as a JSON document (format "mr-materials", version 1): the candidates,
+/// the assignment and the objective.
+std::string material_result_to_json(const MaterialTransferResult& result);
+
+}  // namespace mr

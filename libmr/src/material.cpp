@@ -1,0 +1,606 @@
+// The facade of mr/material.h: candidate materials from a sample image, their assignment to the
+// target's regions by Tabu search, and the re-rendering (DESIGN.md section 5).
+#include "mr/material.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <numeric>
+#include <opencv2/imgproc.hpp>
+
+#include "mr/annotations.h"
+#include "mr/error.h"
+#include "mr/io.h"
+#include "photo/material/apply.h"
+#include "photo/material/brdf_fit.h"
+#include "photo/material/material_objective.h"
+#include "photo/material/segments.h"
+#include "photo/material/style.h"
+#include "photo/material/tabu_search.h"
+#include "render/surface_shading.h"
+
+namespace mr {
+
+namespace {
+
+// Two fitted materials closer than this (Euclidean over diffuse R, G, B, specular albedo and
+// roughness, the parameter vector of the objective's smoothness term) are the same material
+// fitted twice: the acceptance tolerances of the fit itself are 0.03 / 0.05 / 0.1, so a smaller
+// gap is within its noise. The larger segment's fit is kept.
+constexpr double kDuplicateMaterialDistance = 0.05;
+// Radiance below this (scene-linear) is flat black: no shading to fit.
+constexpr float kBlackRadiance = 1e-4f;
+// Regions larger than this are capped when computing statistics for the search (every pixel is
+// still re-rendered): the statistics are sums, so an even stride keeps them unbiased.
+constexpr std::size_t kMaxStatisticsPixels = 200000;
+// Rays per pixel for the sky's occlusion: the default 16 leaves visible grain in re-rendered
+// regions under sky light (the specular term is not divided out like the diffuse one is).
+constexpr int kSkyRays = 64;
+// At most this many segments per wanted candidate are fitted, each on this many pixels.
+constexpr int kFittedSegmentsPerCandidate = 3;
+constexpr int kFitPixels = 2000;
+
+std::string format(const char* fmt, auto... args) {
+  char buffer[512];
+  std::snprintf(buffer, sizeof buffer, fmt, args...);
+  return buffer;
+}
+
+std::string size_text(int w, int h) {
+  return std::to_string(w) + "x" + std::to_string(h);
+}
+
+double luminance(const float* p) {
+  return 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+}
+
+void validate_options(const MaterialTransferOptions& o) {
+  auto bad = [](const std::string& what) {
+    throw Error(ErrorCode::invalid_argument, "material transfer: " + what);
+  };
+  if (o.max_candidates < 1 || o.max_candidates > 64)
+    bad("max_candidates must be in 1..64, got " + std::to_string(o.max_candidates));
+  if (!(o.superpixel_size_px >= 0) || !std::isfinite(o.superpixel_size_px))
+    bad("superpixel_size_px must be >= 0 (0: automatic)");
+  if (!(o.max_relative_rms > 0) || !std::isfinite(o.max_relative_rms))
+    bad("max_relative_rms must be > 0");
+  if (!(o.smoothness_weight >= 0) || !std::isfinite(o.smoothness_weight))
+    bad("smoothness_weight must be >= 0");
+  if (o.tabu_max_iterations < 1) bad("tabu_max_iterations must be >= 1");
+  if (o.tabu_patience < 1) bad("tabu_patience must be >= 1");
+  if (o.threads < 0) bad("threads must be >= 0 (0: all cores)");
+}
+
+// Checks a ShadedPhoto and returns its RGB (first three channels) as an owned image.
+Image checked_rgb(const ShadedPhoto& p, const char* what) {
+  if (!p.photo || !p.distance_m)
+    throw Error(ErrorCode::invalid_argument,
+                std::string(what) + ": photo and distance map are required");
+  const Image& photo = *p.photo;
+  if (photo.empty() || photo.channels() < 3)
+    throw Error(ErrorCode::invalid_argument, std::string(what) +
+                                                 ": the photo must be RGB, it has " +
+                                                 std::to_string(photo.channels()) + " channels");
+  if (p.distance_m->width() != photo.width() || p.distance_m->height() != photo.height())
+    throw Error(ErrorCode::size_mismatch,
+                std::string(what) + ": distance map is " +
+                    size_text(p.distance_m->width(), p.distance_m->height()) + ", photo is " +
+                    size_text(photo.width(), photo.height()));
+  if (p.camera.width != photo.width() || p.camera.height != photo.height())
+    throw Error(ErrorCode::size_mismatch,
+                std::string(what) + ": camera is " + size_text(p.camera.width, p.camera.height) +
+                    ", photo is " + size_text(photo.width(), photo.height()));
+  const Lighting& l = p.scene.lighting;
+  if (!l.sun && !l.sky_radiance && l.lamps.empty())
+    throw Error(ErrorCode::invalid_argument,
+                std::string(what) + ": the scene has no light (no sun, sky or lamp)");
+  if (photo.channels() == 3) return photo;
+  return photo.select_channels(std::array{0, 1, 2});
+}
+
+render::SurfaceGeometry geometry_of(const ShadedPhoto& p, const MaterialTransferOptions& o) {
+  render::SurfaceGeometryOptions g;
+  g.threads = o.threads;
+  g.sky_rays = kSkyRays;
+  return render::surface_geometry_from_depth(*p.distance_m, p.camera, p.scene.pose,
+                                             p.scene.lighting, g);
+}
+
+double mean_surface_luminance(const Image& rgb, const Image& surface) {
+  double sum = 0;
+  std::size_t n = 0;
+  for (int y = 0; y < rgb.height(); ++y)
+    for (int x = 0; x < rgb.width(); ++x) {
+      if (!(surface.at(x, y, 0) > 0)) continue;
+      const double l = luminance(rgb.pixel(x, y));
+      if (!std::isfinite(l)) continue;
+      sum += std::max(0.0, l);
+      ++n;
+    }
+  return n ? sum / double(n) : 0.0;
+}
+
+double parameter_distance(const Material& a, const Material& b) {
+  double d = 0;
+  for (int c = 0; c < 3; ++c) d += std::pow(double(a.diffuse_albedo[c]) - b.diffuse_albedo[c], 2);
+  d += std::pow(double(a.specular_albedo) - b.specular_albedo, 2);
+  d += std::pow(double(a.roughness) - b.roughness, 2);
+  return std::sqrt(d);
+}
+
+std::string describe(const Material& m) {
+  return format("diffuse (%.3f, %.3f, %.3f), specular %.3f, roughness %.3f", m.diffuse_albedo[0],
+                m.diffuse_albedo[1], m.diffuse_albedo[2], m.specular_albedo, m.roughness);
+}
+
+template <class F>
+auto in_arena(int threads, F&& f) {
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  return arena.execute(std::forward<F>(f));
+}
+
+// Exposure reference for the style statistics: the light level, i.e. the mean luminance of a
+// white Lambertian surface (the diffuse shading S) over the photo's surfaces. Both the sample and
+// the target are normalised by their own light, so that the statistics compare materials (a
+// surface of albedo 0.3 looks the same under either light) and a highlight is a pixel brighter than
+// twice what an average white matte surface would show. Normalising by the photo's own mean
+// luminance instead would make a region look brighter or darker by what the rest of the photo
+// happens to hold (a bright new material under the target's light, in a dark photo, would count
+// as all highlight).
+double light_level(const render::SurfaceGeometry& geometry, const Lighting& lighting) {
+  const Image shading = photo::diffuse_shading(geometry, lighting);
+  return mean_surface_luminance(shading, geometry.surface);
+}
+
+MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOptions& options,
+                           double* light_level_out = nullptr) {
+  const Image rgb = checked_rgb(sample, "sample");
+  const int w = rgb.width(), h = rgb.height();
+  const render::SurfaceGeometry geometry = geometry_of(sample, options);
+  const Lighting& lighting = sample.scene.lighting;
+  if (light_level_out) *light_level_out = light_level(geometry, lighting);
+
+  // Usable pixels: a surface, finite, not flat black.
+  Image valid(w, h, 1);
+  std::size_t surface_pixels = 0, usable_pixels = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!(geometry.surface.at(x, y, 0) > 0)) continue;
+      ++surface_pixels;
+      const float* p = rgb.pixel(x, y);
+      bool ok = true;
+      for (int c = 0; c < 3; ++c) ok = ok && std::isfinite(p[c]);
+      if (!ok || !(std::max({p[0], p[1], p[2]}) > kBlackRadiance)) continue;
+      valid.at(x, y, 0) = 1;
+      ++usable_pixels;
+    }
+  const std::string counts = std::to_string(w * h) + " pixels, " + std::to_string(surface_pixels) +
+                             " with a surface, " + std::to_string(usable_pixels) +
+                             " of them not black";
+  if (usable_pixels == 0)
+    throw Error(ErrorCode::invalid_argument,
+                "sample: no usable segment: " + counts +
+                    (surface_pixels == 0 ? " (all sky: the distance map has no surface)"
+                                         : " (flat black)"));
+  photo::SegmentOptions seg_options;
+  seg_options.superpixel_size_px = options.superpixel_size_px;
+  const photo::Segmentation seg = photo::segment_image(rgb, &valid, seg_options);
+
+  MaterialCandidates out;
+  out.notes.push_back("sample: " + counts + "; " + std::to_string(seg.count) + " segments");
+  if (seg.count == 0)
+    throw Error(ErrorCode::invalid_argument,
+                "sample: no usable segment: " + counts + ", none large enough (at least " +
+                    std::to_string(seg_options.min_segment_pixels) + " pixels)");
+  std::vector<std::vector<std::int32_t>> segment_pixels(seg.count);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float s = seg.labels.at(x, y, 0);
+      if (s >= 0 && s < float(seg.count)) segment_pixels[int(s)].push_back(y * w + x);
+    }
+  struct Fitted {
+    bool ok = false;
+    photo::BrdfFit fit;
+    std::string failure;
+  };
+  std::vector<Fitted> fits(seg.count);
+  // Inverse rendering is most of the time: only the largest segments are fitted (the candidates
+  // come from them anyway: larger segments win ties and duplicates), on a pixel sample each.
+  const int fitted_segments =
+      std::min(seg.count, kFittedSegmentsPerCandidate * options.max_candidates);
+  std::vector<int> by_size(seg.count);
+  std::iota(by_size.begin(), by_size.end(), 0);
+  std::stable_sort(by_size.begin(), by_size.end(), [&](int a, int b) {
+    return segment_pixels[a].size() > segment_pixels[b].size();
+  });
+  for (int i = fitted_segments; i < seg.count; ++i)
+    fits[by_size[i]].failure =
+        "not fitted: smaller than the " + std::to_string(fitted_segments) + " largest segments";
+  photo::BrdfFitOptions fit_options;
+  fit_options.max_pixels = kFitPixels;
+  tbb::parallel_for(0, fitted_segments, [&](int i) {
+    const int s = by_size[i];
+    try {
+      fits[s].fit = photo::fit_brdf(rgb, geometry, lighting, segment_pixels[s], fit_options);
+      fits[s].ok = std::isfinite(fits[s].fit.relative_rms);
+      if (!fits[s].ok) fits[s].failure = "not fitted: no finite residual";
+    } catch (const Error& e) {
+      fits[s].failure = std::string("not fitted: ") + e.what();
+    }
+  });
+
+  // Well fitted, then the largest first; a near-duplicate joins the candidate it duplicates.
+  std::vector<int> order;
+  for (int s = 0; s < seg.count; ++s) {
+    if (!fits[s].ok) {
+      out.notes.push_back(
+          format("segment %d (%zu px): %s", s, segment_pixels[s].size(), fits[s].failure.c_str()));
+      continue;
+    }
+    if (fits[s].fit.relative_rms > options.max_relative_rms) {
+      out.notes.push_back(format("segment %d (%zu px): dropped, relative RMS %.3f > %.3f", s,
+                                 segment_pixels[s].size(), fits[s].fit.relative_rms,
+                                 options.max_relative_rms));
+      continue;
+    }
+    order.push_back(s);
+  }
+  if (order.empty()) {
+    double best = INFINITY;
+    for (const Fitted& f : fits)
+      if (f.ok) best = std::min(best, f.fit.relative_rms);
+    throw Error(ErrorCode::invalid_argument,
+                "sample: no usable segment: " + std::to_string(seg.count) +
+                    " segments, none fitted within relative RMS " +
+                    format("%.3f", options.max_relative_rms) +
+                    (std::isfinite(best) ? format(" (best %.3f)", best)
+                                         : std::string(" (no fit converged)")));
+  }
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return segment_pixels[a].size() > segment_pixels[b].size();
+  });
+  std::vector<int> owner(seg.count, -1);  // segment -> the segment whose candidate it is shown by
+  for (int s : order) {
+    const Material& m = fits[s].fit.material;
+    int duplicate_of = -1;
+    for (const MaterialCandidate& c : out.candidates)
+      if (parameter_distance(c.material, m) < kDuplicateMaterialDistance) {
+        duplicate_of = c.segment;
+        break;
+      }
+    if (duplicate_of >= 0) {
+      owner[s] = duplicate_of;
+      out.notes.push_back(
+          format("segment %d (%zu px): same material as segment %d (parameter distance < %.2f)", s,
+                 segment_pixels[s].size(), duplicate_of, kDuplicateMaterialDistance));
+      continue;
+    }
+    if (int(out.candidates.size()) >= options.max_candidates) {
+      out.notes.push_back(format("segment %d (%zu px): dropped, %d candidates kept already", s,
+                                 segment_pixels[s].size(), options.max_candidates));
+      continue;
+    }
+    owner[s] = s;
+    MaterialCandidate c;
+    c.material = m;
+    c.segment = s;
+    c.pixel_count = fits[s].fit.pixels_used;
+    c.relative_rms = fits[s].fit.relative_rms;
+    out.candidates.push_back(c);
+    out.notes.push_back(format("candidate %zu = segment %d (%zu px): %s, relative RMS %.3f",
+                               out.candidates.size() - 1, s, segment_pixels[s].size(),
+                               describe(m).c_str(), c.relative_rms));
+  }
+  out.segment_labels = Image(w, h, 1, {"Y"});
+  for (float& v : out.segment_labels.pixels()) v = -1;
+  for (int s = 0; s < seg.count; ++s)
+    if (owner[s] >= 0)
+      for (std::int32_t i : segment_pixels[s]) out.segment_labels.data()[i] = float(owner[s]);
+  return out;
+}
+
+// Integer region ids of a label image: the count n, with every id in 1..n checked to have pixels.
+int checked_region_count(const Image& labels, int width, int height) {
+  if (labels.empty()) throw Error(ErrorCode::invalid_argument, "region labels: empty image");
+  if (labels.width() != width || labels.height() != height)
+    throw Error(ErrorCode::size_mismatch, "region labels are " +
+                                              size_text(labels.width(), labels.height()) +
+                                              ", the target photo is " + size_text(width, height));
+  if (labels.channels() != 1)
+    throw Error(ErrorCode::invalid_argument,
+                "region labels must have 1 channel, found " + std::to_string(labels.channels()));
+  constexpr int kMaxRegions = 4096;
+  int n = 0;
+  for (float v : labels.pixels()) {
+    if (!std::isfinite(v) || v < 0 || v != std::floor(v) || v > float(kMaxRegions))
+      throw Error(
+          ErrorCode::invalid_argument,
+          format("region labels: value %g is not a region id (0..%d)", double(v), kMaxRegions));
+    n = std::max(n, int(v));
+  }
+  if (n == 0)
+    throw Error(ErrorCode::invalid_argument,
+                "region labels: no region (every pixel is 0): nothing to re-material");
+  std::vector<std::size_t> count(n + 1, 0);
+  for (float v : labels.pixels()) ++count[int(v)];
+  for (int k = 1; k <= n; ++k)
+    if (count[k] == 0)
+      throw Error(ErrorCode::invalid_argument, "region labels: region " + std::to_string(k) +
+                                                   " has no pixels (ids must be 1.." +
+                                                   std::to_string(n) + " without gaps)");
+  return n;
+}
+
+// Each plane polygon of the annotations is one region (a later polygon paints over an earlier
+// one). Annotation coordinates put (0, 0) at the centre of the top-left pixel, as OpenCV does;
+// 4 bits of sub-pixel precision.
+Image region_labels_from_annotations(const Annotations& annotations, const std::string& name,
+                                     int width, int height) {
+  if (width <= 0 || height <= 0)
+    throw Error(ErrorCode::invalid_argument, name + ": bad photo size");
+  if (annotations.planes.empty())
+    throw Error(ErrorCode::invalid_argument,
+                name + ": region annotations have no plane polygon (/planes is empty)");
+  cv::Mat labels(height, width, CV_32F, cv::Scalar(0));
+  constexpr int kShift = 4;
+  for (std::size_t i = 0; i < annotations.planes.size(); ++i) {
+    std::vector<cv::Point> points;
+    for (const PixelPoint& p : annotations.planes[i].polygon)
+      points.emplace_back(int(std::lround(p[0] * (1 << kShift))),
+                          int(std::lround(p[1] * (1 << kShift))));
+    const std::vector<std::vector<cv::Point>> polygons{points};
+    cv::fillPoly(labels, polygons, cv::Scalar(double(i + 1)), cv::LINE_8, kShift);
+  }
+  Image out(width, height, 1, {"Y"});
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) out.at(x, y, 0) = labels.at<float>(y, x);
+  std::vector<bool> present(annotations.planes.size() + 1, false);
+  for (float v : out.pixels()) present[std::size_t(v)] = true;
+  for (std::size_t i = 0; i < annotations.planes.size(); ++i)
+    if (!present[i + 1])
+      throw Error(ErrorCode::invalid_argument,
+                  name + ": /planes/" + std::to_string(i) + "/polygon: covers no pixel of the " +
+                      size_text(width, height) +
+                      " photo (outside it, or painted over by a later polygon)");
+  return out;
+}
+
+}  // namespace
+
+MaterialCandidates extract_material_candidates(const ShadedPhoto& sample,
+                                               const MaterialTransferOptions& options) {
+  validate_options(options);
+  return in_arena(options.threads, [&] { return extract(sample, options); });
+}
+
+MaterialTransferResult transfer_material(const ShadedPhoto& sample, const ShadedPhoto& target,
+                                         const Image& region_labels,
+                                         const MaterialTransferOptions& options) {
+  validate_options(options);
+  const Image target_rgb = checked_rgb(target, "target");
+  const int w = target_rgb.width(), h = target_rgb.height();
+  const int regions = checked_region_count(region_labels, w, h);
+  return in_arena(options.threads, [&] {
+    const render::SurfaceGeometry geometry = geometry_of(target, options);
+    const Lighting& lighting = target.scene.lighting;
+    std::vector<std::vector<std::int32_t>> region_pixels(regions);
+    std::vector<std::size_t> sky_in_region(regions, 0);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const int k = int(region_labels.at(x, y, 0));
+        if (k == 0) continue;
+        if (geometry.surface.at(x, y, 0) > 0)
+          region_pixels[k - 1].push_back(y * w + x);
+        else
+          ++sky_in_region[k - 1];
+      }
+    for (int r = 0; r < regions; ++r)
+      if (region_pixels[r].empty())
+        throw Error(ErrorCode::invalid_argument,
+                    "region " + std::to_string(r + 1) + ": all its " +
+                        std::to_string(sky_in_region[r]) +
+                        " pixels are sky (no depth): there is no surface to re-material");
+
+    MaterialTransferResult result;
+    double sample_light = 0;
+    result.candidates = extract(sample, options, &sample_light);
+    const std::vector<MaterialCandidate>& candidates = result.candidates.candidates;
+    const int m = int(candidates.size());
+
+    // The sample's look: its used segments, normalised by its light (light_level).
+    const Image sample_rgb = checked_rgb(sample, "sample");
+    std::vector<std::int32_t> sample_pixels;
+    for (std::size_t i = 0; i < sample_rgb.pixel_count(); ++i)
+      if (result.candidates.segment_labels.data()[i] >= 0) sample_pixels.push_back(std::int32_t(i));
+    if (!(sample_light > 0))
+      throw Error(ErrorCode::invalid_argument,
+                  "sample: its light reaches none of its surfaces (all unlit)");
+    const photo::StyleStatistics sample_stats =
+        photo::style_statistics(sample_rgb, sample_pixels, sample_light);
+
+    // The target's detail layer and per region x candidate statistics of what would be shown.
+    const Image shading = photo::diffuse_shading(geometry, lighting);
+    const Image detail = photo::photo_detail(target_rgb, shading, geometry);
+    const Image* detail_used = options.keep_detail ? &detail : nullptr;
+    const double target_reference = mean_surface_luminance(shading, geometry.surface);
+    if (!(target_reference > 0))
+      throw Error(ErrorCode::invalid_argument,
+                  "target: its light reaches none of its surfaces (all unlit)");
+    std::vector<std::vector<std::int32_t>> stats_pixels(regions);
+    for (int r = 0; r < regions; ++r) {
+      const std::size_t stride =
+          (region_pixels[r].size() + kMaxStatisticsPixels - 1) / kMaxStatisticsPixels;
+      for (std::size_t i = 0; i < region_pixels[r].size(); i += std::max<std::size_t>(stride, 1))
+        stats_pixels[r].push_back(region_pixels[r][i]);
+    }
+    std::vector<std::int32_t> all_stats_pixels;
+    for (const auto& p : stats_pixels)
+      all_stats_pixels.insert(all_stats_pixels.end(), p.begin(), p.end());
+    std::vector<std::vector<photo::StyleStatistics>> region_stats(
+        regions, std::vector<photo::StyleStatistics>(m));
+    {
+      Image rendered(w, h, 3);
+      for (int c = 0; c < m; ++c) {
+        photo::render_with_detail(geometry, lighting, shading, detail_used, candidates[c].material,
+                                  all_stats_pixels, rendered);
+        tbb::parallel_for(0, regions, [&](int r) {
+          region_stats[r][c] = photo::style_statistics(rendered, stats_pixels[r], target_reference);
+        });
+      }
+    }
+    std::vector<Material> materials;
+    for (const MaterialCandidate& c : candidates) materials.push_back(c.material);
+    const photo::MaterialObjective objective(sample_stats, region_stats, materials,
+                                             photo::region_adjacency(region_labels, regions),
+                                             options.smoothness_weight);
+    photo::TabuOptions tabu;
+    tabu.max_iterations = options.tabu_max_iterations;
+    tabu.patience = options.tabu_patience;
+    tabu.seed = options.seed;
+    const photo::TabuResult search = photo::tabu_search(
+        regions, m, [&](std::span<const int> a) { return objective(a); }, tabu);
+    result.assignment = search.assignment;
+    result.objective = search.objective;
+    result.best_objective_history = search.best_history;
+
+    std::vector<Material> assigned;
+    for (int r = 0; r < regions; ++r) assigned.push_back(materials[result.assignment[r]]);
+    result.image = photo::apply_materials(*target.photo, geometry, lighting, shading, region_labels,
+                                          assigned, detail_used);
+
+    // Style distance of the regions to the sample, before and after (whole composite).
+    const photo::StyleStatistics before =
+        photo::style_statistics(target_rgb, all_stats_pixels, target_reference);
+    const photo::StyleStatistics after =
+        photo::style_statistics(result.image, all_stats_pixels, target_reference);
+    result.notes = result.candidates.notes;
+    result.notes.push_back(
+        format("target: %d regions, %zu candidates; Tabu search: %zu iterations, %ld evaluations",
+               regions, candidates.size(), search.best_history.size(), search.evaluations));
+    for (int r = 0; r < regions; ++r) {
+      std::string line = format("region %d (%zu px): candidate %d", r + 1, region_pixels[r].size(),
+                                result.assignment[r]);
+      if (sky_in_region[r]) line += format(" (%zu sky pixels left as they are)", sky_in_region[r]);
+      result.notes.push_back(line);
+    }
+    result.notes.push_back(format(
+        "style distance of the regions to the sample: before %.4f, after %.4f (objective %.4f)",
+        photo::style_distance(sample_stats, before), photo::style_distance(sample_stats, after),
+        result.objective));
+    return result;
+  });
+}
+
+Image load_region_labels(const std::filesystem::path& path, int width, int height) {
+  std::string extension = path.extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  if (extension == ".json")
+    return region_labels_from_annotations(load_annotations(path), path.string(), width, height);
+  ReadOptions read;
+  read.to_scene_linear = false;  // ids and colours as stored (integer files normalised to [0, 1])
+  const ImageFileInfo info = probe_image(path);
+  const Image mask = read_image(path, read);
+  const std::string name = path.string();
+  if (mask.width() != width || mask.height() != height)
+    throw Error(ErrorCode::size_mismatch, name + ": region mask is " +
+                                              size_text(mask.width(), mask.height()) +
+                                              ", the photo is " + size_text(width, height));
+  Image labels(width, height, 1, {"Y"});
+  // Integer files are read normalised: back to their codes.
+  const double code_scale = info.pixel_type == PixelType::uint8    ? 255.0
+                            : info.pixel_type == PixelType::uint16 ? 65535.0
+                                                                   : 1.0;
+  const int colour_channels = std::min(mask.channels(), 3);
+  const bool has_alpha = mask.channels() == 2 || mask.channels() == 4;
+  if (colour_channels == 1 || (mask.channels() == 2)) {
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) {
+        const double code = std::round(double(mask.at(x, y, 0)) * code_scale);
+        if (has_alpha && !(mask.at(x, y, 1) > 0.5f)) continue;
+        if (!std::isfinite(code) || code < 0 ||
+            std::abs(double(mask.at(x, y, 0)) * code_scale - code) > 1e-3)
+          throw Error(ErrorCode::invalid_argument,
+                      name + format(": pixel (%d, %d) holds %g, not a region id (0 = none, 1..n)",
+                                    x, y, double(mask.at(x, y, 0)) * code_scale));
+        labels.at(x, y, 0) = float(code);
+      }
+    // Ids as given, but without gaps (transfer_material requires 1..n all present).
+    std::map<int, int> renumber;
+    for (float v : labels.pixels())
+      if (v > 0) renumber[int(v)] = 0;
+    int next = 1;
+    for (auto& [id, to] : renumber) to = next++;
+    for (float& v : labels.pixels())
+      if (v > 0) v = float(renumber[int(v)]);
+  } else {
+    std::map<std::array<long, 3>, int> ids;
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) {
+        const float* p = mask.pixel(x, y);
+        if (has_alpha && !(p[3] > 0.5f)) continue;
+        std::array<long, 3> key;
+        for (int c = 0; c < 3; ++c)
+          key[c] = std::lround(double(p[c]) * (code_scale > 1 ? code_scale : 65535.0));
+        if (key[0] == 0 && key[1] == 0 && key[2] == 0) continue;
+        auto [it, inserted] = ids.emplace(key, int(ids.size()) + 1);
+        labels.at(x, y, 0) = float(it->second);
+        if (ids.size() > 1024)
+          throw Error(
+              ErrorCode::invalid_argument,
+              name +
+                  ": region mask has more than 1024 distinct colours: not a mask (a lossy format "
+                  "such as JPEG blurs mask colours; use PNG)");
+      }
+  }
+  bool any = false;
+  for (float v : labels.pixels()) any = any || v > 0;
+  if (!any)
+    throw Error(ErrorCode::invalid_argument,
+                name + ": region mask has no region (every pixel is 0 / black)");
+  return labels;
+}
+
+std::string material_result_to_json(const MaterialTransferResult& result) {
+  using nlohmann::ordered_json;
+  auto material_json = [](const Material& m) {
+    return ordered_json{
+        {"diffuse_albedo", {m.diffuse_albedo[0], m.diffuse_albedo[1], m.diffuse_albedo[2]}},
+        {"specular_albedo", m.specular_albedo},
+        {"roughness", m.roughness}};
+  };
+  ordered_json doc;
+  doc["format"] = "mr-materials";
+  doc["version"] = 1;
+  ordered_json candidates = ordered_json::array();
+  for (std::size_t i = 0; i < result.candidates.candidates.size(); ++i) {
+    const MaterialCandidate& c = result.candidates.candidates[i];
+    candidates.push_back(ordered_json{{"index", i},
+                                      {"material", material_json(c.material)},
+                                      {"sample_segment", c.segment},
+                                      {"pixel_count", c.pixel_count},
+                                      {"relative_rms", c.relative_rms}});
+  }
+  doc["candidates"] = candidates;
+  ordered_json regions = ordered_json::array();
+  for (std::size_t r = 0; r < result.assignment.size(); ++r) {
+    const int c = result.assignment[r];
+    ordered_json entry{{"region", r + 1}, {"candidate", c}};
+    if (c >= 0 && std::size_t(c) < result.candidates.candidates.size())
+      entry["material"] = material_json(result.candidates.candidates[c].material);
+    regions.push_back(entry);
+  }
+  doc["regions"] = regions;
+  doc["objective"] = result.objective;
+  doc["best_objective_history"] = result.best_objective_history;
+  doc["notes"] = result.notes;
+  return doc.dump(1) + "\n";
+}
+
+}  // namespace mr

@@ -1,0 +1,502 @@
+// The microfacet BRDF of mr::Material and the shading of depth-map surfaces with it
+// (render/surface_shading.h). Everything that evaluates the BRDF goes through the functions here.
+#include "render/surface_shading.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "mr/error.h"
+#include "render/embree_scene.h"
+#include "render/occluder_mesh.h"
+
+namespace mr::render {
+
+namespace {
+
+constexpr float kPi = 3.14159265358979323846f;
+constexpr double kPiD = 3.14159265358979323846;
+constexpr float kMinRoughness = 0.02f;  // mr::Material's range
+
+float dot(const Vec3f& a, const Vec3f& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+Vec3f normalized(const Vec3f& a) {
+  const float n = std::sqrt(dot(a, a));
+  return n > 0 ? Vec3f{a[0] / n, a[1] / n, a[2] / n} : Vec3f{0, 0, 0};
+}
+Vec3f to_f(const Vec3& v) {
+  return {float(v.x), float(v.y), float(v.z)};
+}
+
+float clamp_roughness(float r) {
+  return std::clamp(r, kMinRoughness, 1.0f);
+}
+
+// G2 / (4 |n.l| |n.v|) for the height-correlated Smith term: finite as either cosine -> 0, so
+// the BRDF never divides by a vanishing cosine.
+float smith_visibility(float n_dot_l, float n_dot_v, float alpha2) {
+  const float gl = n_dot_v * std::sqrt(alpha2 + (1 - alpha2) * n_dot_l * n_dot_l);
+  const float gv = n_dot_l * std::sqrt(alpha2 + (1 - alpha2) * n_dot_v * n_dot_v);
+  const float s = gl + gv;
+  return s > 0 ? 0.5f / s : 0.0f;
+}
+
+float ggx_d_alpha2(float n_dot_h, float alpha2) {
+  if (n_dot_h <= 0) return 0;
+  const float t = n_dot_h * n_dot_h * (alpha2 - 1) + 1;
+  return alpha2 / (kPi * t * t);
+}
+
+// The specular lobe without Fresnel, D V (n.l), and the Schlick weight w = (1 - v.h)^5, so that
+// f_spec cos = coefficient * (F0 (1 - w) + w). Zero below either horizon.
+struct LobeSample {
+  float coefficient = 0, schlick_weight = 0;
+};
+LobeSample specular_lobe(const Vec3f& n, const Vec3f& l, const Vec3f& v, float roughness) {
+  const float nl = dot(n, l), nv = dot(n, v);
+  if (nl <= 0 || nv <= 0) return {};
+  const Vec3f h = normalized({l[0] + v[0], l[1] + v[1], l[2] + v[2]});
+  const float r = clamp_roughness(roughness);
+  const float alpha2 = r * r * r * r;
+  const float vh = std::clamp(dot(v, h), 0.0f, 1.0f);
+  const float m = 1 - vh;
+  const float m2 = m * m;
+  return {ggx_d_alpha2(dot(n, h), alpha2) * smith_visibility(nl, nv, alpha2) * nl, m2 * m2 * m};
+}
+
+// ---- The split-sum table E_spec(n.v, roughness) = F0 a + b --------------------------------
+
+// Nodes in n.v are uniform in sqrt(n.v): E_spec has a boundary layer of width ~alpha at grazing
+// view (it tends to 1 as n.v -> 0, by the Smith term's projected-area identity), which uniform
+// nodes smear over their spacing for glossy surfaces.
+constexpr int kTableMu = 96;
+constexpr int kTableRoughness = 50;  // roughness nodes, uniform on [0.02, 1]
+constexpr int kTableSamples = 1024;  // Hammersley points per node
+
+double radical_inverse_base2(std::uint32_t i) {
+  i = (i << 16u) | (i >> 16u);
+  i = ((i & 0x55555555u) << 1u) | ((i & 0xAAAAAAAAu) >> 1u);
+  i = ((i & 0x33333333u) << 2u) | ((i & 0xCCCCCCCCu) >> 2u);
+  i = ((i & 0x0F0F0F0Fu) << 4u) | ((i & 0xF0F0F0F0u) >> 4u);
+  i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
+  return double(i) * 2.3283064365386963e-10;
+}
+
+double table_roughness(int j) {
+  return kMinRoughness + (1.0 - kMinRoughness) * j / (kTableRoughness - 1);
+}
+
+// a and b at one node, by sampling GGX's distribution of visible normals (Heitz 2018) with a
+// fixed Hammersley set. Then f cos / pdf(l) = G2(l, v) / G1(v) <= 1 for every sample, so the
+// estimate has low variance and never exceeds 1 (energy conservation holds by construction).
+SpecularAlbedo integrate_node(double mu, double roughness) {
+  mu = std::max(mu, 1e-5);  // n.v = 0 is the limit; E_spec is continuous there
+  const double alpha = roughness * roughness, alpha2 = alpha * alpha;
+  const double vx = std::sqrt(1 - mu * mu), vz = mu;  // the view in the tangent frame, vy = 0
+  // The view in the hemisphere configuration (stretched by alpha); its frame (t1, t2, ve).
+  const double len = std::sqrt(alpha2 * vx * vx + vz * vz);
+  const double ex = alpha * vx / len, ez = vz / len;
+  // t1 = (0, 1, 0) (perpendicular to ve, which has no y part); t2 = cross(ve, t1).
+  const double t2x = -ez, t2z = ex;
+  const double s = 0.5 * (1 + ez);
+  const double sv = std::sqrt(alpha2 + (1 - alpha2) * mu * mu);
+  double a = 0, b = 0;
+  for (int i = 0; i < kTableSamples; ++i) {
+    const double u1 = (i + 0.5) / kTableSamples, u2 = radical_inverse_base2(std::uint32_t(i));
+    const double r = std::sqrt(u1), phi = 2 * kPiD * u2;
+    const double p1 = r * std::cos(phi);
+    const double p2 = (1 - s) * std::sqrt(std::max(0.0, 1 - p1 * p1)) + s * r * std::sin(phi);
+    const double p3 = std::sqrt(std::max(0.0, 1 - p1 * p1 - p2 * p2));
+    // The sampled normal in the stretched frame, back to the ellipsoid (unstretched).
+    const double nhx = p2 * t2x + p3 * ex, nhy = p1, nhz = p2 * t2z + p3 * ez;
+    double hx = alpha * nhx, hy = alpha * nhy, hz = std::max(0.0, nhz);
+    const double hn = std::sqrt(hx * hx + hy * hy + hz * hz);
+    if (!(hn > 0)) continue;
+    hx /= hn, hy /= hn, hz /= hn;
+    const double vh = vx * hx + vz * hz;
+    if (vh <= 0) continue;
+    const double lz = 2 * vh * hz - vz;
+    if (lz <= 0) continue;  // reflected below the horizon: no contribution
+    const double sl = std::sqrt(alpha2 + (1 - alpha2) * lz * lz);
+    // G2 / G1(v) for the height-correlated Smith term, written to stay finite as n.v -> 0.
+    const double weight = (mu + sv) * lz / (lz * sv + mu * sl);
+    const double w = std::pow(1 - vh, 5);
+    a += weight * (1 - w);
+    b += weight * w;
+  }
+  return {float(a / kTableSamples), float(b / kTableSamples)};
+}
+
+double table_mu(int i) {
+  const double t = double(i) / (kTableMu - 1);
+  return t * t;
+}
+
+struct AlbedoTable {
+  std::vector<SpecularAlbedo> nodes;  // [roughness j][mu i]
+  AlbedoTable() : nodes(std::size_t(kTableMu) * kTableRoughness) {
+    // Serial on purpose: this runs inside a function-local static's initialiser, possibly on a
+    // TBB worker; a nested parallel loop could let that worker steal a task that waits on this
+    // very initialisation. It takes ~0.2 s once.
+    for (int j = 0; j < kTableRoughness; ++j)
+      for (int i = 0; i < kTableMu; ++i)
+        nodes[std::size_t(j) * kTableMu + i] = integrate_node(table_mu(i), table_roughness(j));
+  }
+};
+
+const AlbedoTable& albedo_table() {
+  static const AlbedoTable table;  // thread-safe initialisation (C++11 magic statics)
+  return table;
+}
+
+// Smoothstep between the outer and inner cone, as the scattering core's lamps.
+float spot_factor(const Lamp& lamp, const Vec3f& from_lamp_unit) {
+  if (lamp.outer_angle_deg >= 180.0) return 1.0f;
+  const Vec3f axis = normalized(to_f(lamp.spot_direction));
+  const double cos_a = dot(axis, from_lamp_unit);
+  const double cos_in = std::cos(lamp.inner_angle_deg * kPiD / 180),
+               cos_out = std::cos(lamp.outer_angle_deg * kPiD / 180);
+  if (cos_a >= cos_in) return 1.0f;
+  if (cos_a <= cos_out) return 0.0f;
+  const double t = (cos_a - cos_out) / (cos_in - cos_out);
+  return float(t * t * (3 - 2 * t));
+}
+
+void add_direct(ShadingTerms& terms, const SurfacePoint& p, const Vec3f& l, const Rgb& irradiance,
+                float roughness) {
+  const float nl = dot(p.normal, l);
+  if (nl <= 0 || dot(p.normal, p.view) <= 0) return;
+  const LobeSample lobe = specular_lobe(p.normal, l, p.view, roughness);
+  for (int c = 0; c < 3; ++c) {
+    terms.diffuse[c] += irradiance[c] * nl / kPi;
+    terms.specular_f0[c] += irradiance[c] * lobe.coefficient * (1 - lobe.schlick_weight);
+    terms.specular_bias[c] += irradiance[c] * lobe.coefficient * lobe.schlick_weight;
+  }
+}
+
+// A deterministic per-pixel hash for decorrelating the rays of neighbouring pixels.
+std::uint32_t hash32(std::uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352du;
+  x ^= x >> 15;
+  x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+
+// An orthonormal frame (t, b) around unit n.
+void frame(const Vec3f& n, Vec3f& t, Vec3f& b) {
+  const Vec3f helper = std::fabs(n[1]) < 0.9f ? Vec3f{0, 1, 0} : Vec3f{1, 0, 0};
+  t = normalized({helper[1] * n[2] - helper[2] * n[1], helper[2] * n[0] - helper[0] * n[2],
+                  helper[0] * n[1] - helper[1] * n[0]});
+  b = {n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]};
+}
+
+// Traces `dirs` from `origin` to infinity; returns how many escape.
+int count_escaping(const OccluderScene& scene, const Vec3f& origin, const Vec3f* dirs, int count) {
+  int escaped = 0;
+  for (int first = 0; first < count; first += 8) {
+    RayPacket8 packet;
+    bool blocked[8];
+    for (int k = 0; k < 8; ++k) {
+      const int i = first + k;
+      packet.valid[k] = i < count ? -1 : 0;
+      const Vec3f d = i < count ? dirs[i] : Vec3f{0, 1, 0};
+      packet.origin_x[k] = origin[0];
+      packet.origin_y[k] = origin[1];
+      packet.origin_z[k] = origin[2];
+      packet.direction_x[k] = d[0];
+      packet.direction_y[k] = d[1];
+      packet.direction_z[k] = d[2];
+      packet.t_near[k] = 0.0f;
+      packet.t_far[k] = std::numeric_limits<float>::infinity();
+    }
+    scene.occluded8(packet, blocked);
+    for (int k = 0; k < 8 && first + k < count; ++k) escaped += !blocked[k];
+  }
+  return escaped;
+}
+
+void check_view(const std::string& what, const Image& image, int w, int h, int channels) {
+  if (image.channels() != channels)
+    throw Error(ErrorCode::invalid_argument, what + " must have " + std::to_string(channels) +
+                                                 " channel(s), found " +
+                                                 std::to_string(image.channels()));
+  if (image.width() != w || image.height() != h)
+    throw Error(ErrorCode::size_mismatch, what + " is " + std::to_string(image.width()) + "x" +
+                                              std::to_string(image.height()) +
+                                              ", the surface geometry is " + std::to_string(w) +
+                                              "x" + std::to_string(h));
+}
+
+}  // namespace
+
+float ggx_distribution(float n_dot_h, float roughness) {
+  const float r = clamp_roughness(roughness);
+  return ggx_d_alpha2(n_dot_h, r * r * r * r);
+}
+
+float smith_g2(float n_dot_l, float n_dot_v, float roughness) {
+  if (n_dot_l <= 0 || n_dot_v <= 0) return 0;
+  const float r = clamp_roughness(roughness);
+  return 4 * n_dot_l * n_dot_v * smith_visibility(n_dot_l, n_dot_v, r * r * r * r);
+}
+
+float schlick_fresnel(float f0, float v_dot_h) {
+  const float m = 1 - std::clamp(v_dot_h, 0.0f, 1.0f);
+  const float m2 = m * m;
+  return f0 + (1 - f0) * m2 * m2 * m;
+}
+
+Rgb brdf_cosine(const Material& material, const Vec3f& n, const Vec3f& l, const Vec3f& v) {
+  const float nl = dot(n, l);
+  if (nl <= 0 || dot(n, v) <= 0) return {0, 0, 0};
+  const LobeSample lobe = specular_lobe(n, l, v, material.roughness);
+  const float f0 = material.specular_albedo;
+  const float spec = lobe.coefficient * (f0 * (1 - lobe.schlick_weight) + lobe.schlick_weight);
+  Rgb out;
+  for (int c = 0; c < 3; ++c) out[c] = material.diffuse_albedo[c] / kPi * nl + spec;
+  return out;
+}
+
+SpecularAlbedo ggx_directional_albedo(float n_dot_v, float roughness) {
+  const AlbedoTable& table = albedo_table();
+  const float mu = std::sqrt(std::clamp(n_dot_v, 0.0f, 1.0f)) * (kTableMu - 1);
+  const float rr =
+      (clamp_roughness(roughness) - kMinRoughness) / (1 - kMinRoughness) * (kTableRoughness - 1);
+  const int i0 = std::min(int(mu), kTableMu - 2), j0 = std::min(int(rr), kTableRoughness - 2);
+  const float fi = mu - i0, fj = rr - j0;
+  auto at = [&](int j, int i) { return table.nodes[std::size_t(j) * kTableMu + i]; };
+  const SpecularAlbedo s00 = at(j0, i0), s01 = at(j0, i0 + 1), s10 = at(j0 + 1, i0),
+                       s11 = at(j0 + 1, i0 + 1);
+  // Bilinear in (sqrt(n.v), roughness).
+  auto lerp2 = [&](float v00, float v01, float v10, float v11) {
+    return (1 - fj) * ((1 - fi) * v00 + fi * v01) + fj * ((1 - fi) * v10 + fi * v11);
+  };
+  return {lerp2(s00.scale, s01.scale, s10.scale, s11.scale),
+          lerp2(s00.bias, s01.bias, s10.bias, s11.bias)};
+}
+
+SurfaceGeometry surface_geometry_from_depth(const Image& distance_m, const Camera& camera,
+                                            const CameraPose& pose, const Lighting& lighting,
+                                            const SurfaceGeometryOptions& options) {
+  if (options.sky_rays < 0 || options.sky_rays > 256)
+    throw Error(ErrorCode::invalid_argument, "surface geometry: sky_rays must be in 0..256, got " +
+                                                 std::to_string(options.sky_rays));
+  if (options.sun_rays < 1 || options.sun_rays > 64)
+    throw Error(ErrorCode::invalid_argument, "surface geometry: sun_rays must be in 1..64, got " +
+                                                 std::to_string(options.sun_rays));
+  if (options.threads < 0)
+    throw Error(ErrorCode::invalid_argument,
+                "surface geometry: threads must be >= 0, got " + std::to_string(options.threads));
+  tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+  SurfaceGeometry g;
+  arena.execute([&] {
+    // Throws for a wrong channel count or size (the message names both sizes).
+    g.normal = estimate_normals(distance_m.view(), camera, pose);
+    const int w = camera.width, h = camera.height;
+    g.view = Image(w, h, 3);
+    g.position_m = Image(w, h, 3, {"P.x", "P.y", "P.z"});
+    g.sun_visibility = Image(w, h, 1);
+    g.sky_visibility = Image(w, h, 1);
+    g.surface = Image(w, h, 1);
+
+    std::optional<OccluderScene> occluders;
+    if (options.shadows) {
+      TriangleMesh mesh = reconstruct_occluder_mesh(distance_m.view(), camera, pose);
+      // Robust traversal: a shadow ray slipping through the shared edge of two triangles would
+      // light one pixel inside a shadow (seen in tests), and here every pixel's visibility is
+      // one sample that nothing averages out. It measured no slower (embree_scene.h).
+      OccluderSceneOptions scene_options;
+      scene_options.robust = true;
+      if (mesh.triangle_count() > 0) occluders.emplace(std::move(mesh), scene_options);
+    }
+    std::optional<Vec3f> sun_dir;
+    Vec3f sun_u{}, sun_v{};
+    float sun_tan_radius = 0;
+    if (lighting.sun) {
+      sun_dir = normalized(to_f(lighting.sun->direction_to_sun));
+      if (dot(*sun_dir, *sun_dir) == 0)
+        throw Error(ErrorCode::invalid_argument, "lighting.sun.direction_to_sun is zero");
+      frame(*sun_dir, sun_u, sun_v);
+      sun_tan_radius = float(std::tan(lighting.sun->angular_radius_deg * kPiD / 180));
+    }
+    const int sun_rays = sun_tan_radius > 0 ? options.sun_rays : 1;
+    const Vec3f eye = to_f(pose.position_m);
+
+    tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
+      Vec3f dirs[256];
+      for (int y = rows.begin(); y != rows.end(); ++y)
+        for (int x = 0; x < w; ++x) {
+          const float d = distance_m.at(x, y, 0);
+          const Vec3f n = {g.normal.at(x, y, 0), g.normal.at(x, y, 1), g.normal.at(x, y, 2)};
+          if (!(std::isfinite(d) && d > 0) || dot(n, n) < 0.5f) {
+            for (int c = 0; c < 3; ++c) g.normal.at(x, y, c) = 0;
+            continue;
+          }
+          const Vec3f ray = to_f(pose.ray_direction(camera, x, y));
+          const Vec3f p = {eye[0] + d * ray[0], eye[1] + d * ray[1], eye[2] + d * ray[2]};
+          for (int c = 0; c < 3; ++c) {
+            g.position_m.at(x, y, c) = p[c];
+            g.view.at(x, y, c) = -ray[c];
+          }
+          g.surface.at(x, y, 0) = 1;
+          // Off the surface along its normal, as the scattering core does, so the pixel's own
+          // (and its neighbours') triangles do not shadow it.
+          const float offset = 1e-3f + 1e-3f * d;
+          const Vec3f origin = {p[0] + offset * n[0], p[1] + offset * n[1], p[2] + offset * n[2]};
+          const std::uint32_t seed = hash32(std::uint32_t(y) * 73856093u ^ std::uint32_t(x));
+          const float rotation = float(seed >> 8) * (1.0f / 16777216.0f);
+
+          if (sun_dir && dot(n, *sun_dir) > 0) {
+            int count = 0;
+            for (int i = 0; i < sun_rays; ++i) {
+              Vec3f s = *sun_dir;
+              if (sun_rays > 1) {
+                // Stratified in radius, golden-angle spiral in azimuth, rotated per pixel.
+                const float r = sun_tan_radius * std::sqrt((i + 0.5f) / sun_rays);
+                const float phi = 2.39996323f * i + 2 * kPi * rotation;
+                s = normalized({s[0] + r * (std::cos(phi) * sun_u[0] + std::sin(phi) * sun_v[0]),
+                                s[1] + r * (std::cos(phi) * sun_u[1] + std::sin(phi) * sun_v[1]),
+                                s[2] + r * (std::cos(phi) * sun_u[2] + std::sin(phi) * sun_v[2])});
+              }
+              if (dot(n, s) > 0) dirs[count++] = s;
+            }
+            const int seen = occluders ? count_escaping(*occluders, origin, dirs, count) : count;
+            g.sun_visibility.at(x, y, 0) = float(seen) / float(sun_rays);
+          }
+
+          float sky = 0.5f * (1 + n[1]);
+          if (occluders && options.sky_rays > 0 && sky > 0) {
+            // Cosine-distributed directions around n (stratified: Hammersley with a per-pixel
+            // Cranley-Patterson rotation); only the upward ones can reach the sky, and the
+            // closed form already accounts for the downward share.
+            Vec3f t, b;
+            frame(n, t, b);
+            auto escaping_share = [&](int rays) {
+              int up = 0;
+              for (int i = 0; i < rays; ++i) {
+                const float u1 = (i + 0.5f) / rays;
+                float u2 = float(radical_inverse_base2(std::uint32_t(i))) + rotation;
+                u2 -= std::floor(u2);
+                const float rad = std::sqrt(u1), phi = 2 * kPi * u2;
+                const float a = rad * std::cos(phi), c = rad * std::sin(phi),
+                            z = std::sqrt(std::max(0.0f, 1 - u1));
+                const Vec3f dir = {a * t[0] + c * b[0] + z * n[0], a * t[1] + c * b[1] + z * n[1],
+                                   a * t[2] + c * b[2] + z * n[2]};
+                if (dir[1] > 0) dirs[up++] = dir;
+              }
+              if (up == 0) return 1.0f;
+              return float(count_escaping(*occluders, origin, dirs, up)) / float(up);
+            };
+            // One fixed count for every pixel: refining only where a first estimate came out
+            // partial biases the result upward (open-looking pixels keep 1); a test caught it.
+            sky *= escaping_share(options.sky_rays);
+          }
+          g.sky_visibility.at(x, y, 0) = sky;
+        }
+    });
+  });
+  return g;
+}
+
+SurfacePoint surface_point(const SurfaceGeometry& geometry, int x, int y) {
+  SurfacePoint p;
+  p.surface = geometry.surface.at(x, y, 0) > 0;
+  if (!p.surface) return p;
+  for (int c = 0; c < 3; ++c) {
+    p.normal[c] = geometry.normal.at(x, y, c);
+    p.view[c] = geometry.view.at(x, y, c);
+    p.position_m[c] = geometry.position_m.at(x, y, c);
+  }
+  p.sun_visibility = geometry.sun_visibility.at(x, y, 0);
+  p.sky_visibility = geometry.sky_visibility.at(x, y, 0);
+  return p;
+}
+
+ShadingTerms shading_terms(const SurfacePoint& p, const Lighting& lighting, float roughness) {
+  ShadingTerms terms;
+  if (!p.surface) return terms;
+  if (lighting.sun && p.sun_visibility > 0) {
+    const Sun& sun = *lighting.sun;
+    const Rgb e = {sun.irradiance[0] * p.sun_visibility, sun.irradiance[1] * p.sun_visibility,
+                   sun.irradiance[2] * p.sun_visibility};
+    add_direct(terms, p, normalized(to_f(sun.direction_to_sun)), e, roughness);
+  }
+  if (lighting.sky_radiance && p.sky_visibility > 0) {
+    const float nv = dot(p.normal, p.view);
+    if (nv > 0) {
+      const SpecularAlbedo ab = ggx_directional_albedo(nv, roughness);
+      for (int c = 0; c < 3; ++c) {
+        const float l = (*lighting.sky_radiance)[c] * p.sky_visibility;
+        terms.diffuse[c] += l;
+        terms.specular_f0[c] += l * ab.scale;
+        terms.specular_bias[c] += l * ab.bias;
+      }
+    }
+  }
+  for (const Lamp& lamp : lighting.lamps) {
+    const Vec3f to_lamp = {float(lamp.position_m.x) - p.position_m[0],
+                           float(lamp.position_m.y) - p.position_m[1],
+                           float(lamp.position_m.z) - p.position_m[2]};
+    const float r2 = dot(to_lamp, to_lamp);
+    if (!(r2 > 1e-12f)) continue;
+    const Vec3f l = normalized(to_lamp);
+    const float spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
+    if (spot <= 0) continue;
+    const Rgb e = {lamp.intensity_per_sr[0] * spot / r2, lamp.intensity_per_sr[1] * spot / r2,
+                   lamp.intensity_per_sr[2] * spot / r2};
+    add_direct(terms, p, l, e, roughness);
+  }
+  return terms;
+}
+
+Rgb shade(const Material& m, const ShadingTerms& t) {
+  Rgb out;
+  for (int c = 0; c < 3; ++c)
+    out[c] = m.diffuse_albedo[c] * t.diffuse[c] + m.specular_albedo * t.specular_f0[c] +
+             t.specular_bias[c];
+  return out;
+}
+
+Rgb shade_pixel(const Material& material, const SurfaceGeometry& geometry, const Lighting& lighting,
+                int x, int y) {
+  const SurfacePoint p = surface_point(geometry, x, y);
+  if (!p.surface) return {0, 0, 0};
+  return shade(material, shading_terms(p, lighting, material.roughness));
+}
+
+void shade_regions(const SurfaceGeometry& geometry, const Lighting& lighting, const Image& labels,
+                   std::span<const Material> materials, Image& out) {
+  const int w = geometry.surface.width(), h = geometry.surface.height();
+  check_view("shade_regions: labels", labels, w, h, 1);
+  check_view("shade_regions: output", out, w, h, 3);
+  for (std::size_t k = 0; k < materials.size(); ++k)
+    validate_material(materials[k], "shade_regions: materials[" + std::to_string(k) + "]");
+  tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y != rows.end(); ++y)
+      for (int x = 0; x < w; ++x) {
+        const float label = labels.at(x, y, 0);
+        if (!(label >= 1 && label <= float(materials.size())) || std::floor(label) != label)
+          continue;
+        const Rgb c = shade_pixel(materials[std::size_t(label) - 1], geometry, lighting, x, y);
+        float* o = out.pixel(x, y);
+        if (geometry.surface.at(x, y, 0) > 0) {
+          o[0] = c[0];
+          o[1] = c[1];
+          o[2] = c[2];
+        }
+      }
+  });
+}
+
+}  // namespace mr::render

@@ -1,0 +1,188 @@
+// `mr material` driven like a user drives it, on the sample photos (reduced to a third of their
+// size so that each run takes a few seconds): the depth map found by the {stem}_depth.exr
+// convention, a mask PNG or an annotations JSON as regions, outputs written and inputs untouched,
+// fog in the same run, and bad input answered with a message and exit code.
+#include <gtest/gtest.h>
+
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "mr/annotations.h"
+#include "mr/io.h"
+#include "test_support.h"
+
+namespace fs = std::filesystem;
+
+namespace mr {
+namespace {
+
+const std::string kMr = MR_CLI_PATH;
+const fs::path kSamples = fs::path(MR_SOURCE_DIR) / "sample_photos";
+
+std::string q(const fs::path& p) {
+  return "'" + p.string() + "'";
+}
+
+// Every third pixel (nearest neighbour keeps depth edges sharp) of a photo and its depth map.
+void write_reduced(const std::string& stem, const fs::path& dir) {
+  const Image photo = read_image(kSamples / (stem + ".jpg"));
+  ReadOptions raw;
+  raw.to_scene_linear = false;
+  raw.reject_non_finite = false;
+  const Image depth = read_image(kSamples / (stem + "_depth.exr"), raw);
+  const int w = photo.width() / 3, h = photo.height() / 3;
+  Image p(w, h, 3), d(w, h, 1, {"Z"});
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) p.at(x, y, c) = photo.at(3 * x + 1, 3 * y + 1, c);
+      d.at(x, y, 0) = depth.at(3 * x + 1, 3 * y + 1, 0);
+    }
+  write_image(dir / (stem + ".png"), p);
+  WriteOptions wd;
+  wd.pixel_type = PixelType::float32;
+  wd.colorspace = colorspace::raw;
+  write_image(dir / (stem + "_depth.exr"), d, wd);
+}
+
+class MaterialCli : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new test::ScratchDir;
+    write_reduced("leuven", dir_->path());
+    write_reduced("building", dir_->path());
+  }
+  static void TearDownTestSuite() {
+    delete dir_;
+    dir_ = nullptr;
+  }
+  void SetUp() override {
+    work = dir_->path() / ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    fs::create_directories(work);
+  }
+  // Regions on the reduced leuven (250 x 187): the street (1) and the left house's wall (2).
+  fs::path write_mask(int w = 250, int h = 187) {
+    Image m(w, h, 1);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (y > 140 && y < 180 && x > 40 && x < 200) m.at(x, y, 0) = 1.0f / 255;
+        if (y > 30 && y < 120 && x > 2 && x < 35) m.at(x, y, 0) = 2.0f / 255;
+      }
+    WriteOptions o;
+    o.colorspace = colorspace::raw;
+    o.pixel_type = PixelType::uint8;
+    const fs::path path = work / ("mask_" + std::to_string(w) + ".png");
+    write_image(path, m, o);
+    return path;
+  }
+  std::string base() const {
+    return kMr + " material --sample " + q(dir_->path() / "building.png") +
+           " --sample-fov 50 --target " + q(dir_->path() / "leuven.png") + " --fov 60";
+  }
+  static test::ScratchDir* dir_;
+  fs::path work;
+};
+test::ScratchDir* MaterialCli::dir_ = nullptr;
+
+std::map<std::string, std::uint64_t> checksums(const fs::path& dir) {
+  std::map<std::string, std::uint64_t> out;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.is_regular_file()) out[e.path().filename().string()] = test::file_checksum(e.path());
+  return out;
+}
+
+TEST_F(MaterialCli, MaskRegionsWriteImageAndJsonInputsUntouched) {
+  const fs::path mask = write_mask();
+  const auto before = checksums(dir_->path());
+  const auto r = test::run(base() + " --regions " + q(mask) + " -o " + q(work / "out.png") +
+                           " --materials-json " + q(work / "chosen.json") + " --seed 3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("leuven_depth.exr"), std::string::npos)
+      << r.output;  // found by convention
+  EXPECT_NE(r.output.find("default light"), std::string::npos) << r.output;
+  const Image out = read_image(work / "out.png");
+  EXPECT_EQ(out.width(), 250);
+  EXPECT_EQ(out.height(), 187);
+  const auto doc = nlohmann::json::parse(test::read_bytes(work / "chosen.json"));
+  EXPECT_EQ(doc["format"], "mr-materials");
+  EXPECT_EQ(doc["regions"].size(), 2u);
+  EXPECT_GE(doc["candidates"].size(), 1u);
+  EXPECT_EQ(before, checksums(dir_->path()));  // inputs never modified
+  // Pixels outside the regions are the photo's (8-bit round trip: exact).
+  const Image photo = read_image(dir_->path() / "leuven.png");
+  EXPECT_EQ(out.at(120, 10, 0), photo.at(120, 10, 0));
+  EXPECT_EQ(out.at(240, 100, 1), photo.at(240, 100, 1));
+  // The street changed.
+  double changed = 0;
+  for (int y = 145; y < 175; ++y)
+    for (int x = 50; x < 190; ++x) changed += std::abs(out.at(x, y, 1) - photo.at(x, y, 1));
+  EXPECT_GT(changed / (30 * 140), 0.005);
+  // An existing output is not replaced without --overwrite.
+  const auto again = test::run(base() + " --regions " + q(mask) + " -o " + q(work / "out.png"));
+  EXPECT_EQ(again.exit_code, 2) << again.output;
+  EXPECT_NE(again.output.find("--overwrite"), std::string::npos) << again.output;
+}
+
+TEST_F(MaterialCli, AnnotationRegionsAndFogInOneRun) {
+  Annotations a;
+  a.planes.push_back({{{40, 145}, {200, 145}, {200, 180}, {40, 180}}, std::nullopt});
+  save_annotations(work / "regions.json", a);
+  const auto r = test::run(base() + " --regions " + q(work / "regions.json") + " -o " +
+                           q(work / "fog.png") + " --visibility 40m -q");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // Fog lifts the far street: the top of the frame (sky and far houses) grows brighter/greyer.
+  const Image out = read_image(work / "fog.png");
+  const Image photo = read_image(dir_->path() / "leuven.png");
+  double diff = 0;
+  for (int x = 0; x < 250; ++x) diff += std::abs(out.at(x, 100, 1) - photo.at(x, 100, 1));
+  EXPECT_GT(diff / 250, 0.005);
+}
+
+TEST_F(MaterialCli, BadInputsGiveMessages) {
+  // Wrong-size mask.
+  auto r = test::run(base() + " --regions " + q(write_mask(100, 80)) + " -o " + q(work / "a.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("region mask is 100x80, the photo is 250x187"), std::string::npos)
+      << r.output;
+  // Empty mask.
+  WriteOptions o;
+  o.colorspace = colorspace::raw;
+  o.pixel_type = PixelType::uint8;
+  write_image(work / "empty.png", Image(250, 187, 1), o);
+  r = test::run(base() + " --regions " + q(work / "empty.png") + " -o " + q(work / "a.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("no region"), std::string::npos) << r.output;
+  // A sample with no usable segment (all black).
+  Image black(120, 90, 3);
+  write_image(work / "black.png", black);
+  Image depth(120, 90, 1, {"Z"});
+  for (float& v : depth.pixels()) v = 5;
+  WriteOptions wd;
+  wd.pixel_type = PixelType::float32;
+  wd.colorspace = colorspace::raw;
+  write_image(work / "black_depth.exr", depth, wd);
+  r = test::run(kMr + " material --sample " + q(work / "black.png") + " --target " +
+                q(dir_->path() / "leuven.png") + " --regions " + q(write_mask()) + " -o " +
+                q(work / "a.png"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("no usable segment"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("black.png"), std::string::npos) << r.output;
+  // Missing sample; output onto an input; unwritable format.
+  r = test::run(kMr + " material --sample " + q(work / "missing.jpg") + " --target " +
+                q(dir_->path() / "leuven.png") + " --regions " + q(write_mask()) + " -o " +
+                q(work / "a.png"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("missing.jpg"), std::string::npos) << r.output;
+  r = test::run(base() + " --regions " + q(write_mask()) + " -o " + q(dir_->path() / "leuven.png") +
+                " --overwrite");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("is an input file"), std::string::npos) << r.output;
+  r = test::run(base() + " --regions " + q(write_mask()) + " -o " + q(work / "a.notaformat"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_FALSE(fs::exists(work / "a.png"));  // nothing written by any failed run
+  // Missing required option.
+  r = test::run(kMr + " material --sample " + q(work / "black.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+}
+
+}  // namespace
+}  // namespace mr
