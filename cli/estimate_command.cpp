@@ -103,6 +103,9 @@ int run_estimate_command(const EstimateCommandOptions& o) {
       }
     }
     est = estimate_scene(photo, camera, annotations);
+    // Recorded so that `mr fog --scene` renders with this focal length (the one found from the
+    // vanishing points, say) rather than falling back to EXIF or the default.
+    est.scene.camera = scene_camera(camera);
     std::optional<NetworkDepth> network_depth;
     if (!o.depth_network.empty()) {
       try {  // the network's and the fit's messages name the model

@@ -154,6 +154,10 @@ FogPlan make_plan(const FogCommandOptions& o) {
   if (o.pitch_deg) scene.pose.pitch_deg = *o.pitch_deg;
   if (o.roll_deg) scene.pose.roll_deg = *o.roll_deg;
   if (o.yaw_deg) scene.pose.yaw_deg = *o.yaw_deg;
+  // The command line's focal length wins over the scene's camera; a single --save-scene file
+  // (not a pattern) is written before any photo is read, so it cannot record a focal length in
+  // pixels of a photo and records no camera then. A pattern records each photo's.
+  if (o.focal_px || o.fov_deg) scene.camera.reset();
   if (o.seed) scene.render.seed = *o.seed;
   if (o.march_steps) scene.render.march_steps = *o.march_steps;
   if (o.no_shadows) scene.render.volumetric_shadows = false;
@@ -236,9 +240,20 @@ FogPlan make_plan(const FogCommandOptions& o) {
   return plan;
 }
 
-Camera make_camera(const FogCommandOptions& o, const Image& photo) {
+// --focal-px / --fov, else the camera recorded in the --scene file (what `mr estimate` found),
+// else EXIF or the default.
+Camera make_camera(const FogCommandOptions& o, const FogScene& scene, const fs::path& photo_path,
+                   const Image& photo) {
   if (o.focal_px) return Camera::from_focal_px(photo.width(), photo.height(), *o.focal_px);
   if (o.fov_deg) return Camera::from_horizontal_fov(photo.width(), photo.height(), *o.fov_deg);
+  if (scene.camera) {
+    try {
+      return camera_for_image(*scene.camera, photo.width(), photo.height());
+    } catch (const Error& e) {
+      throw Error(e.code(), photo_path.string() + ": --scene " + o.scene_path + ": " + e.what() +
+                                "; give --fov or --focal-px");
+    }
+  }
   return Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
 }
 
@@ -305,8 +320,10 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   const bool estimated = o.depth == "auto" && !fs::exists(job.depth, ec);
   // Estimating the geometry, a photo without EXIF focal length may get it from its vanishing
   // points (camera_for_photo); a supplied depth map keeps the documented default.
-  const Camera camera = estimated && !o.focal_px && !o.fov_deg ? camera_for_photo(photo).camera
-                                                               : make_camera(o, photo);
+  const Camera camera = estimated && !o.focal_px && !o.fov_deg && !plan.scene.camera
+                            ? camera_for_photo(photo).camera
+                            : make_camera(o, plan.scene, job.photo, photo);
+  scene.camera = scene_camera(camera);  // what --save-scene records for this photo
   const DepthMap depth = estimated ? estimate_depth(o, job, photo, camera, scene)
                                    : read_depth(job.depth, camera, plan.depth);
   const std::string depth_name =
@@ -431,12 +448,14 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
       ->check(CLI::NonNegativeNumber);
   cmd->add_flag("-q,--quiet", o.quiet, "Print errors and the summary only");
   cmd->add_flag("--overwrite", o.overwrite, "Redo photos whose outputs exist (default: skip them)");
-  cmd->add_option("--scene", o.scene_path, "Scene JSON (docs/scene.md); options below override it");
+  cmd->add_option("--scene", o.scene_path,
+                  "Scene JSON (docs/scene.md); options below override it (its camera, from mr "
+                  "estimate, sets the focal length unless --fov or --focal-px is given)");
   cmd->add_option(
       "--save-scene", o.save_scene_path,
       "Write the resolved scene JSON here; a pattern with {dir} {stem} {name} {ext}: one "
-      "per photo, the scene it was rendered with (--depth auto: its estimated pose, "
-      "sun and sky)");
+      "per photo, the scene it was rendered with (its camera; --depth auto: its estimated "
+      "pose, sun and sky)");
   cmd->add_option("--quality", o.quality, "draft, normal or final [default: normal]");
   cmd->add_option(
       "--backend", o.backend,

@@ -6,21 +6,31 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
-#include <numbers>
+#include <optional>
 #include <string>
 
 #include "mr/error.h"
 #include "photo/geometry.h"
+#include "render/depth_downsample.h"
+#include "render/embree_scene.h"
+#include "render/occluder_mesh.h"
+#include "render/surface_shading.h"
 
 namespace mr::photo {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-
-Vec3 add(const Vec3& a, const Vec3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-Vec3 sub(const Vec3& a, const Vec3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-Vec3 scale(const Vec3& a, double s) { return {a.x * s, a.y * s, a.z * s}; }
-double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+Vec3 add(const Vec3& a, const Vec3& b) {
+  return {a.x + b.x, a.y + b.y, a.z + b.z};
+}
+Vec3 sub(const Vec3& a, const Vec3& b) {
+  return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+Vec3 scale(const Vec3& a, double s) {
+  return {a.x * s, a.y * s, a.z * s};
+}
+double dot(const Vec3& a, const Vec3& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
@@ -38,11 +48,16 @@ std::string num(double v) {
   return buf;
 }
 
-std::string lamp_name(std::size_t i) { return "lamp " + std::to_string(i); }
-std::string patch_name(std::size_t k) { return "lamp patch " + std::to_string(k); }
+std::string lamp_name(std::size_t i) {
+  return "lamp " + std::to_string(i);
+}
+std::string patch_name(std::size_t k) {
+  return "lamp patch " + std::to_string(k);
+}
 const char* const kChannel[3] = {"R", "G", "B"};
 
-/// One patch pixel: its radiance and, per lamp, g_i = max(0, n . (P_i - X)) / |P_i - X|^3.
+/// One patch pixel: its radiance and, per lamp, g_i = V_i * (the Lambert radiance of unit
+/// albedo under lamp i at unit intensity, from render::shading_terms) = V_i cos / (pi r^2).
 struct Sample {
   std::array<double, 3> observed{};
   std::vector<double> g;
@@ -68,12 +83,12 @@ class ShadingCost : public ceres::CostFunction {
                 double** jacobians) const override {
     const std::size_t n = colours_.size();
     for (int c = 0; c < 3; ++c) {
-      const double k = albedo_[c] / kPi * inv_scale_[c];
+      const double k = albedo_[c] * inv_scale_[c];
       double model = parameters[n][c];
       for (std::size_t i = 0; i < n; ++i) {
         const double intensity =
             colours_[i] ? parameters[i][0] * (*colours_[i])[c] : parameters[i][c];
-        model += albedo_[c] / kPi * sample_.g[i] * intensity;
+        model += albedo_[c] * sample_.g[i] * intensity;
       }
       residuals[c] = (model - sample_.observed[c]) * inv_scale_[c];
       if (!jacobians) continue;
@@ -99,6 +114,34 @@ class ShadingCost : public ceres::CostFunction {
 
 Vec3 point_at(const Image& distance_m, const Camera& camera, const CameraPose& pose, int x, int y) {
   return add(pose.position_m, scale(pose.ray_direction(camera, x, y), distance_m.at(x, y, 0)));
+}
+
+/// The occluder mesh of the distance map in an Embree scene, at most kMaxMeshPixels: a larger map
+/// is reduced (render::downsample_distance_nearest) so the mesh of a 24 MP photo does not take
+/// gigabytes; `step` is the reduction factor (1: full resolution).
+constexpr double kMaxMeshPixels = 1.0e6;
+struct Occluders {
+  std::optional<render::OccluderScene> scene;
+  int step = 1;
+};
+Occluders build_occluders(const Image& distance_m, const Camera& camera, const CameraPose& pose) {
+  Occluders out;
+  const double pixels = double(camera.width) * double(camera.height);
+  out.step = pixels > kMaxMeshPixels ? int(std::ceil(std::sqrt(pixels / kMaxMeshPixels))) : 1;
+  render::TriangleMesh mesh;
+  if (out.step > 1) {
+    const render::DownsampledDistance coarse =
+        render::downsample_distance_nearest(distance_m.view(), camera, out.step);
+    mesh = render::reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, pose);
+  } else {
+    mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, pose);
+  }
+  // Robust traversal, as render/surface_shading: each patch pixel's visibility is one ray, and
+  // one slipping through a shared edge would light a pixel inside a shadow.
+  render::OccluderSceneOptions options;
+  options.robust = true;
+  if (mesh.triangle_count() > 0) out.scene.emplace(std::move(mesh), options);
+  return out;
 }
 
 double median(std::vector<double> v) {
@@ -128,7 +171,8 @@ Vec3 lift_lamp(const Image& distance_m, const Camera& camera, const CameraPose& 
   if (std::isinf(d) && d > 0)
     fail(name + ": " + where +
          " shows the sky (no depth); a lamp is marked where the depth map has a surface");
-  if (!std::isfinite(d) || !(d > 0)) fail(name + ": " + where + " has no valid depth (" + num(d) + ")");
+  if (!std::isfinite(d) || !(d > 0))
+    fail(name + ": " + where + " has no valid depth (" + num(d) + ")");
   // Bilinear where the four nearest pixel centres are finite and on one surface.
   const int x0 = std::clamp(int(std::floor(x)), 0, w - 1), x1 = std::min(x0 + 1, w - 1);
   const int y0 = std::clamp(int(std::floor(y)), 0, h - 1), y1 = std::min(y0 + 1, h - 1);
@@ -187,16 +231,17 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
                   const std::vector<LampPatch>& patches, const LampFitOptions& options) {
   if (lamps.empty()) fail("lamp fit: no lamps were marked");
   if (patches.empty())
-    fail("lamp fit: no lamp patches were marked; the intensities are fitted to the shading of "
-         "marked surfaces the lamps light");
+    fail(
+        "lamp fit: no lamp patches were marked; the intensities are fitted to the shading of "
+        "marked surfaces the lamps light");
   if (photo.width() != camera.width || photo.height() != camera.height ||
       distance_m.width() != camera.width || distance_m.height() != camera.height)
-    throw Error(ErrorCode::size_mismatch,
-                "lamp fit: photo " + std::to_string(photo.width()) + "x" +
-                    std::to_string(photo.height()) + ", distance map " +
-                    std::to_string(distance_m.width()) + "x" + std::to_string(distance_m.height()) +
-                    ", camera " + std::to_string(camera.width) + "x" +
-                    std::to_string(camera.height));
+    throw Error(ErrorCode::size_mismatch, "lamp fit: photo " + std::to_string(photo.width()) + "x" +
+                                              std::to_string(photo.height()) + ", distance map " +
+                                              std::to_string(distance_m.width()) + "x" +
+                                              std::to_string(distance_m.height()) + ", camera " +
+                                              std::to_string(camera.width) + "x" +
+                                              std::to_string(camera.height));
   if (photo.channels() < 3) fail("lamp fit: the photo needs RGB channels");
   if (distance_m.channels() != 1) fail("lamp fit: the distance map needs exactly one channel");
   if (!(options.robust_scale > 0) || !std::isfinite(options.robust_scale))
@@ -223,6 +268,40 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
     }
   }
 
+  // The direct light is the shared shading code's (render/surface_shading.h): the Lambert term
+  // of shading_terms for each lamp alone at unit intensity, i.e. the radiance of a unit-albedo
+  // Lambertian surface, cos / (pi r^2) for a point lamp. The fit's unknowns multiply it.
+  std::vector<Lighting> unit_light(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    Lamp lamp;
+    lamp.position_m = fit.positions_m[i];
+    lamp.intensity_per_sr = {1, 1, 1};
+    unit_light[i].lamps.push_back(lamp);
+  }
+  // Visibility: a shadow ray from each patch pixel to each lamp against the occluder mesh.
+  Occluders occluders;
+  std::vector<Vec3> shadow_target(n);
+  if (options.shadows) {
+    occluders = build_occluders(distance_m, camera, pose);
+    for (std::size_t i = 0; i < n; ++i) {
+      // A lamp marked on a wall or ceiling (offset_m ~ 0) sits on the mesh; its shadow rays end
+      // a clearance in front of that surface (along its normal, toward the room), so the
+      // surface the lamp hangs on does not hide it. The clearance covers the mesh's error
+      // (MeshOptions::centre_tolerance, 1e-3 of the distance, and one coarse pixel's depth
+      // step when the mesh is reduced).
+      const Vec3& P = fit.positions_m[i];
+      const double range = std::sqrt(dot(sub(P, pose.position_m), sub(P, pose.position_m)));
+      const double clearance = 0.01 + 2e-3 * occluders.step * range;
+      const int lx = std::clamp(int(std::lround(lamps[i].pixel[0])), 0, camera.width - 1);
+      const int ly = std::clamp(int(std::lround(lamps[i].pixel[1])), 0, camera.height - 1);
+      Vec3 X, nrm;
+      if (!surface_point(distance_m, camera, pose, lx, ly, X, nrm))
+        nrm = scale(pose.ray_direction(camera, lamps[i].pixel[0], lamps[i].pixel[1]), -1.0);
+      shadow_target[i] = add(P, scale(nrm, clearance));
+    }
+  }
+  std::vector<std::size_t> facing(n, 0), hidden(n, 0);
+
   // Gather the patch pixels.
   std::vector<Sample> samples;
   for (std::size_t k = 0; k < patches.size(); ++k) {
@@ -237,15 +316,16 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
       x0 = std::min(x0, p[0]), x1 = std::max(x1, p[0]);
       y0 = std::min(y0, p[1]), y1 = std::max(y1, p[1]);
     }
-    const int xa = std::max(0, int(std::floor(x0))), xb = std::min(camera.width - 1, int(std::ceil(x1)));
-    const int ya = std::max(0, int(std::floor(y0))), yb = std::min(camera.height - 1, int(std::ceil(y1)));
+    const int xa = std::max(0, int(std::floor(x0))),
+              xb = std::min(camera.width - 1, int(std::ceil(x1)));
+    const int ya = std::max(0, int(std::floor(y0))),
+              yb = std::min(camera.height - 1, int(std::ceil(y1)));
     std::vector<std::array<int, 2>> pixels;
     for (int y = ya; y <= yb; ++y)
       for (int x = xa; x <= xb; ++x)
         if (inside_polygon(patch.polygon, x, y)) pixels.push_back({x, y});
-    const std::size_t stride =
-        std::max<std::size_t>(1, (pixels.size() + options.max_pixels_per_patch - 1) /
-                                     options.max_pixels_per_patch);
+    const std::size_t stride = std::max<std::size_t>(
+        1, (pixels.size() + options.max_pixels_per_patch - 1) / options.max_pixels_per_patch);
     std::size_t used = 0;
     for (std::size_t j = 0; j < pixels.size(); j += stride) {
       const auto [x, y] = pixels[j];
@@ -259,12 +339,38 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
         ok = ok && std::isfinite(s.observed[c]);
       }
       if (!ok) continue;
+      render::SurfacePoint point;
+      point.surface = true;
+      const Vec3 view = scale(pose.ray_direction(camera, x, y), -1.0);
+      point.normal = {float(nrm.x), float(nrm.y), float(nrm.z)};
+      point.view = {float(view.x), float(view.y), float(view.z)};
+      point.position_m = {float(X.x), float(X.y), float(X.z)};
+      // Off the surface along its normal (as render/surface_shading and the scattering core),
+      // so the pixel's own triangles do not shadow it; a reduced mesh sits up to a coarse
+      // pixel's depth step nearer, hence the factor.
+      const double distance = distance_m.at(x, y, 0);
+      const Vec3 origin = add(X, scale(nrm, (1e-3 + 1e-3 * distance) * occluders.step));
       s.g.resize(n);
       for (std::size_t i = 0; i < n; ++i) {
         const Vec3 to = sub(fit.positions_m[i], X);
-        const double r2 = dot(to, to);
-        if (!(r2 > 1e-12)) { ok = false; break; }
-        s.g[i] = std::max(0.0, dot(nrm, to)) / (r2 * std::sqrt(r2));
+        if (!(dot(to, to) > 1e-12)) {
+          ok = false;
+          break;
+        }
+        s.g[i] = render::shading_terms(point, unit_light[i], 1.0f).diffuse[0];
+        if (!(s.g[i] > 0)) {
+          s.g[i] = 0;
+          continue;
+        }
+        ++facing[i];
+        if (occluders.scene) {
+          const Vec3 d = sub(shadow_target[i], origin);
+          if (occluders.scene->occluded({float(origin.x), float(origin.y), float(origin.z)},
+                                        {float(d.x), float(d.y), float(d.z)}, 0.0f, 1.0f - 1e-4f)) {
+            s.g[i] = 0;
+            ++hidden[i];
+          }
+        }
       }
       if (!ok) continue;
       samples.push_back(std::move(s));
@@ -278,8 +384,12 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
     double sum = 0;
     for (const auto& s : samples) sum += s.g[i];
     if (!(sum > 0))
-      fail(lamp_name(i) + ": lights none of the marked patches (every patch pixel faces away from "
-                          "it); its intensity cannot be fitted");
+      fail(lamp_name(i) +
+           ": lights none of the marked patches (every patch pixel faces away from "
+           "it" +
+           std::string(hidden[i] > 0 ? " or the scene hides it from them" : "") +
+           "); its intensity cannot be fitted");
+    fit.shadowed_fraction.push_back(facing[i] ? double(hidden[i]) / double(facing[i]) : 0.0);
   }
 
   // Per-channel scale of the residuals: the median patch radiance.
@@ -291,24 +401,27 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
     med[c] = median(std::move(v));
   }
   const double top = std::max({med[0], med[1], med[2]});
-  if (!(top > 0)) fail("lamp fit: the lamp patches are black (median radiance <= 0 in every channel)");
+  if (!(top > 0))
+    fail("lamp fit: the lamp patches are black (median radiance <= 0 in every channel)");
   for (int c = 0; c < 3; ++c) inv_scale[c] = 1.0 / std::max(med[c], 1e-3 * top);
 
   // Start point.
   std::vector<std::vector<double>> params(n);
-  std::array<double, 3> mean_lit{};  // mean over samples of rho / pi * sum_i g_i
+  std::array<double, 3> mean_lit{};  // mean over samples of rho * sum_i g_i
   for (const auto& s : samples) {
     double gsum = 0;
     for (double g : s.g) gsum += g;
-    for (int c = 0; c < 3; ++c) mean_lit[c] += patches[s.patch].albedo[c] / kPi * gsum;
+    for (int c = 0; c < 3; ++c) mean_lit[c] += patches[s.patch].albedo[c] * gsum;
   }
   std::array<double, 3> start{};
   for (int c = 0; c < 3; ++c) start[c] = 0.5 * mean_obs[c] / (mean_lit[c] / double(samples.size()));
   for (std::size_t i = 0; i < n; ++i) {
-    const std::array<double, 3> s0 = options.initial_intensity.empty() ? start : options.initial_intensity[i];
+    const std::array<double, 3> s0 =
+        options.initial_intensity.empty() ? start : options.initial_intensity[i];
     for (double v : s0)
       if (!std::isfinite(v)) fail(lamp_name(i) + ": the initial intensity is NaN or infinite");
-    params[i] = colours[i] ? std::vector<double>{luminance(s0)} : std::vector<double>(s0.begin(), s0.end());
+    params[i] =
+        colours[i] ? std::vector<double>{luminance(s0)} : std::vector<double>(s0.begin(), s0.end());
   }
   std::vector<std::array<double, 3>> ambient(patches.size());
   for (auto& a : ambient)
@@ -316,7 +429,8 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
 
   auto intensity = [&](std::size_t i) {
     std::array<double, 3> out{};
-    for (int c = 0; c < 3; ++c) out[c] = colours[i] ? params[i][0] * (*colours[i])[c] : params[i][c];
+    for (int c = 0; c < 3; ++c)
+      out[c] = colours[i] ? params[i][0] * (*colours[i])[c] : params[i][c];
     return out;
   };
 
@@ -373,14 +487,16 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
     for (int c = 0; c < 3; ++c)
       if (I[c] < -options.max_negative_fraction * largest[c])
         fail(lamp_name(i) + ": the marked patches need a negative intensity (" + num(I[c]) +
-             " per sr in " + kChannel[c] + "): the shading contradicts a lamp there (is the "
+             " per sr in " + kChannel[c] +
+             "): the shading contradicts a lamp there (is the "
              "lamp misplaced, a patch in shadow, or the light from somewhere else?)");
   }
   for (std::size_t k = 0; k < patches.size(); ++k)
     for (int c = 0; c < 3; ++c)
       if (ambient[k][c] < -options.max_negative_fraction * med[c])
         fail(patch_name(k) + ": needs a negative ambient term (" + num(ambient[k][c]) + " in " +
-             kChannel[c] + "): the lamps' fall-off over it is steeper than the photo shows (is "
+             kChannel[c] +
+             "): the lamps' fall-off over it is steeper than the photo shows (is "
              "the albedo or a lamp's position wrong?)");
   solve(true, true);
 
@@ -394,7 +510,7 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
     for (int c = 0; c < 3; ++c) {
       double model = ambient[s.patch][c];
       for (std::size_t i = 0; i < n; ++i)
-        model += patches[s.patch].albedo[c] / kPi * s.g[i] * fit.intensity_per_sr[i][c];
+        model += patches[s.patch].albedo[c] * s.g[i] * fit.intensity_per_sr[i][c];
       const double r = (model - s.observed[c]) * inv_scale[c];
       sq += r * r;
       patch_sq[s.patch] += r * r;

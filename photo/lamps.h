@@ -3,11 +3,12 @@
 // intensities are fitted with Ceres to the photo's shading on marked surfaces ("lamp patches").
 // Ceres is used in lamps.cpp only.
 //
-// Model (per colour channel c; a closed-form direct-light model evaluated here, the same
-// quantity the scattering core integrates for a lamp's surface term, without fog):
+// Model (per colour channel c), the direct light evaluated with the project's shared shading
+// code (render/surface_shading.h: the Lambert term of shading_terms, one lamp at a time at unit
+// intensity, i.e. a unit-albedo Lambertian surface), times the lamp's visibility:
 //
-//   L_p,c = (rho_k,c / pi) * sum_i I_i,c * V * max(0, n_p . (P_i - X_p)) / |P_i - X_p|^3
-//           + A_k,c
+//   L_p,c = rho_k,c * sum_i I_i,c * V_i,p * D_i,p + A_k,c,
+//   D_i,p = max(0, n_p . (P_i - X_p)) / (pi |P_i - X_p|^3)   (what shading_terms returns)
 //
 //   L_p      the photo's scene-linear radiance at pixel p of lamp patch k
 //   X_p, n_p the surface point seen at p (camera + ray * distance) and its normal, from the
@@ -15,13 +16,24 @@
 //            each axis, so creases and depth edges are not smeared), turned toward the camera
 //   P_i      lamp i's position (lift_lamp); I_i,c its radiant intensity per steradian (unknown,
 //            >= 0); irradiance I cos / r^2 as mr::Lamp defines it
+//   V_i,p    1 where the segment from X_p to lamp i is free, 0 where the scene hides the lamp:
+//            a shadow ray against the occluder mesh of the distance map
+//            (render::reconstruct_occluder_mesh in an Embree OccluderScene, reduced to at most
+//            1 MP for larger maps), leaving the surface 1 mm + 1e-3 of its distance along n_p
+//            (times the reduction factor) and ending 1 cm + 2e-3 of the lamp's distance (times
+//            the factor) in front of the surface the lamp was marked on, along that surface's
+//            normal, so a lamp marked on a wall (offset_m = 0) is not hidden by the wall itself.
+//            LampFitOptions::shadows = false takes V = 1 (the model before shadows were added)
 //   rho_k,c  the patch's Lambertian albedo: GIVEN (LampPatch::albedo, default 0.5). The albedo
 //            and the intensities only appear as their product, so the intensities scale with
 //            1 / albedo; a wrong albedo guess scales every lamp alike
 //   A_k,c    per patch, unknown, >= 0: everything else that lights it (ambient / sky /
 //            interreflections), i.e. the patch's albedo times its ambient irradiance / pi,
 //            taken as constant over the patch
-//   V        visibility, taken as 1 (no shadows between lamp and patch: mark unshadowed surfaces)
+//
+// Only the Lambert lobe of the shared BRDF is used: the patches are taken as matte, and the
+// model stays linear in (I, A) with one albedo per patch (a specular lobe would add a roughness
+// and F0 per patch that a few marked patches cannot pin down).
 //
 // The fit is linear in the unknowns (I, A). It runs in three Ceres stages: a plain squared loss
 // from the start point (converges from any start), then a Cauchy loss from there with no bounds
@@ -66,6 +78,9 @@ struct LampFitOptions {
   /// -max_negative_fraction * (the largest |intensity| of that channel), or a patch's ambient
   /// term below -max_negative_fraction * (the median patch radiance of that channel).
   double max_negative_fraction = 0.05;
+  /// Lamp visibility by shadow rays against the occluder mesh (see the model). false: every
+  /// patch pixel facing a lamp is lit by it (biased where the scene shadows a patch).
+  bool shadows = true;
   /// At most this many pixels per patch are used (an even stride over the patch).
   std::size_t max_pixels_per_patch = 4000;
   /// Start point of the intensities, per lamp (RGB; a coloured lamp uses their luminance).
@@ -74,7 +89,7 @@ struct LampFitOptions {
 };
 
 struct LampFit {
-  std::vector<Vec3> positions_m;                      ///< per lamp, world frame
+  std::vector<Vec3> positions_m;                        ///< per lamp, world frame
   std::vector<std::array<double, 3>> intensity_per_sr;  ///< per lamp, RGB, >= 0
   std::vector<std::array<double, 3>> ambient;           ///< per patch: A_k (radiance units)
   /// Relative residual (model - photo) / median patch radiance, over the used pixels and the
@@ -82,6 +97,8 @@ struct LampFit {
   double rms_residual = 0, median_abs_residual = 0;
   std::vector<double> patch_rms_residual;
   std::size_t pixels_used = 0;
+  /// Per lamp: the share of the used patch pixels facing it that the scene hides from it.
+  std::vector<double> shadowed_fraction;
   bool converged = false;  ///< the last Ceres stage reported convergence
   int iterations = 0;      ///< all stages together
 };
@@ -105,7 +122,8 @@ bool surface_point(const Image& distance_m, const Camera& camera, const CameraPo
 /// Throws mr::Error(invalid_argument) naming the lamp or patch index when: a lamp cannot be
 /// lifted (lift_lamp); there are no lamps or no patches; a patch has an albedo outside (0, 1],
 /// fewer than 3 points or no pixel with a finite depth, normal and photo value; a lamp lights
-/// none of the patch pixels (its intensity is then undetermined); the patches are black; or the
+/// none of the patch pixels (faces away from all of them or is hidden from them: its intensity
+/// is then undetermined); the patches are black; or the
 /// data are contradictory (a lamp needs a negative intensity or a patch a negative ambient term,
 /// see LampFitOptions::max_negative_fraction). size_mismatch for images of the wrong size.
 LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& camera,

@@ -37,15 +37,19 @@ void write_depth(const fs::path& path, int w, int h, float near_m = 5.0f, float 
   Image d(w, h, 1, {"Z"});
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
-      d.at(x, y, 0) = y < h / 4 ? 0.0f : far_m + (near_m - far_m) * float(y) / float(h - 1);  // sky at top
+      d.at(x, y, 0) =
+          y < h / 4 ? 0.0f : far_m + (near_m - far_m) * float(y) / float(h - 1);  // sky at top
   write_raw(path, d, PixelType::float32);
 }
 
-void write_photo(const fs::path& path, int w, int h) { write_image(path, test::make_test_photo(w, h)); }
+void write_photo(const fs::path& path, int w, int h) {
+  write_image(path, test::make_test_photo(w, h));
+}
 
 std::map<std::string, std::uint64_t> checksums(const fs::path& dir) {
   std::map<std::string, std::uint64_t> out;
-  for (const auto& e : fs::directory_iterator(dir)) out[e.path().filename().string()] = test::file_checksum(e.path());
+  for (const auto& e : fs::directory_iterator(dir))
+    out[e.path().filename().string()] = test::file_checksum(e.path());
   return out;
 }
 
@@ -80,9 +84,7 @@ class CliBatch : public ::testing::Test {
     write_photo(in / "wrongsize.png", 64, 48);
     write_depth(in / "wrongsize_depth.exr", 32, 24);
   }
-  test::CommandResult mr_fog(const std::string& args) {
-    return test::run(kMr + " fog " + args);
-  }
+  test::CommandResult mr_fog(const std::string& args) { return test::run(kMr + " fog " + args); }
   test::ScratchDir dir;
   fs::path in, out;
 };
@@ -96,7 +98,8 @@ TEST_F(CliBatch, GoodPhotosAreWrittenBadOnesReportedAndNothingIsLost) {
     EXPECT_NE(r.output.find(name), std::string::npos) << name << "\n" << r.output;
   EXPECT_NE(r.output.find("32x24"), std::string::npos) << r.output;  // both sizes named
   EXPECT_NE(r.output.find("64x48"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("2 done, 0 skipped (outputs exist), 3 failed"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("2 done, 0 skipped (outputs exist), 3 failed"), std::string::npos)
+      << r.output;
 
   std::vector<std::string> written;
   for (const auto& e : fs::directory_iterator(out)) written.push_back(e.path().filename().string());
@@ -134,7 +137,8 @@ TEST_F(CliBatch, ResumeSkipsFinishedOutputsAndOverwriteRedoesThem) {
 
 TEST_F(CliBatch, NeverOverwritesAnInputEvenWhenTheOutputPointsAtIt) {
   const auto before = checksums(in);
-  const auto r = mr_fog((in / "good1.png").string() + " -o " + in.string() + " --suffix '' --overwrite");
+  const auto r =
+      mr_fog((in / "good1.png").string() + " -o " + in.string() + " --suffix '' --overwrite");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("refusing to overwrite"), std::string::npos) << r.output;
   EXPECT_EQ(checksums(in), before);
@@ -144,7 +148,8 @@ TEST_F(CliBatch, AovsGoIntoTheExrOrBesideTheOutput) {
   auto r = mr_fog((in / "good1.png").string() + " -o " + out.string() + " --aovs --format exr -q");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const Image layered = read_raw(out / "good1_fog.exr");
-  for (const char* name : {"R", "G", "B", "transmittance.R", "transmittance.B", "inscatter.G", "depth.Z"})
+  for (const char* name :
+       {"R", "G", "B", "transmittance.R", "transmittance.B", "inscatter.G", "depth.Z"})
     EXPECT_GE(layered.channel_index(name), 0) << name;
   r = mr_fog((in / "good2.jpg").string() + " -o " + out.string() + " --aovs -q");
   ASSERT_EQ(r.exit_code, 0) << r.output;
@@ -168,7 +173,8 @@ TEST_F(CliBatch, DepthPatternSingleFileAndDisparity) {
   for (float& v : disp.pixels()) v = 20.0f / 255.0f;
   write_raw(dir / "disp.png", disp, PixelType::uint8);
   r = mr_fog((in / "good1.png").string() + " -o " + (dir / "o2").string() + " --depth " +
-             (dir / "disp.png").string() + " --depth-kind disparity --baseline 0.16 --focal-px 500 -q");
+             (dir / "disp.png").string() +
+             " --depth-kind disparity --baseline 0.16 --focal-px 500 -q");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   r = mr_fog((in / "good1.png").string() + " -o " + (dir / "o3").string() + " --depth " +
              (dir / "disp.png").string() + " --depth-kind disparity");
@@ -177,10 +183,10 @@ TEST_F(CliBatch, DepthPatternSingleFileAndDisparity) {
 }
 
 TEST_F(CliBatch, UsageErrorsExitTwo) {
-  for (const std::string args : {"", "--no-such-option x.jpg", "x.jpg --visibility fog",
-                                 "x.jpg --visibility -3m", "x.jpg --airlight 1,2",
-                                 "x.jpg --bit-depth 12", "x.jpg --format xyz",
-                                 "x.jpg --visibility 100m --density 0.1"}) {
+  for (const std::string args :
+       {"", "--no-such-option x.jpg", "x.jpg --visibility fog", "x.jpg --visibility -3m",
+        "x.jpg --airlight 1,2", "x.jpg --bit-depth 12", "x.jpg --format xyz",
+        "x.jpg --visibility 100m --density 0.1"}) {
     const auto r = mr_fog(args);
     EXPECT_EQ(r.exit_code, 2) << args << "\n" << r.output;
   }
@@ -338,7 +344,7 @@ TEST_F(CliScene, BadSceneFilesAreUsageErrorsNamingTheValue) {
       {head + R"("lighting": {"lamps": [{"position_m": [0, "up", 0]}]}})",
        {"/lighting/lamps/0/position_m"}},
       {head + R"("lighting": {"sun": {"azimuth_deg": 10}}})", {"/lighting/sun", "elevation_deg"}},
-      {R"({"format": "libmr-scene", "version": 2})", {"/version", "version 2"}},
+      {R"({"format": "libmr-scene", "version": 3})", {"/version", "version 3"}},
   };
   const auto inputs_before = checksums(in);
   for (const Case& c : cases) {

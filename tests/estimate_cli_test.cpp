@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <string>
 
 #include "mr/annotations.h"
@@ -160,6 +162,129 @@ TEST_F(EstimateCli, FogSavesOneEstimatedScenePerPhoto) {
   EXPECT_NE(clash.output.find("for both"), std::string::npos) << clash.output;
   EXPECT_FALSE(fs::exists(dir / "out2"));
   EXPECT_FALSE(fs::exists(dir / "scenes" / "same.json.png"));
+}
+
+// A ground grid (0.15 m stripes every 2 m) under a gradient sky, seen from 1.6 m by a camera
+// 60 degrees across, pitched -8, rolled 4, turned 30 degrees (so both stripe families have
+// finite vanishing points), 4x4 supersampled. Scene-linear (written as an 8-bit PNG: no EXIF).
+Image grid_photo(const Camera& camera, const CameraPose& pose) {
+  Image out(camera.width, camera.height, 3);
+  for (int y = 0; y < camera.height; ++y)
+    for (int x = 0; x < camera.width; ++x) {
+      double rgb[3] = {0, 0, 0};
+      for (int sy = 0; sy < 4; ++sy)
+        for (int sx = 0; sx < 4; ++sx) {
+          const Vec3 d =
+              pose.ray_direction(camera, x + (sx + 0.5) / 4 - 0.5, y + (sy + 0.5) / 4 - 0.5);
+          double c[3];
+          if (d.y >= 0) {
+            c[0] = 0.35 + 0.4 * y / camera.height, c[1] = 0.6, c[2] = 0.9;
+          } else {
+            const double t = -pose.position_m.y / d.y;
+            const double gx = pose.position_m.x + t * d.x, gz = pose.position_m.z + t * d.z;
+            const bool stripe = std::abs(gx - 2 * std::round(gx / 2)) < 0.075 ||
+                                std::abs(gz - 2 * std::round(gz / 2)) < 0.075;
+            const double v = stripe ? 0.1 : 0.45;
+            c[0] = v, c[1] = 0.85 * v, c[2] = 0.7 * v;
+          }
+          for (int k = 0; k < 3; ++k) rgb[k] += c[k] / 16;
+        }
+      for (int k = 0; k < 3; ++k) out.at(x, y, k) = float(std::pow(rgb[k], 2.2));
+    }
+  return out;
+}
+
+// The focal length `mr estimate` finds from the vanishing points (no EXIF) is recorded in the
+// scene, and `mr fog --scene` renders with it: the same image as an explicit --focal-px run,
+// and not the one the 60-degree default would give.
+TEST_F(EstimateCli, SceneCarriesTheVanishingPointFocalLengthToFog) {
+  const Camera truth = Camera::from_horizontal_fov(480, 360, 50);
+  CameraPose pose;
+  pose.position_m = {0, 1.6, 0};
+  pose.pitch_deg = -8;
+  pose.roll_deg = 4;
+  pose.yaw_deg = 30;
+  write_image(dir / "grid.png", grid_photo(truth, pose));
+  auto r = test::run(kMr + " estimate " + q(dir / "grid.png") + " -o " + q(dir / "grid.json") +
+                     " --depth-out " + q(dir / "grid_depth.exr"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_NE(r.output.find("vanishing points"), std::string::npos) << r.output;
+  const FogScene scene = load_scene(dir / "grid.json");
+  ASSERT_TRUE(scene.camera);
+  EXPECT_EQ(scene.camera->width, 480);
+  EXPECT_EQ(scene.camera->height, 360);
+  EXPECT_FALSE(scene.camera->principal_point_px);
+  const double f = scene.camera->focal_px;
+  std::printf("vanishing-point focal %.2f px (truth %.2f, 60-degree default %.2f)\n", f,
+              truth.focal_px, Camera::from_horizontal_fov(480, 360, 60).focal_px);
+  EXPECT_NEAR(f, truth.focal_px, 0.03 * truth.focal_px);
+
+  char focal[64];
+  std::snprintf(focal, sizeof focal, "%.17g", f);
+  const std::string common = kMr + " fog " + q(dir / "grid.png") + " --depth " +
+                             q(dir / "grid_depth.exr") + " --scene " + q(dir / "grid.json") +
+                             " --quality draft --seed 3 -q --visibility 60m --height-fog 0,3 ";
+  // (Height fog makes the image depend on each pixel's ray direction, hence on the focal length;
+  // homogeneous fog under a uniform sky would depend on the distance map only.)
+  r = test::run(common + "-o " + q(dir / "from_scene") + " --save-scene '" +
+                (dir / "saved" / "{stem}.json").string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = test::run(common + "-o " + q(dir / "explicit") + " --focal-px " + focal + " --save-scene " +
+                q(dir / "explicit.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = test::run(common + "-o " + q(dir / "default") + " --fov 60");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  if (const char* out = std::getenv("MR_TEST_OUT")) {  // to look at
+    fs::copy_file(dir / "grid.png", fs::path(out) / "grid.png",
+                  fs::copy_options::overwrite_existing);
+    fs::copy_file(dir / "from_scene" / "grid_fog.png", fs::path(out) / "grid_fog_scene_camera.png",
+                  fs::copy_options::overwrite_existing);
+  }
+  const Image a = read_image(dir / "from_scene" / "grid_fog.png");
+  const Image b = read_image(dir / "explicit" / "grid_fog.png");
+  const Image c = read_image(dir / "default" / "grid_fog.png");
+  ASSERT_EQ(a.pixel_count(), b.pixel_count());
+  std::size_t differ_explicit = 0, differ_default = 0;
+  for (int y = 0; y < a.height(); ++y)
+    for (int x = 0; x < a.width(); ++x)
+      for (int k = 0; k < 3; ++k) {
+        differ_explicit += a.at(x, y, k) != b.at(x, y, k);
+        differ_default += a.at(x, y, k) != c.at(x, y, k);
+      }
+  std::printf("values differing from the --focal-px run: %zu, from the 60-degree run: %zu\n",
+              differ_explicit, differ_default);
+  EXPECT_EQ(differ_explicit, 0u);
+  EXPECT_GT(differ_default, std::size_t(a.pixel_count()));  // the test can tell them apart
+  // The per-photo saved scene records the camera the photo was rendered with.
+  const FogScene saved = load_scene(dir / "saved" / "grid.json");
+  ASSERT_TRUE(saved.camera);
+  EXPECT_EQ(saved.camera->focal_px, f);
+
+  // A rotated photo (another aspect ratio) cannot take the recorded focal length: a clear error
+  // naming both sizes, unless the command line gives one.
+  Image rotated(360, 480, 3);
+  const Image photo = read_image(dir / "grid.png");
+  for (int y = 0; y < 480; ++y)
+    for (int x = 0; x < 360; ++x)
+      for (int k = 0; k < 3; ++k) rotated.at(x, y, k) = photo.at(y, 359 - x, k);
+  fs::create_directories(dir / "rot");
+  write_image(dir / "rot" / "tall.png", rotated);
+  r = test::run(kMr + " fog " + q(dir / "rot" / "tall.png") + " --depth auto --scene " +
+                q(dir / "grid.json") + " --quality draft -o " + q(dir / "rot_out") +
+                " --save-scene " + q(dir / "kept.json"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("recorded for a 480x360 image, this one is 360x480"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("give --fov or --focal-px"), std::string::npos) << r.output;
+  // A single --save-scene file keeps the --scene file's camera (it is written before any photo
+  // is read), and records none when the command line replaced it with its own focal length.
+  const FogScene kept = load_scene(dir / "kept.json");
+  ASSERT_TRUE(kept.camera);
+  EXPECT_EQ(kept.camera->focal_px, f);
+  EXPECT_FALSE(load_scene(dir / "explicit.json").camera);
+  r = test::run(kMr + " fog " + q(dir / "rot" / "tall.png") + " --depth auto --scene " +
+                q(dir / "grid.json") + " --fov 50 --quality draft -q -o " + q(dir / "rot_out"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
 }
 
 }  // namespace

@@ -86,6 +86,14 @@ void expect_scene_eq(const FogScene& a, const FogScene& b) {
   EXPECT_EQ(a.render.max_distance_m, b.render.max_distance_m);
   EXPECT_EQ(a.render.seed, b.render.seed);
   EXPECT_EQ(a.render.threads, b.render.threads);
+
+  ASSERT_EQ(a.camera.has_value(), b.camera.has_value());
+  if (a.camera) {
+    EXPECT_EQ(a.camera->width, b.camera->width);
+    EXPECT_EQ(a.camera->height, b.camera->height);
+    EXPECT_EQ(a.camera->focal_px, b.camera->focal_px);
+    EXPECT_EQ(a.camera->principal_point_px, b.camera->principal_point_px);
+  }
 }
 
 // A scene with every field away from its default, with values that have no short decimal
@@ -122,6 +130,7 @@ FogScene every_field_set() {
   b.inner_angle_deg = 0;
   b.outer_angle_deg = 1e-9;
   s.lighting.lamps = {a, b};
+  s.camera = SceneCamera{4032, 3024, 3123.4567890123457, std::array<double, 2>{2016.1 / 3, 1511.5}};
   s.render.quality = Quality::final;
   s.render.backend = Backend::cpu;
   s.render.march_steps = 4096;
@@ -245,7 +254,7 @@ TEST(SceneJson, RoundTripOfDefaultsAndUnboundedLayer) {
 
 TEST(SceneJson, WritesEveryKeyPrettyAndReadably) {
   const std::string text = scene_to_json(every_field_set());
-  EXPECT_EQ(text.rfind("{\n  \"format\": \"libmr-scene\",\n  \"version\": 1,\n", 0), 0u) << text;
+  EXPECT_EQ(text.rfind("{\n  \"format\": \"libmr-scene\",\n  \"version\": 2,\n", 0), 0u) << text;
   for (const char* key : {"camera_pose",
                           "position_m",
                           "yaw_deg",
@@ -285,7 +294,12 @@ TEST(SceneJson, WritesEveryKeyPrettyAndReadably) {
                           "volumetric_shadows",
                           "light_path_attenuation",
                           "max_distance_m",
-                          "threads"})
+                          "threads",
+                          "camera",
+                          "width",
+                          "height",
+                          "focal_px",
+                          "principal_point_px"})
     EXPECT_CONTAINS(text, key);
   // Vectors and colours on one line; floats in their short form.
   EXPECT_CONTAINS(text, "\"sigma_t_per_m\": [0.1, 0.33333334, 9999.9]");
@@ -552,9 +566,9 @@ TEST(SceneJson, BadEnumStrings) {
 }
 
 TEST(SceneJson, FormatAndVersion) {
-  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 2}"),
-                  "scene.json: /version: version 2 is newer than this libmr supports (it reads "
-                  "version 1); upgrade libmr");
+  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 3}"),
+                  "scene.json: /version: version 3 is newer than this libmr supports (it reads "
+                  "versions 1 to 2); upgrade libmr");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 0}"),
                   "scene.json: /version: version 0 does not exist");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\"}"), "scene.json: /version: missing");
@@ -562,8 +576,105 @@ TEST(SceneJson, FormatAndVersion) {
   EXPECT_CONTAINS(parse_error("{\"format\": \"gltf\", \"version\": 1}"),
                   "scene.json: /format: expected \"libmr-scene\", found a string (\"gltf\")");
   // A newer document is refused for its version, not for the keys this libmr does not know.
-  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 3, \"depth\": {}}"),
-                  "/version: version 3 is newer");
+  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 4, \"depth\": {}}"),
+                  "/version: version 4 is newer");
+}
+
+// ---- the camera (format version 2) ----
+
+std::string doc2(const std::string& body) {
+  return std::string("{\"format\": \"libmr-scene\", \"version\": 2") +
+         (body.empty() ? "" : ", " + body) + "}";
+}
+
+TEST(SceneJson, CameraRoundTripsAndIsOptional) {
+  FogScene s;
+  s.camera = SceneCamera{1600, 1200, 1234.5678901234567, std::nullopt};
+  const std::string text = scene_to_json(s);
+  EXPECT_CONTAINS(text, "\"version\": 2");
+  EXPECT_CONTAINS(text, "\"camera\": {");
+  EXPECT_EQ(text.find("principal_point_px"), std::string::npos);  // the centre: left out
+  const FogScene back = scene_from_json(text, "cam.json");
+  expect_scene_eq(back, s);
+  // Old documents (version 1, no camera) still read, without a camera; none is written then.
+  EXPECT_FALSE(scene_from_json(doc(""), "v1.json").camera);
+  EXPECT_EQ(scene_to_json(FogScene{}).find("\"camera\""), std::string::npos);
+  EXPECT_FALSE(scene_from_json(doc2("\"camera\": null"), "null.json").camera);
+  // The field of view instead of the focal length: f = (w / 2) / tan(fov / 2).
+  const FogScene f = scene_from_json(
+      doc2("\"camera\": {\"width\": 800, \"height\": 600, \"horizontal_fov_deg\": 90}"), "fov");
+  ASSERT_TRUE(f.camera);
+  EXPECT_NEAR(f.camera->focal_px, 400, 1e-9);
+}
+
+TEST(SceneJson, CameraForImageScalesResizedPhotos) {
+  const SceneCamera c{4000, 3000, 3200, std::array<double, 2>{2010, 1490}};
+  const Camera same = camera_for_image(c, 4000, 3000);
+  EXPECT_EQ(same.focal_px, 3200);
+  EXPECT_EQ(same.cx, 2010);
+  EXPECT_EQ(same.cy, 1490);
+  // A copy at a quarter of the size: the same field of view and principal point (in fractions).
+  const Camera small = camera_for_image(c, 1000, 750);
+  EXPECT_DOUBLE_EQ(small.focal_px, 800);
+  EXPECT_DOUBLE_EQ(small.cx, 502.5);
+  EXPECT_DOUBLE_EQ(small.cy, 372.5);
+  const Camera ref = Camera::from_focal_px(4000, 3000, 3200);
+  EXPECT_NEAR(small.horizontal_fov_deg(), ref.horizontal_fov_deg(), 1e-12);
+  // Rounding to whole pixels (1001 x 750) is still the same photo; a rotated one is not.
+  EXPECT_NO_THROW(camera_for_image(c, 1001, 750));
+  const std::string rotated = error_of([&] { camera_for_image(c, 3000, 4000); });
+  EXPECT_CONTAINS(rotated, "recorded for a 4000x3000 image, this one is 3000x4000");
+  EXPECT_CONTAINS(rotated, "aspect ratio");
+  // scene_camera records a Camera exactly (the centre as no principal point).
+  const Camera cam = Camera::from_focal_px(640, 480, 500.123456789);
+  const SceneCamera rec = scene_camera(cam);
+  EXPECT_FALSE(rec.principal_point_px);
+  const Camera again = camera_for_image(rec, 640, 480);
+  EXPECT_EQ(again.focal_px, cam.focal_px);
+  EXPECT_EQ(again.cx, cam.cx);
+  EXPECT_EQ(again.cy, cam.cy);
+}
+
+TEST(SceneJson, BadCameraValuesNameTheirPointer) {
+  const std::string size = "\"width\": 640, \"height\": 480";
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": {" + size + ", \"focal_px\": -5}")),
+                  "scene.json: /camera/focal_px: must be > 0 pixels, found -5");
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": {" + size + ", \"focal_px\": \"wide\"}")),
+                  "scene.json: /camera/focal_px: expected a number, found a string");
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": {\"height\": 480, \"focal_px\": 500}")),
+                  "scene.json: /camera/width: missing");
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": {\"width\": 0, \"height\": 480, \"focal_px\": 5}")),
+                  "scene.json: /camera/width: must be >= 1, found 0");
+  EXPECT_CONTAINS(
+      parse_error(doc2("\"camera\": {\"width\": 64.5, \"height\": 48, \"focal_px\": 5}")),
+      "scene.json: /camera/width: expected an integer");
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": {" + size + "}")),
+                  "scene.json: /camera/focal_px: missing; give focal_px or horizontal_fov_deg");
+  EXPECT_CONTAINS(
+      parse_error(doc2("\"camera\": {" + size + ", \"focal_px\": 5, \"horizontal_fov_deg\": 60}")),
+      "scene.json: /camera: give either focal_px or horizontal_fov_deg, not both");
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": {" + size + ", \"horizontal_fov_deg\": 180}")),
+                  "scene.json: /camera/horizontal_fov_deg: must be in (0, 180) degrees, found 180");
+  EXPECT_CONTAINS(
+      parse_error(
+          doc2("\"camera\": {" + size + ", \"focal_px\": 500, \"principal_point_px\": [320]}")),
+      "scene.json: /camera/principal_point_px: expected an array of 2 numbers [cx, cy]");
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": {" + size +
+                                   ", \"focal_px\": 500, \"principal_point_px\": [320, 900]}")),
+                  "scene.json: /camera/principal_point_px/1: must be inside the 640x480 image "
+                  "(0..480), found 900");
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": {" + size + ", \"focal_pz\": 500}")),
+                  "scene.json: /camera/focal_pz: unknown key; did you mean \"focal_px\"?");
+  EXPECT_CONTAINS(parse_error(doc2("\"camera\": [500]")),
+                  "scene.json: /camera: expected an object, found an array");
+  // The camera is a version-2 key.
+  EXPECT_CONTAINS(parse_error(doc("\"camera\": {" + size + ", \"focal_px\": 500}")),
+                  "scene.json: /camera: the camera is part of the format from version 2 on; this "
+                  "document is version 1");
+  // Writing refuses a camera it could not read back.
+  FogScene s;
+  s.camera = SceneCamera{640, 480, std::numeric_limits<double>::quiet_NaN(), std::nullopt};
+  EXPECT_CONTAINS(error_of([&] { scene_to_json(s); }), "/camera/focal_px: must be > 0 pixels");
 }
 
 TEST(SceneJson, MalformedJsonReportsLineAndColumn) {

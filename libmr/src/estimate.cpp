@@ -14,6 +14,7 @@
 
 #include "cv_bridge.h"
 #include "mr/error.h"
+#include "mr/scene_json.h"
 #include "photo/airlight.h"
 #include "photo/geometry.h"
 #include "photo/horizon.h"
@@ -450,6 +451,9 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
   est.geometry = estimate_geometry(photo, camera, annotations, options);
   const GeometryEstimate& g = est.geometry;
   est.scene.pose = g.pose;
+  // The scene records the camera it was estimated with (a focal length from vanishing points
+  // would otherwise be lost when the scene is reused: mr fog --scene, mr-studio projects).
+  est.scene.camera = scene_camera(camera);
   const char* horizon_how =
       g.horizon_source == EstimateSource::annotations ? "annotated"
       : g.horizon_source == EstimateSource::horizontal_vps

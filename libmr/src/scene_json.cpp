@@ -46,7 +46,6 @@ using json::parse_text;
 using json::pointer_token;
 using Reader = json::JsonReader;
 
-
 Medium read_medium(const Json& j, const std::string& p, const Reader& r) {
   r.object(j, p);
   r.check_keys(j, p,
@@ -226,6 +225,63 @@ RenderSettings read_render(const Json& j, const std::string& p, const Reader& r)
   return s;
 }
 
+// The shortest decimal of a double that reads back as it ("-5", "1234.5", "nan").
+std::string shortest(double v) {
+  char buf[64];
+  return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
+}
+
+// The camera's rules, shared by reading (pointer = where the value is) and writing.
+void check_camera(const SceneCamera& c, const std::string& p, const Reader& r) {
+  if (c.width < 1) r.fail(p + "/width", "must be >= 1, found " + std::to_string(c.width));
+  if (c.height < 1) r.fail(p + "/height", "must be >= 1, found " + std::to_string(c.height));
+  if (!(c.focal_px > 0) || !std::isfinite(c.focal_px))
+    r.fail(p + "/focal_px", "must be > 0 pixels, found " + shortest(c.focal_px));
+  if (c.principal_point_px) {
+    const auto& pp = *c.principal_point_px;
+    const int size[2] = {c.width, c.height};
+    for (int a = 0; a < 2; ++a)
+      if (!(pp[a] >= 0 && pp[a] <= size[a]))
+        r.fail(p + "/principal_point_px/" + std::to_string(a),
+               "must be inside the " + std::to_string(c.width) + "x" + std::to_string(c.height) +
+                   " image (0.." + std::to_string(size[a]) + "), found " + shortest(pp[a]));
+  }
+}
+
+SceneCamera read_camera(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(j, p, {"width", "height", "focal_px", "horizontal_fov_deg", "principal_point_px"});
+  SceneCamera c;
+  for (const char* key : {"width", "height"}) {
+    const Json* v = member(j, key);
+    if (!v)
+      r.fail(p + "/" + key,
+             "missing; the camera's focal length refers to an image size (width and height)");
+    (key[0] == 'w' ? c.width : c.height) = static_cast<int>(r.integer(
+        *v, p + "/" + key, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
+  }
+  const Json* focal = member(j, "focal_px");
+  const Json* fov = member(j, "horizontal_fov_deg");
+  if (focal && fov) r.fail(p, "give either focal_px or horizontal_fov_deg, not both");
+  if (!focal && !fov) r.fail(p + "/focal_px", "missing; give focal_px or horizontal_fov_deg");
+  if (focal) c.focal_px = r.number(*focal, p + "/focal_px");
+  if (fov) {
+    const double deg = r.number(*fov, p + "/horizontal_fov_deg");
+    if (!(deg > 0 && deg < 180))
+      r.fail(p + "/horizontal_fov_deg", "must be in (0, 180) degrees, found " + fov->dump());
+    if (c.width >= 1)
+      c.focal_px = 0.5 * c.width / std::tan(0.5 * deg * 3.14159265358979323846 / 180);
+  }
+  if (const Json* v = member(j, "principal_point_px")) {
+    const std::string pp = p + "/principal_point_px";
+    if (!v->is_array() || v->size() != 2) r.expected(pp, "an array of 2 numbers [cx, cy]", *v);
+    c.principal_point_px =
+        std::array<double, 2>{r.number((*v)[0], pp + "/0"), r.number((*v)[1], pp + "/1")};
+  }
+  check_camera(c, p, r);
+  return c;
+}
+
 FogScene read_document(const Json& doc, const Reader& r) {
   if (!doc.is_object())
     r.fail("", "expected a JSON object at the top level, found " + describe(doc));
@@ -252,12 +308,21 @@ FogScene read_document(const Json& doc, const Reader& r) {
     r.fail("/version",
            "version " + std::to_string(v) + " does not exist; this libmr reads " + supported);
 
-  r.check_keys(doc, "", {"format", "version", "camera_pose", "medium", "lighting", "render"});
+  r.check_keys(doc, "",
+               {"format", "version", "camera_pose", "medium", "lighting", "render", "camera"});
   FogScene s;
   if (const Json* j = member(doc, "camera_pose")) s.pose = read_pose(*j, "/camera_pose", r);
   if (const Json* j = member(doc, "medium")) s.medium = read_medium(*j, "/medium", r);
   if (const Json* j = member(doc, "lighting")) s.lighting = read_lighting(*j, "/lighting", r);
   if (const Json* j = member(doc, "render")) s.render = read_render(*j, "/render", r);
+  if (const Json* j = member(doc, "camera"); j && !j->is_null()) {
+    if (v < 2)
+      r.fail("/camera",
+             "the camera is part of the format from version 2 on; this document is "
+             "version " +
+                 std::to_string(v));
+    s.camera = read_camera(*j, "/camera", r);
+  }
   return s;
 }
 
@@ -390,6 +455,14 @@ Json to_document(const FogScene& s) {
                        {"max_distance_m", r.max_distance_m},
                        {"seed", r.seed},
                        {"threads", r.threads}};
+  if (s.camera) {  // optional: documents without it read as before
+    Json camera = Json{
+        {"width", s.camera->width}, {"height", s.camera->height}, {"focal_px", s.camera->focal_px}};
+    if (s.camera->principal_point_px)
+      camera["principal_point_px"] =
+          Json::array({(*s.camera->principal_point_px)[0], (*s.camera->principal_point_px)[1]});
+    doc["camera"] = std::move(camera);
+  }
   return doc;
 }
 
@@ -443,10 +516,52 @@ FogScene scene_from_json(const std::string& text, const std::string& source_name
 
 std::string scene_to_json(const FogScene& scene) {
   validate_scene(scene);  // NaN and friends have no JSON spelling: refuse rather than corrupt
+  if (scene.camera) check_camera(*scene.camera, "/camera", Reader("scene_to_json"));
   std::string out;
   write_pretty(to_document(scene), 0, out);
   out += "\n";
   return out;
+}
+
+Camera camera_for_image(const SceneCamera& c, int width, int height) {
+  check_camera(c, "/camera", Reader("scene camera"));
+  if (width < 1 || height < 1)
+    throw Error(ErrorCode::invalid_argument, "scene camera: image size " + std::to_string(width) +
+                                                 "x" + std::to_string(height) + " is not positive");
+  const std::string sizes = "the scene's camera was recorded for a " + std::to_string(c.width) +
+                            "x" + std::to_string(c.height) + " image, this one is " +
+                            std::to_string(width) + "x" + std::to_string(height);
+  Camera out;
+  out.width = width;
+  out.height = height;
+  if (width == c.width && height == c.height) {
+    out.focal_px = c.focal_px;
+    out.cx = c.principal_point_px ? (*c.principal_point_px)[0] : 0.5 * width;
+    out.cy = c.principal_point_px ? (*c.principal_point_px)[1] : 0.5 * height;
+    return out;
+  }
+  // A resized copy keeps the aspect ratio up to rounding of its size to whole pixels.
+  const double aspect = double(width) / height, recorded = double(c.width) / c.height;
+  if (std::abs(aspect / recorded - 1) > 0.01)
+    throw Error(ErrorCode::invalid_argument,
+                sizes +
+                    ": another aspect ratio (rotated or cropped?), so its focal length "
+                    "does not carry over");
+  const double sx = double(width) / c.width, sy = double(height) / c.height;
+  out.focal_px = c.focal_px * sx;
+  out.cx = c.principal_point_px ? (*c.principal_point_px)[0] * sx : 0.5 * width;
+  out.cy = c.principal_point_px ? (*c.principal_point_px)[1] * sy : 0.5 * height;
+  return out;
+}
+
+SceneCamera scene_camera(const Camera& camera) {
+  SceneCamera c;
+  c.width = camera.width;
+  c.height = camera.height;
+  c.focal_px = camera.focal_px;
+  if (camera.cx != 0.5 * camera.width || camera.cy != 0.5 * camera.height)
+    c.principal_point_px = std::array<double, 2>{camera.cx, camera.cy};
+  return c;
 }
 
 FogScene load_scene(const fs::path& path) {

@@ -29,6 +29,7 @@ constexpr double kRoughnessStep = 1e-3;  // central-difference step for d/dr
 constexpr double kCauchyScale = 0.1;
 constexpr std::array<double, 6> kRoughnessStarts = {0.05, 0.15, 0.3, 0.45, 0.65, 0.9};
 constexpr std::size_t kStartsRefined = 2;
+constexpr double kDielectricF0 = 0.04;
 
 [[noreturn]] void fail(const std::string& message) {
   throw Error(ErrorCode::invalid_argument, "fit_brdf: " + message);
@@ -83,6 +84,22 @@ class PixelCost : public ceres::SizedCostFunction<3, 3, 1, 1> {
   std::array<double, 3> inv_mean_;
 };
 
+// Pulls F0 toward a dielectric's 0.04, in the units of the pixel residuals: with weight w the
+// prior costs w * n * (F0 - 0.04)^2 against n pixels' squared relative residuals.
+class DielectricPriorCost : public ceres::SizedCostFunction<1, 1> {
+ public:
+  explicit DielectricPriorCost(double sqrt_weight) : sqrt_weight_(sqrt_weight) {}
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    residuals[0] = sqrt_weight_ * (parameters[0][0] - kDielectricF0);
+    if (jacobians && jacobians[0]) jacobians[0][0] = sqrt_weight_;
+    return true;
+  }
+
+ private:
+  double sqrt_weight_;
+};
+
 struct Parameters {
   std::array<double, 3> kd{0.5, 0.5, 0.5};
   double f0 = 0.04;
@@ -102,6 +119,9 @@ BrdfFit fit_brdf(const Image& radiance, const render::SurfaceGeometry& geometry,
                 "fit_brdf: the radiance image is " + std::to_string(radiance.width()) + "x" +
                     std::to_string(radiance.height()) + ", the surface geometry is " +
                     std::to_string(w) + "x" + std::to_string(h));
+  if (!(options.dielectric_prior_weight >= 0) || !std::isfinite(options.dielectric_prior_weight))
+    fail("dielectric_prior_weight must be finite and >= 0, got " +
+         std::to_string(options.dielectric_prior_weight));
   if (options.max_pixels < 16)
     fail("max_pixels must be >= 16, got " + std::to_string(options.max_pixels));
 
@@ -155,6 +175,10 @@ BrdfFit fit_brdf(const Image& radiance, const render::SurfaceGeometry& geometry,
       problem.AddResidualBlock(new PixelCost(s, lighting, inv_mean),
                                options.robust && !hold_roughness ? &cauchy : nullptr, p.kd.data(),
                                &p.f0, &p.roughness);
+    if (options.dielectric_prior_weight > 0)
+      problem.AddResidualBlock(
+          new DielectricPriorCost(std::sqrt(options.dielectric_prior_weight * double(n))),
+          nullptr, &p.f0);
     for (int c = 0; c < 3; ++c) {
       problem.SetParameterLowerBound(p.kd.data(), c, 0.0);
       problem.SetParameterUpperBound(p.kd.data(), c, 1.0);

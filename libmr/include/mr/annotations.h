@@ -68,8 +68,9 @@ struct Annotations {
     std::optional<std::array<double, 3>> color;
   };
   std::vector<Lamp> lamps;
-  /// A surface the lamps light (one material, unshadowed): their intensities are fitted to its
-  /// shading. `albedo` per channel in (0, 1]; unset: 0.5 (intensities scale with 1 / albedo).
+  /// A surface the lamps light (one material; shadows cast by the scene of the distance map are
+  /// traced): their intensities are fitted to its shading. `albedo` per channel in (0, 1];
+  /// unset: 0.5 (intensities scale with 1 / albedo).
   struct LampPatch {
     std::vector<PixelPoint> polygon;  ///< >= 3 points
     std::optional<std::array<double, 3>> albedo;

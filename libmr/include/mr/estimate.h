@@ -138,7 +138,7 @@ struct SceneEstimate {
   /// pixels (else left unset: mr fog estimates it with the dark channel prior);
   /// with lamps and lamp_patches annotated, lighting.lamps: one per marked lamp, lifted to 3D
   /// with the distance map, its intensity fitted to the patches' shading (photo/lamps.h);
-  /// everything else at FogScene's defaults.
+  /// scene.camera: the camera estimated with; everything else at FogScene's defaults.
   FogScene scene;
   /// One line per estimate made, for a person to read ("horizon: annotated, pitch -2.1 deg").
   std::vector<std::string> notes;

@@ -123,12 +123,28 @@ struct RenderSettings {
   int threads = 0;            ///< 0: all cores
 };
 
+/// The intrinsics of the camera a scene was made for (what `mr estimate` found: EXIF, the
+/// vanishing points or a default), so that a scene reused with another run keeps its focal
+/// length. A focal length in pixels is tied to an image size, so the size is kept with it: for a
+/// photo of another size with the same aspect ratio (a resized copy) the focal length and the
+/// principal point scale with it (mr::camera_for_image in mr/scene_json.h).
+struct SceneCamera {
+  int width = 0, height = 0;  ///< the image size (pixels) focal_px and principal_point_px refer to
+  double focal_px = 0;        ///< > 0
+  /// In pixels of that image ((0, 0) = top-left corner of the top-left pixel); nullopt: the
+  /// image's centre.
+  std::optional<std::array<double, 2>> principal_point_px;
+};
+
 /// A whole fog scene (the JSON scene document, docs/scene.md, holds the same).
 struct FogScene {
   CameraPose pose;
   Medium medium;
   Lighting lighting;
   RenderSettings render;
+  /// The camera the scene was estimated or rendered for; nullopt: none recorded (the photo's
+  /// EXIF or a default then decides, as before).
+  std::optional<SceneCamera> camera;
 };
 
 }  // namespace mr

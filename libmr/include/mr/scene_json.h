@@ -3,7 +3,7 @@
 // The format (every key, unit, default and range) is documented in docs/scene.md.
 //
 //   {"format": "libmr-scene", "version": 1, "camera_pose": {...}, "medium": {...},
-//    "lighting": {...}, "render": {...}}
+//    "lighting": {...}, "render": {...}, "camera": {...}}   ("camera" optional)
 //
 // Missing keys take the FogScene defaults, so {"format": "libmr-scene", "version": 1} is a
 // complete scene. Unknown keys are errors (they are usually typos).
@@ -19,8 +19,9 @@ namespace mr {
 /// The value of the document's "format" key.
 inline constexpr const char* kSceneFormatName = "libmr-scene";
 /// The newest document version this libmr reads and the one it writes. Readers accept every
-/// version from 1 up to this one.
-inline constexpr int kSceneFormatVersion = 1;
+/// version from 1 up to this one. Version 2 added the optional "camera" (the rest of the
+/// format, defaults included, is version 1's).
+inline constexpr int kSceneFormatVersion = 2;
 
 /// Parses a scene document. `source_name` (usually the file name) starts every error message.
 /// The result has passed validate_scene.
@@ -37,6 +38,18 @@ FogScene scene_from_json(const std::string& text, const std::string& source_name
 /// Throws mr::Error(invalid_argument) from validate_scene for a scene that could not be read
 /// back (a NaN, say), so a document written by libmr is always one it accepts.
 std::string scene_to_json(const FogScene& scene);
+
+/// The camera of a photo `width` x `height` from a scene's recorded camera: the recorded one when
+/// the size is the same (bit for bit); for a resized photo of the same aspect ratio (within 1 %)
+/// the focal length scales with the width and the principal point with each axis. Throws
+/// mr::Error(invalid_argument) naming both sizes when the aspect ratio differs (a rotated or
+/// cropped photo: the recorded focal length does not carry over), or for an invalid camera or
+/// size.
+Camera camera_for_image(const SceneCamera& camera, int width, int height);
+
+/// The SceneCamera recording `camera` (its size, focal length and principal point; the principal
+/// point is left out when it is the image's centre).
+SceneCamera scene_camera(const Camera& camera);
 
 /// Reads and parses a scene file; errors name the file as given.
 /// Throws mr::Error: io when the file cannot be read, invalid_argument for its content.
