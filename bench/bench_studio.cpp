@@ -186,6 +186,61 @@ int main(int argc, char** argv) {
         "(worst %.1f, target <= 50), normal pass %.1f ms; backend %s\n",
         changes, m_first, m_gap, worst_gap, m_normal, w.preview()->backend.c_str());
 
+    // An edit while a normal pass is running (a user who keeps dragging after the draft showed):
+    // the time from the edit to its first pass, and the longest event-loop gap, with the running
+    // pass cancelled (mr::CancelToken) and, for comparison, left to finish; in the default scene
+    // (sky light only) and in the "Morning mist" preset (sun, shafts, wisps: longer passes).
+    const mr::FogScene default_scene = w.fogPanel()->scene();
+    for (const bool mist : {false, true})
+      for (bool cancel : {false, true}) {
+        if (mist) {
+          w.fogPanel()->applyPreset(mrstudio::FogPanel::Preset::morning_mist);
+          if (!wait_for([&] { return settled(w); }, 300000))
+            throw mr::Error(mr::ErrorCode::io, "no preview of the preset within 300 s");
+        }
+        w.setCancelStaleRenders(cancel);
+        std::vector<double> firsts, gaps_during, jobs;
+        for (int i = 0; i < (changes + 1) / 2; ++i) {
+          wait_for([] { return false; }, 50);
+          const int before = w.generation();
+          QTimer::singleShot(0, [&] { slider->setValue(base + 3 + i); });
+          // The draft of that edit shown, its normal pass started: wait 100 ms into it.
+          if (!wait_for(
+                  [&] {
+                    return w.preview() && w.preview()->generation == before + 1 && w.rendering();
+                  },
+                  300000))
+            throw mr::Error(mr::ErrorCode::io, "no draft within 300 s");
+          wait_for([] { return false; }, 100);
+          if (settled(w)) throw mr::Error(mr::ErrorCode::io, "normal pass done within 100 ms");
+          bool changed = false;
+          QTimer::singleShot(0, [&] {
+            first_ms = normal_ms = -1;
+            max_gap_ms = 0;
+            since_change.start();
+            target_generation = w.generation() + 1;
+            slider->setValue(base - 3 - i);
+            changed = true;
+          });
+          if (!wait_for([&] { return changed && normal_ms >= 0 && settled(w); }, 300000))
+            throw mr::Error(mr::ErrorCode::io, "no normal pass within 300 s");
+          firsts.push_back(first_ms);
+          gaps_during.push_back(max_gap_ms);
+          jobs.push_back(first_job_ms);
+        }
+        std::printf(
+            "%s: edit during a normal pass, running pass %s: first pass of the new edit after %.1f "
+            "ms (median of %zu; worst %.1f; that pass's own job %.1f ms), longest event-loop gap "
+            "%.1f ms (worst %.1f)\n",
+            mist ? "morning mist" : "default scene", cancel ? "cancelled" : "left to finish",
+            median(firsts), firsts.size(), *std::max_element(firsts.begin(), firsts.end()),
+            median(jobs), median(gaps_during),
+            *std::max_element(gaps_during.begin(), gaps_during.end()));
+      }
+    std::printf("preview renders cancelled: %d\n", w.cancelledRenders());
+    w.fogPanel()->setScene(default_scene);
+    w.setCancelStaleRenders(true);
+
     // An annotation edit: a horizon set through the editor's undo stack (as two clicks do),
     // re-estimated on the worker (mr::estimate_scene on the 12 MP photo), then the preview of
     // the new pose. The UI thread's longest gap over the whole of it.

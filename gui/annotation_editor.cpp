@@ -68,6 +68,12 @@ std::vector<mr::PixelPoint*> item_points(mr::Annotations& a, const ItemRef& item
     case Kind::lamp_patch:
       for (auto& p : a.lamp_patches.at(item.index).polygon) out.push_back(&p);
       break;
+    case Kind::interior_box:
+      if (a.interior_box) {
+        for (auto& p : a.interior_box->floor) out.push_back(&p);
+        if (a.interior_box->ceiling_point) out.push_back(&*a.interior_box->ceiling_point);
+      }
+      break;
     case Kind::camera_height:
     case Kind::none:
       break;
@@ -106,6 +112,7 @@ std::vector<ItemRef> annotation_items(const mr::Annotations& a) {
   for (int i = 0; i < int(a.distance_hints.size()); ++i) items.push_back({Kind::distance_hint, i});
   for (int i = 0; i < int(a.lamps.size()); ++i) items.push_back({Kind::lamp, i});
   for (int i = 0; i < int(a.lamp_patches.size()); ++i) items.push_back({Kind::lamp_patch, i});
+  if (a.interior_box) items.push_back({Kind::interior_box, 0});
   return items;
 }
 
@@ -129,6 +136,13 @@ QString item_label(const mr::Annotations& a, const ItemRef& item) {
       return QObject::tr("Lamp %1").arg(n);
     case Kind::lamp_patch:
       return QObject::tr("Lamp patch %1").arg(n);
+    case Kind::interior_box: {
+      if (!a.interior_box) break;
+      // Short: the list is narrow; the ceiling height is in the panel above it.
+      QString label = QObject::tr("Room, %1 walls").arg(int(a.interior_box->floor.size()) - 1);
+      if (a.interior_box->ceiling_point) label += QObject::tr(" + ceiling point");
+      return label;
+    }
     case Kind::none:
       break;
   }
@@ -225,6 +239,9 @@ bool AnnotationEditor::deleteSelected() {
     case Kind::lamp_patch:
       a.lamp_patches.erase(a.lamp_patches.begin() + i);
       break;
+    case Kind::interior_box:
+      a.interior_box.reset();
+      break;
     case Kind::none:
       break;
   }
@@ -250,6 +267,17 @@ void AnnotationEditor::setCameraHeight(std::optional<double> metres) {
   a.camera_height_m = metres;
   if (metres) a.known_length.reset();
   edit(a, metres ? tr("Camera height %1 m").arg(*metres) : tr("No camera height"));
+}
+
+void AnnotationEditor::setCeilingHeight(std::optional<double> metres) {
+  if (!annotations_.interior_box) {
+    if (metres) emit rejected(tr("Draw the interior box's floor first (Floor tool)"));
+    return;
+  }
+  if (metres == annotations_.interior_box->ceiling_height_m) return;
+  mr::Annotations a = annotations_;
+  a.interior_box->ceiling_height_m = metres;
+  edit(a, metres ? tr("Ceiling height %1 m").arg(*metres) : tr("No ceiling height"));
 }
 
 ItemRef AnnotationEditor::hitItem(const mr::PixelPoint& p, double scale, int* handle) const {
@@ -278,6 +306,10 @@ ItemRef AnnotationEditor::hitItem(const mr::PixelPoint& p, double scale, int* ha
       if (segment_dist(p, *points[0], *points[1]) < r ||
           segment_dist(p, *points[1], *points[2]) < r)
         return item;
+    } else if (item.kind == Kind::interior_box) {
+      const auto& floor = a.interior_box->floor;
+      for (std::size_t k = 0; k + 1 < floor.size(); ++k)
+        if (segment_dist(p, floor[k], floor[k + 1]) < r) return item;
     }
   }
   for (const ItemRef& item : items) {
@@ -316,6 +348,16 @@ bool AnnotationEditor::press(const mr::PixelPoint& p, double scale) {
       if (edit(a, tr("Add lamp"))) select({Kind::lamp, int(a.lamps.size()) - 1});
       return true;
     }
+    case Tool::ceiling_point: {
+      if (!annotations_.interior_box) {
+        emit rejected(tr("Draw the interior box's floor first (Floor tool)"));
+        return true;
+      }
+      mr::Annotations a = annotations_;
+      a.interior_box->ceiling_point = p;
+      if (edit(a, tr("Set ceiling point"))) select({Kind::interior_box, 0});
+      return true;
+    }
     default:
       // A click on the last point again (a double-click's first press) adds nothing.
       if (!pending_.empty() && dist(pending_.back(), p) < 0.5 / scale) return true;
@@ -349,10 +391,22 @@ void AnnotationEditor::finishPending() {
 
 void AnnotationEditor::closePolygon() {
   if (pending_.size() < 3) {
-    emit rejected(tr("A polygon needs at least 3 points"));
+    emit rejected(tool_ == Tool::interior_floor
+                      ? tr("The floor's edge needs at least 3 points (2 walls)")
+                      : tr("A polygon needs at least 3 points"));
     return;
   }
   mr::Annotations a = annotations_;
+  if (tool_ == Tool::interior_floor) {
+    // A new floor replaces the old one; the ceiling's height and point are kept.
+    mr::Annotations::InteriorBox box = a.interior_box.value_or(mr::Annotations::InteriorBox{});
+    box.floor = pending_;
+    a.interior_box = box;
+    pending_.clear();
+    if (edit(a, tr("Set interior box floor"))) select({Kind::interior_box, 0});
+    emit pendingChanged();
+    return;
+  }
   if (tool_ == Tool::plane) {
     a.planes.push_back({pending_, std::nullopt});
     pending_.clear();
@@ -394,7 +448,7 @@ bool AnnotationEditor::release(const mr::PixelPoint& p, double scale) {
 }
 
 bool AnnotationEditor::doubleClick(const mr::PixelPoint& p, double scale) {
-  if (tool_ == Tool::plane || tool_ == Tool::lamp_patch) {
+  if (tool_ == Tool::plane || tool_ == Tool::lamp_patch || tool_ == Tool::interior_floor) {
     // The double-click's own point, unless its first press added it already.
     if (pending_.empty() || dist(pending_.back(), p) >= 0.5 / scale) pending_.push_back(p);
     closePolygon();
@@ -405,7 +459,7 @@ bool AnnotationEditor::doubleClick(const mr::PixelPoint& p, double scale) {
 
 bool AnnotationEditor::key(int key) {
   if ((key == Qt::Key_Return || key == Qt::Key_Enter) &&
-      (tool_ == Tool::plane || tool_ == Tool::lamp_patch)) {
+      (tool_ == Tool::plane || tool_ == Tool::lamp_patch || tool_ == Tool::interior_floor)) {
     closePolygon();
     return true;
   }
@@ -450,7 +504,7 @@ void AnnotationEditor::paint(QPainter& painter, const QTransform& to_view) const
   };
   const mr::Annotations& a = annotations_;
   const QColor horizon_c(255, 60, 60), length_c(0, 220, 255), plane_c(255, 215, 0),
-      hint_c(0, 255, 255), shadow_c(255, 0, 255), lamp_c(255, 150, 20);
+      hint_c(0, 255, 255), shadow_c(255, 0, 255), lamp_c(255, 150, 20), room_c(120, 255, 120);
   auto sel = [&](Kind k, int i) { return selection_ == ItemRef{k, i}; };
   for (int i = 0; i < int(a.planes.size()); ++i) {
     polygon(a.planes[i].polygon, plane_c, sel(Kind::plane, i));
@@ -501,13 +555,38 @@ void AnnotationEditor::paint(QPainter& painter, const QTransform& to_view) const
     painter.drawEllipse(v(a.lamps[i].pixel), 9, 9);
     handles({a.lamps[i].pixel}, lamp_c, s);
   }
+  if (a.interior_box) {
+    // The floor's edge (each segment is one wall's base) and, dotted, the ceiling point's
+    // vertical to the floor's edge below it: enough to see what the room is made of.
+    const auto& box = *a.interior_box;
+    const bool s = sel(Kind::interior_box, 0);
+    QPolygonF floor;
+    for (const auto& p : box.floor) floor << v(p);
+    pen(room_c, s);
+    painter.drawPolyline(floor);
+    handles(box.floor, room_c, s);
+    if (box.ceiling_point) {
+      const QPointF c = v(*box.ceiling_point);
+      pen(room_c, s, Qt::DotLine);
+      painter.drawLine(c - QPointF(12, 0), c + QPointF(12, 0));
+      handles({*box.ceiling_point}, room_c, s);
+      painter.setPen(room_c);
+      painter.drawText(c + QPointF(8, -8), tr("ceiling"));
+    }
+    if (box.ceiling_height_m && !box.floor.empty()) {
+      painter.setPen(room_c);
+      painter.drawText(v(box.floor[box.floor.size() / 2]) + QPointF(8, -8),
+                       tr("ceiling %1 m").arg(*box.ceiling_height_m, 0, 'g', 3));
+    }
+  }
   // The item being drawn, with a rubber band to the mouse.
   if (!pending_.empty()) {
-    QColor c = tool_ == Tool::horizon        ? horizon_c
-               : tool_ == Tool::known_length ? length_c
-               : tool_ == Tool::shadow_pair  ? shadow_c
-               : tool_ == Tool::plane        ? plane_c
-                                             : lamp_c;
+    QColor c = tool_ == Tool::horizon          ? horizon_c
+               : tool_ == Tool::known_length   ? length_c
+               : tool_ == Tool::shadow_pair    ? shadow_c
+               : tool_ == Tool::plane          ? plane_c
+               : tool_ == Tool::interior_floor ? room_c
+                                               : lamp_c;
     painter.setPen(QPen(c, 2, Qt::DashLine));
     QPolygonF line;
     for (const auto& p : pending_) line << v(p);

@@ -2,7 +2,9 @@
 // docs/annotations.md) with the mouse over the image view. Horizon (2 clicks), known length
 // (2 clicks, its length from knownLength()), shadow pairs (3 clicks: caster top, caster foot,
 // shadow tip: the three points the JSON needs), lamps (1 click), vertical-plane and lamp-patch
-// polygons (clicks; double-click or Enter closes, Escape cancels). The select tool picks an
+// polygons (clicks; double-click or Enter closes, Escape cancels), an interior box (the floor's
+// edge by clicks, double-click or Enter finishes; one click for the ceiling point; its ceiling
+// height from setCeilingHeight). The select tool picks an
 // item (click on or near it), moves one of its points (drag a handle) and deletes it (Delete).
 // Every edit is one command on the undo stack: a snapshot of the document before and after.
 #pragma once
@@ -20,7 +22,18 @@ class QUndoStack;
 
 namespace mrstudio {
 
-enum class Tool { navigate, select, horizon, known_length, shadow_pair, lamp, plane, lamp_patch };
+enum class Tool {
+  navigate,
+  select,
+  horizon,
+  known_length,
+  shadow_pair,
+  lamp,
+  plane,
+  lamp_patch,
+  interior_floor,  ///< clicks where walls meet the floor; double-click or Enter finishes
+  ceiling_point,   ///< one click where the ceiling meets a wall (needs the floor first)
+};
 
 /// One annotation of the document: its kind and its index in that kind's list (0 for the
 /// single horizon / known length / camera height).
@@ -34,7 +47,8 @@ struct ItemRef {
     distance_hint,
     shadow_pair,
     lamp,
-    lamp_patch
+    lamp_patch,
+    interior_box  ///< its floor points, then its ceiling point
   };
   Kind kind = Kind::none;
   int index = 0;
@@ -81,6 +95,9 @@ class AnnotationEditor : public QObject {
   /// Camera height above the ground (metres) or none (estimated from the known length or the
   /// default); undoable. Clears the known length (the JSON allows one of the two).
   void setCameraHeight(std::optional<double> metres);
+  /// The interior box's ceiling height above the floor (metres) or none; undoable. Rejected
+  /// (rejected(message)) without a box.
+  void setCeilingHeight(std::optional<double> metres);
   /// Offset (metres) of new lamps in front of the surface they are seen on.
   double lampOffset() const { return lamp_offset_m_; }
   void setLampOffset(double metres) { lamp_offset_m_ = metres; }

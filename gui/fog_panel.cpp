@@ -12,6 +12,7 @@
 #include <QPushButton>
 #include <QSignalBlocker>
 #include <QSlider>
+#include <QSpinBox>
 #include <QVBoxLayout>
 #include <algorithm>
 #include <cmath>
@@ -28,6 +29,14 @@ float srgb_to_linear(double v) {
 double linear_to_srgb(double v) {
   v = std::clamp(v, 0.0, 1.0);
   return v <= 0.0031308 ? v * 12.92 : 1.055 * std::pow(v, 1 / 2.4) - 0.055;
+}
+
+// Spin boxes that share a row (tint, seed) share its width instead of asking for room for their
+// widest value: the panel (and its dock) stays narrow.
+template <class SpinBox>
+void share_row(SpinBox* s, const QString& typical) {
+  s->setSizePolicy(QSizePolicy::Ignored, QSizePolicy::Fixed);
+  s->setMinimumWidth(s->fontMetrics().horizontalAdvance(typical) + 28);
 }
 
 QDoubleSpinBox* spin(double lo, double hi, double value, int decimals, const QString& suffix,
@@ -86,6 +95,24 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   visibility_spin_->setObjectName("visibilitySpin");
   medium_form->addRow(tr("Visibility"), visibility_spin_);
   medium_form->addRow(visibility_slider_);
+  {
+    // Coloured extinction: the visibility sets the mean sigma_t, the tint each channel's share.
+    auto* tint_row = new QHBoxLayout;
+    const char* names[] = {"R", "G", "B"};
+    for (int c = 0; c < 3; ++c) {
+      tint_[c] = spin(0.05, 3, 1, 2, QString(), 0.05);
+      tint_[c]->setObjectName(QString("tint%1").arg(names[c]));
+      tint_[c]->setPrefix(QString("%1 ").arg(names[c]));
+      share_row(tint_[c], QStringLiteral("G 1.00"));
+      tint_[c]->setToolTip(
+          tr("Extinction of this channel relative to the three's mean (1 1 1: "
+             "grey fog; > 1 in blue: a yellowish haze)"));
+      tint_row->addWidget(tint_[c]);
+    }
+    // Its own full-width row under a label: three boxes beside a label would widen the panel.
+    medium_form->addRow(new QLabel(tr("Extinction tint (R, G, B)")));
+    medium_form->addRow(tint_row);
+  }
   g_spin_ = spin(-0.95, 0.95, 0.0, 2, QString(), 0.05);
   g_spin_->setToolTip(
       tr("Henyey-Greenstein asymmetry: > 0 scatters forward (bright halo "
@@ -95,6 +122,10 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   top_spin_ = spin(0.1, 5000, 10, 1, tr(" m"), 1);
   top_spin_->setToolTip(tr("Height above the ground where the fog ends"));
   medium_form->addRow(top_enabled_, top_spin_);
+  bottom_enabled_ = new QCheckBox(tr("Fog layer bottom"));
+  bottom_spin_ = spin(-5000, 5000, 0, 1, tr(" m"), 1);
+  bottom_spin_->setToolTip(tr("Height above the ground where the fog starts (a lifted layer)"));
+  medium_form->addRow(bottom_enabled_, bottom_spin_);
   albedo_spin_ = spin(0, 1, 1, 2, QString(), 0.05);
   albedo_spin_->setToolTip(
       tr("Single-scattering albedo: the fraction of the light the fog removes that it "
@@ -106,6 +137,17 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   noise_scale_->setToolTip(tr("Size of the largest wisps"));
   medium_form->addRow(tr("Wisps"), noise_amplitude_);
   medium_form->addRow(tr("Wisp size"), noise_scale_);
+  noise_octaves_ = new QSpinBox;
+  noise_octaves_->setRange(1, 8);
+  noise_octaves_->setKeyboardTracking(false);
+  noise_octaves_->setToolTip(tr("Octaves of noise: more adds finer wisps"));
+  noise_seed_ = new QSpinBox;
+  noise_seed_->setRange(0, std::numeric_limits<int>::max());
+  noise_seed_->setKeyboardTracking(false);
+  noise_seed_->setToolTip(tr("Another seed gives other wisps of the same kind"));
+  share_row(noise_seed_, QStringLiteral("123456"));
+  medium_form->addRow(tr("Wisp octaves"), noise_octaves_);
+  medium_form->addRow(tr("Wisp seed"), noise_seed_);
   layout->addWidget(medium);
 
   height_box_ = new QGroupBox(tr("Height fog"));
@@ -151,6 +193,9 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   sun_irradiance_->setToolTip(
       tr("Sunlight above the fog (scene-linear, perpendicular to the rays)"));
   sun_form->addRow(tr("Irradiance"), sun_irradiance_);
+  sun_radius_ = spin(0.01, 5, 0.27, 2, tr(" °"), 0.05);
+  sun_radius_->setToolTip(tr("Angular radius of the sun's disk: larger gives softer shaft edges"));
+  sun_form->addRow(tr("Disk radius"), sun_radius_);
   layout->addWidget(sun_box_);
 
   lamp_box_ = new QGroupBox(tr("Lamps"));
@@ -163,6 +208,35 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   lamp_intensity_->setToolTip(tr(
       "Radiant intensity of the selected lamp (scene-linear per steradian; its colour is kept)"));
   lamp_form->addRow(tr("Intensity"), lamp_intensity_);
+  {
+    const char* axes[] = {"x", "y", "z"};
+    const QString labels[] = {tr("Right (x)"), tr("Height (y)"), tr("Ahead (z)")};
+    for (int k = 0; k < 3; ++k) {
+      lamp_position_[k] = spin(-10000, 10000, 0, 2, tr(" m"), 0.1);
+      lamp_position_[k]->setObjectName(QString("lamp_%1").arg(axes[k]));
+      lamp_form->addRow(labels[k], lamp_position_[k]);
+    }
+    lamp_position_[0]->setToolTip(tr("Metres to the right of the camera (at yaw 0)"));
+    lamp_position_[1]->setToolTip(tr("Height above the ground, metres"));
+    lamp_position_[2]->setToolTip(tr("Metres ahead of the camera (at yaw 0)"));
+  }
+  lamp_spot_ = new QCheckBox(tr("Spot (cone)"));
+  lamp_spot_->setToolTip(tr("A cone of light (its axis kept; a new spot points down)"));
+  lamp_form->addRow(lamp_spot_);
+  lamp_inner_ = spin(0, 179, 30, 1, tr(" °"), 5);
+  lamp_inner_->setToolTip(tr("Half-angle of full intensity"));
+  lamp_outer_ = spin(0.1, 179.9, 45, 1, tr(" °"), 5);
+  lamp_outer_->setToolTip(tr("Half-angle where the light has faded to 0"));
+  lamp_form->addRow(tr("Inner angle"), lamp_inner_);
+  lamp_form->addRow(tr("Outer angle"), lamp_outer_);
+  add_lamp_ = new QPushButton(tr("Add lamp"));
+  add_lamp_->setToolTip(tr("A lamp 4 m up, 10 m ahead (or use the Lamp annotation tool)"));
+  remove_lamp_ = new QPushButton(tr("Remove"));
+  auto* lamp_buttons = new QHBoxLayout;
+  lamp_buttons->addWidget(add_lamp_);
+  lamp_buttons->addWidget(remove_lamp_);
+  lamp_buttons->addStretch(1);
+  lamp_form->addRow(lamp_buttons);
   layout->addWidget(lamp_box_);
   layout->addStretch(1);
 
@@ -187,8 +261,54 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
             changed();
           });
   for (QDoubleSpinBox* s : {g_spin_, top_spin_, sky_brightness_, sun_irradiance_, albedo_spin_,
-                            height_base_, height_scale_, noise_amplitude_, noise_scale_})
+                            height_base_, height_scale_, noise_amplitude_, noise_scale_,
+                            bottom_spin_, sun_radius_, tint_[0], tint_[1], tint_[2]})
     connect(s, qOverload<double>(&QDoubleSpinBox::valueChanged), this, changed);
+  for (QSpinBox* s : {noise_octaves_, noise_seed_})
+    connect(s, qOverload<int>(&QSpinBox::valueChanged), this, changed);
+  connect(bottom_enabled_, &QCheckBox::toggled, this, changed);
+  // The selected lamp's controls write into it.
+  auto lamp_edited = [this, changed] {
+    const int row = lamp_list_->currentRow();
+    if (updating_ || row < 0 || row >= int(lamps_.size())) return;
+    mr::Lamp& lamp = lamps_[row];
+    lamp.position_m = {lamp_position_[0]->value(), lamp_position_[1]->value(),
+                       lamp_position_[2]->value()};
+    if (lamp_spot_->isChecked()) {
+      lamp.outer_angle_deg = lamp_outer_->value();
+      lamp.inner_angle_deg = std::min(lamp_inner_->value(), lamp.outer_angle_deg);
+    } else {
+      lamp.inner_angle_deg = lamp.outer_angle_deg = 180;
+    }
+    const QSignalBlocker block(lamp_list_);
+    const mr::Vec3& p = lamp.position_m;
+    lamp_list_->item(row)->setText(tr("Lamp %1 at (%2, %3, %4) m")
+                                       .arg(row + 1)
+                                       .arg(p.x, 0, 'f', 1)
+                                       .arg(p.y, 0, 'f', 1)
+                                       .arg(p.z, 0, 'f', 1));
+    updateEnabled();
+    changed();
+  };
+  for (QDoubleSpinBox* s :
+       {lamp_position_[0], lamp_position_[1], lamp_position_[2], lamp_inner_, lamp_outer_})
+    connect(s, qOverload<double>(&QDoubleSpinBox::valueChanged), this, lamp_edited);
+  connect(lamp_spot_, &QCheckBox::toggled, this, lamp_edited);
+  connect(add_lamp_, &QPushButton::clicked, this, [this, changed] {
+    mr::Lamp lamp;
+    lamp.position_m = {0, 4, 10};
+    lamps_.push_back(lamp);
+    refreshLamps();
+    lamp_list_->setCurrentRow(int(lamps_.size()) - 1);
+    changed();
+  });
+  connect(remove_lamp_, &QPushButton::clicked, this, [this, changed] {
+    const int row = lamp_list_->currentRow();
+    if (row < 0 || row >= int(lamps_.size())) return;
+    lamps_.erase(lamps_.begin() + row);
+    refreshLamps();
+    changed();
+  });
   for (QDoubleSpinBox* s : {sun_azimuth_, sun_elevation_})
     connect(s, qOverload<double>(&QDoubleSpinBox::valueChanged), this, [this, changed] {
       sun_dial_->setSun(sun_azimuth_->value(), sun_elevation_->value());
@@ -205,12 +325,7 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   for (QCheckBox* c : {top_enabled_, sky_auto_}) connect(c, &QCheckBox::toggled, this, changed);
   connect(sun_box_, &QGroupBox::toggled, this, changed);
   connect(height_box_, &QGroupBox::toggled, this, changed);
-  connect(lamp_list_, &QListWidget::currentRowChanged, this, [this](int row) {
-    if (row < 0 || row >= int(lamps_.size())) return;
-    const QSignalBlocker block(lamp_intensity_);
-    const mr::Rgb& i = lamps_[row].intensity_per_sr;
-    lamp_intensity_->setValue((double(i[0]) + i[1] + i[2]) / 3);
-  });
+  connect(lamp_list_, &QListWidget::currentRowChanged, this, &FogPanel::showLamp);
   connect(lamp_intensity_, qOverload<double>(&QDoubleSpinBox::valueChanged), this,
           [this, changed](double v) {
             const int row = lamp_list_->currentRow();
@@ -306,6 +421,27 @@ void FogPanel::applyPreset(Preset preset) {
   preset_box_->setCurrentIndex(int(preset) + 1);  // sceneChanged resets it to Custom
 }
 
+void FogPanel::showLamp(int row) {
+  if (row < 0 || row >= int(lamps_.size())) return;
+  const bool was_updating = updating_;
+  updating_ = true;
+  const QSignalBlocker block(lamp_intensity_);
+  const mr::Lamp& lamp = lamps_[row];
+  const mr::Rgb& i = lamp.intensity_per_sr;
+  lamp_intensity_->setValue((double(i[0]) + i[1] + i[2]) / 3);
+  lamp_position_[0]->setValue(lamp.position_m.x);
+  lamp_position_[1]->setValue(lamp.position_m.y);
+  lamp_position_[2]->setValue(lamp.position_m.z);
+  const bool spot = lamp.outer_angle_deg < 180;
+  lamp_spot_->setChecked(spot);
+  if (spot) {
+    lamp_outer_->setValue(lamp.outer_angle_deg);
+    lamp_inner_->setValue(lamp.inner_angle_deg);
+  }
+  updateEnabled();
+  updating_ = was_updating;
+}
+
 void FogPanel::refreshLamps() {
   const int row = std::max(0, lamp_list_->currentRow());
   lamp_list_->clear();
@@ -317,8 +453,12 @@ void FogPanel::refreshLamps() {
                             .arg(p.y, 0, 'f', 1)
                             .arg(p.z, 0, 'f', 1));
   }
-  lamp_box_->setVisible(!lamps_.empty());
-  if (!lamps_.empty()) lamp_list_->setCurrentRow(std::min(row, int(lamps_.size()) - 1));
+  lamp_list_->setVisible(!lamps_.empty());
+  if (!lamps_.empty()) {
+    lamp_list_->setCurrentRow(std::min(row, int(lamps_.size()) - 1));
+    showLamp(lamp_list_->currentRow());
+  }
+  updateEnabled();
 }
 
 void FogPanel::setSkyColor(const QColor& color) {
@@ -339,6 +479,14 @@ void FogPanel::updateEnabled() {
   top_spin_->setEnabled(top_enabled_->isChecked());
   sky_button_->setEnabled(!sky_auto_->isChecked());
   sky_brightness_->setEnabled(!sky_auto_->isChecked());
+  bottom_spin_->setEnabled(bottom_enabled_->isChecked());
+  const bool lamp = lamp_list_->currentRow() >= 0 && lamp_list_->currentRow() < int(lamps_.size());
+  for (QWidget* w :
+       std::initializer_list<QWidget*>{lamp_intensity_, lamp_position_[0], lamp_position_[1],
+                                       lamp_position_[2], lamp_spot_, remove_lamp_})
+    w->setEnabled(lamp);
+  lamp_inner_->setEnabled(lamp && lamp_spot_->isChecked());
+  lamp_outer_->setEnabled(lamp && lamp_spot_->isChecked());
 }
 
 void FogPanel::setVisibility(double metres) {
@@ -356,10 +504,17 @@ void FogPanel::setScene(const mr::FogScene& scene) {
   const double sigma = (double(s[0]) + s[1] + s[2]) / 3;
   const double v = sigma > 0 ? 3.912 / sigma : kMaxVisibility;
   visibility_spin_->setValue(v);
+  for (int c = 0; c < 3; ++c) tint_[c]->setValue(sigma > 0 ? s[c] / sigma : 1.0);
   visibility_slider_->setValue(sliderFromVisibility(v));
   g_spin_->setValue(scene.medium.g);
   top_enabled_->setChecked(std::isfinite(scene.medium.layer_top_m));
   if (std::isfinite(scene.medium.layer_top_m)) top_spin_->setValue(scene.medium.layer_top_m);
+  bottom_enabled_->setChecked(std::isfinite(scene.medium.layer_bottom_m));
+  if (std::isfinite(scene.medium.layer_bottom_m))
+    bottom_spin_->setValue(scene.medium.layer_bottom_m);
+  noise_octaves_->setValue(scene.medium.noise.octaves);
+  noise_seed_->setValue(int(std::min<std::uint32_t>(
+      scene.medium.noise.seed, std::uint32_t(std::numeric_limits<int>::max()))));
   sky_auto_->setChecked(!scene.lighting.sky_radiance);
   if (scene.lighting.sky_radiance) {
     const mr::Rgb& l = *scene.lighting.sky_radiance;
@@ -376,6 +531,7 @@ void FogPanel::setScene(const mr::FogScene& scene) {
       sun_elevation_->setValue(std::asin(std::clamp(d.y / n, -1.0, 1.0)) * 180 / M_PI);
       sun_azimuth_->setValue(std::atan2(d.x, d.z) * 180 / M_PI);
     }
+    sun_radius_->setValue(scene.lighting.sun->angular_radius_deg);
     sun_irradiance_->setValue((scene.lighting.sun->irradiance[0] +
                                scene.lighting.sun->irradiance[1] +
                                scene.lighting.sun->irradiance[2]) /
@@ -400,8 +556,15 @@ void FogPanel::setScene(const mr::FogScene& scene) {
 
 mr::FogScene FogPanel::scene() const {
   mr::FogScene scene = base_;
-  const float sigma = float(3.912 / visibility_spin_->value());
-  scene.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  const double sigma = 3.912 / visibility_spin_->value();
+  const double tint_mean = (tint_[0]->value() + tint_[1]->value() + tint_[2]->value()) / 3;
+  for (int c = 0; c < 3; ++c)
+    scene.medium.sigma_t_per_m[c] = float(sigma * tint_[c]->value() / tint_mean);
+  scene.medium.layer_bottom_m = bottom_enabled_->isChecked()
+                                    ? bottom_spin_->value()
+                                    : -std::numeric_limits<double>::infinity();
+  scene.medium.noise.octaves = noise_octaves_->value();
+  scene.medium.noise.seed = std::uint32_t(noise_seed_->value());
   scene.medium.g = g_spin_->value();
   scene.medium.layer_top_m =
       top_enabled_->isChecked() ? top_spin_->value() : std::numeric_limits<double>::infinity();
@@ -431,6 +594,7 @@ mr::FogScene FogPanel::scene() const {
     mr::Sun sun = base_.lighting.sun.value_or(mr::Sun{});
     sun.direction_to_sun =
         mr::direction_from_azimuth_elevation(sun_azimuth_->value(), sun_elevation_->value());
+    sun.angular_radius_deg = sun_radius_->value();
     const float e = float(sun_irradiance_->value());
     // Keep the base's colour when it had one; the spin box sets the mean.
     const double mean = (double(sun.irradiance[0]) + sun.irradiance[1] + sun.irradiance[2]) / 3;

@@ -1,9 +1,11 @@
 // The fog panel: presets; the medium (visibility on a log slider, metres; albedo; Henyey-
 // Greenstein g; the fog layer's top; exponential height fog base and scale height, metres;
 // noise wisps amplitude and size, metres); sky radiance (auto or a colour and a brightness);
-// the sun (on/off, on a sky dial and as azimuth / elevation, degrees, and irradiance); the
-// lamps (intensity per steradian of the selected one). It edits a mr::FogScene: scene() is the
-// base scene (setScene) with the panel's values written into it.
+// the sun (on/off, on a sky dial and as azimuth / elevation, degrees, irradiance, angular
+// radius); the fog layer's bottom and top (metres); wisp octaves and seed; a coloured extinction
+// (a tint: each channel's sigma_t relative to their mean); the lamps (add / remove; position,
+// metres; intensity per steradian; spot cone, inner and outer half-angles, degrees). It edits a
+// mr::FogScene: scene() is the base scene (setScene) with the panel's values written into it.
 #pragma once
 #include <QColor>
 #include <QWidget>
@@ -18,6 +20,7 @@ class QLabel;
 class QListWidget;
 class QPushButton;
 class QSlider;
+class QSpinBox;
 
 namespace mrstudio {
 
@@ -50,6 +53,24 @@ class FogPanel : public QWidget {
   QDoubleSpinBox* lampIntensitySpin() const { return lamp_intensity_; }
   QSlider* visibilitySlider() const { return visibility_slider_; }
   QDoubleSpinBox* visibilitySpin() const { return visibility_spin_; }
+  /// Extinction tint, R, G, B: each channel's sigma_t relative to their mean (normalised when
+  /// read back from a scene).
+  QDoubleSpinBox* tintSpin(int channel) const { return tint_[channel]; }
+  QCheckBox* bottomCheck() const { return bottom_enabled_; }
+  QDoubleSpinBox* bottomSpin() const { return bottom_spin_; }
+  QCheckBox* topCheck() const { return top_enabled_; }
+  QDoubleSpinBox* topSpin() const { return top_spin_; }
+  QSpinBox* octavesSpin() const { return noise_octaves_; }
+  QSpinBox* seedSpin() const { return noise_seed_; }
+  QGroupBox* sunBox() const { return sun_box_; }
+  QDoubleSpinBox* sunRadiusSpin() const { return sun_radius_; }
+  /// The selected lamp's position (metres, world: x right, y up, z ahead at yaw 0).
+  QDoubleSpinBox* lampPositionSpin(int axis) const { return lamp_position_[axis]; }
+  QCheckBox* lampSpotCheck() const { return lamp_spot_; }
+  QDoubleSpinBox* lampInnerSpin() const { return lamp_inner_; }
+  QDoubleSpinBox* lampOuterSpin() const { return lamp_outer_; }
+  QPushButton* addLampButton() const { return add_lamp_; }
+  QPushButton* removeLampButton() const { return remove_lamp_; }
 
   static constexpr double kMinVisibility = 5.0, kMaxVisibility = 50000.0;
   static constexpr int kSliderSteps = 1000;
@@ -63,6 +84,7 @@ class FogPanel : public QWidget {
   void updateEnabled();
   void updateSkyButton();
   void refreshLamps();
+  void showLamp(int row);  ///< the selected lamp's values into its controls
 
   mr::FogScene base_;
   QColor sky_color_{200, 205, 212};
@@ -90,6 +112,18 @@ class FogPanel : public QWidget {
   QGroupBox* lamp_box_;
   QListWidget* lamp_list_;
   QDoubleSpinBox* lamp_intensity_;
+  QDoubleSpinBox* tint_[3];
+  QCheckBox* bottom_enabled_;
+  QDoubleSpinBox* bottom_spin_;
+  QSpinBox* noise_octaves_;
+  QSpinBox* noise_seed_;
+  QDoubleSpinBox* sun_radius_;
+  QDoubleSpinBox* lamp_position_[3];
+  QCheckBox* lamp_spot_;
+  QDoubleSpinBox* lamp_inner_;
+  QDoubleSpinBox* lamp_outer_;
+  QPushButton* add_lamp_;
+  QPushButton* remove_lamp_;
   std::vector<mr::Lamp> lamps_;
 };
 

@@ -140,10 +140,11 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
   tools->setToolButtonStyle(Qt::ToolButtonTextOnly);
   tool_group_ = new QActionGroup(this);
   const std::pair<Tool, QString> tool_names[] = {
-      {Tool::navigate, tr("Pan")},       {Tool::select, tr("Select")},
-      {Tool::horizon, tr("Horizon")},    {Tool::known_length, tr("Length")},
-      {Tool::shadow_pair, tr("Shadow")}, {Tool::lamp, tr("Lamp")},
-      {Tool::plane, tr("Plane")},        {Tool::lamp_patch, tr("Lamp patch")}};
+      {Tool::navigate, tr("Pan")},         {Tool::select, tr("Select")},
+      {Tool::horizon, tr("Horizon")},      {Tool::known_length, tr("Length")},
+      {Tool::shadow_pair, tr("Shadow")},   {Tool::lamp, tr("Lamp")},
+      {Tool::plane, tr("Plane")},          {Tool::lamp_patch, tr("Lamp patch")},
+      {Tool::interior_floor, tr("Floor")}, {Tool::ceiling_point, tr("Ceiling")}};
   const char* tool_tips[] = {
       "Drag to pan (the middle button pans with every tool)",
       "Click an annotation to select it, drag a point to move it, Delete removes it",
@@ -154,7 +155,11 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
       "Click a lamp (it also needs a lamp patch: a surface it lights)",
       "Click the corners of a vertical wall or object standing on the ground; double-click or "
       "Enter closes",
-      "Click the corners of a surface lit by the lamps; double-click or Enter closes"};
+      "Click the corners of a surface lit by the lamps; double-click or Enter closes",
+      "Interior box: click where the walls meet the floor, in order along the floor's edge (each "
+      "two points span one wall); double-click or Enter finishes",
+      "Interior box: click where the ceiling meets a wall (or give the ceiling height in the "
+      "Annotations panel)"};
   int k = 0;
   for (const auto& [tool, name] : tool_names) {
     QAction* action = tools->addAction(name);
@@ -187,7 +192,12 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
   warning_label_->setStyleSheet("color: #a05000;");
   warning_label_->setContentsMargins(10, 0, 10, 0);
   warning_label_->setVisible(false);
-  statusBar()->addPermanentWidget(warning_label_);
+  // Not permanent: a tool's hint hides it for a while instead of being cut off by it (and it
+  // comes back when the hint goes).
+  statusBar()->addWidget(warning_label_);
+  connect(statusBar(), &QStatusBar::messageChanged, warning_label_, [this](const QString& message) {
+    warning_label_->setVisible(message.isEmpty() && has_warning_);
+  });
   statusBar()->addPermanentWidget(timing_label_);
   statusBar()->addPermanentWidget(backend_label_);
   statusBar()->addPermanentWidget(zoom_label_);
@@ -378,7 +388,10 @@ void MainWindow::requestPreview() {
   if (!document_) return;
   ++generation_;
   if (rendering_) {
-    render_pending_ = true;  // the job running now is stale; start the newest when it ends
+    // The job running now is stale: stop it (mr::fog returns within a row's work) and start the
+    // newest when it ends.
+    if (render_cancel_ && cancel_stale_renders_) render_cancel_->request();
+    render_pending_ = true;
     return;
   }
   startRender(mr::Quality::draft);
@@ -398,28 +411,37 @@ void MainWindow::startRender(mr::Quality quality) {
     const QSize display = view_->displayPixels();
     request.max_pixels = std::max(kDraftPixels, double(display.width()) * display.height());
   }
+  request.cancel = std::make_shared<mr::CancelToken>();
+  render_cancel_ = request.cancel;
   rendering_ = true;
   const mr::ColorConfig color = color_;
   QtConcurrent::run(&pool_, [this, request, color] {
     std::shared_ptr<PreviewResult> result;
     QString error;
+    bool cancelled = false;
     try {
       result = render_preview(request, color);
     } catch (const mr::Error& e) {
-      error = QString::fromStdString(e.what());
+      cancelled = e.code() == mr::ErrorCode::cancelled;
+      if (!cancelled) error = QString::fromStdString(e.what());
     } catch (const std::exception& e) {
       error = QString::fromStdString(e.what());
     }
     const int generation = request.generation;
     QMetaObject::invokeMethod(
-        this, [this, result, error, generation] { onRenderDone(result, error, generation); },
+        this,
+        [this, result, error, generation, cancelled] {
+          onRenderDone(result, error, generation, cancelled);
+        },
         Qt::QueuedConnection);
   });
 }
 
-void MainWindow::onRenderDone(std::shared_ptr<PreviewResult> result, QString error,
-                              int generation) {
+void MainWindow::onRenderDone(std::shared_ptr<PreviewResult> result, QString error, int generation,
+                              bool cancelled) {
   rendering_ = false;
+  render_cancel_.reset();
+  if (cancelled) ++cancelled_renders_;
   const bool current = generation == generation_;
   if (current && !error.isEmpty()) {
     // One box at a time: a slider drag over a bad value should not stack dialogs.
@@ -447,7 +469,8 @@ void MainWindow::onRenderDone(std::shared_ptr<PreviewResult> result, QString err
     QStringList warnings;
     for (const std::string& w : mr::scene_warnings(result->scene))
       warnings << QString::fromStdString(w);
-    warning_label_->setVisible(!warnings.isEmpty());
+    has_warning_ = !warnings.isEmpty();
+    warning_label_->setVisible(has_warning_ && statusBar()->currentMessage().isEmpty());
     if (!warnings.isEmpty()) {
       warning_label_->setText(tr("⚠ %1").arg(warnings.first().section(':', 0, 0)));
       warning_label_->setToolTip(warnings.join("\n\n"));
@@ -562,6 +585,20 @@ void MainWindow::buildAnnotationDock() {
   length_spin_->setToolTip(tr(
       "Length of the known-length line (Length tool): new ones get it, the selected one changes"));
   form->addRow(tr("Known length"), length_spin_);
+  ceiling_check_ = new QCheckBox(tr("Ceiling height"));
+  ceiling_check_->setObjectName("ceilingCheck");
+  ceiling_check_->setToolTip(
+      tr("Height of the interior box's ceiling above the floor (Floor "
+         "tool first); with a ceiling point it fixes the camera height"));
+  ceiling_spin_ = new QDoubleSpinBox;
+  ceiling_spin_->setObjectName("ceilingSpin");
+  ceiling_spin_->setRange(0.5, 100);
+  ceiling_spin_->setDecimals(2);
+  ceiling_spin_->setValue(2.5);
+  ceiling_spin_->setSuffix(tr(" m"));
+  ceiling_spin_->setKeyboardTracking(false);
+  ceiling_spin_->setEnabled(false);
+  form->addRow(ceiling_check_, ceiling_spin_);
   layout->addWidget(camera);
 
   auto* items = new QGroupBox(tr("Annotations"));
@@ -620,6 +657,13 @@ void MainWindow::buildAnnotationDock() {
   });
   connect(length_spin_, qOverload<double>(&QDoubleSpinBox::valueChanged), editor_,
           &AnnotationEditor::setKnownLength);
+  connect(ceiling_check_, &QCheckBox::toggled, this, [this](bool on) {
+    editor_->setCeilingHeight(on ? std::optional<double>(ceiling_spin_->value()) : std::nullopt);
+    refreshAnnotationList();  // rejected without a box: the check goes back
+  });
+  connect(ceiling_spin_, qOverload<double>(&QDoubleSpinBox::valueChanged), this, [this](double v) {
+    if (ceiling_check_->isChecked()) editor_->setCeilingHeight(v);
+  });
   connect(remove, &QPushButton::clicked, editor_, &AnnotationEditor::deleteSelected);
   connect(snap, &QPushButton::clicked, this, &MainWindow::snapSelectedPolygon);
   auto update_snap = [this, snap] {
@@ -638,7 +682,8 @@ void MainWindow::buildAnnotationDock() {
 void MainWindow::refreshAnnotationList() {
   const mr::Annotations& a = editor_->annotations();
   const QSignalBlocker block_list(annotation_list_), block_check(height_check_),
-      block_spin(height_spin_);
+      block_spin(height_spin_), block_ceiling_check(ceiling_check_),
+      block_ceiling_spin(ceiling_spin_);
   annotation_list_->clear();
   const auto items = annotation_items(a);
   for (const ItemRef& item : items) annotation_list_->addItem(item_label(a, item));
@@ -647,6 +692,12 @@ void MainWindow::refreshAnnotationList() {
   height_check_->setChecked(bool(a.camera_height_m));
   height_spin_->setEnabled(bool(a.camera_height_m));
   if (a.camera_height_m) height_spin_->setValue(*a.camera_height_m);
+  const std::optional<double> ceiling =
+      a.interior_box ? a.interior_box->ceiling_height_m : std::nullopt;
+  ceiling_check_->setChecked(bool(ceiling));
+  ceiling_check_->setEnabled(bool(a.interior_box));
+  ceiling_spin_->setEnabled(bool(ceiling));
+  if (ceiling) ceiling_spin_->setValue(*ceiling);
   if (a.known_length && editor_->selection().kind == ItemRef::Kind::known_length) {
     const QSignalBlocker block_length(length_spin_);
     length_spin_->setValue(a.known_length->length_m);
@@ -663,7 +714,9 @@ void MainWindow::setTool(Tool tool) {
                                 "Shadow: click the caster's top, its foot, then the shadow's tip",
                                 "Lamp: click the lamp",
                                 "Plane: click its corners, double-click or Enter to close",
-                                "Lamp patch: click its corners, double-click or Enter to close"};
+                                "Lamp patch: click its corners, double-click or Enter to close",
+                                "Floor: click where walls meet the floor; Enter finishes",
+                                "Ceiling: click where it meets a wall"};
   if (tool != Tool::navigate) statusBar()->showMessage(tr(hints[int(tool)]), 8000);
   view_->setFocus();
 }
@@ -1048,7 +1101,7 @@ void MainWindow::onSaveProject() {
 // ---- export ------------------------------------------------------------------------------
 
 void MainWindow::cancelExport() {
-  if (export_cancel_) *export_cancel_ = true;
+  if (export_cancel_) export_cancel_->request();
 }
 
 bool MainWindow::exportImage(const QString& path, const ExportSettings& settings,
@@ -1078,9 +1131,9 @@ bool MainWindow::exportImage(const QString& path, const ExportSettings& settings
   scene.render.quality = mr::Quality::normal;
   const mr::ColorConfig color = color_;
   // The render and the write run on the worker; the write goes through mr::write_image /
-  // write_exr_layers, which write a temporary file and rename it (atomic). A cancel before the
-  // write starts writes nothing; the flag is checked between the render and the write.
-  std::shared_ptr<std::atomic<bool>> cancelled = std::make_shared<std::atomic<bool>>(false);
+  // write_exr_layers, which write a temporary file and rename it (atomic). A cancel during the
+  // render stops mr::fog (within a row); one before the write starts writes nothing.
+  std::shared_ptr<mr::CancelToken> cancelled = std::make_shared<mr::CancelToken>();
   export_cancel_ = cancelled;
   std::shared_ptr<std::atomic<int>> stage = std::make_shared<std::atomic<int>>(0);
   QFuture<QString> job =
@@ -1088,8 +1141,8 @@ bool MainWindow::exportImage(const QString& path, const ExportSettings& settings
         try {
           mr::ScatteringLayers aovs;
           const mr::FogLayers layers =
-              mr::fog(doc->photo, doc->distance_m, doc->camera, scene, &aovs);
-          if (*cancelled) return QStringLiteral("cancelled");
+              mr::fog(doc->photo, doc->distance_m, doc->camera, scene, &aovs, cancelled.get());
+          if (cancelled->requested()) return QStringLiteral("cancelled");
           stage->store(1);
           if (settings.aovs) {
             const mr::Image composite_rgb = layers.composite.select_channels(std::array{0, 1, 2});
@@ -1112,6 +1165,9 @@ bool MainWindow::exportImage(const QString& path, const ExportSettings& settings
           }
           stage->store(2);
           return {};
+        } catch (const mr::Error& e) {
+          if (e.code() == mr::ErrorCode::cancelled) return QStringLiteral("cancelled");
+          return QString::fromStdString(e.what());
         } catch (const std::exception& e) {
           return QString::fromStdString(e.what());
         }

@@ -1,6 +1,7 @@
 // mr-studio's main window: the photo view with a before/after split, the layer switcher, the
 // fog panel, the live preview (rendered on a worker thread: a draft pass on <= 0.25 MP, then a
-// normal pass at the view's resolution; stale results are discarded by a generation counter),
+// normal pass at the view's resolution; a new edit cancels the running pass through its
+// mr::CancelToken, and stale results are discarded by a generation counter),
 // project files and export. Errors are shown in non-modal message boxes (and errorShown).
 // The annotation tools (annotation_editor.h) edit the photo's annotations over the view; every
 // edit is undoable and re-estimates the scene (mr::estimate_scene) on the worker, which updates
@@ -114,6 +115,11 @@ class MainWindow : public QMainWindow {
   std::shared_ptr<const PreviewResult> preview() const { return preview_; }
   bool rendering() const { return rendering_; }
   int generation() const { return generation_; }
+  /// Preview renders stopped by a newer edit so far (mr::CancelToken).
+  int cancelledRenders() const { return cancelled_renders_; }
+  /// Whether a new edit cancels the running preview render (default) or lets it finish and
+  /// drops its result; off only to measure what cancelling gains (bench/bench_studio.cpp).
+  void setCancelStaleRenders(bool on) { cancel_stale_renders_ = on; }
   EventLoopMonitor* eventLoopMonitor() const { return monitor_; }
   void setLayer(Layer layer);
 
@@ -134,7 +140,9 @@ class MainWindow : public QMainWindow {
   void showError(const QString& title, const QString& message);
   void requestPreview();
   void startRender(mr::Quality quality);
-  void onRenderDone(std::shared_ptr<PreviewResult> result, QString error, int generation);
+  /// `cancelled`: the render was stopped by a newer edit (no result, no error).
+  void onRenderDone(std::shared_ptr<PreviewResult> result, QString error, int generation,
+                    bool cancelled = false);
   void showLayer();
   void updateTitle();
   void onOpen();
@@ -178,6 +186,8 @@ class MainWindow : public QMainWindow {
   QCheckBox* height_check_;
   QDoubleSpinBox* height_spin_;
   QDoubleSpinBox* length_spin_;
+  QCheckBox* ceiling_check_;
+  QDoubleSpinBox* ceiling_spin_;
   QCheckBox* auto_estimate_;
   QLabel* estimate_label_;
   QTimer estimate_timer_;  ///< debounces re-estimates after edits
@@ -193,11 +203,15 @@ class MainWindow : public QMainWindow {
   QString recovery_path_;
   QTimer autosave_timer_;
   QMenu* recent_menu_ = nullptr;
-  std::shared_ptr<std::atomic<bool>> export_cancel_;  ///< the running export's cancel flag
+  std::shared_ptr<mr::CancelToken> export_cancel_;  ///< the running export's (stops mr::fog)
+  std::shared_ptr<mr::CancelToken> render_cancel_;  ///< the running preview render's
   int load_generation_ = 0;
   int generation_ = 0;           ///< bumped by every edit; results of older ones are discarded
   bool rendering_ = false;       ///< a render job is on the worker
   bool render_pending_ = false;  ///< an edit arrived while rendering: render again when done
+  int cancelled_renders_ = 0;
+  bool cancel_stale_renders_ = true;
+  bool has_warning_ = false;  ///< the preview's scene has a warning (warning_label_)
   bool exporting_ = false;
   /// Runs loads, renders and exports; the destructor waits for it (jobs post back to `this`).
   QThreadPool pool_;

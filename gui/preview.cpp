@@ -225,7 +225,8 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   result->scene.render.quality = request.quality;
   const auto render_start = std::chrono::steady_clock::now();
   mr::ScatteringLayers aovs;
-  result->layers = mr::fog(result->photo, result->distance_m, result->camera, result->scene, &aovs);
+  result->layers = mr::fog(result->photo, result->distance_m, result->camera, result->scene, &aovs,
+                           request.cancel.get());
   result->render_s = seconds_since(render_start);
   result->backend = aovs.backend;
   result->backend_notice = aovs.backend_notice;

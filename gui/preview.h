@@ -83,6 +83,9 @@ struct PreviewRequest {
   double max_pixels = 0.25e6;  ///< the render's size: the photo's aspect, at most this many pixels
   bool display_aovs = false;   ///< convert the transmittance and in-scatter for display too
   int generation = 0;
+  /// Requested by the UI thread when a newer edit makes this render stale: mr::fog stops within
+  /// a row and render_preview throws mr::Error(cancelled). May be null.
+  std::shared_ptr<mr::CancelToken> cancel;
 };
 
 struct PreviewResult {

@@ -577,6 +577,11 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   const Core core(in, plan);
   const int w = in.distance_m.width, h = in.distance_m.height;
   const int g = core.constant_source() ? 1 : std::max(1, plan.grid_step);
+  // Cancellation: every row of every pass checks the token (one relaxed load) and skips its work
+  // once it is requested; each pass's end throws. TBB's own cancellation is not needed.
+  auto stop = [&] { return in.cancel && in.cancel->requested(); };
+  auto throw_if_stopped = [&] { throw_if_cancelled(in.cancel, "render_scattering (cpu)"); };
+  throw_if_stopped();
 
   Sparse sparse;
   sparse.width = w;
@@ -601,10 +606,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   if (gy.back() != h - 1) gy.push_back(h - 1);
   tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, gy.size(), 0, gx.size()),
                     [&](const tbb::blocked_range2d<std::size_t>& r) {
-                      for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j)
+                      for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j) {
+                        if (stop()) return;
                         for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i)
                           exact(gx[i], gy[j], plan.steps);
+                      }
                     });
+  throw_if_stopped();
   std::size_t exact_count = gx.size() * gy.size();
 
   // Pass 2: every other pixel from its cell's four samples with their gradients, where all
@@ -640,16 +648,19 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     using Gradients = std::array<double, 2 * kValues>;  // d/dx of each value, then d/dy
     std::vector<Gradients> sample_gradients(gx.size() * gy.size());
     tbb::parallel_for(std::size_t(0), gy.size(), [&](std::size_t j) {
+      if (stop()) return;
       for (std::size_t i = 0; i < gx.size(); ++i)
         for (int c = 0; c < kValues; ++c) {
           sample_gradients[j * gx.size() + i][c] = gradient(i, j, true, c);
           sample_gradients[j * gx.size() + i][kValues + c] = gradient(i, j, false, c);
         }
     });
+    throw_if_stopped();
     tbb::parallel_for(
         tbb::blocked_range2d<std::size_t>(0, gy.size() - 1, 0, gx.size() - 1),
         [&](const tbb::blocked_range2d<std::size_t>& r) {
-          for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j)
+          for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j) {
+            if (stop()) return;
             for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i) {
               const int x0 = gx[i], x1 = gx[i + 1], y0 = gy[j], y1 = gy[j + 1];
               const std::array<std::pair<std::size_t, std::size_t>, 4> corners{
@@ -722,14 +733,17 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                   interpolated[idx] = 1;
                 }
             }
+          }
         });
   }
+  throw_if_stopped();
   exact_count += exact_more.combine(std::plus<>());
 
   // Pass 3: per pixel, the transmittance map T = tau(camera, surface) * S(surface) and the AOVs.
   const bool closed_form_camera = !core.has_noise();
   tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
-    for (int y = rows.begin(); y < rows.end(); ++y)
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      if (stop()) return;
       for (int x = 0; x < w; ++x) {
         const PixelSample& s = sparse.at(x, y);
         double od[3] = {s.camera_od[0], s.camera_od[1], s.camera_od[2]};
@@ -744,7 +758,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         }
         out.sun_visibility.at(x, y, 0) = sun_visible;
       }
+    }
   });
+  throw_if_stopped();
   std::size_t interpolated_count = 0;
   for (unsigned char v : interpolated) interpolated_count += v;
   out.exact_pixels = exact_count;

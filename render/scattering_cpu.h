@@ -9,6 +9,7 @@
 #include <cstddef>
 
 #include "mr/camera.h"
+#include "mr/cancel.h"
 #include "mr/image.h"
 #include "mr/scene.h"
 
@@ -38,6 +39,9 @@ struct CoreInputs {
   ConstImageView normals;             ///< 3 channels, world; may be empty when no sun/lamps
   const OccluderScene* occluders = nullptr;  ///< nullptr: nothing casts shadows
   std::array<float, 3> sky_radiance{};
+  /// Checked between rows of every pass (a relaxed load per row); requested: the core throws
+  /// mr::Error(cancelled) and the outputs hold a partial render the caller must drop.
+  const CancelToken* cancel = nullptr;
 };
 
 struct CoreOutputs {

@@ -8,18 +8,24 @@
 #include <QDir>
 #include <QDockWidget>
 #include <QDoubleSpinBox>
+#include <QElapsedTimer>
 #include <QFile>
+#include <QGroupBox>
 #include <QLineEdit>
 #include <QListWidget>
 #include <QMessageBox>
 #include <QMimeData>
 #include <QPainter>
+#include <QProgressDialog>
+#include <QPushButton>
 #include <QSignalSpy>
 #include <QSlider>
+#include <QSpinBox>
 #include <QTemporaryDir>
 #include <QUndoStack>
 #include <QtTest>
 #include <cmath>
+#include <limits>
 
 #include "annotation_editor.h"
 #include "export_dialog.h"
@@ -163,6 +169,9 @@ class GuiTest : public QObject {
   void screenshots();
   void scaledAnnotationsKeepThePose();
   void grabCutSnapsRoughPolygon();
+  void newEditCancelsTheRunningRender();
+  void interiorBoxByClicks();
+  void fogPanelRoundTripEveryParameter();
 
  private:
   void annotateEstimateUndoSaveExportBody();
@@ -827,6 +836,34 @@ void GuiTest::exportDialogAndCancel() {
   QVERIFY(!w.exportImage(cancelled, {}, true));
   QVERIFY(!QFileInfo::exists(cancelled));
   QVERIFY(QDir(dir.path()).entryList({"cancelled*"}).isEmpty());
+  // Cancel during the render (the progress dialog's Cancel): mr::fog stops within a row, so the
+  // export returns well before a full one would (bound: 300 ms after the request). A sunlit
+  // scene with shafts and wisps, so that a full export takes long enough to cancel.
+  mr::FogScene heavy = w.fogPanel()->scene();
+  heavy.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-60, 25), {3, 3, 3}, 0.27};
+  heavy.medium.layer_top_m = 40;
+  heavy.medium.noise.amplitude = 0.3;
+  w.fogPanel()->setScene(heavy);
+  QElapsedTimer export_clock;
+  export_clock.start();
+  QVERIFY(w.exportImage(dir.filePath("full.exr"), {}, true));
+  const double export_ms = double(export_clock.elapsed());
+  QTimer::singleShot(150, &w, [&w] {
+    QProgressDialog* progress = w.findChild<QProgressDialog*>("exportProgress");
+    QVERIFY(progress);
+    QPushButton* cancel = progress->findChild<QPushButton*>();
+    QVERIFY(cancel);
+    QTest::mouseClick(cancel, Qt::LeftButton);
+  });
+  export_clock.restart();
+  QVERIFY(!w.exportImage(cancelled, {}, true));
+  const double cancelled_ms = double(export_clock.elapsed());
+  qInfo("export: full %.0f ms; cancelled after 150 ms: returned after %.0f ms", export_ms,
+        cancelled_ms);
+  QVERIFY(export_ms > 450);  // else the bound below says nothing
+  QVERIFY(cancelled_ms < 150 + 300);
+  QVERIFY(!QFileInfo::exists(cancelled));
+  QVERIFY(QDir(dir.path()).entryList({"cancelled*"}).isEmpty());
   // AOVs need EXR: a clear error, not a crash.
   MainWindow::ExportSettings aovs;
   aovs.aovs = true;
@@ -1054,6 +1091,271 @@ void GuiTest::grabCutSnapsRoughPolygon() {
   editor->undoStack()->undo();
   QCOMPARE(editor->annotations().planes[0].polygon, drawn);
   QTRY_VERIFY_WITH_TIMEOUT(!w.estimating() && settled(w), 60000);
+}
+
+// A new edit while the normal pass runs cancels it (mr::CancelToken): the render stops, its
+// result never shows, and the newest edit's passes follow.
+void GuiTest::newEditCancelsTheRunningRender() {
+  MainWindow w;
+  w.resize(2560, 1440);  // a large view: a long normal pass
+  w.show();
+  QVERIFY(QTest::qWaitForWindowExposed(&w));
+  openAndSettle(w, kLeuven);
+  // Sun, shafts and wisps: a normal pass of ~1 s, long enough to be caught running.
+  mr::FogScene heavy = w.fogPanel()->scene();
+  heavy.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-60, 25), {3, 3, 3}, 0.27};
+  heavy.medium.layer_top_m = 40;
+  heavy.medium.noise.amplitude = 0.3;
+  w.fogPanel()->setScene(heavy);
+  QSlider* slider = w.fogPanel()->visibilitySlider();
+  const int cancelled_before = w.cancelledRenders();
+  std::vector<int> shown;  // qualities of the passes shown after the second edit
+  slider->setValue(slider->value() - slider->pageStep());
+  const int first_edit = w.generation();
+  QTRY_VERIFY_WITH_TIMEOUT(w.preview() && w.preview()->generation == first_edit && w.rendering(),
+                           60000);
+  QCOMPARE(w.preview()->quality, mr::Quality::draft);  // the normal pass is the one running
+  double first_job_ms = 0;                             // the new edit's draft job itself
+  connect(&w, &MainWindow::previewUpdated, &w, [&](int generation, int quality) {
+    if (shown.empty()) first_job_ms = 1e3 * w.preview()->total_s;
+    shown.push_back(generation * 10 + quality);
+  });
+  QElapsedTimer clock;
+  clock.start();
+  slider->setValue(slider->value() - slider->pageStep());
+  QTRY_VERIFY_WITH_TIMEOUT(!shown.empty(), 60000);
+  const double first_ms = double(clock.elapsed());
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+  qInfo(
+      "edit during a normal pass: first pass of the new edit after %.0f ms (its own job %.0f ms); "
+      "%d render(s) cancelled",
+      first_ms, first_job_ms, w.cancelledRenders() - cancelled_before);
+  QCOMPARE(w.cancelledRenders(), cancelled_before + 1);
+  // The stale pass stopped within a row: the wait before the new draft started is short
+  // (bound 300 ms on 2 shared cores; left to finish it would be most of a ~1 s pass).
+  QVERIFY2(first_ms - first_job_ms < 300, qPrintable(QString::number(first_ms - first_job_ms)));
+  // Only the newest edit's passes were shown: the stale normal pass never was.
+  const int newest = w.generation();
+  QCOMPARE(shown.front(), newest * 10 + int(mr::Quality::draft));
+  QCOMPARE(shown.back(), newest * 10 + int(mr::Quality::normal));
+  QCOMPARE(double(w.preview()->scene.medium.sigma_t_per_m[0]),
+           double(w.fogPanel()->scene().medium.sigma_t_per_m[0]));
+}
+
+// The interior-box tools on a synthetic room photo (no depth file: the depth is estimated). A
+// room 4.5 m wide (walls at x = -2 and x = 2.5), back wall at z = 6, ceiling 2.6 m, seen from
+// 1.5 m: the horizon and the floor's edge are clicked where the room's points project, the
+// ceiling height is typed in the Annotations panel (then, instead of the camera height, a
+// ceiling point is clicked). The estimated distance map must match ray-room intersections
+// within 2 % at pixels on the floor, both walls, the back wall and the ceiling.
+void GuiTest::interiorBoxByClicks() {
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  const QString photo_path = dir.filePath("room.png");
+  {
+    mr::Image photo(640, 480, 3);
+    for (int y = 0; y < 480; ++y)
+      for (int x = 0; x < 640; ++x)
+        for (int c = 0; c < 3; ++c) photo.at(x, y, c) = 0.2f + 0.5f * float(x + c * y) / 2000.0f;
+    mr::write_image(photo_path.toStdString(), photo);
+  }
+  MainWindow w;
+  w.resize(1366, 768);
+  w.show();
+  QVERIFY(QTest::qWaitForWindowExposed(&w));
+  openAndSettle(w, photo_path);
+  QVERIFY(w.document()->depth_estimated);
+  ImageView* view = w.imageView();
+  AnnotationEditor* editor = w.annotationEditor();
+  QSignalSpy estimates(&w, &MainWindow::estimateFinished);
+  const mr::Camera cam = w.document()->camera;
+
+  // Horizon a little above the centre (camera pitched down), camera height 1.5 m.
+  w.setTool(Tool::horizon);
+  clickImage(view, {30, 200.5});
+  clickImage(view, {610, 200.5});
+  QVERIFY(editor->annotations().horizon);
+  editor->setCameraHeight(1.5);
+  const mr::CameraPose pose = mr::pose_from_horizon(cam, *editor->annotations().horizon, 1.5);
+
+  // The floor's edge: left wall base, back-left and back-right corners, right wall base.
+  const double left = -2, right = 2.5, back = 6, ceiling = 2.6;
+  w.setTool(Tool::interior_floor);
+  const int steps_before = editor->undoStack()->count();
+  for (const mr::Vec3 p : {mr::Vec3{left, 0, 4}, mr::Vec3{left, 0, back}, mr::Vec3{right, 0, back},
+                           mr::Vec3{right, 0, 5}}) {
+    const mr::PixelPoint q = project(cam, pose, p);
+    QVERIFY(q[0] > 0 && q[0] < cam.width - 1 && q[1] > 0 && q[1] < cam.height - 1);
+    clickImage(view, q);
+  }
+  QVERIFY(!editor->annotations().interior_box);  // not until finished
+  QCOMPARE(int(editor->pendingPoints().size()), 4);
+  view->setFocus();
+  QTest::keyClick(view, Qt::Key_Return);
+  QVERIFY(editor->annotations().interior_box);
+  QCOMPARE(int(editor->annotations().interior_box->floor.size()), 4);
+  QCOMPARE(editor->undoStack()->count(), steps_before + 1);
+  QCOMPARE(editor->selection().kind, ItemRef::Kind::interior_box);
+
+  // The ceiling height in the Annotations panel: one more undo step.
+  auto* ceiling_check = w.findChild<QCheckBox*>("ceilingCheck");
+  auto* ceiling_spin = w.findChild<QDoubleSpinBox*>("ceilingSpin");
+  QVERIFY(ceiling_check && ceiling_spin);
+  QVERIFY(ceiling_check->isEnabled());
+  ceiling_spin->setValue(ceiling);
+  ceiling_check->setChecked(true);
+  QCOMPARE(editor->annotations().interior_box->ceiling_height_m.value_or(0), ceiling);
+  QCOMPARE(editor->undoStack()->count(), steps_before + 2);
+
+  // The expected distance along a pixel's ray: the nearest of the room's five planes.
+  auto room_distance = [&](const mr::CameraPose& p, double x, double y) {
+    const mr::Vec3 d = p.ray_direction(cam, x, y), o = p.position_m;
+    double best = std::numeric_limits<double>::infinity();
+    auto hit = [&](double t) {
+      if (t > 0) best = std::min(best, t);
+    };
+    if (d.x != 0) hit((left - o.x) / d.x), hit((right - o.x) / d.x);
+    if (d.z != 0) hit((back - o.z) / d.z);
+    if (d.y != 0) hit((0 - o.y) / d.y), hit((ceiling - o.y) / d.y);
+    return best;
+  };
+  // Floor, left wall, right wall, back wall, ceiling.
+  const std::array<mr::PixelPoint, 5> probes{
+      {{320, 460}, {40, 230}, {600, 230}, {330, 200}, {320, 10}}};
+  auto check_depth = [&](const char* what) {
+    const mr::Image& distance = w.document()->distance_m;
+    for (const auto& q : probes) {
+      const double truth = room_distance(pose, q[0], q[1]);
+      const double got = distance.at(int(q[0]), int(q[1]), 0);
+      qInfo("%s: pixel (%.0f, %.0f): estimated %.3f m, room %.3f m (%.2f %%)", what, q[0], q[1],
+            got, truth, 100 * std::abs(got / truth - 1));
+      QVERIFY2(std::abs(got / truth - 1) < 0.02, what);
+    }
+  };
+  QTRY_VERIFY_WITH_TIMEOUT(
+      !w.estimating() && !estimates.isEmpty() && estimates.last().at(0).toBool() && settled(w),
+      60000);
+  check_depth("camera height + ceiling height");
+  w.setLayer(Layer::estimate);
+  QTest::qWait(30);
+  QVERIFY(w.grab().save(outDir() + "/interior_box_1366.png"));
+  w.setLayer(Layer::composite);
+
+  // Undo the ceiling height, then the floor; redo both.
+  editor->undoStack()->undo();
+  QVERIFY(!editor->annotations().interior_box->ceiling_height_m);
+  QVERIFY(!ceiling_check->isChecked());
+  editor->undoStack()->undo();
+  QVERIFY(!editor->annotations().interior_box);
+  QVERIFY(!ceiling_check->isEnabled());
+  editor->undoStack()->redo();
+  editor->undoStack()->redo();
+  QCOMPARE(editor->annotations().interior_box->ceiling_height_m.value_or(0), ceiling);
+  QVERIFY(ceiling_check->isChecked());
+
+  // Without the camera height, a ceiling point (where the back wall meets the ceiling) with the
+  // ceiling height fixes it: the same room.
+  editor->setCameraHeight(std::nullopt);
+  QTRY_VERIFY_WITH_TIMEOUT(!w.estimating() && settled(w), 60000);
+  const int estimates_before = int(estimates.count());
+  w.setTool(Tool::ceiling_point);
+  clickImage(view, project(cam, pose, {0.5, ceiling, back}));
+  QVERIFY(editor->annotations().interior_box->ceiling_point);
+  QTRY_VERIFY_WITH_TIMEOUT(!w.estimating() && estimates.count() > estimates_before &&
+                               estimates.last().at(0).toBool() && settled(w),
+                           60000);
+  const double camera_height = w.fogPanel()->scene().pose.position_m.y;
+  qInfo("camera height from the ceiling height and point: %.3f m (truth 1.5)", camera_height);
+  QVERIFY(std::abs(camera_height - 1.5) < 0.03);
+  check_depth("ceiling height + ceiling point");
+  // Select it and delete: the whole box goes, undoably.
+  w.setTool(Tool::select);
+  editor->select({ItemRef::Kind::interior_box, 0});
+  QVERIFY(editor->deleteSelected());
+  QVERIFY(!editor->annotations().interior_box);
+  editor->undoStack()->undo();
+  QVERIFY(editor->annotations().interior_box->ceiling_point);
+}
+
+// Every control of the fog panel set by hand, read into a scene, that scene shown in a fresh
+// panel and read back: the same scene, bit for bit (scene_to_json writes every field exactly),
+// and the controls show what was typed.
+void GuiTest::fogPanelRoundTripEveryParameter() {
+  FogPanel panel;
+  panel.setVisibility(250);
+  panel.tintSpin(0)->setValue(0.85);
+  panel.tintSpin(1)->setValue(1.0);
+  panel.tintSpin(2)->setValue(1.15);
+  panel.topCheck()->setChecked(true);
+  panel.topSpin()->setValue(42.5);
+  panel.bottomCheck()->setChecked(true);
+  panel.bottomSpin()->setValue(3.5);
+  panel.octavesSpin()->setValue(6);
+  panel.seedSpin()->setValue(12345);
+  panel.sunBox()->setChecked(true);
+  panel.sunRadiusSpin()->setValue(0.8);
+  QVERIFY(!panel.removeLampButton()->isEnabled());
+  QTest::mouseClick(panel.addLampButton(), Qt::LeftButton);
+  QTest::mouseClick(panel.addLampButton(), Qt::LeftButton);
+  QCOMPARE(panel.lampList()->count(), 2);
+  QCOMPARE(panel.lampList()->currentRow(), 1);
+  panel.lampPositionSpin(0)->setValue(-2.25);
+  panel.lampPositionSpin(1)->setValue(5.5);
+  panel.lampPositionSpin(2)->setValue(14.75);
+  panel.lampSpotCheck()->setChecked(true);
+  panel.lampOuterSpin()->setValue(50);
+  panel.lampInnerSpin()->setValue(20.5);
+  panel.lampIntensitySpin()->setValue(500);
+  panel.lampList()->setCurrentRow(0);
+  QTest::mouseClick(panel.removeLampButton(), Qt::LeftButton);
+  QCOMPARE(panel.lampList()->count(), 1);
+
+  const mr::FogScene s1 = panel.scene();
+  // What the controls say, in the scene's units.
+  const double sigma = 3.912 / 250;
+  QCOMPARE(double(s1.medium.sigma_t_per_m[0]), double(float(sigma * 0.85)));
+  QCOMPARE(double(s1.medium.sigma_t_per_m[2]), double(float(sigma * 1.15)));
+  QCOMPARE(s1.medium.layer_top_m, 42.5);
+  QCOMPARE(s1.medium.layer_bottom_m, 3.5);
+  QCOMPARE(s1.medium.noise.octaves, 6);
+  QCOMPARE(s1.medium.noise.seed, 12345u);
+  QVERIFY(s1.lighting.sun);
+  QCOMPARE(s1.lighting.sun->angular_radius_deg, 0.8);
+  QCOMPARE(int(s1.lighting.lamps.size()), 1);
+  const mr::Lamp& lamp = s1.lighting.lamps[0];
+  QCOMPARE(lamp.position_m.x, -2.25);
+  QCOMPARE(lamp.position_m.y, 5.5);
+  QCOMPARE(lamp.position_m.z, 14.75);
+  QCOMPARE(lamp.outer_angle_deg, 50.0);
+  QCOMPARE(lamp.inner_angle_deg, 20.5);
+  // The channels keep their colour and are floats: each rounded to 2^-24 relative.
+  const double mean_intensity =
+      (double(lamp.intensity_per_sr[0]) + lamp.intensity_per_sr[1] + lamp.intensity_per_sr[2]) / 3;
+  QVERIFY(std::abs(mean_intensity - 500) <= 500 * std::ldexp(1.0, -24) * 1.001);
+  try {
+    mr::validate_scene(s1);
+  } catch (const mr::Error& e) {
+    QFAIL(e.what());
+  }
+
+  FogPanel again;
+  again.setScene(s1);
+  const mr::FogScene s2 = again.scene();
+  QCOMPARE(QString::fromStdString(mr::scene_to_json(s2)),
+           QString::fromStdString(mr::scene_to_json(s1)));
+  for (int c = 0; c < 3; ++c) QCOMPARE(again.tintSpin(c)->value(), panel.tintSpin(c)->value());
+  QCOMPARE(again.visibility(), 250.0);
+  QCOMPARE(again.bottomSpin()->value(), 3.5);
+  QCOMPARE(again.seedSpin()->value(), 12345);
+  QCOMPARE(again.lampPositionSpin(2)->value(), 14.75);
+  QCOMPARE(again.lampInnerSpin()->value(), 20.5);
+  QVERIFY(again.lampSpotCheck()->isChecked());
+  // Off again: a point lamp, an unbounded layer.
+  again.lampSpotCheck()->setChecked(false);
+  again.bottomCheck()->setChecked(false);
+  const mr::FogScene s3 = again.scene();
+  QCOMPARE(s3.lighting.lamps[0].outer_angle_deg, 180.0);
+  QVERIFY(std::isinf(s3.medium.layer_bottom_m) && s3.medium.layer_bottom_m < 0);
 }
 
 // Sanitizer builds (MR_SANITIZE): Qt 5.15's offscreen platform plugin never deletes its screen

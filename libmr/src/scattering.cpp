@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 
+#include "mr/cancel.h"
 #include "mr/error.h"
 #include "photo/airlight.h"
 #include "photo/composite.h"
@@ -62,8 +63,11 @@ void check_lamps_outside_geometry(const Image& distance_m, const Camera& camera,
 }  // namespace
 
 ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
-                                   const Camera& camera, const FogScene& scene) {
+                                   const Camera& camera, const FogScene& scene,
+                                   const CancelToken* cancel) {
   const auto start = Clock::now();
+  constexpr const char* kWhat = "render_scattering";
+  throw_if_cancelled(cancel, kWhat);
   validate_scene(scene);
   if (distance_m.empty() || distance_m.channels() != 1)
     throw Error(ErrorCode::invalid_argument, "render_scattering: the depth map is missing or has " +
@@ -132,6 +136,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     if (lights) {
       auto t = Clock::now();
       normals = render::estimate_normals(distance_m.view(), camera, scene.pose);
+      throw_if_cancelled(cancel, kWhat);
       if (scene.render.volumetric_shadows) {
         // The preset's mesh resolution (a coarse mesh builds and traces faster), unless the
         // image is too small to coarsen.
@@ -148,6 +153,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         }
         out.timings.mesh_s = seconds_since(t);
         occluder_mesh = std::move(mesh);
+        throw_if_cancelled(cancel, kWhat);
       } else {
         out.timings.mesh_s = seconds_since(t);
       }
@@ -158,6 +164,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     in.distance_m = distance_m.view();
     if (!normals.empty()) in.normals = normals.view();
     in.sky_radiance = out.sky_radiance;
+    in.cancel = cancel;
     render::CoreOutputs core{out.transmittance.view(), out.inscatter.view(),
                              out.sun_visibility.view(), out.optical_depth.view()};
     auto t = Clock::now();
@@ -165,6 +172,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       t = Clock::now();
       if (occluder_mesh.triangle_count() > 0) occluders.emplace(std::move(occluder_mesh));
       out.timings.bvh_s = seconds_since(t);
+      throw_if_cancelled(cancel, kWhat);
       in.occluders = occluders ? &*occluders : nullptr;
       t = Clock::now();
       render::render_scattering_cpu(in, core);
@@ -200,7 +208,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
 }
 
 FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
-              const FogScene& scene, ScatteringLayers* layers_out) {
+              const FogScene& scene, ScatteringLayers* layers_out, const CancelToken* cancel) {
   if (photo.empty() || photo.channels() < 3)
     throw Error(ErrorCode::invalid_argument, "fog: photo must have at least 3 channels, has " +
                                                  std::to_string(photo.channels()));
@@ -208,7 +216,7 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
     throw Error(ErrorCode::size_mismatch,
                 "fog: depth map is " + size_text(distance_m.width(), distance_m.height()) +
                     ", photo is " + size_text(photo.width(), photo.height()));
-  ScatteringLayers layers = render_scattering(photo, distance_m, camera, scene);
+  ScatteringLayers layers = render_scattering(photo, distance_m, camera, scene, cancel);
   FogLayers out;
   out.airlight = layers.sky_radiance;
   out.composite =

@@ -350,6 +350,9 @@ struct Backend::Impl {
 void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreOutputs& out,
                            const BackendOptions& opt, BackendTimings* timings) {
   std::lock_guard lock(mutex);
+  // Cancellation: checked here, after the shadow maps and before each tile (each tile waits for
+  // its own fence, so a throw leaves the device idle and RAII frees the resources).
+  throw_if_cancelled(in.cancel, "render_scattering (vulkan)");
   ensure_pipelines();
   const FogScene& scene = *in.scene;
   const Camera& cam = *in.camera;
@@ -548,8 +551,14 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
 
   // ---- tiles ------------------------------------------------------------------------------------
   const std::size_t range = limits.maxStorageBufferRange;
-  std::size_t tile_limit = std::min<std::size_t>(opt.max_tile_pixels ? opt.max_tile_pixels : std::size_t(-1),
-                                                 range / (4 * sizeof(float) * gpu::kSampleVec4s));
+  // A cancellable render is split into tiles of at most kCancellableTilePixels (the same result,
+  // tile by tile) so that a request waits for at most one small dispatch.
+  constexpr std::size_t kCancellableTilePixels = std::size_t(1) << 16;
+  const std::size_t wanted_tile = opt.max_tile_pixels ? opt.max_tile_pixels
+                                  : in.cancel         ? kCancellableTilePixels
+                                                      : std::size_t(-1);
+  std::size_t tile_limit =
+      std::min<std::size_t>(wanted_tile, range / (4 * sizeof(float) * gpu::kSampleVec4s));
   tile_limit = std::max<std::size_t>(tile_limit, 1);
   int tw = W, th = H;
   while (std::size_t(tw) * std::size_t(th) > tile_limit) {
@@ -720,17 +729,28 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
     image_barrier(ctx, cmd, atlas.handle, VK_IMAGE_ASPECT_COLOR_BIT, atlas.layers, VK_IMAGE_LAYOUT_UNDEFINED,
                   VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, 0,
                   VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
-    ctx.vk.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, shadow.get());
-    ctx.vk.vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, shadow_layout.get(), 0, 1, &sets[1], 0,
-                                   nullptr);
     const VkViewport viewport{0, 0, float(size), float(size), 0, 1};
     const VkRect2D scissor{{0, 0}, {std::uint32_t(size), std::uint32_t(size)}};
-    ctx.vk.vkCmdSetViewport(cmd, 0, 1, &viewport);
-    ctx.vk.vkCmdSetScissor(cmd, 0, 1, &scissor);
-    const VkDeviceSize zero = 0;
-    ctx.vk.vkCmdBindVertexBuffers(cmd, 0, 1, &vertex_buf.handle, &zero);
-    ctx.vk.vkCmdBindIndexBuffer(cmd, index_buf.handle, 0, VK_INDEX_TYPE_UINT32);
+    auto bind_shadow_state = [&] {
+      ctx.vk.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, shadow.get());
+      ctx.vk.vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, shadow_layout.get(), 0, 1, &sets[1], 0,
+                                     nullptr);
+      ctx.vk.vkCmdSetViewport(cmd, 0, 1, &viewport);
+      ctx.vk.vkCmdSetScissor(cmd, 0, 1, &scissor);
+      const VkDeviceSize zero = 0;
+      ctx.vk.vkCmdBindVertexBuffers(cmd, 0, 1, &vertex_buf.handle, &zero);
+      ctx.vk.vkCmdBindIndexBuffer(cmd, index_buf.handle, 0, VK_INDEX_TYPE_UINT32);
+    };
+    bind_shadow_state();
     for (int l = 0; l < n_layers; ++l) {
+      if (in.cancel && l > 0) {
+        // Cancellable: one submission per layer (a 4096^2 layer is a long draw on a software
+        // device), checked in between.
+        submit_and_wait();
+        throw_if_cancelled(in.cancel, "render_scattering (vulkan)");
+        begin();
+        bind_shadow_state();
+      }
       // The depth attachment is reused by every layer: wait for the previous layer's tests.
       image_barrier(ctx, cmd, depth_attachment->handle, VK_IMAGE_ASPECT_DEPTH_BIT, 1, VK_IMAGE_LAYOUT_UNDEFINED,
                     VK_IMAGE_LAYOUT_DEPTH_ATTACHMENT_OPTIMAL,
@@ -774,6 +794,7 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
   }
   stamp(2, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT);
   submit_and_wait();
+  throw_if_cancelled(in.cancel, "render_scattering (vulkan)");
 
   // ---- tiles ------------------------------------------------------------------------------------
   double host_down = 0;
@@ -795,6 +816,7 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
       tp.grid = {i0, j0, i1 - i0 + 1, j1 - j0 + 1};
       if (std::size_t(tp.grid.z) * std::size_t(tp.grid.w) > grid_max)
         throw Error(ErrorCode::internal, "vulkan: grid buffer too small for a tile");
+      throw_if_cancelled(in.cancel, "render_scattering (vulkan)");
 
       t_host = Clock::now();
       auto* dst = static_cast<char*>(staging_up.mapped);

@@ -28,7 +28,8 @@ class Unavailable : public Error {
 
 struct BackendOptions {
   /// Largest tile (output pixels per dispatch); 0 = from the device's limits. Images larger
-  /// than a tile are rendered tile by tile, with the same result.
+  /// than a tile are rendered tile by tile, with the same result. With a cancel token
+  /// (CoreInputs::cancel) 0 means at most 2^16 pixels, so a cancel waits for one small tile.
   std::size_t max_tile_pixels = 0;
   /// Shadow-map size in texels (each sun cascade, each lamp cube face); 0 = from the image
   /// size and quality.
@@ -72,7 +73,8 @@ class Backend {
 
   /// Renders every pixel of `out` like render_scattering_cpu(in, out). `mesh`: the occluder mesh
   /// (nullptr or empty: nothing casts shadows; in.occluders is ignored). Thread-safe (renders
-  /// are serialised). Throws Unavailable (e.g. out of device memory) or mr::Error.
+  /// are serialised). Throws Unavailable (e.g. out of device memory) or mr::Error; cancelled
+  /// (in.cancel requested; checked before the shadow maps and each tile) leaves `out` partial.
   void render(const CoreInputs& in, const TriangleMesh* mesh, CoreOutputs& out,
               const BackendOptions& options = {}, BackendTimings* timings = nullptr);
 

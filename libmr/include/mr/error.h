@@ -14,6 +14,7 @@ enum class ErrorCode {
   size_mismatch,     ///< two inputs that must have the same size do not
   color,             ///< OpenColorIO could not load a config or convert between colour spaces
   internal,          ///< a bug: an invariant of libmr itself was broken
+  cancelled,         ///< the caller asked the call to stop (mr::CancelToken); nothing was output
 };
 
 /// Human-readable name of a code ("io", "invalid_argument", ...).

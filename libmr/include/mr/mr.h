@@ -3,6 +3,7 @@
 
 #include "mr/annotations.h"
 #include "mr/camera.h"
+#include "mr/cancel.h"
 #include "mr/color.h"
 #include "mr/depth.h"
 #include "mr/depth_fit.h"

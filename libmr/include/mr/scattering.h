@@ -13,6 +13,8 @@
 
 namespace mr {
 
+class CancelToken;  // mr/cancel.h
+
 /// The core's output, all the photo's size.
 struct ScatteringLayers {
   Image transmittance;   ///< T (R,G,B): tau(camera, surface) * S(surface), in [0, 1]
@@ -45,15 +47,23 @@ struct ScatteringLayers {
 /// Renders T and R for `photo` (scene-linear RGB; used only to estimate the sky radiance when
 /// the scene does not give it) with `distance_m` (1 channel, metres along each ray; +inf = sky)
 /// seen by `camera` from `scene.pose`. Deterministic for a scene (including its seed).
+/// `cancel` (optional, caller-owned, may be requested from any thread): the render stops within
+/// about one image row (CPU) or one tile (Vulkan: a token caps tiles at 65536 pixels) of the
+/// request and throws mr::Error(cancelled), returning nothing; never requested, the result is
+/// bit-identical to a render without a token.
 /// Throws mr::Error: invalid_argument for a bad scene (naming the field, see validate_scene),
-/// size_mismatch, invalid_argument for NaN distances.
+/// size_mismatch, invalid_argument for NaN distances, cancelled.
 ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
-                                   const Camera& camera, const FogScene& scene);
+                                   const Camera& camera, const FogScene& scene,
+                                   const CancelToken* cancel = nullptr);
 
 /// render_scattering followed by the composite C = I * T + R (alpha carried).
-/// The returned FogLayers' `airlight` holds the sky radiance used.
+/// The returned FogLayers' `airlight` holds the sky radiance used. `cancel`: as for
+/// render_scattering (a cancelled call throws mr::Error(cancelled) and leaves `layers_out` as
+/// it was).
 FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
-              const FogScene& scene, ScatteringLayers* layers_out = nullptr);
+              const FogScene& scene, ScatteringLayers* layers_out = nullptr,
+              const CancelToken* cancel = nullptr);
 
 /// Checks every field of a scene and throws mr::Error(invalid_argument) naming the first bad
 /// one by its path ("medium.g", "lighting.lamps[2].position_m") and what was found.
