@@ -66,12 +66,8 @@ double bright_surface_luminance(const Image& photo, const Image& distance_m) {
   return l[k];
 }
 
-Lighting default_lighting(const Image& photo, const Image& distance_m, const CameraPose& pose,
-                          std::string& note) {
-  const double bright = bright_surface_luminance(photo, distance_m);
-  const double level_factor =
-      kSunToSkyRatio * std::sin(kSunElevationDeg * std::numbers::pi / 180) / std::numbers::pi + 1;
-  const float sky = float(std::max(bright, 1e-4) / (kBrightSurfaceAlbedo * level_factor));
+// The default sun and sky at sky radiance `sky` (the sun's irradiance kSunToSkyRatio * sky).
+Lighting default_lighting_at(float sky, const CameraPose& pose) {
   Lighting l;
   Sun sun;
   sun.direction_to_sun =
@@ -80,6 +76,17 @@ Lighting default_lighting(const Image& photo, const Image& distance_m, const Cam
   sun.irradiance = {e, e, e};
   l.sun = sun;
   l.sky_radiance = Rgb{sky, sky, sky};
+  return l;
+}
+
+Lighting default_lighting(const Image& photo, const Image& distance_m, const CameraPose& pose,
+                          std::string& note) {
+  const double bright = bright_surface_luminance(photo, distance_m);
+  const double level_factor =
+      kSunToSkyRatio * std::sin(kSunElevationDeg * std::numbers::pi / 180) / std::numbers::pi + 1;
+  const float sky = float(std::max(bright, 1e-4) / (kBrightSurfaceAlbedo * level_factor));
+  Lighting l = default_lighting_at(sky, pose);
+  const float e = float(kSunToSkyRatio) * sky;
   char text[256];
   std::snprintf(text, sizeof text,
                 "default light: sun behind-left of the camera (azimuth %.0f, elevation %.0f deg), "
@@ -139,6 +146,26 @@ LoadedPhoto load_photo(const std::string& path, const std::string& depth_option,
   return p;
 }
 
+// A 3D scene target (no photo): its distance map, the camera from --fov (else 60 degrees) at
+// the map's size, the scene JSON's pose and light, else a level camera and the default light at
+// sky radiance 1.
+LoadedPhoto load_scene_target(const std::string& depth_path, const std::string& scene_path,
+                              std::optional<double> fov_deg) {
+  LoadedPhoto p;
+  const ImageFileInfo info = probe_image(depth_path);
+  p.camera = Camera::from_horizontal_fov(info.width, info.height, fov_deg.value_or(60.0));
+  p.distance_m = read_depth(depth_path, p.camera).distance_m;
+  p.depth_note = "3D scene: distance map " + depth_path + " (no photo; regions over black)";
+  if (!scene_path.empty()) {
+    p.scene = load_scene(scene_path);
+    p.light_note = "pose and lighting from " + scene_path;
+  } else {
+    p.scene.lighting = default_lighting_at(1.0f, p.scene.pose);
+    p.light_note = "default light at sky radiance 1 (sun behind-left of the camera, 45 deg up)";
+  }
+  return p;
+}
+
 void write_text_atomically(const fs::path& path, const std::string& text) {
   // Beside the final file, renamed over it when complete (as mr::write_image does).
   const fs::path temp =
@@ -171,7 +198,9 @@ CLI::App* add_material_command(CLI::App& app, MaterialCommandOptions& o) {
       "Give regions of a photo the material look of a sample image: BRDFs fitted to the sample's "
       "segments, assigned to the regions by Tabu search, re-rendered under the photo's light");
   cmd->add_option("--sample", o.sample, "Sample image with the wanted look")->required();
-  cmd->add_option("--target", o.target, "Photo whose regions get the look")->required();
+  cmd->add_option("--target", o.target,
+                  "Photo whose regions get the look (without it: --target-depth is a 3D scene's "
+                  "distance map, rendered over black)");
   cmd->add_option(
          "--regions", o.regions,
          "Regions of the target: a mask image (one channel of ids 1..n, 0 = none; or distinct "
@@ -246,16 +275,21 @@ int run_material_command(const MaterialCommandOptions& o) {
     }
   }
 
+  const bool scene_target = o.target.empty();
+  if (scene_target && (o.target_depth.empty() || o.target_depth == "auto"))
+    return fail(2, "--target (a photo) or --target-depth (a 3D scene's distance map) is required");
+
   const auto start = std::chrono::steady_clock::now();
   LoadedPhoto sample, target;
   Image labels;
   try {
     std::optional<Annotations> annotations;
     if (is_json(o.regions)) annotations = load_annotations(o.regions);
-    target = load_photo(o.target, o.target_depth, o.target_scene, o.target_fov_deg,
-                        annotations ? &*annotations : nullptr);
+    target = scene_target ? load_scene_target(o.target_depth, o.target_scene, o.target_fov_deg)
+                          : load_photo(o.target, o.target_depth, o.target_scene, o.target_fov_deg,
+                                       annotations ? &*annotations : nullptr);
     sample = load_photo(o.sample, o.sample_depth, o.sample_scene, o.sample_fov_deg, nullptr);
-    labels = load_region_labels(o.regions, target.photo.width(), target.photo.height());
+    labels = load_region_labels(o.regions, target.camera.width, target.camera.height);
   } catch (const Error& e) {
     const bool usage =
         e.code() == ErrorCode::invalid_argument || e.code() == ErrorCode::size_mismatch;
@@ -264,8 +298,9 @@ int run_material_command(const MaterialCommandOptions& o) {
   if (!o.quiet) {
     std::printf("sample %s: %dx%d; %s\n  %s\n", o.sample.c_str(), sample.photo.width(),
                 sample.photo.height(), sample.depth_note.c_str(), sample.light_note.c_str());
-    std::printf("target %s: %dx%d; %s\n  %s\n", o.target.c_str(), target.photo.width(),
-                target.photo.height(), target.depth_note.c_str(), target.light_note.c_str());
+    std::printf("target %s: %dx%d; %s\n  %s\n",
+                scene_target ? o.target_depth.c_str() : o.target.c_str(), target.camera.width,
+                target.camera.height, target.depth_note.c_str(), target.light_note.c_str());
   }
   MaterialTransferOptions options;
   options.max_candidates = o.max_candidates;
@@ -276,15 +311,17 @@ int run_material_command(const MaterialCommandOptions& o) {
   MaterialTransferResult result;
   try {
     const ShadedPhoto s{&sample.photo, &sample.distance_m, sample.camera, sample.scene};
-    const ShadedPhoto t{&target.photo, &target.distance_m, target.camera, target.scene};
+    const ShadedPhoto t{scene_target ? nullptr : &target.photo, &target.distance_m, target.camera,
+                        target.scene};
     result = transfer_material(s, t, labels, options);
   } catch (const Error& e) {
     // The library's messages say which input they are about; name its file.
     const std::string message = e.what();
     const bool regions = message.starts_with("region");
-    const std::string& file = regions                         ? o.regions
-                              : message.starts_with("target") ? o.target
-                                                              : o.sample;
+    const std::string& file = regions ? o.regions
+                              : message.starts_with("target")
+                                  ? (scene_target ? o.target_depth : o.target)
+                                  : o.sample;
     return fail(regions ? 2 : 1, file + ": " + message);
   }
   try {

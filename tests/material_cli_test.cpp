@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "mr/annotations.h"
+#include "mr/camera.h"
 #include "mr/io.h"
 #include "test_support.h"
 
@@ -135,6 +136,41 @@ TEST_F(MaterialCli, AnnotationRegionsAndFogInOneRun) {
   double diff = 0;
   for (int x = 0; x < 250; ++x) diff += std::abs(out.at(x, 100, 1) - photo.at(x, 100, 1));
   EXPECT_GT(diff / 250, 0.005);
+}
+
+TEST_F(MaterialCli, SceneTargetFromADistanceMapAlone) {
+  // A 3D scene given by its distance map: a flat wall 4 m away filling a 90 x 60 frame, one
+  // region in its middle. No --target photo: the region is rendered over black.
+  Image depth(90, 60, 1, {"Z"});
+  const Camera camera = Camera::from_horizontal_fov(90, 60, 60);
+  for (int y = 0; y < 60; ++y)
+    for (int x = 0; x < 90; ++x) depth.at(x, y, 0) = float(4 * camera.z_to_distance(x, y));
+  WriteOptions wd;
+  wd.pixel_type = PixelType::float32;
+  wd.colorspace = colorspace::raw;
+  write_image(work / "wall_depth.exr", depth, wd);
+  Image mask(90, 60, 1);
+  for (int y = 15; y < 45; ++y)
+    for (int x = 20; x < 70; ++x) mask.at(x, y, 0) = 1.0f / 255;
+  WriteOptions o;
+  o.colorspace = colorspace::raw;
+  o.pixel_type = PixelType::uint8;
+  write_image(work / "wall_mask.png", mask, o);
+  const std::string cmd = kMr + " material --sample " + q(dir_->path() / "building.png") +
+                          " --sample-fov 50 --target-depth " + q(work / "wall_depth.exr") +
+                          " --fov 60 --regions " + q(work / "wall_mask.png");
+  auto r = test::run(cmd + " -o " + q(work / "wall.exr"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("3D scene"), std::string::npos) << r.output;
+  const Image out = read_image(work / "wall.exr");
+  ASSERT_EQ(out.width(), 90);
+  EXPECT_EQ(out.at(5, 5, 1), 0.0f);     // outside the region: black
+  EXPECT_GT(out.at(45, 30, 1), 0.01f);  // the region: lit by the default light
+  // Neither a photo nor a distance map: a usage error.
+  r = test::run(kMr + " material --sample " + q(dir_->path() / "building.png") + " --regions " +
+                q(work / "wall_mask.png") + " -o " + q(work / "none.exr"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--target-depth"), std::string::npos) << r.output;
 }
 
 TEST_F(MaterialCli, BadInputsGiveMessages) {

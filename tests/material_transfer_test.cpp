@@ -5,6 +5,7 @@
 // bad input with clear errors. Plus load_region_labels (ids, colours, annotations) and the JSON.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <numbers>
@@ -223,6 +224,49 @@ TEST(MaterialTransfer, GlossySphereOntoMatteGround) {
       if (target.labels.at(x, y, 0) == 0) {
         for (int c = 0; c < 3; ++c) ASSERT_EQ(r.image.at(x, y, c), target.photo.at(x, y, c));
       }
+}
+
+TEST(MaterialTransfer, SceneTargetWithoutPhotoIsRenderedWithTheSamplesMaterial) {
+  // A 3D object given only by its distance map (photo null): the sphere gets the sample's
+  // material and is rendered exactly as shade_regions renders it; everything else is black.
+  const Synthetic sample = glossy_sphere();
+  Synthetic object = make_geometry(120, 100, 0, true, {0.2, 1.5, 4.0}, 0.8, false);
+  const ShadedPhoto target{nullptr, &object.distance_m, object.camera, object.scene};
+  const MaterialTransferResult r = transfer_material(shaded(sample), target, object.labels);
+  for (const std::string& n : r.notes) std::printf("  %s\n", n.c_str());
+  ASSERT_EQ(r.assignment.size(), 1u);
+  const Material& m = r.candidates.candidates[r.assignment[0]].material;
+  double d, sp, g;
+  parameter_error(m, kGlossy, &d, &sp, &g);
+  EXPECT_LT(d, 0.06);  // tolerances as in GlossySphereOntoMatteGround
+  EXPECT_LT(sp, 0.10);
+  EXPECT_LT(g, 0.10);
+  Synthetic plain = object;
+  render(plain, {m});
+  int interior = 0;
+  for (int y = 0; y < 100; ++y)
+    for (int x = 0; x < 120; ++x) {
+      if (object.labels.at(x, y, 0) == 0) {
+        for (int c = 0; c < 3; ++c) ASSERT_EQ(r.image.at(x, y, c), 0.0f) << x << "," << y;
+        continue;
+      }
+      bool inside = true;  // 3 px from the border: beyond the feathered edge
+      for (int dy = -3; dy <= 3 && inside; ++dy)
+        for (int dx = -3; dx <= 3 && inside; ++dx) {
+          const int xx = std::clamp(x + dx, 0, 119), yy = std::clamp(y + dy, 0, 99);
+          inside = object.labels.at(xx, yy, 0) == 1;
+        }
+      if (!inside) continue;
+      ++interior;
+      for (int c = 0; c < 3; ++c)
+        ASSERT_NEAR(r.image.at(x, y, c), plain.photo.at(x, y, c),
+                    1e-5 * std::max(1.0f, plain.photo.at(x, y, c)))
+            << x << "," << y;
+    }
+  EXPECT_GT(interior, 1000);
+  // Without a photo the distance map must be there and match the camera.
+  const ShadedPhoto nothing{nullptr, nullptr, object.camera, object.scene};
+  EXPECT_THROW(transfer_material(shaded(sample), nothing, object.labels), Error);
 }
 
 TEST(MaterialTransfer, TwoMaterialSampleGivesBothCandidates) {

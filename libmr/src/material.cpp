@@ -383,7 +383,25 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
                                          const Image& region_labels,
                                          const MaterialTransferOptions& options) {
   validate_options(options);
-  const Image target_rgb = checked_rgb(target, "target");
+  // A target without a photo is a 3D scene given by its distance map (objects rendered by any
+  // renderer): its regions are rendered over black, with no photo detail to keep.
+  const bool scene_only = target.photo == nullptr;
+  Image blank;
+  if (scene_only) {
+    if (!target.distance_m)
+      throw Error(ErrorCode::invalid_argument,
+                  "target: a photo or a distance map (for a 3D scene) is required");
+    if (target.camera.width != target.distance_m->width() ||
+        target.camera.height != target.distance_m->height())
+      throw Error(ErrorCode::size_mismatch,
+                  "target: camera is " + size_text(target.camera.width, target.camera.height) +
+                      ", distance map is " +
+                      size_text(target.distance_m->width(), target.distance_m->height()));
+    blank = Image(target.camera.width, target.camera.height, 3);
+  }
+  ShadedPhoto target_checked = target;
+  if (scene_only) target_checked.photo = &blank;
+  const Image target_rgb = checked_rgb(target_checked, "target");
   const int w = target_rgb.width(), h = target_rgb.height();
   const int regions = checked_region_count(region_labels, w, h);
   return in_arena(options.threads, [&] {
@@ -427,7 +445,7 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     // The target's detail layer and per region x candidate statistics of what would be shown.
     const Image shading = photo::diffuse_shading(geometry, lighting);
     const Image detail = photo::photo_detail(target_rgb, shading, geometry);
-    const Image* detail_used = options.keep_detail ? &detail : nullptr;
+    const Image* detail_used = options.keep_detail && !scene_only ? &detail : nullptr;
     const double target_reference = mean_surface_luminance(shading, geometry.surface);
     if (!(target_reference > 0))
       throw Error(ErrorCode::invalid_argument,
@@ -471,7 +489,7 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
 
     std::vector<Material> assigned;
     for (int r = 0; r < regions; ++r) assigned.push_back(materials[result.assignment[r]]);
-    result.image = photo::apply_materials(*target.photo, geometry, lighting, shading, region_labels,
+    result.image = photo::apply_materials(target_rgb, geometry, lighting, shading, region_labels,
                                           assigned, detail_used);
 
     // Style distance of the regions to the sample, before and after (whole composite).
@@ -489,10 +507,15 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
       if (sky_in_region[r]) line += format(" (%zu sky pixels left as they are)", sky_in_region[r]);
       result.notes.push_back(line);
     }
-    result.notes.push_back(format(
-        "style distance of the regions to the sample: before %.4f, after %.4f (objective %.4f)",
-        photo::style_distance(sample_stats, before), photo::style_distance(sample_stats, after),
-        result.objective));
+    if (scene_only)
+      result.notes.push_back(
+          format("style distance of the rendered regions to the sample: %.4f (objective %.4f)",
+                 photo::style_distance(sample_stats, after), result.objective));
+    else
+      result.notes.push_back(format(
+          "style distance of the regions to the sample: before %.4f, after %.4f (objective %.4f)",
+          photo::style_distance(sample_stats, before), photo::style_distance(sample_stats, after),
+          result.objective));
     return result;
   });
 }

@@ -81,7 +81,11 @@ struct MaterialTransferResult {
   std::vector<std::string> notes;
 };
 
-/// Re-materials the regions of `target`: `region_labels` is 1 channel of the target's size with
+/// Re-materials the regions of `target`. A target with `photo` null is a 3D scene given by its
+/// distance map and camera alone (e.g. objects rendered to depth by another renderer): its
+/// regions are rendered over black with the chosen materials (no photo detail: keep_detail is
+/// ignored), everything else is black.
+/// Region labels: `region_labels` is 1 channel of the target's size with
 /// 0 = untouched and 1..n = region n (every id in 1..n must have pixels). Throws
 /// mr::Error(invalid_argument) for an empty region set, a region id with no pixels, or a region
 /// entirely in the sky; mr::Error(size_mismatch) for labels of another size.
