@@ -157,6 +157,15 @@ TEST(Cancel, RequestedBeforeTheCallThrowsAndLeavesTheOutputsAlone) {
   EXPECT_TRUE(layers.transmittance.empty());
 }
 
+// The 200 ms bar is for the optimised build. Sanitizer and unoptimised builds run everything about
+// 10x slower (this render: 21.9 s under ASan+UBSan against 2-6 s), the uninterruptible steps
+// between checks (one row of the march, the BVH build) included, so the bar scales with them.
+#if defined(__SANITIZE_ADDRESS__) || !defined(__OPTIMIZE__)
+constexpr double kCpuCancelBarS = 2.0;
+#else
+constexpr double kCpuCancelBarS = 0.2;
+#endif
+
 TEST(Cancel, CpuRenderStopsWithin200msOfTheRequest) {
   const Camera cam = Camera::from_horizontal_fov(1920, 1080, 60);
   const FogScene s = sunlit_street(Backend::cpu);
@@ -173,7 +182,7 @@ TEST(Cancel, CpuRenderStopsWithin200msOfTheRequest) {
         "after the request (%s)\n",
         full_s, 1e3 * after_s, 1e3 * t.latency_s, t.message.c_str());
     EXPECT_TRUE(t.threw_cancelled) << t.message;
-    EXPECT_LT(t.latency_s, 0.2);
+    EXPECT_LT(t.latency_s, kCpuCancelBarS);
   }
 }
 
