@@ -29,28 +29,6 @@ double seconds(Clock::duration d) {
   return std::chrono::duration<double>(d).count();
 }
 
-// A street: ground, a wall on the left (x = -3, 6 m high), a pillar, a far wall; sky above.
-Image street_depth(const Camera& cam, const CameraPose& pose) {
-  Image depth = test::ground_depth(cam, pose);
-  for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x) {
-      const Vec3 w = pose.ray_direction(cam, x, y);
-      float& d = depth.at(x, y, 0);
-      if (w.x < 0) {
-        const double t = -3.0 / w.x;
-        if (pose.position_m.y + t * w.y < 6 && t < d) d = float(t);
-      }
-      if (w.z > 0) {
-        const double t = (60 - pose.position_m.z) / w.z;
-        if (pose.position_m.y + t * w.y < 14 && t < d) d = float(t);
-        const double tp = (12 - pose.position_m.z) / w.z;
-        const double px = pose.position_m.x + tp * w.x, py = pose.position_m.y + tp * w.y;
-        if (px > 1 && px < 2 && py < 8 && tp < d) d = float(tp);
-      }
-    }
-  return depth;
-}
-
 // Sunlit street with a lamp, shafts and wisps: every part of the core runs.
 FogScene street_scene(Backend backend) {
   FogScene s = test::base_scene();
@@ -132,7 +110,7 @@ TEST(Cancel, ErrorCodeHasAName) {
 TEST(Cancel, CpuRenderWithAnUnusedTokenIsBitIdentical) {
   const Camera cam = Camera::from_horizontal_fov(320, 180, 60);
   const FogScene s = street_scene(Backend::cpu);
-  const Image depth = street_depth(cam, s.pose);
+  const Image depth = test::street_depth(cam, s.pose);
   CancelToken token;
   expect_identical(render_scattering(Image(), depth, cam, s),
                    render_scattering(Image(), depth, cam, s, &token));
@@ -141,7 +119,7 @@ TEST(Cancel, CpuRenderWithAnUnusedTokenIsBitIdentical) {
 TEST(Cancel, RequestedBeforeTheCallThrowsAndLeavesTheOutputsAlone) {
   const Camera cam = Camera::from_horizontal_fov(64, 48, 60);
   const FogScene s = street_scene(Backend::cpu);
-  const Image depth = street_depth(cam, s.pose);
+  const Image depth = test::street_depth(cam, s.pose);
   const Image photo = test::make_test_photo(64, 48);
   CancelToken token;
   token.request();
@@ -169,7 +147,7 @@ constexpr double kCpuCancelBarS = 0.2;
 TEST(Cancel, CpuRenderStopsWithin200msOfTheRequest) {
   const Camera cam = Camera::from_horizontal_fov(1920, 1080, 60);
   const FogScene s = sunlit_street(Backend::cpu);
-  const Image depth = street_depth(cam, s.pose);
+  const Image depth = test::street_depth(cam, s.pose);
   const auto t0 = Clock::now();
   (void)render_scattering(Image(), depth, cam, s);
   const double full_s = seconds(Clock::now() - t0);
@@ -200,7 +178,7 @@ TEST_F(VulkanCancel, RenderWithAnUnusedTokenIsBitIdentical) {
   // in several with one.
   const Camera cam = Camera::from_horizontal_fov(320, 240, 60);
   const FogScene s = street_scene(Backend::vulkan);
-  const Image depth = street_depth(cam, s.pose);
+  const Image depth = test::street_depth(cam, s.pose);
   CancelToken token;
   const ScatteringLayers plain = render_scattering(Image(), depth, cam, s);
   const ScatteringLayers tokened = render_scattering(Image(), depth, cam, s, &token);
@@ -214,7 +192,7 @@ TEST_F(VulkanCancel, RenderStopsWithin500msOfTheRequest) {
   // running at the request.
   const Camera cam = Camera::from_horizontal_fov(1920, 1080, 60);
   const FogScene s = sunlit_street(Backend::vulkan);
-  const Image depth = street_depth(cam, s.pose);
+  const Image depth = test::street_depth(cam, s.pose);
   for (double after_s : {0.05, 1.5}) {
     const CancelTiming t = measure_cancel(depth, cam, s, after_s);
     std::printf(

@@ -53,6 +53,29 @@ inline Image ground_depth(const Camera& cam, const CameraPose& pose) {
   return im;
 }
 
+/// A street: the ground, a wall on the left (x = -3, 6 m high), a pillar 1 m wide at x in [1, 2],
+/// z = 12, 8 m high, a far wall (z = 60, 14 m high); sky above.
+inline Image street_depth(const Camera& cam, const CameraPose& pose) {
+  Image depth = ground_depth(cam, pose);
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Vec3 w = pose.ray_direction(cam, x, y);
+      float& d = depth.at(x, y, 0);
+      if (w.x < 0) {
+        const double t = -3.0 / w.x;
+        if (pose.position_m.y + t * w.y < 6 && t < d) d = float(t);
+      }
+      if (w.z > 0) {
+        const double t = (60 - pose.position_m.z) / w.z;
+        if (pose.position_m.y + t * w.y < 14 && t < d) d = float(t);
+        const double tp = (12 - pose.position_m.z) / w.z;
+        const double px = pose.position_m.x + tp * w.x, py = pose.position_m.y + tp * w.y;
+        if (px > 1 && px < 2 && py < 8 && tp < d) d = float(tp);
+      }
+    }
+  return depth;
+}
+
 /// Coloured fog with g 0.4, no sky light, final quality (the closed-form tests' start).
 inline FogScene base_scene() {
   FogScene s;

@@ -32,31 +32,7 @@ using test::base_scene;
 using test::constant_depth;
 using test::ground_depth;
 using test::kInf;
-
-// A street: ground, a wall on the left (x = -3, 6 m high), a pillar, a far wall; sky above.
-Image street_depth(const Camera& cam, const CameraPose& pose) {
-  Image depth = ground_depth(cam, pose);
-  for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x) {
-      const Vec3 w = pose.ray_direction(cam, x, y);
-      float& d = depth.at(x, y, 0);
-      if (w.x < 0) {
-        const double t = -3.0 / w.x;
-        if (pose.position_m.y + t * w.y < 6 && t < d) d = float(t);
-      }
-      if (w.z > 0) {
-        const double t = (60 - pose.position_m.z) / w.z;
-        if (pose.position_m.y + t * w.y < 14 && t < d) d = float(t);
-      }
-      // A pillar 1 m wide at x in [1, 2], z = 12, 8 m high.
-      if (w.z > 0) {
-        const double t = (12 - pose.position_m.z) / w.z;
-        const double px = pose.position_m.x + t * w.x, py = pose.position_m.y + t * w.y;
-        if (px > 1 && px < 2 && py < 8 && t < d) d = float(t);
-      }
-    }
-  return depth;
-}
+using test::street_depth;
 
 class VulkanScattering : public ::testing::Test {
  protected:
