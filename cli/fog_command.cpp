@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <mutex>
+#include <optional>
 
 #include "batch.h"
 #include "mr/mr.h"
@@ -243,18 +244,22 @@ FogPlan make_plan(const FogCommandOptions& o) {
 // --focal-px / --fov, else the camera recorded in the --scene file (what `mr estimate` found),
 // else EXIF or the default.
 Camera make_camera(const FogCommandOptions& o, const FogScene& scene, const fs::path& photo_path,
-                   const Image& photo) {
-  if (o.focal_px) return Camera::from_focal_px(photo.width(), photo.height(), *o.focal_px);
-  if (o.fov_deg) return Camera::from_horizontal_fov(photo.width(), photo.height(), *o.fov_deg);
+                   int width, int height, const Metadata& metadata) {
+  if (o.focal_px) return Camera::from_focal_px(width, height, *o.focal_px);
+  if (o.fov_deg) return Camera::from_horizontal_fov(width, height, *o.fov_deg);
   if (scene.camera) {
     try {
-      return camera_for_image(*scene.camera, photo.width(), photo.height());
+      return camera_for_image(*scene.camera, width, height);
     } catch (const Error& e) {
       throw Error(e.code(), photo_path.string() + ": --scene " + o.scene_path + ": " + e.what() +
                                 "; give --fov or --focal-px");
     }
   }
-  return Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
+  return Camera::from_metadata(width, height, metadata);
+}
+Camera make_camera(const FogCommandOptions& o, const FogScene& scene, const fs::path& photo_path,
+                   const Image& photo) {
+  return make_camera(o, scene, photo_path, photo.width(), photo.height(), photo.metadata());
 }
 
 // --depth auto without a depth file: the geometry from mr::estimate_scene (the photo's
@@ -297,6 +302,117 @@ DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image&
   }
 }
 
+// The output's stored type: --bit-depth, or with auto the input's precision where the output
+// format can hold it.
+WriteOptions output_write_options(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
+                                  const ImageFileInfo& info) {
+  WriteOptions write;
+  write.color = &plan.color;
+  write.colorspace = o.output_colorspace;
+  write.pixel_type = plan.pixel_type;
+  const std::string out_ext = job.output.extension().string();
+  const bool exr_out = out_ext == ".exr" || out_ext == ".EXR";
+  if (write.pixel_type == PixelType::automatic) {
+    if (exr_out)
+      write.pixel_type =
+          info.pixel_type == PixelType::float32 ? PixelType::float32 : PixelType::half;
+    else if (info.pixel_type == PixelType::uint16 &&
+             (out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff"))
+      write.pixel_type = PixelType::uint16;
+  }
+  return write;
+}
+
+// Sky statistics of a depth map, as warnings (NaN / negative values, all sky).
+void warn_about_depth(Reporter& report, const std::string& depth_name, std::size_t pixels,
+                      std::size_t no_surface, std::size_t invalid) {
+  // Sky stored as 0 or +inf is the documented encoding; NaN or negative values are not, and an
+  // all-sky map is almost certainly the wrong file or scale.
+  auto percent = [&](std::size_t n) {
+    char text[64];
+    std::snprintf(text, sizeof text, "%.1f", 100.0 * double(n) / double(pixels));
+    return std::string(text);
+  };
+  if (invalid > 0)
+    report.warning(depth_name + ": " + std::to_string(invalid) + " pixels (" + percent(invalid) +
+                   " %) are NaN or negative: treated as sky");
+  if (no_surface == pixels)
+    report.warning(depth_name + ": no pixel has a surface (all 0, inf or invalid): all sky");
+}
+
+// Streamers (their strip buffers) are reused from photo to photo: one per photo in flight.
+class StreamerPool {
+ public:
+  std::unique_ptr<FogStreamer> acquire() {
+    std::lock_guard lock(mutex_);
+    if (free_.empty()) return std::make_unique<FogStreamer>();
+    auto s = std::move(free_.back());
+    free_.pop_back();
+    return s;
+  }
+  void release(std::unique_ptr<FogStreamer> s) {
+    std::lock_guard lock(mutex_);
+    free_.push_back(std::move(s));
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<FogStreamer>> free_;
+};
+
+// Sky light only (no sun, lamps or noise): every pixel is a closed form, so the photo streams
+// through decode -> fog -> encode in strips (mr/fog_stream.h) with the same result as the
+// full-frame path below. With the sky radiance 'auto' the photo is decoded whole first (the
+// dark channel prior needs all of it); the fog and the encoding still stream. nullopt: the job
+// needs the full-frame path (AOVs, an estimated geometry, a forced Vulkan backend, or what
+// FogStreamer declines: unusual files, and the bad inputs whose errors that path reports).
+std::optional<Outcome> run_streamed(const FogCommandOptions& o, const FogPlan& plan,
+                                    const Job& job, Reporter& report) {
+  if (!is_sky_only(plan.scene) || plan.scene.render.backend == Backend::vulkan || o.aovs)
+    return std::nullopt;
+  std::error_code ec;
+  if (o.depth == "auto" && !fs::exists(job.depth, ec)) return std::nullopt;
+  static StreamerPool pool;
+  std::unique_ptr<FogStreamer> streamer = pool.acquire();
+  FogScene scene = plan.scene;  // what --save-scene records ('auto' sky stays 'auto')
+  FogScene render_scene = scene;
+  Image photo;
+  StreamFogRequest request;
+  if (!scene.lighting.sky_radiance) {
+    ReadOptions read;
+    read.colorspace = o.input_colorspace;
+    read.color = &plan.color;
+    photo = read_image(job.photo, read);
+    if (photo.channels() < 3) return std::nullopt;
+    render_scene.lighting.sky_radiance = estimate_airlight(photo);
+    request.photo_image = &photo;
+  }
+  request.photo = job.photo;
+  request.depth = job.depth;
+  request.output = job.output;
+  request.depth_options = plan.depth;
+  request.scene = &render_scene;
+  request.camera = [&](int width, int height, const Metadata& metadata) {
+    return make_camera(o, plan.scene, job.photo, width, height, metadata);
+  };
+  request.color = &plan.color;
+  request.input_colorspace = o.input_colorspace;
+  request.write = output_write_options(o, plan, job, probe_image(job.photo));
+  const StreamFogResult result = streamer->fog_file(request);
+  pool.release(std::move(streamer));
+  if (!result.streamed) return std::nullopt;
+  warn_about_depth(report, job.depth.string(),
+                   std::size_t(result.width) * std::size_t(result.height), result.no_surface_pixels,
+                   result.invalid_pixels);
+  if (!o.save_scene_path.empty() && is_pattern(o.save_scene_path)) {
+    scene.camera = scene_camera(result.camera);
+    const fs::path target = expand_pattern(o.save_scene_path, job.photo);
+    if (target.has_parent_path()) fs::create_directories(target.parent_path(), ec);  // as -o
+    save_scene(target, scene);
+  }
+  return Outcome::done;
+}
+
 Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job, Reporter& report,
                 const std::atomic<bool>& interrupted) {
   std::error_code ec;
@@ -311,6 +427,7 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
         throw Error(ErrorCode::invalid_argument, job.photo.string() + ": output " + out->string() +
                                                      " is an input file; refusing to overwrite it");
   }
+  if (const std::optional<Outcome> streamed = run_streamed(o, plan, job, report)) return *streamed;
   ReadOptions read;
   read.colorspace = o.input_colorspace;
   read.color = &plan.color;
@@ -328,19 +445,8 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
                                    : read_depth(job.depth, camera, plan.depth);
   const std::string depth_name =
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
-  // Sky stored as 0 or +inf is the documented encoding; NaN or negative values are not, and an
-  // all-sky map is almost certainly the wrong file or scale.
-  auto percent = [&](std::size_t n) {
-    char text[64];
-    std::snprintf(text, sizeof text, "%.1f",
-                  100.0 * double(n) / double(depth.distance_m.pixel_count()));
-    return std::string(text);
-  };
-  if (depth.invalid_pixels > 0)
-    report.warning(depth_name + ": " + std::to_string(depth.invalid_pixels) + " pixels (" +
-                   percent(depth.invalid_pixels) + " %) are NaN or negative: treated as sky");
-  if (depth.no_surface_pixels == depth.distance_m.pixel_count())
-    report.warning(depth_name + ": no pixel has a surface (all 0, inf or invalid): all sky");
+  warn_about_depth(report, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
+                   depth.invalid_pixels);
   ScatteringLayers aovs;
   const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs);
   if (!aovs.backend_notice.empty()) {  // the Vulkan fall-back: once per run
@@ -349,21 +455,9 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   }
   if (interrupted) return Outcome::failed;
 
-  WriteOptions write;
-  write.color = &plan.color;
-  write.colorspace = o.output_colorspace;
-  write.pixel_type = plan.pixel_type;
+  const WriteOptions write = output_write_options(o, plan, job, info);
   const std::string out_ext = job.output.extension().string();
   const bool exr_out = out_ext == ".exr" || out_ext == ".EXR";
-  if (write.pixel_type == PixelType::automatic) {
-    // Keep the input's precision where the output format can hold it.
-    if (exr_out)
-      write.pixel_type =
-          info.pixel_type == PixelType::float32 ? PixelType::float32 : PixelType::half;
-    else if (info.pixel_type == PixelType::uint16 &&
-             (out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff"))
-      write.pixel_type = PixelType::uint16;
-  }
   // R,G,B + transmittance.RGB + inscatter.RGB + depth.Z + sun_visibility.Y + optical_depth.RGB
   auto write_layers = [&](const fs::path& path, PixelType type) {
     const Image composite_rgb = layers.composite.select_channels(std::array{0, 1, 2});

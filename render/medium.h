@@ -42,6 +42,23 @@ double density_at(const Medium& medium, const Vec3d& x);
 /// The noise modulation max(0, 1 + amplitude * fbm(x / scale)) (1 when noise is off).
 double noise_modulation(const Medium::Noise& noise, const Vec3d& x);
 
+/// Sky light only (no sun, no lamps, no noise; DESIGN.md section 3): the in-scatter R of a
+/// pixel whose camera optical depths are `optical_depth` (per channel: sigma_t times
+/// RayDensity's unit optical depth). The source albedo L_sky is constant along the ray, so the
+/// march's sum telescopes to R = albedo L_sky (1 - tau) exactly; expm1 keeps thin fog's 1 - tau
+/// precise, and grey fog needs it once. T is exp(-optical_depth) (S = 1: ambient light only).
+/// The scattering core's sky-only path and the streaming pipeline (libmr/src/fog_stream.cpp)
+/// both call this, so they give the same bits.
+inline void sky_only_inscatter(const double optical_depth[3], const std::array<float, 3>& albedo,
+                               const std::array<float, 3>& sky_radiance, double inscatter[3]) {
+  double scattered = 0;  // 1 - tau
+  for (int c = 0; c < 3; ++c) {
+    if (c == 0 || !(optical_depth[c] == optical_depth[c - 1]))
+      scattered = -std::expm1(-optical_depth[c]);
+    inscatter[c] = albedo[c] * sky_radiance[c] * scattered;
+  }
+}
+
 /// Henyey-Greenstein phase function; cos_theta = dot(view direction, direction to the light).
 inline double henyey_greenstein(double g, double cos_theta) {
   const double denom = 1.0 + g * g - 2.0 * g * cos_theta;

@@ -170,10 +170,8 @@ class Core {
       // Sky light only: sum over segments telescopes to albedo L (1 - tau(D)) exactly (to the
       // very end of the fog for the sky).
       const double od_exact = rd.optical_depth(0, distance);
-      for (int c = 0; c < 3; ++c) {
-        s.camera_od[c] = sigma_[c] * od_exact;
-        s.inscatter[c] = m.albedo[c] * in_.sky_radiance[c] * -std::expm1(-s.camera_od[c]);
-      }
+      for (int c = 0; c < 3; ++c) s.camera_od[c] = sigma_[c] * od_exact;
+      sky_only_inscatter(s.camera_od, m.albedo, in_.sky_radiance, s.inscatter);
       return s;
     }
 

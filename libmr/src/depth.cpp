@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "depth_convert.h"
 #include "mr/error.h"
 #include "mr/io.h"
 
@@ -43,7 +44,6 @@ DepthMap depth_to_distance(Image stored, const Camera& camera, const DepthOption
   }
   stored.set_channel_names({"Z"});
 
-  constexpr float kInf = std::numeric_limits<float>::infinity();
   const int width = stored.width();
   const double f_b = camera.focal_px * options.baseline_m;
   // Counts: no surface at all, and of those the values that are not a sky encoding (NaN, -inf,
@@ -54,27 +54,10 @@ DepthMap depth_to_distance(Image stored, const Camera& camera, const DepthOption
       [&](const tbb::blocked_range<int>& rows, Counts count) {
         for (int y = rows.begin(); y < rows.end(); ++y) {
           float* row = stored.pixel(0, y);
-          for (int x = 0; x < width; ++x) {
-            const double v = double(row[x]) * options.scale;
-            double d = kInf;
-            if (std::isfinite(v) && v > 0) {
-              switch (options.kind) {
-                case DepthKind::distance: d = v; break;
-                case DepthKind::planar_z: d = v * camera.z_to_distance(x, y); break;
-                case DepthKind::disparity: {
-                  const double disparity = v + options.doffs_px;
-                  d = disparity > 0 ? f_b / disparity * camera.z_to_distance(x, y) : kInf;
-                  break;
-                }
-              }
-            }
-            if (!std::isfinite(d) || !(d > 0)) {
-              d = kInf;
-              ++count.first;
-              if (std::isnan(v) || v < 0) ++count.second;
-            }
-            row[x] = float(d);
-          }
+          for (int x = 0; x < width; ++x)
+            row[x] = detail::stored_depth_to_distance(double(row[x]) * options.scale, options,
+                                                      camera, f_b, x, y, count.first,
+                                                      count.second);
         }
         return count;
       },

@@ -11,6 +11,7 @@
 #include "mr/error.h"
 #include "mr/estimate.h"
 #include "mr/fog.h"
+#include "mr/fog_stream.h"
 #include "mr/image.h"
 #include "mr/io.h"
 #include "mr/metadata.h"
