@@ -15,15 +15,47 @@ namespace mr::cli {
 
 namespace {
 
-std::vector<fs::path> folder_images(const fs::path& folder) {
+// What a folder entry that cannot be a photo is, for the warning that names it ("" for regular
+// files).
+std::string unusable_entry(const fs::path& p) {
+  std::error_code ec;
+  const fs::file_status link = fs::symlink_status(p, ec);
+  const fs::file_status target = fs::status(p, ec);
+  if (fs::is_symlink(link) && (ec || target.type() == fs::file_type::not_found)) {
+    if (ec == std::errc::too_many_symbolic_link_levels) return "a symbolic link loop";
+    std::error_code e2;
+    return "a dangling symbolic link (to " + fs::read_symlink(p, e2).string() + ")";
+  }
+  if (ec) return "unreadable (" + ec.message() + ")";
+  if (fs::is_regular_file(target)) return "";
+  if (fs::is_directory(target)) return "a folder";
+  if (fs::is_fifo(target)) return "a FIFO (named pipe)";
+  if (fs::is_character_file(target) || fs::is_block_file(target)) return "a device";
+  return "not a regular file";
+}
+
+std::vector<fs::path> folder_images(const fs::path& folder, std::vector<std::string>* warnings) {
   std::vector<fs::path> out;
+  std::vector<std::pair<fs::path, std::string>> skipped;
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(folder, ec)) {
     const fs::path& p = entry.path();
-    if (!entry.is_regular_file(ec) || p.filename().string().starts_with(".")) continue;
-    if (is_readable_image_extension(p)) out.push_back(p);
+    if (p.filename().string().starts_with(".")) continue;  // hidden (our temporaries too)
+    const std::string problem = unusable_entry(p);
+    const bool image_name = is_readable_image_extension(p);
+    if (problem.empty()) {
+      if (image_name) out.push_back(p);
+    } else if (image_name || problem.find("symbolic link") != std::string::npos) {
+      // Named, not silently dropped: a photo the user expects may be behind it.
+      skipped.emplace_back(p, problem);
+    }
   }
+  if (ec && warnings) warnings->push_back(folder.string() + ": cannot list: " + ec.message());
   std::sort(out.begin(), out.end());
+  std::sort(skipped.begin(), skipped.end());
+  if (warnings)
+    for (const auto& [p, problem] : skipped)
+      warnings->push_back(p.string() + ": " + problem + ", not a photo; skipped");
   return out;
 }
 
@@ -44,7 +76,8 @@ void replace_all(std::string& s, const std::string& from, const std::string& to)
 }  // namespace
 
 std::vector<fs::path> expand_inputs(const std::vector<std::string>& args,
-                                    const std::vector<std::string>& skip_stem_suffixes) {
+                                    const std::vector<std::string>& skip_stem_suffixes,
+                                    std::vector<std::string>* warnings) {
   std::vector<fs::path> out;
   std::set<fs::path> seen;
   auto add = [&](const fs::path& p) {
@@ -59,12 +92,18 @@ std::vector<fs::path> expand_inputs(const std::vector<std::string>& args,
   for (const std::string& arg : args) {
     std::error_code ec;
     if (fs::is_directory(arg, ec)) {
-      for (const auto& p : folder_images(arg)) add_found(p);
+      for (const auto& p : folder_images(arg, warnings)) add_found(p);
     } else if (arg.find_first_of("*?[") != std::string::npos && !fs::exists(arg, ec)) {
       auto matches = glob_paths(arg);
       if (matches.empty()) add(arg);
-      for (const auto& p : matches)
-        if (!fs::is_directory(p, ec)) add_found(p);
+      for (const auto& p : matches) {
+        if (fs::is_directory(p, ec)) {
+          if (warnings && is_readable_image_extension(p))
+            warnings->push_back(p.string() + ": a folder, not a photo; skipped");
+          continue;
+        }
+        add_found(p);
+      }
     } else {
       add(arg);
     }

@@ -14,9 +14,12 @@ namespace mr::cli {
 /// skipped), patterns with * ? [ are globbed. Files found in folders or by globs whose stem ends
 /// with one of `skip_stem_suffixes` (depth maps, AOV files) are left out; files named
 /// explicitly never are. Duplicates are dropped; order is kept. A glob that matches nothing is
-/// returned as is (it then fails as a missing file).
+/// returned as is (it then fails as a missing file). Entries of a folder that cannot be photos
+/// although named like images (a folder "x.jpg", a FIFO, a device) and every broken symbolic
+/// link (dangling, or a loop) are skipped with one line each in `warnings` (when given).
 std::vector<std::filesystem::path> expand_inputs(const std::vector<std::string>& args,
-                                                 const std::vector<std::string>& skip_stem_suffixes = {});
+                                                 const std::vector<std::string>& skip_stem_suffixes = {},
+                                                 std::vector<std::string>* warnings = nullptr);
 
 /// Substitutes {dir}, {stem}, {name} and {ext} (with the dot) of `photo` into `pattern`.
 std::filesystem::path expand_pattern(const std::string& pattern,

@@ -11,6 +11,7 @@
 #include "mr/estimate.h"
 #include "mr/io.h"
 #include "mr/scene_json.h"
+#include "output_safety.h"
 
 namespace mr::cli {
 
@@ -44,18 +45,38 @@ CLI::App* add_estimate_command(CLI::App& app, EstimateCommandOptions& o) {
                   "replaces the estimated depth")
       ->check(CLI::ExistingFile);
   cmd->add_flag("-q,--quiet", o.quiet, "Print only errors");
+  cmd->add_flag("--overwrite", o.overwrite,
+                "Replace an existing --depth-out (a depth map is an input of mr fog; default: "
+                "refuse)");
   return cmd;
 }
 
 int run_estimate_command(const EstimateCommandOptions& o) {
-  // Outputs must not replace the photo or each other.
+  // The report goes to stdout (buffered when piped): flushed before any error, so errors come
+  // last.
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);
+  // Outputs must not replace an input (the photo, the annotations, the network) or each other,
+  // and are only ever regular files (a FIFO, a link, a device is an error, not replaced).
   std::error_code ec;
-  for (const std::string* out : {&o.scene_out, &o.depth_out, &o.overlay_out}) {
-    if (out->empty()) continue;
-    if (fs::equivalent(*out, o.photo, ec)) {
-      std::fprintf(stderr, "ERROR: %s: refusing to overwrite the input photo\n", out->c_str());
+  std::vector<fs::path> inputs{o.photo};
+  if (!o.annotations.empty()) inputs.emplace_back(o.annotations);
+  if (!o.depth_network.empty()) inputs.emplace_back(o.depth_network);
+  std::vector<std::vector<PlannedOutput>> outputs;
+  for (const auto& [out, option] : {std::pair{&o.scene_out, "-o"}, {&o.depth_out, "--depth-out"},
+                                    {&o.overlay_out, "--overlay"}})
+    if (!out->empty()) outputs.push_back({{*out, option}});
+  std::vector<std::string> problems = check_planned_outputs(inputs, outputs);
+  for (const std::string& problem : problems)
+    if (!problem.empty()) {
+      std::fprintf(stderr, "ERROR: %s\n", problem.c_str());
       return 2;
     }
+  // A depth map is what mr fog reads as an input: an existing one is replaced only when asked.
+  if (!o.depth_out.empty() && !o.overwrite && fs::exists(o.depth_out, ec)) {
+    std::fprintf(stderr,
+                 "ERROR: %s: exists (a depth map mr fog reads); pass --overwrite to replace it\n",
+                 o.depth_out.c_str());
+    return 2;
   }
   if (!o.depth_out.empty() && !is_writable_image_extension(o.depth_out)) {
     std::fprintf(stderr, "ERROR: %s: not an image format that can be written\n",
@@ -68,6 +89,8 @@ int run_estimate_command(const EstimateCommandOptions& o) {
     return 2;
   }
 
+  for (const auto& out : {o.scene_out, o.depth_out, o.overlay_out})
+    if (!out.empty()) remove_stale_temporaries(fs::path(out).parent_path());
   Annotations annotations;
   if (!o.annotations.empty()) {
     try {

@@ -15,6 +15,7 @@
 
 #include "batch.h"
 #include "mr/mr.h"
+#include "output_safety.h"
 #include "mr/scene_json.h"
 #include "progress.h"
 
@@ -36,6 +37,7 @@ enum class Outcome { done, skipped, failed };
 
 struct Job {
   fs::path photo, depth, output, aovs_output;  // aovs_output empty: none / same as output
+  std::string error;  // found while planning (an output that is an input, or shared): fails it
 };
 
 constexpr const char* kDepthExtensions[] = {".exr", ".tif", ".tiff", ".pfm", ".png"};
@@ -197,6 +199,12 @@ FogPlan make_plan(const FogCommandOptions& o) {
     throw Error(ErrorCode::invalid_argument,
                 "--depth-kind '" + o.depth_kind + "': expected distance, z or disparity");
   plan.depth.scale = o.depth_scale;
+  if (!(o.sky_depth_m > 0))  // +inf allowed: no threshold
+    throw Error(ErrorCode::invalid_argument, "--sky-depth must be positive metres (inf: none)");
+  plan.depth.sky_depth_m = o.sky_depth_m;
+  if (!(o.max_megapixels > 0) || !std::isfinite(o.max_megapixels))
+    throw Error(ErrorCode::invalid_argument, "--max-megapixels must be positive");
+  set_max_decoded_pixels(std::uint64_t(std::ceil(o.max_megapixels * 1e6)));
   plan.depth.baseline_m = o.baseline_m;
   plan.depth.doffs_px = o.doffs_px;
   if (plan.depth.kind == DepthKind::disparity && !(o.baseline_m > 0))
@@ -216,6 +224,7 @@ FogPlan make_plan(const FogCommandOptions& o) {
     std::vector<std::pair<fs::path, fs::path>> targets;  // scene file, its photo
     for (const fs::path& photo : photos) {
       const fs::path target = expand_pattern(o.save_scene_path, photo);
+      check_output_file(target);  // a FIFO, a link, a device: an error, not replaced
       for (const fs::path& input : {photo, find_depth(o, photo)})
         if (same_file(target, input))
           throw Error(ErrorCode::invalid_argument,
@@ -324,8 +333,9 @@ WriteOptions output_write_options(const FogCommandOptions& o, const FogPlan& pla
 }
 
 // Sky statistics of a depth map, as warnings (NaN / negative values, all sky).
-void warn_about_depth(Reporter& report, const std::string& depth_name, std::size_t pixels,
-                      std::size_t no_surface, std::size_t invalid) {
+void warn_about_depth(Reporter& report, const FogCommandOptions& o, const std::string& depth_name,
+                      std::size_t pixels, std::size_t no_surface, std::size_t invalid,
+                      std::size_t sky_threshold, std::size_t clamped) {
   // Sky stored as 0 or +inf is the documented encoding; NaN or negative values are not, and an
   // all-sky map is almost certainly the wrong file or scale.
   auto percent = [&](std::size_t n) {
@@ -336,6 +346,12 @@ void warn_about_depth(Reporter& report, const std::string& depth_name, std::size
   if (invalid > 0)
     report.warning(depth_name + ": " + std::to_string(invalid) + " pixels (" + percent(invalid) +
                    " %) are NaN or negative: treated as sky");
+  if (clamped > 0)
+    report.warning(depth_name + ": " + std::to_string(clamped) +
+                   " pixels are farther than 10,000 km: clamped to it");
+  if (o.verbose && sky_threshold > 0)
+    report.info("note: " + depth_name + ": " + std::to_string(sky_threshold) +
+                " pixels at or beyond --sky-depth are sky");
   if (no_surface == pixels)
     report.warning(depth_name + ": no pixel has a surface (all 0, inf or invalid): all sky");
 }
@@ -396,14 +412,15 @@ std::optional<Outcome> run_streamed(const FogCommandOptions& o, const FogPlan& p
     return make_camera(o, plan.scene, job.photo, width, height, metadata);
   };
   request.color = &plan.color;
+  request.software = kOutputSoftware;  // marks the output as ours (output_safety.h)
   request.input_colorspace = o.input_colorspace;
   request.write = output_write_options(o, plan, job, probe_image(job.photo));
   const StreamFogResult result = streamer->fog_file(request);
   pool.release(std::move(streamer));
   if (!result.streamed) return std::nullopt;
-  warn_about_depth(report, job.depth.string(),
+  warn_about_depth(report, o, job.depth.string(),
                    std::size_t(result.width) * std::size_t(result.height), result.no_surface_pixels,
-                   result.invalid_pixels);
+                   result.invalid_pixels, result.sky_threshold_pixels, result.clamped_pixels);
   if (!o.save_scene_path.empty() && is_pattern(o.save_scene_path)) {
     scene.camera = scene_camera(result.camera);
     const fs::path target = expand_pattern(o.save_scene_path, job.photo);
@@ -413,8 +430,25 @@ std::optional<Outcome> run_streamed(const FogCommandOptions& o, const FogPlan& p
   return Outcome::done;
 }
 
+// The depth map's size from its header against the photo's as displayed (read_image turns the
+// photo by its EXIF Orientation, read_depth the map by its own), before either is decoded.
+void check_depth_size(const Job& job, const ImageFileInfo& photo) {
+  const ImageFileInfo depth = probe_image(job.depth);
+  auto shown = [](const ImageFileInfo& i) {
+    return i.orientation >= 5 ? std::pair{i.height, i.width} : std::pair{i.width, i.height};
+  };
+  const auto [pw, ph] = shown(photo);
+  const auto [dw, dh] = shown(depth);
+  if (pw != dw || ph != dh)
+    throw Error(ErrorCode::size_mismatch,
+                job.depth.string() + ": depth map is " + std::to_string(dw) + "x" +
+                    std::to_string(dh) + ", photo " + job.photo.string() + " is " +
+                    std::to_string(pw) + "x" + std::to_string(ph));
+}
+
 Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job, Reporter& report,
-                const std::atomic<bool>& interrupted) {
+                [[maybe_unused]] const std::atomic<bool>& interrupted) {
+  if (!job.error.empty()) throw Error(ErrorCode::invalid_argument, job.error);
   std::error_code ec;
   const bool want_aovs_file = !job.aovs_output.empty();
   if (!o.overwrite && fs::exists(job.output, ec) &&
@@ -431,8 +465,11 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   ReadOptions read;
   read.colorspace = o.input_colorspace;
   read.color = &plan.color;
-  const Image photo = read_image(job.photo, read);
+  // Sizes from the headers first: a wrong-size depth map fails before anything is decoded.
   const ImageFileInfo info = probe_image(job.photo);
+  if (o.depth != "auto" || fs::exists(job.depth, ec)) check_depth_size(job, info);
+  Image photo = read_image(job.photo, read);
+  photo.metadata().set("Software", kOutputSoftware);  // marks the outputs as ours
   FogScene scene = plan.scene;
   const bool estimated = o.depth == "auto" && !fs::exists(job.depth, ec);
   // Estimating the geometry, a photo without EXIF focal length may get it from its vanishing
@@ -445,15 +482,24 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
                                    : read_depth(job.depth, camera, plan.depth);
   const std::string depth_name =
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
-  warn_about_depth(report, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
-                   depth.invalid_pixels);
+  warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
+                   depth.invalid_pixels, depth.sky_threshold_pixels, depth.clamped_pixels);
   ScatteringLayers aovs;
+  if (o.verbose) report.info("note: " + job.photo.string() + ": rendering");
   const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs);
-  if (!aovs.backend_notice.empty()) {  // the Vulkan fall-back: once per run
+  // The Vulkan fall-back, once per run: a warning when a GPU failed; on a machine without a
+  // usable GPU the CPU is the expected choice, a note in verbose mode only.
+  if (!aovs.backend_notice.empty() && (aovs.backend_notice_is_warning || o.verbose)) {
     static std::once_flag noticed;
-    std::call_once(noticed, [&] { report.warning(aovs.backend_notice); });
+    std::call_once(noticed, [&] {
+      if (aovs.backend_notice_is_warning)
+        report.warning(aovs.backend_notice);
+      else
+        report.info("note: " + aovs.backend_notice);
+    });
   }
-  if (interrupted) return Outcome::failed;
+  // Interrupted (Ctrl-C) while this photo rendered: it is finished and written all the same
+  // (the README's promise); only photos not yet started are left.
 
   const WriteOptions write = output_write_options(o, plan, job, info);
   const std::string out_ext = job.output.extension().string();
@@ -539,8 +585,18 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
                 "Also write layers R,G,B + transmittance.RGB + inscatter.RGB + depth.Z "
                 "(into the output if it is .exr, else into <name>_aovs.exr)");
   cmd->add_option("-j,--threads", o.threads, "Worker threads [default: all cores]")
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(0, kMaxThreads));
   cmd->add_flag("-q,--quiet", o.quiet, "Print errors and the summary only");
+  cmd->add_flag("-v,--verbose", o.verbose,
+                "Also print notes: each photo as it renders, the backend chosen, files cleaned up");
+  cmd->add_option("--sky-depth", o.sky_depth_m,
+                  "Stored depth values (times --depth-scale) at or above this are sky, metres; "
+                  "reads Blender's 1e10, 1e6 and 65504 as sky; inf: none")
+      ->capture_default_str();
+  cmd->add_option("--max-megapixels", o.max_megapixels,
+                  "Refuse photos and depth maps larger than this when decoded (checked from "
+                  "the header)")
+      ->capture_default_str();
   cmd->add_flag("--overwrite", o.overwrite, "Redo photos whose outputs exist (default: skip them)");
   cmd->add_option("--scene", o.scene_path,
                   "Scene JSON (docs/scene.md); options below override it (its camera, from mr "
@@ -604,7 +660,11 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
     std::fprintf(stderr, "WARNING: %s\n", warning.c_str());
 
   // Jobs: photo -> depth, outputs. Depth maps named on the command line are not photos.
-  std::vector<fs::path> photos = expand_inputs(o.inputs, {"_depth", "_disparity", "_aovs"});
+  std::vector<std::string> input_warnings;
+  std::vector<fs::path> photos =
+      expand_inputs(o.inputs, {"_depth", "_disparity", "_aovs"}, &input_warnings);
+  if (!o.quiet)
+    for (const std::string& w : input_warnings) std::fprintf(stderr, "WARNING: %s\n", w.c_str());
   std::vector<Job> jobs;
   {
     std::vector<fs::path> depths;
@@ -615,16 +675,35 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
       bool is_depth = false;
       for (const auto& d : depths)
         is_depth = is_depth || p.lexically_normal() == d.lexically_normal();
-      // Our own earlier outputs in the same folder are not inputs.
+      // Our own earlier outputs in the same folder are not inputs; a user's photo named like one
+      // (c_fog.jpg beside c.jpg) is: only files marked by mr fog (output_safety.h) are ours.
       const bool is_output = p.stem().string().ends_with(o.suffix) && !o.suffix.empty() &&
-                             same_file(p.parent_path().empty() ? "." : p.parent_path(), out_dir);
+                             same_file(p.parent_path().empty() ? "." : p.parent_path(), out_dir) &&
+                             written_by_mr_fog(p);
       if (is_depth || is_output) continue;
       const std::string ext = o.format.empty() ? p.extension().string() : "." + o.format;
-      Job job{p, depths[i], out_dir / (p.stem().string() + o.suffix + ext), {}};
+      Job job{p, depths[i], out_dir / (p.stem().string() + o.suffix + ext), {}, {}};
       if (o.aovs && ext != ".exr" && ext != ".EXR")
         job.aovs_output = out_dir / (p.stem().string() + o.suffix + "_aovs.exr");
       jobs.push_back(std::move(job));
     }
+    // Outputs are never an input of the run (a photo, a depth map) and never shared by two
+    // photos (d1/x.jpg and d2/x.jpg into one folder; x.jpg and x.png with one --format): such
+    // photos fail here, before anything renders, rather than one output silently replacing
+    // another or an input.
+    std::vector<fs::path> inputs;
+    for (const Job& job : jobs) inputs.insert(inputs.end(), {job.photo, job.depth});
+    if (!o.scene_path.empty()) inputs.emplace_back(o.scene_path);
+    std::vector<std::vector<PlannedOutput>> outputs;
+    for (const Job& job : jobs) {
+      std::vector<PlannedOutput> own{{job.output, job.photo.string()}};
+      if (!job.aovs_output.empty()) own.push_back({job.aovs_output, job.photo.string()});
+      if (!o.save_scene_path.empty() && is_pattern(o.save_scene_path))
+        own.push_back({expand_pattern(o.save_scene_path, job.photo), job.photo.string()});
+      outputs.push_back(std::move(own));
+    }
+    const std::vector<std::string> errors = check_planned_outputs(inputs, outputs);
+    for (std::size_t i = 0; i < jobs.size(); ++i) jobs[i].error = errors[i];
   }
   if (jobs.empty()) {
     std::fprintf(stderr, "ERROR: no input photos found in: %s\n",
@@ -637,6 +716,9 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
     std::fprintf(stderr, "ERROR: %s: cannot create output folder\n", o.out_dir.c_str());
     return 2;
   }
+  // Hidden temporaries of runs that were killed (kill -9) before they could remove them.
+  for (const fs::path& stale : remove_stale_temporaries(o.out_dir))
+    if (o.verbose) std::fprintf(stderr, "note: removed %s (left by a killed run)\n", stale.c_str());
 
   Reporter report(jobs.size(), o.quiet);
   std::atomic<std::size_t> done{0}, skipped{0}, failed{0}, interrupted_jobs{0};

@@ -33,7 +33,10 @@ struct FogCommandOptions {
   bool aovs = false;
   int threads = 0;  ///< 0: all cores
   bool quiet = false;
+  bool verbose = false;  ///< -v: notes (per photo, the backend choice)
   bool overwrite = false;
+  double sky_depth_m = 65504.0;  ///< --sky-depth: stored depth >= this is sky (mr::DepthOptions)
+  double max_megapixels = 250;   ///< --max-megapixels: decoded-size limit of photos and depth
   // The physical model (issue 3); an empty string / nullopt leaves the scene's value.
   std::string scene_path;       ///< --scene scene.json
   std::string save_scene_path;  ///< --save-scene: write the resolved scene

@@ -1,4 +1,6 @@
 // The `mr` command line: batch front end of libmr.
+#include <unistd.h>
+
 #include <csignal>
 
 #include <CLI/CLI.hpp>
@@ -14,12 +16,24 @@ namespace {
 
 std::atomic<bool> g_interrupted{false};
 
-extern "C" void on_signal(int) {
+// How long the first SIGTERM leaves the photos in flight to finish before the process exits.
+constexpr unsigned kTermGraceSeconds = 10;
+
+extern "C" void on_alarm(int) { _exit(128 + SIGTERM); }
+
+extern "C" void on_signal(int signal) {
   // First Ctrl-C: finish the files in flight (their outputs are written atomically), start no
-  // more. A second one kills the process the default way; temporary files are hidden dotfiles.
+  // more. A second one kills the process the default way; temporary files are hidden dotfiles,
+  // removed by the next run. SIGTERM (a service manager, `timeout`, `kill`) must always end the
+  // run: the same, but if the files in flight take longer than kTermGraceSeconds (or a read
+  // hangs) the process exits anyway. Only async-signal-safe calls here.
   g_interrupted = true;
   std::signal(SIGINT, SIG_DFL);
   std::signal(SIGTERM, SIG_DFL);
+  if (signal == SIGTERM) {
+    std::signal(SIGALRM, on_alarm);
+    alarm(kTermGraceSeconds);
+  }
 }
 
 }  // namespace
@@ -42,8 +56,18 @@ int main(int argc, char** argv) {
   }
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
-  if (fog->parsed()) return mr::cli::run_fog_command(fog_options, g_interrupted);
-  if (estimate->parsed()) return mr::cli::run_estimate_command(estimate_options);
-  if (material->parsed()) return mr::cli::run_material_command(material_options);
+  // Anything the commands do not turn into their own one-line error (std::bad_alloc, a thread
+  // that cannot be created, ...) still ends as one, never as an abort.
+  try {
+    if (fog->parsed()) return mr::cli::run_fog_command(fog_options, g_interrupted);
+    if (estimate->parsed()) return mr::cli::run_estimate_command(estimate_options);
+    if (material->parsed()) return mr::cli::run_material_command(material_options);
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "ERROR: out of memory (fewer threads with -j, or smaller photos)\n");
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "ERROR: %s\n", e.what());
+    return 1;
+  }
   return 2;
 }

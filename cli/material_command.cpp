@@ -10,7 +10,10 @@
 #include <numbers>
 #include <vector>
 
+#include <unistd.h>
+
 #include "batch.h"
+#include "output_safety.h"
 #include "mr/material.h"
 #include "mr/mr.h"
 
@@ -167,11 +170,12 @@ LoadedPhoto load_scene_target(const std::string& depth_path, const std::string& 
 }
 
 void write_text_atomically(const fs::path& path, const std::string& text) {
-  // Beside the final file, renamed over it when complete (as mr::write_image does).
-  const fs::path temp =
-      path.parent_path() /
-      ("." + path.filename().string() + ".mr-tmp-" +
-       std::to_string(std::chrono::steady_clock::now().time_since_epoch().count()));
+  // Beside the final file, renamed over it when complete (as mr::write_image does), named as
+  // libmr names its temporaries so that a killed run's leftover is recognised and removed.
+  check_output_file(path);
+  const fs::path temp = path.parent_path() / ("." + path.stem().string() + ".mr-tmp-" +
+                                              std::to_string(::getpid()) + "-0" +
+                                              path.extension().string());
   {
     std::ofstream out(temp, std::ios::binary | std::ios::trunc);
     out << text;
@@ -239,28 +243,43 @@ CLI::App* add_material_command(CLI::App& app, MaterialCommandOptions& o) {
   cmd->add_option("--visibility", o.visibility,
                   "Also fog the result: meteorological visibility, e.g. 150m");
   cmd->add_option("-j,--threads", o.threads, "Worker threads [default: all cores]")
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(0, kMaxThreads));
   cmd->add_flag("--overwrite", o.overwrite, "Replace existing outputs (default: refuse)");
   cmd->add_flag("-q,--quiet", o.quiet, "Print only errors");
   return cmd;
 }
 
 int run_material_command(const MaterialCommandOptions& o) {
+  // The report goes to stdout (buffered when piped), errors to stderr: flush the report first,
+  // so that the error is the last line a user or a script's `tail` sees, and the only one.
   auto fail = [](int code, const std::string& message) {
+    std::fflush(stdout);
     std::fprintf(stderr, "ERROR: %s\n", message.c_str());
     return code;
   };
-  // Outputs: writable formats, never an input, never silently replaced.
+  // Outputs: writable formats, never an input (with the depth maps found beside the photos,
+  // which mr fog reads too; not even with --overwrite), only regular files, never silently
+  // replaced.
   std::vector<std::string> inputs = {o.sample,       o.target,       o.regions,     o.sample_depth,
                                      o.target_depth, o.sample_scene, o.target_scene};
+  for (const auto& [photo, depth] : {std::pair{&o.sample, &o.sample_depth}, {&o.target, &o.target_depth}})
+    if (!photo->empty() && (depth->empty() || *depth == "auto"))
+      for (const char* ext : kDepthExtensions)
+        inputs.push_back(expand_pattern(std::string("{dir}/{stem}_depth") + ext, *photo).string());
   for (const std::string* out : {&o.output, &o.materials_json}) {
     if (out->empty()) continue;
     for (const std::string& in : inputs)
       if (!in.empty() && in != "auto" && same_file(*out, in))
         return fail(2, *out + ": is an input file; refusing to overwrite it");
+    try {
+      check_output_file(*out);
+    } catch (const Error& e) {
+      return fail(2, e.what());
+    }
     std::error_code ec;
     if (!o.overwrite && fs::exists(*out, ec))
       return fail(2, *out + ": exists (pass --overwrite to replace it)");
+    remove_stale_temporaries(fs::path(*out).parent_path());
   }
   if (!is_writable_image_extension(o.output))
     return fail(2, o.output + ": not an image format that can be written");

@@ -392,15 +392,8 @@ std::string annotations_to_json(const Annotations& a) {
 
 Annotations load_annotations(const fs::path& path) {
   const std::string name = path.string();
-  std::error_code ec;
-  if (fs::is_directory(path, ec))
-    throw Error(ErrorCode::io, name + ": is a folder, not an annotations file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(ErrorCode::io, name + ": cannot open: " + std::strerror(errno));
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw Error(ErrorCode::io, name + ": cannot read: " + std::strerror(errno));
-  return annotations_from_json(text.str(), name);
+  const std::string text = json::read_document_file(path, "an annotations file");
+  return annotations_from_json(text, name);
 }
 
 void save_annotations(const fs::path& path, const Annotations& annotations) {

@@ -44,30 +44,45 @@ DepthMap depth_to_distance(Image stored, const Camera& camera, const DepthOption
   }
   stored.set_channel_names({"Z"});
 
+  if (!(options.sky_depth_m > 0))  // NaN or <= 0; +inf is allowed (no threshold)
+    throw Error(ErrorCode::invalid_argument,
+                "sky depth " + std::to_string(options.sky_depth_m) + " must be positive");
+
   const int width = stored.width();
   const double f_b = camera.focal_px * options.baseline_m;
-  // Counts: no surface at all, and of those the values that are not a sky encoding (NaN, -inf,
-  // negative: a broken file rather than sky).
-  using Counts = std::pair<std::size_t, std::size_t>;
+  // Counts: no surface at all; of those the values that are not a sky encoding (NaN, -inf,
+  // negative: a broken file rather than sky) and the finite values at or above the sky
+  // threshold; and surfaces clamped to the far limit.
+  using Counts = detail::DepthCounts;
   const Counts counts = tbb::parallel_reduce(
-      tbb::blocked_range<int>(0, stored.height()), Counts{0, 0},
+      tbb::blocked_range<int>(0, stored.height()), Counts{},
       [&](const tbb::blocked_range<int>& rows, Counts count) {
         for (int y = rows.begin(); y < rows.end(); ++y) {
           float* row = stored.pixel(0, y);
           for (int x = 0; x < width; ++x)
             row[x] = detail::stored_depth_to_distance(double(row[x]) * options.scale, options,
-                                                      camera, f_b, x, y, count.first,
-                                                      count.second);
+                                                      camera, f_b, x, y, count);
         }
         return count;
       },
-      [](const Counts& a, const Counts& b) { return Counts{a.first + b.first, a.second + b.second}; });
-  return {std::move(stored), counts.first, counts.second};
+      [](const Counts& a, const Counts& b) { return a + b; });
+  DepthMap out{std::move(stored), counts.no_surface, counts.invalid};
+  out.sky_threshold_pixels = counts.sky_threshold;
+  out.clamped_pixels = counts.clamped;
+  return out;
 }
 
 DepthMap read_depth(const std::filesystem::path& path, const Camera& camera,
                     const DepthOptions& options) {
   const ImageFileInfo info = probe_image(path);
+  // The size from the header, before decoding: a wrong map is noticed at once, not after
+  // decoding gigabytes of it.
+  const bool turned = info.orientation >= 5;  // read_image swaps width and height
+  const int shown_w = turned ? info.height : info.width, shown_h = turned ? info.width : info.height;
+  if (shown_w != camera.width || shown_h != camera.height)
+    throw Error(ErrorCode::size_mismatch, path.string() + ": depth map is " +
+                                              size_text(shown_w, shown_h) + ", photo is " +
+                                              size_text(camera.width, camera.height));
   ReadOptions raw;
   raw.to_scene_linear = false;
   raw.reject_non_finite = false;  // non-finite depth means "no surface"

@@ -92,7 +92,7 @@ struct Strip {
   std::vector<float> pixels;                // linear photo, then the composite, n channels
   std::vector<float> distance_m, transmittance, inscatter;  // one row
   std::vector<unsigned char> out_codes;     // encoded composite (integer outputs)
-  std::size_t no_surface = 0, invalid = 0;
+  detail::DepthCounts counts;
 };
 
 template <class T>
@@ -155,6 +155,8 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
     const OIIO::ImageSpec& spec = in->spec();
     w = spec.width, h = spec.height, n = spec.nchannels;
     if (w <= 0 || h <= 0 || spec.depth > 1) return decline("unusual image shape");
+    if (std::uint64_t(w) * std::uint64_t(h) > max_decoded_pixels())
+      return decline("larger than the decoded-size limit");
     if (n != 3 && n != 4) return decline("not RGB or RGBA");
     if (spec.tile_width > 0) return decline("tiled photo");
     if (!spec.channelformats.empty()) return decline("per-channel pixel types");
@@ -295,6 +297,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   out_spec.extra_attribs = metadata.impl().attributes;
   drop_encoding_attributes(out_spec.extra_attribs);
   out_spec.attribute("oiio:ColorSpace", to);
+  if (!req.software.empty()) out_spec.attribute("Software", req.software);
   if (format == "jpeg") {
     out_spec.attribute("Compression", "jpeg:" + std::to_string(wo.jpeg_quality));
     // As write_image: full-resolution chroma.
@@ -372,7 +375,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                       s->pixels[k] = float((photo_bits == 8 ? c8[k] : c16[k]) * alpha_scale);
                     }
                 }
-                s->no_surface = s->invalid = 0;
+                s->counts = {};
                 const auto* depth_f = reinterpret_cast<const float*>(s->depth_values.data());
                 const auto* depth_8 = s->depth_values.data();
                 const auto* depth_16 = reinterpret_cast<const std::uint16_t*>(s->depth_values.data());
@@ -389,7 +392,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                                                              : double(depth_8[base + x]);
                     dist[x] = detail::stored_depth_to_distance(
                         stored * depth_options.scale, depth_options, camera, focal_baseline, x, y,
-                        s->no_surface, s->invalid);
+                        s->counts);
                   }
                   for (int x = 0; x < w; ++x) {
                     // The core's sky-only pixel: od = sigma * RayDensity(0, d), T = exp(-od),
@@ -453,8 +456,10 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                     : out->write_scanlines(s->y0, s->y0 + s->rows, 0, OIIO::TypeDesc::FLOAT,
                                            s->pixels.data());
             if (!ok) throw Error(ErrorCode::io, out_path.string() + ": writing failed: " + out->geterror());
-            result.no_surface_pixels += s->no_surface;
-            result.invalid_pixels += s->invalid;
+            result.no_surface_pixels += s->counts.no_surface;
+            result.invalid_pixels += s->counts.invalid;
+            result.sky_threshold_pixels += s->counts.sky_threshold;
+            result.clamped_pixels += s->counts.clamped;
           }));
   if (stopped) throw_if_cancelled(cancel, "fog_file");
   if (in) in->close();

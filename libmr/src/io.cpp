@@ -6,6 +6,8 @@
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <atomic>
+#include <cstdio>
 #include <cctype>
 #include <cmath>
 #include <map>
@@ -75,12 +77,11 @@ const ColorConfig& config_or_default(const ColorConfig* given, ColorConfig& stor
   return storage;
 }
 
+std::atomic<std::uint64_t> g_max_decoded_pixels{kDefaultMaxDecodedPixels};
+
 std::unique_ptr<OIIO::ImageInput> open_input(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec))
-    throw Error(ErrorCode::io, path.string() + ": no such file");
-  if (std::filesystem::is_directory(path, ec))
-    throw Error(ErrorCode::io, path.string() + ": is a folder, not an image");
+  // Only regular files: a FIFO or /dev/zero would block or stream for ever.
+  detail::check_regular_input(path, "an image");
   auto in = OIIO::ImageInput::open(path.string());
   if (!in) {
     std::string msg = OIIO::geterror();
@@ -93,7 +94,25 @@ std::unique_ptr<OIIO::ImageInput> open_input(const std::filesystem::path& path) 
                 path.string() + ": unsupported image shape " + std::to_string(spec.width) + "x" +
                     std::to_string(spec.height) + "x" + std::to_string(spec.nchannels) +
                     " (depth " + std::to_string(spec.depth) + ")");
+  if (spec.nchannels > 64)
+    throw Error(ErrorCode::corrupt_input, path.string() + ": " + std::to_string(spec.nchannels) +
+                                              " channels (at most 64 are read)");
   return in;
+}
+
+// The decoded size is known from the header: a small file that would decode to gigabytes is
+// refused before any pixel is allocated.
+void check_decoded_size(const std::filesystem::path& path, const OIIO::ImageSpec& spec) {
+  const std::uint64_t pixels = std::uint64_t(spec.width) * std::uint64_t(spec.height);
+  const std::uint64_t limit = max_decoded_pixels();
+  if (pixels > limit) {
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  "%dx%d is %.1f megapixels, more than the limit of %.1f (raise it with "
+                  "--max-megapixels)",
+                  spec.width, spec.height, double(pixels) / 1e6, double(limit) / 1e6);
+    throw Error(ErrorCode::corrupt_input, path.string() + ": " + text);
+  }
 }
 
 std::size_t count_non_finite(const Image& image) {
@@ -214,13 +233,27 @@ ImageFileInfo probe_image(const std::filesystem::path& path) {
   auto in = open_input(path);
   const auto& spec = in->spec();
   const int orientation = spec.get_int_attribute("Orientation", 1);
-  return {spec.width,         spec.height,         spec.nchannels,
-          from_oiio(spec.format), in->format_name(), orientation >= 1 && orientation <= 8 ? orientation : 1};
+  ImageFileInfo info;
+  info.width = spec.width;
+  info.height = spec.height;
+  info.channels = spec.nchannels;
+  info.pixel_type = from_oiio(spec.format);
+  info.format = in->format_name();
+  info.orientation = orientation >= 1 && orientation <= 8 ? orientation : 1;
+  info.software = spec.get_string_attribute("Software");
+  return info;
+}
+
+std::uint64_t max_decoded_pixels() noexcept { return g_max_decoded_pixels.load(); }
+
+void set_max_decoded_pixels(std::uint64_t pixels) noexcept {
+  g_max_decoded_pixels.store(pixels > 0 ? pixels : kDefaultMaxDecodedPixels);
 }
 
 Image read_image(const std::filesystem::path& path, const ReadOptions& options) {
   auto in = open_input(path);
   const OIIO::ImageSpec spec = in->spec();
+  check_decoded_size(path, spec);
   const PixelType stored = from_oiio(spec.format);
 
   ColorConfig storage = ColorConfig::builtin();

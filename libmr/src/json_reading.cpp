@@ -1,8 +1,13 @@
 #include "json_reading.h"
 
+#include "atomic_file.h"
+
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
+#include <fstream>
 #include <set>
 #include <utility>
 #include <vector>
@@ -132,6 +137,29 @@ static std::string position_text(const std::string& text, std::size_t bytes_read
   return "line " + std::to_string(line) + ", column " + std::to_string(column);
 }
 
+std::string read_document_file(const std::filesystem::path& path, const std::string& what,
+                               std::size_t max_bytes) {
+  const std::string name = path.string();
+  detail::check_regular_input(path, what);
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (!ec && size > max_bytes)
+    throw Error(ErrorCode::io, name + ": " + std::to_string(size) + " bytes; " + what +
+                                   " is at most " + std::to_string(max_bytes) + " bytes");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(ErrorCode::io, name + ": cannot open: " + std::strerror(errno));
+  std::string text;
+  char buffer[1 << 16];
+  while (in.read(buffer, sizeof buffer) || in.gcount() > 0) {
+    text.append(buffer, std::size_t(in.gcount()));
+    if (text.size() > max_bytes)  // grew while being read
+      throw Error(ErrorCode::io, name + ": more than " + std::to_string(max_bytes) + " bytes; " +
+                                     what + " is smaller");
+  }
+  if (in.bad()) throw Error(ErrorCode::io, name + ": cannot read: " + std::strerror(errno));
+  return text;
+}
+
 const Json* member(const Json& obj, const char* key) {
   const auto it = obj.find(key);
   return it == obj.end() ? nullptr : &*it;
@@ -140,6 +168,13 @@ const Json* member(const Json& obj, const char* key) {
 // Parses the text, rejecting duplicate keys (the parser would silently keep one of them) and
 // turning syntax errors into "source: line L, column C: problem".
 Json parse_text(const std::string& text, const JsonReader& r) {
+  // nlohmann's lexer takes a NUL byte for the end of the input, so "{...}\0garbage" would read
+  // as "{...}". JSON text never holds a raw NUL (inside strings it must be escaped as \u0000).
+  if (const std::size_t nul = text.find('\0'); nul != std::string::npos) {
+    const auto [line, column] = line_column(text, nul);
+    r.fail("", "line " + std::to_string(line) + ", column " + std::to_string(column) +
+                   ": a NUL byte (JSON text has none; the file is truncated, padded or binary)");
+  }
   struct Frame {
     bool is_array = false;
     std::size_t index = 0;       // arrays: the element being read
@@ -161,6 +196,12 @@ Json parse_text(const std::string& text, const JsonReader& r) {
     switch (event) {
       case Event::object_start:
       case Event::array_start:
+        // Nesting is bounded: every reader of the value (copies, dumps, our own walkers)
+        // recurses once per level, and 100,000 levels overflow the stack.
+        if (stack.size() >= kMaxNesting)
+          r.fail(pointer(std::min<std::size_t>(stack.size(), 8)) + (stack.size() > 8 ? "/..." : ""),
+                 "arrays and objects nested more than " + std::to_string(kMaxNesting) +
+                     " levels deep");
         stack.push_back({event == Event::array_start, 0, {}, {}});
         break;
       case Event::key: {

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <filesystem>
 #include <initializer_list>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -151,8 +152,18 @@ class JsonReader {
 /// The member `key` of an object, or nullptr.
 const Json* member(const Json& obj, const char* key);
 
+/// Deepest nesting of arrays and objects parse_text accepts (the project's documents use 4).
+inline constexpr std::size_t kMaxNesting = 256;
+
 /// Parses the text, rejecting duplicate keys (the parser would silently keep one of them) and
-/// turning syntax errors into "source: line L, column C: problem" (through `r`).
+/// turning syntax errors into "source: line L, column C: problem" (through `r`). Also rejected:
+/// nesting deeper than kMaxNesting, NUL bytes, anything but white space after the document.
 Json parse_text(const std::string& text, const JsonReader& r);
+
+/// The whole content of a document file. Only regular files are read (a FIFO, a device such as
+/// /dev/zero, a folder: mr::Error(io) naming the file and what it is), at most `max_bytes`
+/// (documents are small; a larger file is an error, not a long wait).
+std::string read_document_file(const std::filesystem::path& path, const std::string& what,
+                               std::size_t max_bytes = std::size_t(64) << 20);
 
 }  // namespace mr::json

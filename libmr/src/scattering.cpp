@@ -10,6 +10,7 @@
 #include <string>
 
 #include "mr/cancel.h"
+#include "mr/depth.h"
 #include "mr/error.h"
 #include "photo/airlight.h"
 #include "photo/composite.h"
@@ -78,11 +79,22 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
                                               size_text(distance_m.width(), distance_m.height()) +
                                               ", camera is " +
                                               size_text(camera.width, camera.height));
-  for (float d : distance_m.pixels())
+  bool beyond_far_limit = false;
+  for (float d : distance_m.pixels()) {
     if (std::isnan(d) || d <= 0)
       throw Error(ErrorCode::invalid_argument,
                   "render_scattering: distance map holds NaN, zero or negative values "
                   "(use +inf for sky; mr::read_depth converts them)");
+    beyond_far_limit = beyond_far_limit || (std::isfinite(d) && d > kMaxSurfaceDistanceM);
+  }
+  if (beyond_far_limit) {
+    // Every finite distance renders: those past the far limit (mr/depth.h) are clamped to it,
+    // as read_depth does; the ray tracer rejects rays whose points lie past ~1.8e18 m.
+    Image clamped = distance_m;
+    for (float& d : clamped.pixels())
+      if (std::isfinite(d) && d > kMaxSurfaceDistanceM) d = float(kMaxSurfaceDistanceM);
+    return render_scattering(photo, clamped, camera, scene, cancel);
+  }
   const bool need_sky_estimate = !scene.lighting.sky_radiance.has_value();
   if (need_sky_estimate && (photo.empty() || photo.channels() < 3 ||
                             photo.width() != camera.width || photo.height() != camera.height))
@@ -127,6 +139,8 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         if (scene.render.backend == Backend::vulkan)
           throw Error(ErrorCode::invalid_argument,
                       std::string("render.backend is 'vulkan' but ") + e.what());
+        // No usable hardware GPU: the CPU is the expected choice here, not a problem (a note
+        // for verbose front ends; backend_notice_is_warning stays false).
         out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
         if (std::string(e.what()).find("software device") != std::string::npos)
           out.backend_notice += " (render.backend 'vulkan' forces it)";
@@ -193,6 +207,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
           throw Error(ErrorCode::invalid_argument,
                       std::string("render.backend is 'vulkan' but ") + e.what());
         out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
+        out.backend_notice_is_warning = true;  // a GPU was there and failed
         run_cpu();
       }
     } else {
@@ -233,6 +248,7 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
     layers_out->timings = layers.timings;
     layers_out->backend = std::move(layers.backend);
     layers_out->backend_notice = std::move(layers.backend_notice);
+    layers_out->backend_notice_is_warning = layers.backend_notice_is_warning;
   }
   return out;
 }

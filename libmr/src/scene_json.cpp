@@ -566,15 +566,8 @@ SceneCamera scene_camera(const Camera& camera) {
 
 FogScene load_scene(const fs::path& path) {
   const std::string name = path.string();
-  std::error_code ec;
-  if (fs::is_directory(path, ec))
-    throw Error(ErrorCode::io, name + ": is a folder, not a scene file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(ErrorCode::io, name + ": cannot open: " + std::strerror(errno));
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw Error(ErrorCode::io, name + ": cannot read: " + std::strerror(errno));
-  return scene_from_json(text.str(), name);
+  const std::string text = json::read_document_file(path, "a scene file");
+  return scene_from_json(text, name);
 }
 
 void save_scene(const fs::path& path, const FogScene& scene) {

@@ -16,6 +16,18 @@ enum class DepthKind {
   disparity,  ///< stereo disparity in pixels: z = focal_px * baseline_m / (d + doffs)
 };
 
+/// Stored depth values (times DepthOptions::scale) at or above this many metres are sky by
+/// default: the largest half float (65504, what a saturated half-float EXR holds), and with it
+/// the larger sky conventions of common tools (Blender's Z pass writes 1e10 for the background;
+/// others 1e6). A surface 65 km away lies behind more than 5 visibility lengths of even 50 km
+/// haze, so reading it as sky changes nothing visible.
+inline constexpr double kDefaultSkyDepthM = 65504.0;
+
+/// The farthest surface the renderer traces, metres (10,000 km: beyond any terrestrial line of
+/// sight, far inside the range Embree's rays are valid for). Finite distances beyond it are
+/// clamped to it (read_depth, and render_scattering for maps that do not come from a file).
+inline constexpr double kMaxSurfaceDistanceM = 1e7;
+
 struct DepthOptions {
   DepthKind kind = DepthKind::distance;
   /// Multiplies the stored values first. Integer files (8/16-bit PNG/TIFF) are read as their
@@ -24,6 +36,10 @@ struct DepthOptions {
   double scale = 1.0;
   double baseline_m = 0;  ///< disparity only: stereo baseline in metres (> 0)
   double doffs_px = 0;    ///< disparity only: x-difference of the principal points (Middlebury)
+  /// distance and planar_z: stored values (times scale) >= this are sky (kDefaultSkyDepthM).
+  /// +infinity: only 0, negative, NaN and infinite values are sky. Not used for disparity
+  /// (there 0 is the sky).
+  double sky_depth_m = kDefaultSkyDepthM;
 };
 
 /// A metric distance map: one channel ("Z"), metres along each pixel's ray.
@@ -34,6 +50,10 @@ struct DepthMap {
   /// Of those, the pixels whose stored value was NaN or negative: not one of the sky encodings
   /// (0, +inf) but a sign of a broken or mis-scaled map (front ends warn about these).
   std::size_t invalid_pixels = 0;
+  /// Of the no-surface pixels, those whose value was finite and >= DepthOptions::sky_depth_m.
+  std::size_t sky_threshold_pixels = 0;
+  /// Surface pixels whose distance was beyond kMaxSurfaceDistanceM, clamped to it.
+  std::size_t clamped_pixels = 0;
 };
 
 /// Reads a depth file (float EXR/TIFF/PFM, 16-bit PNG/TIFF, ...; channel "Z", "depth.Z", "Y"

@@ -54,6 +54,8 @@ struct StreamFogRequest {
   std::function<Camera(int width, int height, const Metadata& metadata)> camera;
   const ColorConfig* color = nullptr;  ///< nullptr: ColorConfig::from_environment()
   std::string input_colorspace;        ///< as ReadOptions::colorspace
+  /// Written as the output's "Software" tag when not empty (the photo's own tag otherwise).
+  std::string software;
   /// As for write_image (pixel type, colour space, JPEG quality, overwrite).
   WriteOptions write;
   /// Rows per strip (0: chosen from the width, a multiple of 16 so that JPEG MCU rows and
@@ -72,6 +74,8 @@ struct StreamFogResult {
   /// As DepthMap: pixels with no surface (sky), and of those NaN or negative stored values.
   std::size_t no_surface_pixels = 0;
   std::size_t invalid_pixels = 0;
+  std::size_t sky_threshold_pixels = 0;  ///< as DepthMap::sky_threshold_pixels
+  std::size_t clamped_pixels = 0;        ///< as DepthMap::clamped_pixels
   std::size_t strips = 0;  ///< strips the photo was cut into
 };
 

@@ -1,6 +1,7 @@
 // Image files: reading and writing through OpenImageIO, colour through OpenColorIO.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <span>
 #include <string>
@@ -27,10 +28,13 @@ struct ImageFileInfo {
   /// EXIF Orientation of the stored pixels, 1..8 (1: none or absent or invalid). width and
   /// height are as stored; read_image (apply_orientation) swaps them for 5..8.
   int orientation = 1;
+  /// The file's "Software" tag (EXIF / TIFF / PNG text / EXR attribute), empty if none: `mr fog`
+  /// marks its outputs with it so that it never takes a user's photo for one of them.
+  std::string software;
 };
 
 /// Reads the header of an image file. Throws mr::Error(io) naming the file if it cannot be
-/// opened or is not an image.
+/// opened, is not a regular file (a FIFO, a device, a folder) or is not an image.
 ImageFileInfo probe_image(const std::filesystem::path& path);
 
 struct ReadOptions {
@@ -50,6 +54,14 @@ struct ReadOptions {
   /// false: the stored layout, with the file's Orientation left in the metadata.
   bool apply_orientation = true;
 };
+
+/// The largest image read_image decodes, in pixels (width x height), and the default limit
+/// (250 megapixels: 3 GB of float RGB, ~10 GB once rendered). Checked from the file's header,
+/// before any pixel is decoded; larger files fail with corrupt_input naming the file and size.
+inline constexpr std::uint64_t kDefaultMaxDecodedPixels = 250'000'000;
+std::uint64_t max_decoded_pixels() noexcept;
+/// Process-wide (the CLI's --max-megapixels); 0 restores the default. Thread-safe.
+void set_max_decoded_pixels(std::uint64_t pixels) noexcept;
 
 /// Reads a whole image (first subimage, all channels) as float32 with its metadata, turned
 /// upright by its EXIF Orientation (ReadOptions::apply_orientation).

@@ -42,6 +42,10 @@ struct ScatteringLayers {
   } timings;
   std::string backend;         ///< what rendered: "cpu" or "vulkan: <device name>"
   std::string backend_notice;  ///< one line when Backend::automatic fell back to the CPU
+  /// false when the fall-back is the expected choice on this machine (no Vulkan loader, no
+  /// device, only a software device, a sanitizer build): front ends show the notice only when
+  /// asked (verbose). true when a usable GPU failed (e.g. out of device memory): a warning.
+  bool backend_notice_is_warning = false;
 };
 
 /// Renders T and R for `photo` (scene-linear RGB; used only to estimate the sky radiance when

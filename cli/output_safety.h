@@ -1,0 +1,44 @@
+// The CLI's rules for what it writes: outputs are regular files that are never an input of the
+// run and never shared by two photos; leftovers of killed runs are cleaned up.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace mr::cli {
+
+/// The "Software" tag `mr fog` writes into its outputs, and the test for it: a file named like
+/// an output (<stem><suffix>.<ext>) in the output folder is only taken for an earlier output
+/// when its header carries this tag; otherwise it is a photo (an input of the run).
+inline constexpr const char* kOutputSoftware = "mr fog (libmr)";
+bool written_by_mr_fog(const std::filesystem::path& path);
+
+/// Throws mr::Error(io) "<path>: is a FIFO (named pipe); outputs are only written as regular
+/// files ..." when `path` exists and is not a regular file (not following symbolic links: a
+/// symbolic link, a FIFO, a device, a folder). A missing path is fine.
+void check_output_file(const std::filesystem::path& path);
+
+/// One file a run will write, and whose file it is (the photo, or the option that names it).
+struct PlannedOutput {
+  std::filesystem::path path;
+  std::string owner;
+};
+
+/// For a run's outputs, grouped per job: a message per job, empty when its outputs are safe,
+/// else why not: an output that is one of `inputs` (by name, or the same file under another
+/// name: links), an output that another job also writes (every job that shares it fails; no
+/// output is silently lost or overwritten), an output that exists and is not a regular file.
+std::vector<std::string> check_planned_outputs(
+    const std::vector<std::filesystem::path>& inputs,
+    const std::vector<std::vector<PlannedOutput>>& outputs_per_job);
+
+/// Removes the hidden temporary files our atomic writes leave when a run is killed (kill -9, a
+/// crash, a power cut): names ".<stem>.mr-tmp-<pid>-<n>[.<ext>]" in `folder` whose process is
+/// gone, or that are older than a day (the pid was reused). Returns the names removed.
+std::vector<std::filesystem::path> remove_stale_temporaries(const std::filesystem::path& folder);
+
+/// The most threads -j accepts (more is a usage error: each thread holds a photo in memory).
+inline constexpr int kMaxThreads = 256;
+
+}  // namespace mr::cli
