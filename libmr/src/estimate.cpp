@@ -422,10 +422,9 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         // stands there is unknown (a sunset band over the sea, far hills), a band of ground
         // at its made-up distance would end in a seam at the next column without it, and the
         // refinement joins the billboard to the ground wherever the photo has no edge.
-        column_forward[std::size_t(x)] =
-            cov == kFar ? (options.refine_depth ? 0.0 : far_forward)
-            : cov == kContact ? contact_forward[i]
-                              : 0.0;
+        column_forward[std::size_t(x)] = cov == kFar ? (options.refine_depth ? 0.0 : far_forward)
+                                         : cov == kContact ? contact_forward[i]
+                                                           : 0.0;
       }
     }
   }
@@ -458,7 +457,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         // ground there makes the fog jump from clear to opaque within a pixel or two in haze:
         // the confidence ramps from 0 at the horizon to 1 at twice the far billboard's
         // depression (4 degrees: 23 m from 1.6 m), and the refinement smooths what is above.
-        const double below = std::asin(std::clamp(-g.pose.ray_direction(camera, x, y).y, -1.0, 1.0));
+        const double below =
+            std::asin(std::clamp(-g.pose.ray_direction(camera, x, y).y, -1.0, 1.0));
         conf = float(std::clamp(below / (2 * depression * kDeg), 0.0, 1.0));
       }
       float inv = std::isfinite(d) && d > 0 ? 1.0f / d : 0.0f;

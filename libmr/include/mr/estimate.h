@@ -47,10 +47,13 @@ struct EstimateOptions {
   double min_rise_ratio = 0.4;
   /// Depth that does no harm (issue 11 item 3): with the automatic sky mask, the estimated
   /// depth is refined against the photo (photo/geometry.h, refine_inverse_distance) so that it
-  /// jumps only where the photo has an edge; the ground plane, the annotations and the sky are
-  /// kept exactly (confidence 1), the far billboard (confidence 0.05) and structures standing on
-  /// the ground (0.3) follow the photo. The sky's soft matte blends into the depth (see
-  /// GeometryEstimate::sky_alpha). false: the depth as before (binary sky, hard billboards).
+  /// jumps only where the photo has an edge; the ground plane (more than 4 degrees below the
+  /// horizon), the annotations and the sky are kept exactly (confidence 1), the far billboard
+  /// (0.05), structures standing on the ground (0.3) and the ground near the horizon (rising
+  /// from 0 at the horizon to 1 at 4 degrees below it) follow the photo, and the far billboard
+  /// no longer cuts the ground behind it. The sky's soft matte blends into the depth (see
+  /// GeometryEstimate::sky_alpha). false: the depth as before (binary sky, hard billboards),
+  /// except for the matte's blend.
   bool refine_depth = true;
 };
 
@@ -96,11 +99,13 @@ struct GeometryEstimate {
   /// the sky's edge, as soft as the photo's edge there; 0 at and below the horizon); a pixel is
   /// sky (distance +inf) where alpha >= 0.5; a pixel with 0 < alpha < 0.5 lies on its surface's
   /// inverse distance scaled by (1 - 2 alpha), so its fog runs continuously from the surface's
-  /// to the sky's as alpha rises. depth_confidence: how far each pixel's distance is trusted, in [0, 1]
-  /// (1: sky, ground plane, annotated planes, hints and rooms; 0.3: structures standing on the
+  /// to the sky's as alpha rises. depth_confidence: how far each pixel's distance is trusted, in
+  /// [0, 1] (1: sky, annotated planes, hints and rooms, the ground plane from 4 degrees below
+  /// the horizon, 0 at the horizon and linear in between; 0.3: structures standing on the
   /// ground; 0.05: the far billboard; a blurred sky edge scales it by (1 - 2 alpha)); the
-  /// refinement keeps pixels of confidence >= 0.9 and makes the others follow the photo, so
-  /// where the depth is uncertain the fog varies smoothly instead of jumping.
+  /// refinement keeps a pixel's own value with weight smoothstep(0.5, 1, confidence) and takes
+  /// the photo-guided smooth value otherwise, so where the depth is uncertain the fog varies
+  /// smoothly instead of jumping.
   Image sky_alpha, depth_confidence;
   /// Sky pixels found as sky seen through foliage (enclosed gaps; photo/sky_mask.h).
   std::size_t sky_gap_pixels = 0;
