@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <mutex>
 #include <optional>
 
@@ -87,6 +88,12 @@ FogPlan make_plan(const FogCommandOptions& o) {
       const auto v = parse_numbers(o.layer, 2, "--layer bottom,top");
       scene.medium.layer_bottom_m = v[0];
       scene.medium.layer_top_m = v[1];
+    }
+    if (o.layer_top == "none") {
+      if (o.layer.empty()) scene.medium.layer_top_m = std::numeric_limits<double>::infinity();
+    } else if (o.layer_top != "auto") {
+      if (!o.layer.empty()) throw std::invalid_argument("--layer and --layer-top are exclusive");
+      scene.medium.layer_top_m = parse_distance_m(o.layer_top);
     }
     if (!o.noise.empty()) {
       const std::size_t n = std::count(o.noise.begin(), o.noise.end(), ',') + 1;
@@ -480,6 +487,12 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   scene.camera = scene_camera(camera);  // what --save-scene records for this photo
   const DepthMap depth = estimated ? estimate_depth(o, job, photo, camera, scene)
                                    : read_depth(job.depth, camera, plan.depth);
+  // Issue 11 item 4: an estimated scene's fog lies in a layer with a top, so the sky is seen
+  // through it (clouds and sunsets attenuated, not painted over) and the sun enters it from
+  // above. Only where nothing gave the fog a top or a height profile.
+  if (estimated && o.layer_top == "auto" && o.layer.empty() && !scene.medium.height_fog &&
+      std::isinf(scene.medium.layer_top_m))
+    scene.medium.layer_top_m = default_layer_top_m(scene.medium);
   const std::string depth_name =
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
@@ -625,6 +638,11 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
   cmd->add_option("--height-fog", o.height_fog,
                   "Exponential height fog: base,scale (m); density exp(-(y - base) / scale)");
   cmd->add_option("--layer", o.layer, "Fog only between heights bottom,top (m)");
+  cmd->add_option("--layer-top", o.layer_top,
+                  "The fog's top (height above the ground: 60m, 1.5km), 'none', or 'auto': with "
+                  "--depth auto estimating the geometry and no --layer / --height-fog / scene "
+                  "top, half the visibility within 30 m..2 km (the sky is seen through the fog)")
+      ->default_str("auto");
   cmd->add_option("--albedo", o.albedo, "Single-scattering albedo: v or R,G,B [default: 1]");
   cmd->add_option("--g", o.g, "Henyey-Greenstein asymmetry in (-1, 1) [default: 0]");
   cmd->add_option("--noise", o.noise, "Wisps: amplitude[,scale m[,octaves[,seed]]]");

@@ -49,6 +49,9 @@ struct FogCommandOptions {
   std::vector<std::string> lamps;  ///< "x,y,z;R,G,B[;dx,dy,dz;inner,outer]"
   std::string height_fog;       ///< "base,scale"
   std::string layer;            ///< "bottom,top"
+  /// "auto" (default): with an estimated geometry (--depth auto) and no top given, the fog's
+  /// top from its visibility (mr::default_layer_top_m); "none": no top; else a distance.
+  std::string layer_top = "auto";
   std::string albedo;
   std::optional<double> g;
   std::string noise;            ///< "amplitude[,scale[,octaves[,seed]]]"

@@ -1,11 +1,16 @@
 #include "photo/geometry.h"
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/ximgproc/edge_filter.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
 #include <string>
 
+#include "cv_bridge.h"
 #include "mr/error.h"
 
 namespace mr::photo {
@@ -348,6 +353,77 @@ DistanceMap distance_map(const Camera& camera, const CameraPose& pose,
       out.distance_m.at(x, y, 0) = float(dist);
       out.coverage[std::size_t(y) * w + x] = cov;
       ++out.counts[int(cov)];
+    }
+  }
+  return out;
+}
+
+float refine_keep_weight(float confidence) {
+  const float t = std::clamp((confidence - 0.5f) / 0.5f, 0.0f, 1.0f);
+  return t * t * (3 - 2 * t);
+}
+
+std::vector<float> refine_inverse_distance(ConstImageView photo,
+                                           const std::vector<float>& inverse_distance,
+                                           const std::vector<float>& confidence,
+                                           const DepthRefineOptions& o) {
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(w) * h;
+  if (inverse_distance.size() != n || confidence.size() != n)
+    throw Error(ErrorCode::size_mismatch, "refine_inverse_distance: the photo is " +
+                                              std::to_string(w) + "x" + std::to_string(h) +
+                                              " but the maps hold " +
+                                              std::to_string(inverse_distance.size()) + " and " +
+                                              std::to_string(confidence.size()) + " values");
+  std::vector<float> out = inverse_distance;
+  if (w < 4 || h < 4 || photo.channels < 1) return out;
+  bool all_kept = true;
+  for (const float c : confidence) all_kept &= refine_keep_weight(c) >= 1.0f;
+  if (all_kept) return out;
+
+  // The working copy: display-referred 8-bit (the smoother's guide is 8-bit); the maps as
+  // (c q, c), area-averaged to the same size.
+  const double s = std::min(1.0, std::sqrt(o.working_pixels / double(n)));
+  const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
+  const cv::Mat src = detail::as_mat(photo);
+  cv::Mat display(h, w, CV_8UC3);
+  cv::Mat weighted(h, w, CV_32FC2);
+  const int ch = photo.channels;
+  for (int y = 0; y < h; ++y) {
+    const float* row = src.ptr<float>(y);
+    cv::Vec3b* d = display.ptr<cv::Vec3b>(y);
+    cv::Vec2f* m = weighted.ptr<cv::Vec2f>(y);
+    for (int x = 0; x < w; ++x) {
+      const float* p = row + std::ptrdiff_t(x) * ch;
+      for (int c = 0; c < 3; ++c) {
+        float v = p[ch >= 3 ? c : 0];
+        if (!std::isfinite(v)) v = 0;
+        d[x][c] =
+            cv::saturate_cast<std::uint8_t>(255.0f * std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f));
+      }
+      const std::size_t i = std::size_t(y) * w + x;
+      // A little confidence everywhere, so that every pixel has a defined average.
+      const float c = std::max(1e-3f, std::clamp(confidence[i], 0.0f, 1.0f));
+      m[x] = {c * inverse_distance[i], c};
+    }
+  }
+  cv::Mat guide = display, maps = weighted;
+  if (s < 1) {
+    cv::resize(display, guide, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
+    cv::resize(weighted, maps, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
+  }
+  cv::Mat smoothed;
+  cv::ximgproc::fastGlobalSmootherFilter(guide, maps, smoothed, o.lambda, o.sigma_color);
+  if (s < 1) cv::resize(smoothed, smoothed, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+  for (int y = 0; y < h; ++y) {
+    const cv::Vec2f* m = smoothed.ptr<cv::Vec2f>(y);
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      const float keep = refine_keep_weight(confidence[i]);
+      if (keep >= 1.0f) continue;
+      const float q = m[x][1] > 1e-6f ? m[x][0] / m[x][1] : inverse_distance[i];
+      if (!std::isfinite(q)) continue;
+      out[i] = std::max(0.0f, keep * inverse_distance[i] + (1 - keep) * q);
     }
   }
   return out;

@@ -110,4 +110,31 @@ DistanceMap distance_map(const Camera& camera, const CameraPose& pose,
 /// Even-odd point-in-polygon test.
 bool inside_polygon(const std::vector<PixelPoint>& polygon, double x, double y);
 
+/// Edge-aware refinement of an estimated depth (issue 11 item 3: depth that does no harm). Fog
+/// turns every jump of the depth into a jump of the transmittance, so a jump where the photo has
+/// no edge becomes a seam the photo never had. The inverse distance q = 1 / d (0 = sky, so the
+/// sky joins in without infinities) is smoothed with a confidence-normalised fast global
+/// smoother (cv::ximgproc::fastGlobalSmootherFilter, Min et al. 2014, on c q and on c, then
+/// divided; guide = the display-referred photo) on a working copy of about `working_pixels`:
+/// neighbours are tied by exp(-|photo difference| / sigma_color), so values spread freely
+/// along smooth colour ramps (a sunset band into the sky, the sea into the haze) and stop at the
+/// photo's edges, over about sqrt(lambda) working pixels. The result is
+/// w q + (1 - w) smoothed, w = smoothstep(0.5, 1, confidence): confidence 1 (the ground plane,
+/// annotations, the sky) keeps its value exactly, confidence <= 0.5 takes the smoothed one, and
+/// w varies continuously with the confidence.
+struct DepthRefineOptions {
+  double working_pixels = 0.5e6;
+  double lambda = 1500;    ///< smoothness (working pixels^2)
+  double sigma_color = 4;  ///< of 255, display-referred
+};
+/// `inverse_distance` and `confidence` ([0, 1]) are row-major at the photo's size (photo:
+/// scene-linear, >= 1 channel); returns the refined inverse distance (>= 0), same layout.
+/// Throws mr::Error(size_mismatch) when the sizes differ.
+std::vector<float> refine_inverse_distance(ConstImageView photo,
+                                           const std::vector<float>& inverse_distance,
+                                           const std::vector<float>& confidence,
+                                           const DepthRefineOptions& options = {});
+/// The weight refine_inverse_distance gives a pixel's own value: smoothstep(0.5, 1, confidence).
+float refine_keep_weight(float confidence);
+
 }  // namespace mr::photo

@@ -42,6 +42,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   out.width = photo.width;
   out.height = photo.height;
   out.sky.assign(std::size_t(photo.width) * photo.height, 0);
+  out.alpha.assign(out.sky.size(), 0.0f);
   if (photo.width < 4 || photo.height < 4 || photo.channels < 1) return out;
   const double dx = horizon[1][0] - horizon[0][0];
   const double slope = std::abs(dx) > 1e-9 ? (horizon[1][1] - horizon[0][1]) / dx : 0.0;
@@ -172,6 +173,82 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
         if (fill[hl.at<int>(y, x)]) sky.at<std::uint8_t>(y, x) = 1;
   }
 
+  // Sky seen through foliage: small sky-coloured components the texture test refused (a gap's
+  // edge pixels are mixtures, so the window sees texture), enclosed in textured structure, whose
+  // colour is the open sky's. Without this, a billboard fills every gap: no sky through the
+  // canopy, no sunlight between the branches.
+  std::size_t gap_pixels_working = 0;
+  if (o.max_gap_fraction > 0) {
+    std::vector<cv::Vec3d> sky_rgb;
+    std::vector<float> sky_luma;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (sky.at<std::uint8_t>(y, x)) {
+          const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
+          sky_rgb.emplace_back(p[0], p[1], p[2]);
+          sky_luma.push_back(luma.at<float>(y, x));
+        }
+    if (sky_rgb.size() >= std::max<std::size_t>(64, std::size_t(0.005 * w * h))) {
+      cv::Vec3d mean(0, 0, 0);
+      for (const auto& v : sky_rgb) mean += v;
+      mean *= 1.0 / double(sky_rgb.size());
+      cv::Matx33d cov = cv::Matx33d::zeros();
+      for (const auto& v : sky_rgb) {
+        const cv::Vec3d d = v - mean;
+        cov += d * d.t();
+      }
+      cov *= 1.0 / double(sky_rgb.size());
+      for (int k = 0; k < 3; ++k) cov(k, k) += 0.03 * 0.03;  // a floor: a flat sky is not exact
+      const cv::Matx33d inverse = cov.inv(cv::DECOMP_CHOLESKY);
+      std::nth_element(sky_luma.begin(), sky_luma.begin() + std::ptrdiff_t(sky_luma.size() / 2),
+                       sky_luma.end());
+      const double median_luma = sky_luma[sky_luma.size() / 2];
+      cv::Mat gap_cand = colour & (1 - sky);
+      cv::Mat gl, gs, gc;
+      const int m = cv::connectedComponentsWithStats(gap_cand, gl, gs, gc, 8, CV_32S);
+      std::vector<cv::Vec3d> sum(std::size_t(m), cv::Vec3d(0, 0, 0));
+      std::vector<double> luma_sum(std::size_t(m), 0.0);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (const int l = gl.at<int>(y, x); l > 0) {
+            const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
+            sum[l] += cv::Vec3d(p[0], p[1], p[2]);
+            luma_sum[l] += luma.at<float>(y, x);
+          }
+      std::vector<std::uint8_t> gap(std::size_t(m), 0);
+      const double max_area = o.max_gap_fraction * w * h;
+      for (int i = 1; i < m; ++i) {
+        const int area = gs.at<int>(i, cv::CC_STAT_AREA);
+        if (area > max_area) continue;
+        const cv::Vec3d d = sum[i] * (1.0 / area) - mean;
+        if (!((d.t() * inverse * d)(0) <= o.gap_max_sigma * o.gap_max_sigma)) continue;
+        if (!(luma_sum[i] / area >= o.gap_min_luma * median_luma)) continue;
+        // Enclosed in texture (foliage): most of the pixels around it are textured, which a
+        // white boat on a smooth sea or a pale patch of a plain wall are not.
+        const int x0 = std::max(0, gs.at<int>(i, cv::CC_STAT_LEFT) - 3),
+                  y0 = std::max(0, gs.at<int>(i, cv::CC_STAT_TOP) - 3);
+        const int x1 = std::min(
+                      w, gs.at<int>(i, cv::CC_STAT_LEFT) + gs.at<int>(i, cv::CC_STAT_WIDTH) + 3),
+                  y1 = std::min(
+                      h, gs.at<int>(i, cv::CC_STAT_TOP) + gs.at<int>(i, cv::CC_STAT_HEIGHT) + 3);
+        int around = 0, textured = 0;
+        for (int y = y0; y < y1; ++y)
+          for (int x = x0; x < x1; ++x) {
+            if (gl.at<int>(y, x) == i || sky.at<std::uint8_t>(y, x)) continue;
+            ++around;
+            textured += texture.at<float>(y, x) > o.max_texture;
+          }
+        if (around > 0 && 2 * textured >= around) gap[i] = 1;
+      }
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (gap[gl.at<int>(y, x)] && above(x, y)) {
+            sky.at<std::uint8_t>(y, x) = 1;
+            ++gap_pixels_working;
+          }
+    }
+  }
+
   // Full resolution: upsample, refine the edges with a guided filter, clip to the horizon.
   cv::Mat soft;
   sky.convertTo(soft, CV_32F);
@@ -192,11 +269,15 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     const std::uint8_t* sh = shrunk.ptr<std::uint8_t>(y);
     for (int x = 0; x < photo.width; ++x) {
       const float v = gr[x] != sh[x] ? r[x] : so[x];
-      const bool is_sky = v >= 0.5f && y < horizon_y(x);
+      const bool above_horizon = y < horizon_y(x);
+      const bool is_sky = v >= 0.5f && above_horizon;
       out.sky[std::size_t(y) * photo.width + x] = is_sky;
+      out.alpha[std::size_t(y) * photo.width + x] =
+          above_horizon && std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) : 0.0f;
       out.pixels += is_sky;
     }
   }
+  out.gap_pixels = std::size_t(std::lround(double(gap_pixels_working) / (sx * sy)));
   return out;
 }
 

@@ -7,6 +7,11 @@
 // (birds, specks: below `max_hole_fraction` of the image) filled; at full resolution its edges
 // are refined with a guided filter (cv::ximgproc::guidedFilter, guide = the display-referred
 // photo) and clipped to the horizon again. Never throws for any image content.
+//
+// Issue 11 item 4: the mask also comes as a soft matte (alpha): the guided filter's output where
+// it decides (a band along the mask's edges), so the sky's edge is as soft as the photo's; and
+// sky seen through foliage (small sky-coloured gaps enclosed by textured structure, whose colour
+// matches the open sky's) is sky, so that no billboard fills it and sunlight can pass.
 #pragma once
 
 #include <array>
@@ -24,12 +29,23 @@ struct SkyMaskOptions {
   double max_texture = 0.012;       ///< mean |gradient| of the display-referred luma per pixel
   double bright_fraction = 0.6;     ///< grey sky: luma >= this x the bright reference
   double max_hole_fraction = 5e-4;  ///< enclosed non-sky specks filled up to this image fraction
+  /// Sky seen through foliage: enclosed sky-coloured components up to this image fraction whose
+  /// mean colour is within `gap_max_sigma` (Mahalanobis, display-referred RGB) of the open sky's
+  /// and at least `gap_min_luma` x its median luma. 0: off.
+  double max_gap_fraction = 3e-3;
+  double gap_max_sigma = 3.0;
+  double gap_min_luma = 0.8;
 };
 
 struct SkyMask {
   int width = 0, height = 0;
-  std::vector<std::uint8_t> sky;  ///< row-major, 1 = sky
-  std::size_t pixels = 0;         ///< sky pixels
+  std::vector<std::uint8_t> sky;  ///< row-major, 1 = sky (alpha >= 0.5)
+  /// Row-major soft matte in [0, 1]: 1 sky, 0 not; fractional only along the mask's edges, where
+  /// the guided filter follows the photo's own edge (soft where the photo's edge is soft); 0 at
+  /// and below the horizon.
+  std::vector<float> alpha;
+  std::size_t pixels = 0;      ///< sky pixels
+  std::size_t gap_pixels = 0;  ///< of them, sky seen through foliage (enclosed gaps)
 };
 
 /// The sky of `photo` (scene-linear, >= 1 channel), only above the horizon through the two

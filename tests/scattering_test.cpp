@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <limits>
 #include <numbers>
@@ -119,6 +120,62 @@ TEST_F(Scattering, SunThroughAFogLayerWithLightPathAttenuation) {
       }
     }
   EXPECT_LT(worst, 1e-3);
+}
+
+// Issue 11 item 4: sky pixels are seen through a fog layer with a top, a finite path, not
+// painted over. Against numerical integration along the ray (Simpson, independent of
+// render/medium's closed forms): T = exp(-sigma tau(t_top)) and
+// R = integral_0^t_top sigma_s rho(t) exp(-sigma tau(t)) [L_sky + p E exp(-sigma tau_sun(t))] dt,
+// tau_sun the optical depth from the point up toward the sun to the top (also integrated
+// numerically). Homogeneous fog and height fog, both below a top at 60 m; sky light and a sun.
+TEST_F(Scattering, SkySeenThroughAFogLayerMatchesNumericalIntegration) {
+  const Camera cam = Camera::from_horizontal_fov(16, 12, 50);
+  const double top = 60;
+  for (const bool height_fog : {false, true}) {
+    FogScene s = base_scene();
+    s.pose.pitch_deg = 30;  // every ray rises: all sky
+    s.medium.layer_top_m = top;
+    if (height_fog) s.medium.height_fog = Medium::HeightFog{0.0, 25.0};
+    s.lighting.sky_radiance = Rgb{0.5f, 0.6f, 0.7f};
+    s.lighting.sun = Sun{normalize({0.2, 0.6, -0.7}), {3, 3, 3}, 0.0};
+    s.render.volumetric_shadows = false;
+    const Image depth = constant_depth(cam, kInf);
+    const ScatteringLayers out = render(depth, cam, s);
+    const Vec3 l = s.lighting.sun->direction_to_sun;
+    const double y0 = s.pose.position_m.y;
+    auto rho = [&](double y) { return height_fog ? std::exp(-y / 25.0) : 1.0; };
+    double worst_t = 0, worst_r = 0;
+    for (int y = 0; y < cam.height; y += 3)
+      for (int x = 0; x < cam.width; x += 3) {
+        const Vec3 w = s.pose.ray_direction(cam, x, y);
+        ASSERT_GT(w.y, 0.1);
+        const double t_top = (top - y0) / w.y;
+        auto tau = [&](double t) {  // unit optical depth camera -> t
+          return simpson([&](double u) { return rho(y0 + u * w.y); }, 0, t, 400);
+        };
+        auto tau_sun = [&](double t) {  // from the point at t up to the top, toward the sun
+          const double yp = y0 + t * w.y, len = (top - yp) / l.y;
+          return simpson([&](double u) { return rho(yp + u * l.y); }, 0, len, 400);
+        };
+        const double p = hg(s.medium.g, dot(w, l));
+        for (int c = 0; c < 3; ++c) {
+          const double sigma = s.medium.sigma_t_per_m[c];
+          const double want_t = std::exp(-sigma * tau(t_top));
+          const double want_r = simpson(
+              [&](double t) {
+                return s.medium.albedo[c] * sigma * rho(y0 + t * w.y) * std::exp(-sigma * tau(t)) *
+                       ((*s.lighting.sky_radiance)[c] + p * 3.0 * std::exp(-sigma * tau_sun(t)));
+              },
+              0, t_top, 400);
+          worst_t = std::max(worst_t, std::fabs(out.transmittance.at(x, y, c) - want_t) / want_t);
+          worst_r = std::max(worst_r, std::fabs(out.inscatter.at(x, y, c) - want_r) / want_r);
+        }
+      }
+    std::printf("sky through a %s layer (top %g m): worst relative error T %.2e, R %.2e\n",
+                height_fog ? "height-fog" : "homogeneous", top, worst_t, worst_r);
+    EXPECT_LT(worst_t, 1e-4);
+    EXPECT_LT(worst_r, 1e-3);
+  }
 }
 
 #ifndef MR_SCATTERING_TEST_VULKAN  // backend-independent: run once, on the CPU build

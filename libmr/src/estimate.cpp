@@ -304,13 +304,16 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       std::size_t total = 0;
       for (int l = 1; l < count; ++l)
         if (rises[l]) offset[l] = total, total += std::size_t(stats.at<int>(l, cv::CC_STAT_WIDTH));
-      // The lowest row of each rising component in each of its columns.
-      std::vector<int> lowest(total, -1);
+      // The lowest and the highest row of each rising component in each of its columns.
+      std::vector<int> lowest(total, -1), highest(total, -1);
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
           const int l = labels.at<int>(y, x);
-          if (rises[std::size_t(l)])
-            lowest[offset[l] + std::size_t(x - stats.at<int>(l, cv::CC_STAT_LEFT))] = y;
+          if (rises[std::size_t(l)]) {
+            const std::size_t k = offset[l] + std::size_t(x - stats.at<int>(l, cv::CC_STAT_LEFT));
+            lowest[k] = y;
+            if (highest[k] < 0) highest[k] = y;
+          }
         }
       // Its contact: the pixel edge below that row, when it is below the horizon and the pixel
       // beneath is ground-coloured (a structure running off the bottom has no contact).
@@ -324,6 +327,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           const int x = left + k, yc = lowest[offset[l] + k];
           if (yc < 0 || yc + 1 >= h || !(yc >= horizon_y(x) + 1)) continue;
           if (!ground.ground[std::size_t(yc + 1) * w + x]) continue;
+          // Issue 11 item 3: something standing on the ground rises above the horizon by a fair
+          // part of what it spans below it; the sea up to a boat, a person or a low wall do not,
+          // and made into a billboard they become a wall of columns with seams between them.
+          const double rise = horizon_y(x) - highest[offset[l] + k];
+          if (!(rise >= options.min_rise_ratio * (yc + 0.5 - horizon_y(x)))) continue;
           const auto gp = photo::ground_point(camera, g.pose, {double(x), yc + 0.5});
           if (!gp) continue;
           const double fd = (gp->x - o.x) * fwd.x + (gp->z - o.z) * fwd.z;
@@ -383,6 +391,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   }
 
   constexpr int kFar = 5, kContact = 6;
+  std::vector<std::uint8_t> pixel_class(n, 0);              // what decided each pixel's distance
   std::vector<double> column_forward(std::size_t(w), 0.0);  // the structure above the horizon
   std::vector<int> column_cov(std::size_t(w), 0);
   std::size_t counts[7] = {0, 0, 0, 0, 0, 0, 0};  // sky, ground, plane, hint, room, far, contact
@@ -404,11 +413,16 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         if (b < d) d = b, cov = column_cov[std::size_t(x)];
       }
       ++counts[cov];
+      pixel_class[i] = std::uint8_t(cov);
       // The pixel just above the horizon in this column decides whether a structure stands there.
       const double yh = horizon_y(x);
       if (y < yh && y + 1 >= yh) {
         column_cov[std::size_t(x)] = cov;
-        column_forward[std::size_t(x)] = cov == kFar       ? far_forward
+        // With the refinement, the far billboard does not cut the ground behind it: what
+        // stands there is unknown (a sunset band over the sea, far hills), a band of ground
+        // at its made-up distance would end in a seam at the next column without it, and the
+        // refinement joins the billboard to the ground wherever the photo has no edge.
+        column_forward[std::size_t(x)] = cov == kFar ? (options.refine_depth ? 0.0 : far_forward)
                                          : cov == kContact ? contact_forward[i]
                                                            : 0.0;
       }
@@ -420,6 +434,59 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   g.hint_pixels = counts[3];
   g.billboard_pixels = counts[kFar];
   g.contact_pixels = counts[kContact];
+  g.sky_gap_pixels = mask.gap_pixels;
+
+  // Issue 11 items 3 and 4: the soft sky matte, a confidence per pixel, and the depth refined
+  // against the photo so that it jumps only where the photo has an edge.
+  g.sky_alpha = Image(w, h, 1, {"A"});
+  g.depth_confidence = Image(w, h, 1, {"Y"});
+  const photo::DepthRefineOptions refine;
+  std::vector<float> q(n), c(n);
+  std::vector<std::uint8_t> blended(n, 0);  // on the sky's blurred edge
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      const float d = g.distance_m.at(x, y, 0);
+      const int cls = pixel_class[i];
+      const float alpha = mask.alpha[i];
+      g.sky_alpha.at(x, y, 0) = alpha;
+      float conf = cls == kFar ? 0.05f : cls == kContact ? 0.3f : 1.0f;
+      if (cls == int(photo::Coverage::ground)) {
+        // Near the horizon a pixel of the ground spans many metres (at 2 degrees below it, 4 %
+        // of its distance), whether the ground runs flat to the horizon is a guess, and a flat
+        // ground there makes the fog jump from clear to opaque within a pixel or two in haze:
+        // the confidence ramps from 0 at the horizon to 1 at twice the far billboard's
+        // depression (4 degrees: 23 m from 1.6 m), and the refinement smooths what is above.
+        const double below =
+            std::asin(std::clamp(-g.pose.ray_direction(camera, x, y).y, -1.0, 1.0));
+        conf = float(std::clamp(below / (2 * depression * kDeg), 0.0, 1.0));
+      }
+      float inv = std::isfinite(d) && d > 0 ? 1.0f / d : 0.0f;
+      if (std::isfinite(d) && alpha > 0 && cls != int(photo::Coverage::hint) &&
+          cls != int(photo::Coverage::plane)) {
+        // A blurred sky edge: the surface's inverse distance fades to the sky's 0 as the
+        // matte rises to 0.5 (where the binary mask turns to sky), so the fog does too.
+        const float keep = std::max(0.0f, 1.0f - 2.0f * alpha);
+        inv *= keep;
+        conf *= keep;
+        blended[i] = 1;
+      }
+      q[i] = inv;
+      c[i] = conf;
+    }
+  if (options.refine_depth) q = photo::refine_inverse_distance(photo->view(), q, c, refine);
+  // Farther than this a surface is as good as sky for any fog that is not almost clear air.
+  constexpr float kMaxFiniteDistanceM = 1e5f;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      g.depth_confidence.at(x, y, 0) = c[i];
+      float& d = g.distance_m.at(x, y, 0);
+      if (!std::isfinite(d)) continue;  // sky stays sky
+      const bool refined = options.refine_depth && photo::refine_keep_weight(c[i]) < 1.0f;
+      if (!refined && !blended[i]) continue;  // kept exactly
+      d = std::min(kMaxFiniteDistanceM, q[i] > 0 ? 1.0f / q[i] : kMaxFiniteDistanceM);
+    }
   return g;
 }
 
@@ -608,6 +675,18 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
         (fit.converged ? "" : "; Ceres did not report convergence"));
   }
   return est;
+}
+
+double default_layer_top_m(const Medium& medium) {
+  const double sigma =
+      (double(medium.sigma_t_per_m[0]) + medium.sigma_t_per_m[1] + medium.sigma_t_per_m[2]) / 3;
+  if (!(sigma > 0) || !std::isfinite(sigma))
+    throw Error(ErrorCode::invalid_argument,
+                "default_layer_top_m: medium.sigma_t_per_m must be positive, found a mean of " +
+                    fmt("%g", sigma));
+  // Koschmieder's visibility (2 % contrast), as mr::extinction_from_visibility.
+  const double visibility_m = 3.912 / sigma;
+  return std::clamp(0.5 * visibility_m, 30.0, 2000.0);
 }
 
 PhotoCamera camera_for_photo(const Image& photo, double fallback_fov_deg) {

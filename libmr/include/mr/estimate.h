@@ -40,6 +40,21 @@ struct EstimateOptions {
   /// a photo whose ground colour cannot be modelled, keeps the far billboard. false: the far
   /// billboard everywhere.
   bool ground_contact = true;
+  /// A structure column counts as standing on the ground only where its part above the horizon
+  /// is at least this fraction of its part below (a building 3 m tall seen from 1.6 m: about 0.9;
+  /// the sea reaching up to a boat on the horizon, a person, a low wall: far less). Elsewhere
+  /// its pixels below the horizon stay on the ground plane.
+  double min_rise_ratio = 0.4;
+  /// Depth that does no harm (issue 11 item 3): with the automatic sky mask, the estimated
+  /// depth is refined against the photo (photo/geometry.h, refine_inverse_distance) so that it
+  /// jumps only where the photo has an edge; the ground plane (more than 4 degrees below the
+  /// horizon), the annotations and the sky are kept exactly (confidence 1), the far billboard
+  /// (0.05), structures standing on the ground (0.3) and the ground near the horizon (rising
+  /// from 0 at the horizon to 1 at 4 degrees below it) follow the photo, and the far billboard
+  /// no longer cuts the ground behind it. The sky's soft matte blends into the depth (see
+  /// GeometryEstimate::sky_alpha). false: the depth as before (binary sky, hard billboards),
+  /// except for the matte's blend.
+  bool refine_depth = true;
 };
 
 /// Where a value came from.
@@ -79,6 +94,21 @@ struct GeometryEstimate {
   std::size_t billboard_pixels = 0;
   /// Pixels on structures standing where they meet the ground (EstimateOptions::ground_contact).
   std::size_t contact_pixels = 0;
+  /// With the automatic sky mask (issue 11 items 3 and 4), one channel each at the photo's size
+  /// (empty otherwise). sky_alpha: the soft sky matte in [0, 1] (1 sky; fractional only along
+  /// the sky's edge, as soft as the photo's edge there; 0 at and below the horizon); a pixel is
+  /// sky (distance +inf) where alpha >= 0.5; a pixel with 0 < alpha < 0.5 lies on its surface's
+  /// inverse distance scaled by (1 - 2 alpha), so its fog runs continuously from the surface's
+  /// to the sky's as alpha rises. depth_confidence: how far each pixel's distance is trusted, in
+  /// [0, 1] (1: sky, annotated planes, hints and rooms, the ground plane from 4 degrees below
+  /// the horizon, 0 at the horizon and linear in between; 0.3: structures standing on the
+  /// ground; 0.05: the far billboard; a blurred sky edge scales it by (1 - 2 alpha)); the
+  /// refinement keeps a pixel's own value with weight smoothstep(0.5, 1, confidence) and takes
+  /// the photo-guided smooth value otherwise, so where the depth is uncertain the fog varies
+  /// smoothly instead of jumping.
+  Image sky_alpha, depth_confidence;
+  /// Sky pixels found as sky seen through foliage (enclosed gaps; photo/sky_mask.h).
+  std::size_t sky_gap_pixels = 0;
   /// With an interior_box annotation: pixels on the room's floor, walls or ceiling; the
   /// ceiling height (metres above the floor; unset when neither given nor marked); and the
   /// room's edges in the image (floor lines, wall corners up to the ceiling or twice the camera
@@ -152,6 +182,15 @@ struct SceneEstimate {
 /// scene-linear RGB of the camera's size (size_mismatch otherwise).
 SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                              const Annotations& annotations, const EstimateOptions& options = {});
+
+/// The fog layer's top (metres above the ground, y = 0) for automatic fog when the scene gives
+/// none (issue 11 item 4): real fog and haze lie in a layer, and the sky is seen through it, not
+/// replaced by it. Half the medium's visibility (3.912 / mean sigma_t), within [30 m, 2 km]:
+/// dense ground fog (visibility 40 m) 30 m, fog at 150 m visibility 75 m, haze at 3 km 1.5 km
+/// (the boundary layer). `mr fog --depth auto` uses it (--layer-top auto, the default) when the
+/// photo's geometry is estimated and neither --layer, --height-fog nor the scene file gives the
+/// fog a top. Throws mr::Error(invalid_argument) for a medium without positive extinction.
+double default_layer_top_m(const Medium& medium);
 
 /// The camera of a photo for estimation (issue 4 item 1), principal point at the centre.
 struct PhotoCamera {

@@ -1,0 +1,427 @@
+// Issue 11 items 3 and 4 on synthetic photos made to fail the way real ones did: a seascape with
+// boats on the horizon, a sunset band and a hazy hillside (edge-free regions next to the sky and
+// the sea), a forest canopy with sky seen through its gaps, a hill fading softly into the sky.
+// Measured: depth jumps where the photo has no edge, edges the fog creates (fog only softens:
+// the result's gradient more than twice the photo's plus a floor), sky through the canopy, and
+// the soft sky matte's continuity. Each test prints its numbers; "before" is the estimate
+// without the refinement, the rise test and a fog top (EstimateOptions, as the code was).
+#include <gtest/gtest.h>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "mr/error.h"
+#include "mr/estimate.h"
+#include "mr/fog.h"
+#include "mr/io.h"
+#include "mr/scattering.h"
+#include "photo/sky_mask.h"
+
+namespace mr {
+namespace {
+
+constexpr int kW = 640, kH = 480;
+const Camera kCamera = Camera::from_horizontal_fov(kW, kH, 60);
+constexpr double kHorizonRow = 239.5;  // a level camera: through the principal point
+
+cv::Vec3f mix(const cv::Vec3f& a, const cv::Vec3f& b, float t) {
+  return a * (1 - t) + b * t;
+}
+
+// Scene-linear photo of a display-referred [0, 1] CV_32FC3 picture (gamma 2.2, as the sky mask
+// reads it), with a little deterministic grain.
+Image to_photo(const cv::Mat& display, unsigned seed = 7) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> grain(-0.003f, 0.003f);
+  Image out(display.cols, display.rows, 3);
+  for (int y = 0; y < display.rows; ++y)
+    for (int x = 0; x < display.cols; ++x)
+      for (int c = 0; c < 3; ++c)
+        out.at(x, y, c) =
+            std::pow(std::clamp(display.at<cv::Vec3f>(y, x)[c] + grain(rng), 0.0f, 1.0f), 2.2f);
+  return out;
+}
+
+// Sky: blue at the top to pale at the horizon; `sunset` adds a warm band above the horizon
+// that fades into the sky with no edge.
+cv::Vec3f sky_colour(int y, float sunset) {
+  const float t = std::clamp(float((kHorizonRow - y) / kHorizonRow), 0.0f, 1.0f);
+  const cv::Vec3f blue(0.36f, 0.55f, 0.86f), pale(0.80f, 0.82f, 0.86f), warm(0.97f, 0.62f, 0.36f);
+  const cv::Vec3f base = mix(pale, blue, t * t * (3 - 2 * t));
+  const float band = std::exp(-std::pow(float(kHorizonRow - y) / 28.0f, 2.0f));
+  return mix(base, warm, sunset * band);
+}
+
+// The seascape: sky (with a sunset band), the sea as a smooth gradient down to a beach, boats
+// and a mast on the horizon, and a hazy hill on the right whose edge fades into the sky.
+cv::Mat seascape_display() {
+  cv::Mat m(kH, kW, CV_32FC3);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      cv::Vec3f c;
+      if (y < kHorizonRow) {
+        c = sky_colour(y, 0.8f);
+      } else if (y < 400) {
+        const float t = float((y - kHorizonRow) / (400 - kHorizonRow));
+        c = mix(cv::Vec3f(0.30f, 0.40f, 0.52f), cv::Vec3f(0.12f, 0.22f, 0.36f), t);
+      } else {
+        c = cv::Vec3f(0.74f, 0.64f, 0.48f);
+      }
+      m.at<cv::Vec3f>(y, x) = c;
+    }
+  // A hazy hill: its silhouette blurred over ~10 px, its colour close to the sky's.
+  cv::Mat hill(kH, kW, CV_32F, cv::Scalar(0));
+  std::vector<cv::Point> poly{{440, 240}, {500, 212}, {560, 200}, {639, 214}, {639, 240}};
+  cv::fillConvexPoly(hill, poly, cv::Scalar(1), cv::LINE_AA);
+  cv::GaussianBlur(hill, hill, cv::Size(0, 0), 4.0);
+  for (int y = 0; y < 240; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const float a = hill.at<float>(y, x);
+      if (a > 0)
+        m.at<cv::Vec3f>(y, x) = mix(m.at<cv::Vec3f>(y, x), cv::Vec3f(0.62f, 0.60f, 0.66f), a);
+    }
+  // Boats on the horizon, one with a mast.
+  const cv::Scalar hull(0.16, 0.13, 0.11), sail(0.9, 0.88, 0.84);
+  cv::rectangle(m, cv::Point(100, 233), cv::Point(152, 246), hull, cv::FILLED, cv::LINE_AA);
+  cv::line(m, cv::Point(126, 233), cv::Point(126, 188), hull, 2, cv::LINE_AA);
+  cv::fillConvexPoly(m, std::vector<cv::Point>{{128, 190}, {128, 230}, {150, 230}}, sail,
+                     cv::LINE_AA);
+  cv::rectangle(m, cv::Point(300, 236), cv::Point(324, 244), hull, cv::FILLED, cv::LINE_AA);
+  cv::rectangle(m, cv::Point(380, 234), cv::Point(396, 245), hull, cv::FILLED, cv::LINE_AA);
+  return m;
+}
+
+Annotations level_horizon() {
+  Annotations a;
+  a.horizon =
+      std::array<PixelPoint, 2>{PixelPoint{0, kHorizonRow}, PixelPoint{kW - 1, kHorizonRow}};
+  a.camera_height_m = 1.6;
+  return a;
+}
+
+// Display-referred luma (gamma 2.2) of a scene-linear RGB image.
+cv::Mat display_luma(const Image& img) {
+  cv::Mat l(img.height(), img.width(), CV_32F);
+  for (int y = 0; y < img.height(); ++y)
+    for (int x = 0; x < img.width(); ++x) {
+      double v = 0;
+      const double wts[3] = {0.2126, 0.7152, 0.0722};
+      for (int c = 0; c < 3; ++c)
+        v += wts[c] * std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f);
+      l.at<float>(y, x) = float(v);
+    }
+  return l;
+}
+
+// Per pixel: the larger forward difference (right, down) of a single-channel map.
+cv::Mat gradient(const cv::Mat& l) {
+  cv::Mat g(l.rows, l.cols, CV_32F, cv::Scalar(0));
+  for (int y = 0; y < l.rows; ++y)
+    for (int x = 0; x < l.cols; ++x) {
+      float v = 0;
+      if (x + 1 < l.cols) v = std::max(v, std::abs(l.at<float>(y, x + 1) - l.at<float>(y, x)));
+      if (y + 1 < l.rows) v = std::max(v, std::abs(l.at<float>(y + 1, x) - l.at<float>(y, x)));
+      g.at<float>(y, x) = v;
+    }
+  return g;
+}
+
+// The issue's created-edge measure: the fraction of pixels where the fogged image's gradient
+// (display-referred luma) is more than twice the photo's plus a floor of 0.01 (2.5 / 255).
+constexpr float kEdgeFloor = 0.01f;
+void dump(const std::string& name, const Image& image);
+double created_edge_fraction(const Image& photo, const Image& fogged,
+                             const std::string& name = "") {
+  const cv::Mat gp = gradient(display_luma(photo)), gf = gradient(display_luma(fogged));
+  std::size_t created = 0;
+  Image mask(gp.cols, gp.rows, 3);
+  for (int y = 0; y < gp.rows; ++y)
+    for (int x = 0; x < gp.cols; ++x) {
+      const bool c = gf.at<float>(y, x) > 2 * gp.at<float>(y, x) + kEdgeFloor;
+      created += c;
+      for (int k = 0; k < 3; ++k) mask.at(x, y, k) = c ? float(k == 0) : 0.3f * fogged.at(x, y, k);
+    }
+  if (!name.empty()) dump(name, mask);
+  return double(created) / double(gp.total());
+}
+
+// Depth jumps where the photo has no edge: neighbouring pixels whose transmittance in a
+// reference fog (150 m visibility, unbounded: the sky's is 0) differs by more than 0.1 while
+// the photo's gradient within one pixel of both stays below 0.02.
+std::size_t jumps_off_edges(const Image& photo, const Image& distance) {
+  const double sigma = 3.912 / 150;
+  const cv::Mat gp = gradient(display_luma(photo));
+  cv::Mat edge;
+  cv::dilate(gp, edge, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
+  auto t = [&](int x, int y) {
+    const float d = distance.at(x, y, 0);
+    return std::isfinite(d) ? std::exp(-sigma * d) : 0.0;
+  };
+  std::size_t n = 0;
+  for (int y = 0; y + 1 < photo.height(); ++y)
+    for (int x = 0; x + 1 < photo.width(); ++x) {
+      if (edge.at<float>(y, x) >= 0.02f) continue;
+      n += std::abs(t(x + 1, y) - t(x, y)) > 0.1 && edge.at<float>(y, x + 1) < 0.02f;
+      n += std::abs(t(x, y + 1) - t(x, y)) > 0.1 && edge.at<float>(y + 1, x) < 0.02f;
+    }
+  return n;
+}
+
+// With MR_TEST_IMAGES=<folder>: the photos, depths and fogged results as PNGs, to look at.
+void dump(const std::string& name, const Image& image) {
+  const char* folder = std::getenv("MR_TEST_IMAGES");
+  if (!folder || !*folder) return;
+  if (image.channels() == 1) {  // a distance map: 1 - exp(-d / 50 m), sky white
+    Image v(image.width(), image.height(), 3);
+    for (int y = 0; y < image.height(); ++y)
+      for (int x = 0; x < image.width(); ++x) {
+        const float d = image.at(x, y, 0);
+        const float g = std::isfinite(d) ? float(-std::expm1(-d / 50.0)) : 1.0f;
+        for (int c = 0; c < 3; ++c)
+          v.at(x, y, c) = std::pow(g, 2.2f) * (c == 2 || std::isfinite(d) ? 1.0f : 0.9f);
+      }
+    write_image(std::string(folder) + "/" + name + ".png", v);
+    return;
+  }
+  write_image(std::string(folder) + "/" + name + ".png", image);
+}
+
+EstimateOptions before_options() {
+  EstimateOptions o;
+  o.refine_depth = false;
+  o.min_rise_ratio = 0;
+  return o;
+}
+
+// Sky light only, as the looks without sun or lamps: the fog of `visibility_m`, in a layer with
+// the default top when `layer_top`.
+FogLayers fog_look(const Image& photo, const SceneEstimate& est, double visibility_m,
+                   bool layer_top) {
+  FogScene s = est.scene;
+  const float sigma = float(extinction_from_visibility(visibility_m));
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  if (layer_top) s.medium.layer_top_m = default_layer_top_m(s.medium);
+  s.render.backend = Backend::cpu;
+  return fog(photo, est.geometry.distance_m, kCamera, s);
+}
+
+TEST(RealPhoto, SeascapeDepthJumpsOnlyAtPhotoEdges) {
+  const Image photo = to_photo(seascape_display());
+  const GeometryEstimate before =
+      estimate_geometry(photo, kCamera, level_horizon(), before_options());
+  const GeometryEstimate after = estimate_geometry(photo, kCamera, level_horizon());
+  dump("seascape_photo", photo);
+  dump("seascape_depth_before", before.distance_m);
+  dump("seascape_depth_after", after.distance_m);
+  const std::size_t jb = jumps_off_edges(photo, before.distance_m),
+                    ja = jumps_off_edges(photo, after.distance_m);
+  std::printf("seascape: depth jumps off the photo's edges: before %zu, after %zu\n", jb, ja);
+  EXPECT_EQ(ja, 0u);
+  EXPECT_GT(jb, ja);  // the case does exercise what was wrong
+  // The estimate carries its soft matte and confidence at the photo's size.
+  ASSERT_EQ(after.sky_alpha.width(), kW);
+  ASSERT_EQ(after.depth_confidence.height(), kH);
+  // The sea (below the horizon, away from the boats) is the ground plane: flat water, not a
+  // wall of columns. Bar: within 2 % of the plane's distance where the plane is trusted (more
+  // than 4 degrees below the horizon, row 279; above, the refinement smooths it).
+  double worst = 0;
+  for (int y = 285; y < 390; y += 7)
+    for (int x = 180; x < 620; x += 13) {
+      if (x > 290 && x < 410) continue;  // beside the small boats
+      const Vec3 d = after.pose.ray_direction(kCamera, x, y);
+      const double plane = after.pose.position_m.y / -d.y;
+      const double e = std::abs(after.distance_m.at(x, y, 0) - plane) / plane;
+      worst = std::max(worst, e);
+    }
+  std::printf("seascape: sea vs the ground plane, worst relative difference %.4f\n", worst);
+  EXPECT_LT(worst, 0.02);
+}
+
+TEST(RealPhoto, SeascapeFogCreatesNoEdges) {
+  const Image photo = to_photo(seascape_display());
+  const SceneEstimate before = estimate_scene(photo, kCamera, level_horizon(), before_options());
+  const SceneEstimate after = estimate_scene(photo, kCamera, level_horizon());
+  for (const double visibility : {150.0, 3000.0}) {
+    const Image b = fog_look(photo, before, visibility, false).composite;
+    const Image a = fog_look(photo, after, visibility, true).composite;
+    dump("seascape_fog" + std::to_string(int(visibility)) + "_before", b);
+    dump("seascape_fog" + std::to_string(int(visibility)) + "_after", a);
+    const double fb = created_edge_fraction(photo, b),
+                 fa = created_edge_fraction(photo, a,
+                                            "seascape_edges" + std::to_string(int(visibility)));
+    std::printf("seascape, visibility %g m: created-edge pixels before %.4f %%, after %.4f %%\n",
+                visibility, 100 * fb, 100 * fa);
+    EXPECT_LE(fa, 2e-4);  // the issue's target: 0.02 % of the pixels
+  }
+}
+
+// A canopy of dark textured leaves with gaps through which the sky shows, open sky at the top
+// right, grass below the horizon.
+cv::Mat forest_display(std::vector<cv::Point>* gap_centres) {
+  cv::Mat m(kH, kW, CV_32FC3);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> leaf(-0.09f, 0.09f);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      cv::Vec3f c;
+      const bool canopy = y < 215 && !(x > 470 && y < 110);
+      if (y >= kHorizonRow) {
+        const float n = leaf(rng);
+        c = cv::Vec3f(0.25f + n, 0.42f + n, 0.18f + n);
+      } else if (canopy) {
+        const float n = leaf(rng);
+        c = cv::Vec3f(0.12f + n, 0.24f + n, 0.10f + n);
+      } else {
+        c = sky_colour(y, 0);
+      }
+      m.at<cv::Vec3f>(y, x) = c;
+    }
+  std::uniform_int_distribution<int> gx(20, 440), gy(20, 190), gr(5, 9);
+  for (int k = 0; k < 40; ++k) {
+    const cv::Point p(gx(rng), gy(rng));
+    const int r = gr(rng);
+    gap_centres->push_back(p);
+    for (int y = p.y - r; y <= p.y + r; ++y)
+      for (int x = p.x - r; x <= p.x + r; ++x)
+        if ((x - p.x) * (x - p.x) + (y - p.y) * (y - p.y) <= r * r)
+          m.at<cv::Vec3f>(y, x) = sky_colour(y, 0);
+  }
+  return m;
+}
+
+TEST(RealPhoto, SkyThroughTheCanopyStaysSky) {
+  std::vector<cv::Point> gaps;
+  const Image photo = to_photo(forest_display(&gaps));
+  const GeometryEstimate after = estimate_geometry(photo, kCamera, level_horizon());
+  dump("forest_photo", photo);
+  dump("forest_depth_after", after.distance_m);
+  std::size_t inside = 0, sky = 0;
+  for (const cv::Point& p : gaps)
+    for (int dy = -2; dy <= 2; ++dy)  // the gaps' centres: at least 5 px inside
+      for (int dx = -2; dx <= 2; ++dx) {
+        ++inside;
+        sky += std::isinf(after.distance_m.at(p.x + dx, p.y + dy, 0));
+      }
+  photo::SkyMaskOptions off;
+  off.max_gap_fraction = 0;
+  const photo::SkyMask without = photo::estimate_sky_mask(
+      photo.view(), {PixelPoint{0, kHorizonRow}, PixelPoint{kW - 1, kHorizonRow}}, off);
+  std::size_t sky_before = 0;
+  for (const cv::Point& p : gaps)
+    for (int dy = -2; dy <= 2; ++dy)
+      for (int dx = -2; dx <= 2; ++dx)
+        sky_before += without.sky[std::size_t(p.y + dy) * kW + p.x + dx];
+  std::printf("canopy gaps: %zu of %zu centre pixels are sky (before: %zu); %zu gap pixels\n", sky,
+              inside, sky_before, after.sky_gap_pixels);
+  // Bar: 90 % of the gaps' centres (a gap overlapping another or the open sky is still sky).
+  EXPECT_GE(double(sky), 0.9 * double(inside));
+  EXPECT_LT(sky_before, sky);
+  // The canopy itself is not sky: its leaves are dark and textured.
+  std::size_t leaf_sky = 0, leaves = 0;
+  for (int y = 10; y < 200; y += 3)
+    for (int x = 10; x < 460; x += 3) {
+      bool near_gap = false;
+      for (const cv::Point& p : gaps) near_gap |= std::hypot(x - p.x, y - p.y) < 12;
+      if (near_gap) continue;
+      ++leaves;
+      leaf_sky += std::isinf(after.distance_m.at(x, y, 0));
+    }
+  std::printf("canopy: %zu of %zu leaf pixels are sky\n", leaf_sky, leaves);
+  EXPECT_EQ(leaf_sky, 0u);
+}
+
+// A hill whose silhouette fades into the sky over ~15 px.
+cv::Mat soft_hill_display() {
+  cv::Mat m(kH, kW, CV_32FC3);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      m.at<cv::Vec3f>(y, x) = y < kHorizonRow ? sky_colour(y, 0) : cv::Vec3f(0.3f, 0.36f, 0.28f);
+  cv::Mat hill(kH, kW, CV_32F, cv::Scalar(0));
+  std::vector<cv::Point> poly;
+  for (int x = 0; x < kW; x += 8)
+    poly.emplace_back(x, int(170 + 25 * std::sin(x / 90.0) + 10 * std::sin(x / 23.0)));
+  poly.emplace_back(kW - 1, 240);
+  poly.emplace_back(0, 240);
+  cv::fillPoly(hill, std::vector<std::vector<cv::Point>>{poly}, cv::Scalar(1), cv::LINE_AA);
+  cv::GaussianBlur(hill, hill, cv::Size(0, 0), 5.0);
+  for (int y = 0; y < 240; ++y)
+    for (int x = 0; x < kW; ++x)
+      m.at<cv::Vec3f>(y, x) =
+          mix(m.at<cv::Vec3f>(y, x), cv::Vec3f(0.45f, 0.5f, 0.52f), hill.at<float>(y, x));
+  return m;
+}
+
+TEST(RealPhoto, SoftSkyMatteIsContinuous) {
+  const Image photo = to_photo(soft_hill_display());
+  dump("hill_photo", photo);
+  const std::array<PixelPoint, 2> horizon{PixelPoint{0, kHorizonRow},
+                                          PixelPoint{kW - 1, kHorizonRow}};
+  const photo::SkyMask mask = photo::estimate_sky_mask(photo.view(), horizon);
+  ASSERT_EQ(mask.alpha.size(), std::size_t(kW) * kH);
+  // The binary mask is the matte at 0.5; the matte is in [0, 1] and 0 below the horizon.
+  std::size_t fractional = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const std::size_t i = std::size_t(y) * kW + x;
+      const float a = mask.alpha[i];
+      ASSERT_TRUE(a >= 0 && a <= 1) << x << "," << y;
+      EXPECT_EQ(mask.sky[i] != 0, a >= 0.5f) << x << "," << y;
+      if (y > kHorizonRow) {
+        EXPECT_EQ(a, 0.0f);
+      }
+      fractional += a > 0.02f && a < 0.98f;
+    }
+  // Continuity: across the soft silhouette the matte steps by at most 0.35 between neighbours
+  // (it follows the photo's 5 px blur; a binary mask steps by 1).
+  float worst = 0;
+  for (int y = 0; y + 1 < 230; ++y)
+    for (int x = 0; x < kW; ++x)
+      worst = std::max(worst, std::abs(mask.alpha[std::size_t(y + 1) * kW + x] -
+                                       mask.alpha[std::size_t(y) * kW + x]));
+  std::printf("soft hill: %zu fractional matte pixels, largest vertical step %.3f\n", fractional,
+              worst);
+  EXPECT_GT(fractional, std::size_t(kW));  // a band along the whole silhouette
+  EXPECT_LE(worst, 0.35f);
+  // Through the estimate and the fog: no hard transition at the matte's edge.
+  const SceneEstimate before = estimate_scene(photo, kCamera, level_horizon(), before_options());
+  const SceneEstimate after = estimate_scene(photo, kCamera, level_horizon());
+  for (const double visibility : {150.0, 3000.0}) {
+    const Image b = fog_look(photo, before, visibility, false).composite;
+    const Image a = fog_look(photo, after, visibility, true).composite;
+    dump("hill_fog" + std::to_string(int(visibility)) + "_before", b);
+    dump("hill_fog" + std::to_string(int(visibility)) + "_after", a);
+    const double fb = created_edge_fraction(photo, b),
+                 fa = created_edge_fraction(photo, a,
+                                            "hill_edges" + std::to_string(int(visibility)));
+    std::printf("soft hill, visibility %g m: created-edge pixels before %.4f %%, after %.4f %%\n",
+                visibility, 100 * fb, 100 * fa);
+    EXPECT_LE(fa, 2e-4);
+  }
+}
+
+TEST(RealPhoto, DefaultLayerTopFromTheVisibility) {
+  Medium m;
+  auto top = [&](double visibility_m) {
+    const float s = float(extinction_from_visibility(visibility_m));
+    m.sigma_t_per_m = {s, s, s};
+    return default_layer_top_m(m);
+  };
+  EXPECT_NEAR(top(40), 30, 1e-9);      // dense ground fog: the floor
+  EXPECT_NEAR(top(150), 75, 1e-3);     // half the visibility
+  EXPECT_NEAR(top(3000), 1500, 0.05);  // haze: the boundary layer
+  EXPECT_NEAR(top(20000), 2000, 1e-9);
+  m.sigma_t_per_m = {0, 0, 0};
+  EXPECT_THROW(default_layer_top_m(m), Error);
+}
+
+}  // namespace
+}  // namespace mr
