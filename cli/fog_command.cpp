@@ -32,6 +32,8 @@ struct FogPlan {
   FogScene scene;
   DepthOptions depth;
   PixelType pixel_type = PixelType::automatic;
+  // The sun's irradiance follows each photo's exposure (no --sun-irradiance, no sun in --scene).
+  bool auto_sun_irradiance = false;
 };
 
 enum class Outcome { done, skipped, failed };
@@ -127,7 +129,10 @@ FogPlan make_plan(const FogCommandOptions& o) {
         sun.direction_to_sun =
             direction_from_azimuth_elevation(*o.sun_azimuth_deg, *o.sun_elevation_deg);
       }
-      if (!o.sun_irradiance.empty()) sun.irradiance = parse_rgb(o.sun_irradiance);
+      const bool auto_irradiance = o.sun_irradiance == "auto";
+      if (!o.sun_irradiance.empty() && !auto_irradiance) sun.irradiance = parse_rgb(o.sun_irradiance);
+      plan.auto_sun_irradiance =
+          auto_irradiance || (o.sun_irradiance.empty() && !scene.lighting.sun);
       if (o.sun_radius_deg) sun.angular_radius_deg = *o.sun_radius_deg;
       scene.lighting.sun = sun;
     }
@@ -336,6 +341,13 @@ WriteOptions output_write_options(const FogCommandOptions& o, const FogPlan& pla
              (out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff"))
       write.pixel_type = PixelType::uint16;
   }
+  // Display-referred (integer) outputs get the highlight roll-off by default (mr/color.h):
+  // bright fog fades to white instead of clipping; float outputs stay linear and unclipped.
+  const bool float_out = write.pixel_type == PixelType::half ||
+                         write.pixel_type == PixelType::float32 ||
+                         (write.pixel_type == PixelType::automatic &&
+                          (exr_out || out_ext == ".hdr" || out_ext == ".HDR"));
+  if (write.colorspace.empty() && !float_out) write.colorspace = plan.color.display_colorspace();
   return write;
 }
 
@@ -497,6 +509,12 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
                    depth.invalid_pixels, depth.sky_threshold_pixels, depth.clamped_pixels);
+  if (plan.auto_sun_irradiance && scene.lighting.sun) {
+    const Image rgb = photo.channels() >= 3 ? Image() : photo.select_channels(std::array{0, 0, 0});
+    const Image& p3 = photo.channels() >= 3 ? photo : rgb;
+    const Rgb sky = scene.lighting.sky_radiance ? *scene.lighting.sky_radiance : estimate_airlight(p3);
+    scene.lighting.sun->irradiance = exposure_relative_sun_irradiance(p3, depth.distance_m, sky);
+  }
   ScatteringLayers aovs;
   if (o.verbose) report.info("note: " + job.photo.string() + ": rendering");
   const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs);
@@ -629,7 +647,8 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
                   "Sun elevation above the horizon, degrees");
   cmd->add_option("--sun-dir", o.sun_direction, "Direction to the sun x,y,z (world: +Y up)");
   cmd->add_option("--sun-irradiance", o.sun_irradiance,
-                  "Sun irradiance above the fog: v or R,G,B [default: 3]");
+                  "Sun irradiance above the fog: v, R,G,B or 'auto' [default: auto: pi x the "
+                  "photo's bright-surface luminance, so the sun matches the exposure]");
   cmd->add_option("--sun-radius", o.sun_radius_deg,
                   "Sun's angular radius, degrees (soft shafts) [default: 0.27]");
   cmd->add_option("--lamp", o.lamps,
@@ -661,7 +680,8 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
       "Colour space of the photos [default: sRGB for 8/16-bit, scene-linear for float]");
   cmd->add_option(
       "--output-colorspace", o.output_colorspace,
-      "Colour space of the outputs [default: sRGB for 8/16-bit, scene-linear for float]");
+      "Colour space of the outputs [default: 8/16-bit: srgb_rolloff (sRGB with a highlight "
+      "roll-off above 0.8 linear) where the config has it, else sRGB; float: scene-linear]");
   return cmd;
 }
 

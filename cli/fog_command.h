@@ -44,7 +44,7 @@ struct FogCommandOptions {
   std::string backend;  ///< --backend auto|cpu|vulkan
   std::optional<double> sun_azimuth_deg, sun_elevation_deg;
   std::string sun_direction;    ///< "x,y,z"
-  std::string sun_irradiance;   ///< "v" or "R,G,B"
+  std::string sun_irradiance;   ///< "v", "R,G,B" or "auto" (empty: auto unless --scene has a sun)
   std::optional<double> sun_radius_deg;
   std::vector<std::string> lamps;  ///< "x,y,z;R,G,B[;dx,dy,dz;inner,outer]"
   std::string height_fog;       ///< "base,scale"

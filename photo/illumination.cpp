@@ -366,4 +366,54 @@ SunSkyRatio fit_sun_sky_ratio(const SunSkyPatches& in) {
   return out;
 }
 
+ExposureRelativeSun exposure_relative_sun(ConstImageView photo, ConstImageView distance_m,
+                                          const std::array<float, 3>& sky_radiance) {
+  if (photo.channels < 3 || photo.width <= 0 || photo.height <= 0)
+    fail("exposure_relative_sun: the photo must be RGB, has " + std::to_string(photo.channels) +
+         " channels");
+  const bool have_depth = distance_m.data != nullptr;
+  if (have_depth && (distance_m.width != photo.width || distance_m.height != photo.height ||
+                     distance_m.channels < 1))
+    fail("exposure_relative_sun: the distance map is " + std::to_string(distance_m.width) + "x" +
+         std::to_string(distance_m.height) + ", the photo " + std::to_string(photo.width) + "x" +
+         std::to_string(photo.height));
+  // An even stride keeps at most about a million pixels: a percentile needs no more.
+  const std::size_t n = std::size_t(photo.width) * std::size_t(photo.height);
+  const std::size_t stride = std::max<std::size_t>(1, (n + 999'999) / 1'000'000);
+  std::vector<float> surface, all;
+  surface.reserve(n / stride + 1);
+  all.reserve(n / stride + 1);
+  std::size_t k = 0;
+  for (int y = 0; y < photo.height; ++y) {
+    const float* row = photo.row(y);
+    for (int x = 0; x < photo.width; ++x, ++k) {
+      if (k % stride != 0) continue;
+      const float* p = row + std::ptrdiff_t(x) * photo.channels;
+      const float lum = 0.2126f * p[0] + 0.7152f * p[1] + 0.0722f * p[2];
+      if (!std::isfinite(lum)) continue;
+      all.push_back(lum);
+      if (have_depth && std::isfinite(distance_m.row(y)[std::ptrdiff_t(x) * distance_m.channels]))
+        surface.push_back(lum);
+    }
+  }
+  std::vector<float>& pool = surface.size() >= std::max<std::size_t>(1, all.size() / 100) ? surface : all;
+  ExposureRelativeSun out;
+  out.surface_pixels = pool.size();
+  if (!pool.empty()) {
+    auto at = pool.begin() + std::ptrdiff_t(0.99 * double(pool.size() - 1));
+    std::nth_element(pool.begin(), at, pool.end());
+    out.bright_surface_luminance = std::max(0.0f, *at);
+  }
+  out.sky_luminance = std::max(
+      0.0, 0.2126 * sky_radiance[0] + 0.7152 * sky_radiance[1] + 0.0722 * sky_radiance[2]);
+  double e = std::numbers::pi * out.bright_surface_luminance;
+  if (out.sky_luminance > 0 && std::isfinite(out.sky_luminance)) {
+    const double pi_sky = std::numbers::pi * out.sky_luminance;
+    e = std::clamp(e, 1.0 * pi_sky, 10.0 * pi_sky);
+    out.sun_sky_ratio = e / pi_sky;
+  }
+  out.irradiance = {float(e), float(e), float(e)};
+  return out;
+}
+
 }  // namespace mr::photo

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "mr/camera.h"
+#include "mr/image.h"
 #include "mr/scene.h"
 
 namespace mr::photo {
@@ -136,5 +137,37 @@ struct SunSkyRatio {
 /// not brighter than the shadowed one in some channel (the marks are swapped or not one
 /// material; the message names the channel).
 SunSkyRatio fit_sun_sky_ratio(const SunSkyPatches& patches);
+
+/// The sun's strength relative to the photo's exposure (issue 11 item 5), for a sun the user
+/// placed without saying how bright it is.
+///
+/// A photo's exposure puts its brightest diffuse surfaces, in a sunny scene the sunlit ones,
+/// near the top of its range. Rule: the sun is as strong as would make a white (albedo 1)
+/// Lambertian surface facing it exactly as bright as the photo's bright surfaces,
+///   E_sun = pi L_bright,  L_bright = the 99th percentile of the Rec. 709 luminance of the
+///   surface pixels (distance finite; all pixels when there is no distance map or fewer than
+///   1 % surface),
+/// then kept within the sun/sky ratios of real daylight, 1 <= E_sun / (pi L_sky) <= 10 (L_sky
+/// the luminance of the sky radiance; clear skies give 3-10, hazy ones less), when L_sky > 0.
+/// Neutral in colour: a photo white-balanced for daylight shows sunlit white as white.
+/// What this bounds: sunlit fog of albedo a seen at scattering angle theta has at most the
+/// single-scattered radiance a p(theta) E_sun = a pi p(theta) L_bright (the optically thick,
+/// unshadowed limit), i.e. a quarter of L_bright for isotropic scattering and pi p_HG(theta)
+/// times it in general, so the in-scatter of a sunlit look is a bounded multiple of the photo's
+/// own bright-surface radiance, whatever its exposure.
+struct ExposureRelativeSun {
+  std::array<float, 3> irradiance{};  ///< E_sun, grey
+  double bright_surface_luminance = 0;  ///< L_bright
+  double sky_luminance = 0;             ///< luminance of the sky radiance given
+  double sun_sky_ratio = 0;             ///< E_sun / (pi L_sky); 0 without sky light
+  std::size_t surface_pixels = 0;       ///< pixels L_bright was taken from (sampled)
+};
+
+/// `photo`: scene-linear RGB (>= 3 channels); `distance_m`: its distance map (1 channel, +inf
+/// or non-finite = sky) or an empty view; `sky_radiance`: the scene's L_sky (e.g. the airlight).
+/// Non-finite photo values are skipped. Throws mr::Error(invalid_argument) for a photo with
+/// fewer than 3 channels or a distance map of another size.
+ExposureRelativeSun exposure_relative_sun(ConstImageView photo, ConstImageView distance_m,
+                                          const std::array<float, 3>& sky_radiance);
 
 }  // namespace mr::photo

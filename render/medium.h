@@ -49,6 +49,12 @@ double noise_modulation(const Medium::Noise& noise, const Vec3d& x);
 /// precise, and grey fog needs it once. T is exp(-optical_depth) (S = 1: ambient light only).
 /// The scattering core's sky-only path and the streaming pipeline (libmr/src/fog_stream.cpp)
 /// both call this, so they give the same bits.
+/// sigma_t (1/m) times a unit-density optical depth (m): 0 where there is no medium, also along
+/// an infinite ray (0 * inf would be NaN: clear air transmits everything).
+inline double scaled_optical_depth(double sigma_t_per_m, double unit_optical_depth_m) {
+  return sigma_t_per_m > 0 ? sigma_t_per_m * unit_optical_depth_m : 0.0;
+}
+
 inline void sky_only_inscatter(const double optical_depth[3], const std::array<float, 3>& albedo,
                                const std::array<float, 3>& sky_radiance, double inscatter[3]) {
   double scattered = 0;  // 1 - tau

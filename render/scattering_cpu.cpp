@@ -123,6 +123,12 @@ class Core {
 
   std::size_t shadow_rays() const { return rays_.combine(std::plus<>()); }
 
+  // exp(-sigma od) where the sun's path through an unbounded medium has od = inf: a channel
+  // without extinction (sigma 0, clear air) transmits everything, not exp(-0 inf) = NaN.
+  static double clear_air_exp(double sigma, double od) {
+    return sigma > 0 ? std::exp(-sigma * od) : 1.0;
+  }
+
   // CameraPose::ray_direction, with the pose's axes computed once (not 6 trig calls a ray).
   Vec3d ray(int x, int y) const {
     const Camera& cam = *in_.camera;
@@ -170,7 +176,7 @@ class Core {
       // Sky light only: sum over segments telescopes to albedo L (1 - tau(D)) exactly (to the
       // very end of the fog for the sky).
       const double od_exact = rd.optical_depth(0, distance);
-      for (int c = 0; c < 3; ++c) s.camera_od[c] = sigma_[c] * od_exact;
+      for (int c = 0; c < 3; ++c) s.camera_od[c] = scaled_optical_depth(sigma_[c], od_exact);
       sky_only_inscatter(s.camera_od, m.albedo, in_.sky_radiance, s.inscatter);
       return s;
     }
@@ -334,10 +340,10 @@ class Core {
           const double od_sun = scene_.render.light_path_attenuation
                                     ? RayDensity(m, xs, sun_dir_).optical_depth(0, kInf)
                                     : 0.0;
-          const double tau_sun_grey = grey_ ? std::exp(-sigma_[0] * od_sun) : 0.0;
+          const double tau_sun_grey = grey_ ? clear_air_exp(sigma_[0], od_sun) : 0.0;
           for (int c = 0; c < 3; ++c)
             s.inscatter[c] += lit_weight[c] * phase * sun.irradiance[c] *
-                              (grey_ ? tau_sun_grey : std::exp(-sigma_[c] * od_sun));
+                              (grey_ ? tau_sun_grey : clear_air_exp(sigma_[c], od_sun));
         }
       }
       // Lamps: the 1/r^2 falloff is integrated exactly over the segment (with t = tc + h tan(th),
@@ -467,7 +473,7 @@ class Core {
       for (int c = 0; c < 3; ++c) {
         const double e = sun.irradiance[c] * std::max(0.0, cos_i) * visible;
         direct[c] += e;
-        direct_fogged[c] += e * std::exp(-sigma_[c] * od_sun);
+        direct_fogged[c] += e * clear_air_exp(sigma_[c], od_sun);
       }
     }
     for (const Lamp& lamp : scene_.lighting.lamps) {
@@ -506,7 +512,7 @@ class Core {
     const double length = march_length(rd, in_.distance_m.at(x, y, 0));
     const double unit =
         rd.optical_depth(0, std::isfinite(in_.distance_m.at(x, y, 0)) ? length : kInf);
-    for (int c = 0; c < 3; ++c) od[c] = sigma_[c] * unit;
+    for (int c = 0; c < 3; ++c) od[c] = scaled_optical_depth(sigma_[c], unit);
   }
 
   bool has_noise() const { return scene_.medium.noise.amplitude > 0; }

@@ -4,7 +4,11 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <cmath>
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
+#include <limits>
 #include <sstream>
 
 #include "mr/error.h"
@@ -24,12 +28,91 @@ struct ColorConfig::Impl {
 
 ColorConfig::ColorConfig(std::shared_ptr<const Impl> impl) : impl_(std::move(impl)) {}
 
+double highlight_rolloff(double x, double knee) {
+  if (!(x > knee)) return x;  // NaN passes through
+  if (std::isinf(x)) return 1.0;
+  const double u = (x - knee) / (1 - knee);
+  return knee + (1 - knee) * u / (1 + u);
+}
+
+double highlight_rolloff_inverse(double y, double knee) {
+  if (!(y > knee)) return y;
+  if (y >= 1) return std::numeric_limits<double>::infinity();
+  const double t = (y - knee) / (1 - knee);  // = u / (1 + u)
+  return knee + (1 - knee) * t / (1 - t);
+}
+
+namespace {
+
+float half_bits_to_float(std::uint16_t h) {
+  const std::uint32_t sign = std::uint32_t(h & 0x8000u) << 16;
+  const int exponent = (h >> 10) & 0x1f;
+  std::uint32_t mantissa = h & 0x3ffu;
+  std::uint32_t bits;
+  if (exponent == 0) {
+    if (mantissa == 0) {
+      bits = sign;
+    } else {  // subnormal: renormalise
+      int e = -1;
+      do {
+        ++e;
+        mantissa <<= 1;
+      } while ((mantissa & 0x400u) == 0);
+      bits = sign | std::uint32_t(127 - 15 - e) << 23 | (mantissa & 0x3ffu) << 13;
+    }
+  } else if (exponent == 31) {
+    bits = sign | 0x7f800000u | mantissa << 13;
+  } else {
+    bits = sign | std::uint32_t(exponent - 15 + 127) << 23 | mantissa << 13;
+  }
+  float f;
+  std::memcpy(&f, &bits, sizeof f);
+  return f;
+}
+
+// The srgb_rolloff colour space: a half-domain 1D LUT (65536 entries, one per half-float code,
+// so it covers every value without a shaper; OCIO interpolates between neighbouring codes, which
+// is exact on the identity part) with highlight_rolloff, then the sRGB encoding. A LUT cannot be
+// written in an OCIO 2.1 config file without a LUT file beside it, so it is built here.
+OCIO::ColorSpaceRcPtr make_rolloff_colorspace() {
+  auto lut = OCIO::Lut1DTransform::Create(65536, true);
+  for (std::uint32_t i = 0; i < 65536; ++i) {
+    const float x = half_bits_to_float(std::uint16_t(i));
+    const float y = std::isnan(x) ? 0.0f : float(highlight_rolloff(x));
+    lut->setValue(i, y, y, y);
+  }
+  auto encode = OCIO::ExponentWithLinearTransform::Create();
+  encode->setGamma({2.4, 2.4, 2.4, 1.0});
+  encode->setOffset({0.055, 0.055, 0.055, 0.0});
+  encode->setDirection(OCIO::TRANSFORM_DIR_INVERSE);
+  auto group = OCIO::GroupTransform::Create();
+  group->appendTransform(lut);
+  group->appendTransform(encode);
+  auto cs = OCIO::ColorSpace::Create(OCIO::REFERENCE_SPACE_SCENE);
+  cs->setName("sRGB - Roll-off");
+  cs->addAlias(colorspace::srgb_rolloff);
+  cs->setFamily("Display-encoded");
+  cs->setBitDepth(OCIO::BIT_DEPTH_UINT8);
+  cs->setDescription(
+      "sRGB encoding after a highlight roll-off: identity up to 0.8 scene-linear, then "
+      "0.8 + 0.2 u / (1 + u), u = (x - 0.8) / 0.2 (libmr, mr/color.h highlight_rolloff)");
+  cs->setTransform(group, OCIO::COLORSPACE_DIR_FROM_REFERENCE);
+  return cs;
+}
+
+}  // namespace
+
 ColorConfig ColorConfig::builtin() {
   // Parsed once; OCIO configs are immutable and thread-safe once loaded.
   static const std::shared_ptr<const Impl> impl = [] {
     std::istringstream text(detail::kBuiltinOcioConfig);
     try {
-      return std::make_shared<const Impl>(Impl{OCIO::Config::CreateFromStream(text), "<builtin>"});
+      OCIO::ConfigRcPtr config = OCIO::Config::CreateFromStream(text)->createEditableCopy();
+      config->addColorSpace(make_rolloff_colorspace());
+      config->addDisplayView("sRGB", "Roll-off", "sRGB - Roll-off", "");
+      config->setActiveViews("sRGB, Roll-off, Raw");
+      config->validate();
+      return std::make_shared<const Impl>(Impl{config, "<builtin>"});
     } catch (const OCIO::Exception& e) {
       throw Error(ErrorCode::internal, std::string("builtin OCIO config: ") + e.what());
     }
@@ -69,6 +152,10 @@ bool ColorConfig::has_colorspace(const std::string& name) const {
 bool ColorConfig::is_data(const std::string& name) const {
   auto cs = impl_->config->getColorSpace(name.c_str());
   return cs && cs->isData();
+}
+
+const char* ColorConfig::display_colorspace() const {
+  return has_colorspace(colorspace::srgb_rolloff) ? colorspace::srgb_rolloff : colorspace::srgb;
 }
 
 namespace {

@@ -97,7 +97,12 @@ Rgb median_sky_radiance(const Image& photo, const Image& distance_m) {
     if (v.size() % 2 == 0) m = 0.5f * (m + *std::max_element(v.begin(), mid));
     out[c] = std::max(0.0f, m);
   }
-  return out;
+  // Overcast, the sky pixels are the light itself (no object colour mixed in, so no pull toward
+  // grey), but a mask that takes in a clear blue sky or a sunset band would give the fog their
+  // Rayleigh blue or orange: the chroma bound of every automatic fog colour still applies.
+  photo::NeutralPrior bound_only;
+  bound_only.knee_fraction = 1;
+  return photo::neutral_fog_colour(out, bound_only);
 }
 
 }  // namespace
@@ -614,6 +619,17 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
       est.notes.push_back("sun/sky: E_sun / (pi L_sky) = " + fmt("%.2f", ratio.ratio) + " +- " +
                           fmt("%.2f", ratio.ratio_sigma) +
                           "; sky radiance from the photo (dark channel prior)");
+    } else {
+      // No patches: the sun's strength from the photo's exposure (issue 11 item 5) rather
+      // than a fixed default that ignores it.
+      const std::array<float, 3> sky = photo::estimate_airlight_dark_channel(photo.view());
+      const photo::ExposureRelativeSun e =
+          photo::exposure_relative_sun(photo.view(), g.distance_m.view(), sky);
+      s.irradiance = Rgb{e.irradiance[0], e.irradiance[1], e.irradiance[2]};
+      est.notes.push_back("sun: irradiance " + fmt("%.3g", e.irradiance[0]) +
+                          " from the exposure (pi x the bright-surface luminance " +
+                          fmt("%.3g", e.bright_surface_luminance) + ", sun/sky ratio " +
+                          fmt("%.2g", e.sun_sky_ratio) + ")");
     }
     est.scene.lighting.sun = s;
   } else {

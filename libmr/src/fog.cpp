@@ -6,6 +6,7 @@
 #include "mr/error.h"
 #include "photo/airlight.h"
 #include "photo/composite.h"
+#include "photo/illumination.h"
 #include "render/homogeneous_fog.h"
 
 namespace mr {
@@ -33,6 +34,15 @@ Rgb estimate_airlight(const Image& photo) {
   if (photo.empty() || photo.channels() < 3)
     throw Error(ErrorCode::invalid_argument, "estimate_airlight needs an RGB image");
   return photo::estimate_airlight_dark_channel(photo.view());
+}
+
+Rgb exposure_relative_sun_irradiance(const Image& photo, const Image& distance_m,
+                                     const Rgb& sky_radiance) {
+  if (photo.empty() || photo.channels() < 3)
+    throw Error(ErrorCode::invalid_argument, "exposure_relative_sun_irradiance needs an RGB photo");
+  return photo::exposure_relative_sun(
+             photo.view(), distance_m.empty() ? ConstImageView{} : distance_m.view(), sky_radiance)
+      .irradiance;
 }
 
 FogLayers fog(const Image& photo, const Image& distance_m, const FogParams& params) {

@@ -403,7 +403,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                             ? d
                             : render::RayDensity(medium, origin, ray(x, y)).optical_depth(0, d);
                     double od[3], inscatter[3];
-                    for (int c = 0; c < 3; ++c) od[c] = sigma[c] * unit;
+                    for (int c = 0; c < 3; ++c) od[c] = render::scaled_optical_depth(sigma[c], unit);
                     render::sky_only_inscatter(od, medium.albedo, sky, inscatter);
                     double tau = 0;
                     for (int c = 0; c < 3; ++c) {

@@ -17,7 +17,26 @@ inline constexpr const char* scene_linear = "scene_linear";  ///< role: working 
 inline constexpr const char* srgb = "srgb_texture";          ///< sRGB-encoded (8/16-bit files)
 inline constexpr const char* acescg = "ACEScg";
 inline constexpr const char* raw = "raw";  ///< data: never converted
+/// sRGB-encoded after a highlight roll-off (highlight_rolloff below): the default for
+/// display-referred (8/16-bit) outputs of `mr fog`. Built into libmr's config (a user config
+/// may define it too; where it does not, display outputs fall back to srgb).
+inline constexpr const char* srgb_rolloff = "srgb_rolloff";
 }  // namespace colorspace
+
+/// The highlight roll-off of the srgb_rolloff colour space, applied per channel to scene-linear
+/// values before the sRGB encoding (issue 11 item 5): the identity up to the knee, then a
+/// shoulder that approaches 1 without reaching it,
+///   f(x) = x                                   for x <= knee,
+///   f(x) = knee + (1 - knee) u / (1 + u),  u = (x - knee) / (1 - knee)   above,
+/// continuous with a continuous slope (1 at the knee), strictly increasing, below 1 for every
+/// finite x, so fog brighter than the photo's white keeps its gradations instead of clipping: an
+/// 8-bit code reaches 255 only above x = 9.7 (knee 0.8). The knee keeps the photo's mid-tones
+/// exactly as they were: every value <= 0.8 (sRGB code 231 of 255) passes unchanged; the
+/// photo's own highlights above it are compressed, white (1.0) to 0.9 (code 243).
+inline constexpr double kHighlightRolloffKnee = 0.8;
+double highlight_rolloff(double x, double knee = kHighlightRolloffKnee);
+/// Its inverse (for x < 1): x above the knee from f = knee + (1 - knee) u / (1 + u).
+double highlight_rolloff_inverse(double y, double knee = kHighlightRolloffKnee);
 
 /// An OpenColorIO config. Cheap to copy (shared, immutable). Thread-safe.
 class ColorConfig {
@@ -37,6 +56,9 @@ class ColorConfig {
   bool has_colorspace(const std::string& name) const;
   /// True if `name` is a data (never converted) space.
   bool is_data(const std::string& name) const;
+  /// The colour space for display-referred (integer) outputs: colorspace::srgb_rolloff when
+  /// this config has it, else colorspace::srgb.
+  const char* display_colorspace() const;
 
   /// Converts the first three channels of every pixel in place, from `from` to `to`
   /// (names, aliases or roles). Extra channels (alpha, ...) are left alone. Runs in parallel.

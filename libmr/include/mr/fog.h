@@ -41,7 +41,19 @@ FogLayers fog(const Image& photo, const Image& distance_m, const FogParams& para
 /// Airlight estimated from a scene-linear photo with the dark channel prior (He et al. 2009,
 /// as used for Foggy Cityscapes): the dark channel is the per-pixel minimum of R,G,B, min-filtered
 /// over a 15x15 window (scaled with the image size); the airlight is the mean colour of the
-/// brightest 0.1 % of dark-channel pixels. Throws mr::Error(invalid_argument) on an empty image.
+/// brightest 0.1 % of dark-channel pixels, then bounded: real fog takes the colour of the
+/// daylight that lights it, so the colour's CIE u'v' offset from D65 is kept within the daylight
+/// locus from 4000 K (0.043) to 10000 K (0.029) and 0.01 across it, compressed smoothly above half
+/// those limits (a neutral prior), its luminance unchanged (photo/airlight.h gives the sources). Throws mr::Error(invalid_argument) on an empty image.
 Rgb estimate_airlight(const Image& photo);
+
+/// A sun irradiance that matches the photo's exposure, for a sun placed without a given
+/// strength: E_sun = pi x the 99th percentile luminance of the surface pixels (a white surface
+/// facing the sun would be as bright as the photo's bright surfaces), kept within
+/// 1 <= E_sun / (pi L_sky) <= 10 of the sky's luminance when `sky_radiance` is positive; grey.
+/// `distance_m`: the photo's distance map (+inf = sky) or an empty image (all pixels count).
+/// Throws mr::Error(invalid_argument) for a non-RGB photo or a distance map of another size.
+Rgb exposure_relative_sun_irradiance(const Image& photo, const Image& distance_m,
+                                     const Rgb& sky_radiance);
 
 }  // namespace mr
