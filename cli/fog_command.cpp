@@ -32,8 +32,6 @@ struct FogPlan {
   FogScene scene;
   DepthOptions depth;
   PixelType pixel_type = PixelType::automatic;
-  // The sun's irradiance follows each photo's exposure (no --sun-irradiance, no sun in --scene).
-  bool auto_sun_irradiance = false;
 };
 
 enum class Outcome { done, skipped, failed };
@@ -129,10 +127,13 @@ FogPlan make_plan(const FogCommandOptions& o) {
         sun.direction_to_sun =
             direction_from_azimuth_elevation(*o.sun_azimuth_deg, *o.sun_elevation_deg);
       }
-      const bool auto_irradiance = o.sun_irradiance == "auto";
-      if (!o.sun_irradiance.empty() && !auto_irradiance) sun.irradiance = parse_rgb(o.sun_irradiance);
-      plan.auto_sun_irradiance =
-          auto_irradiance || (o.sun_irradiance.empty() && !scene.lighting.sun);
+      // No --sun-irradiance for a new sun, or 'auto': relative to each photo's exposure.
+      if (o.sun_irradiance == "auto" || (o.sun_irradiance.empty() && !scene.lighting.sun)) {
+        sun.irradiance_auto = true;
+      } else if (!o.sun_irradiance.empty()) {
+        sun.irradiance = parse_rgb(o.sun_irradiance);
+        sun.irradiance_auto = false;
+      }
       if (o.sun_radius_deg) sun.angular_radius_deg = *o.sun_radius_deg;
       scene.lighting.sun = sun;
     }
@@ -509,12 +510,6 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
                    depth.invalid_pixels, depth.sky_threshold_pixels, depth.clamped_pixels);
-  if (plan.auto_sun_irradiance && scene.lighting.sun) {
-    const Image rgb = photo.channels() >= 3 ? Image() : photo.select_channels(std::array{0, 0, 0});
-    const Image& p3 = photo.channels() >= 3 ? photo : rgb;
-    const Rgb sky = scene.lighting.sky_radiance ? *scene.lighting.sky_radiance : estimate_airlight(p3);
-    scene.lighting.sun->irradiance = exposure_relative_sun_irradiance(p3, depth.distance_m, sky);
-  }
   ScatteringLayers aovs;
   if (o.verbose) report.info("note: " + job.photo.string() + ": rendering");
   const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs);

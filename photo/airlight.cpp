@@ -39,7 +39,26 @@ Luv to_luv(const std::array<float, 3>& rgb) {
   return {xyz[1], 4 * xyz[0] / d, 9 * xyz[1] / d};
 }
 
+// CIELAB C*ab of the chromaticity (u', v') at Y = 1, D65 white.
+double chroma_ab_of_uv(double u, double v) {
+  const double xyz[3] = {9 * u / (4 * v), 1.0, (12 - 3 * u - 20 * v) / (4 * v)};
+  double white[3];
+  for (int i = 0; i < 3; ++i) white[i] = kRgbToXyz[i][0] + kRgbToXyz[i][1] + kRgbToXyz[i][2];
+  auto f = [](double t) {
+    constexpr double d = 6.0 / 29.0;
+    return t > d * d * d ? std::cbrt(t) : t / (3 * d * d) + 4.0 / 29.0;
+  };
+  const double fx = f(xyz[0] / white[0]), fy = f(xyz[1] / white[1]), fz = f(xyz[2] / white[2]);
+  return std::hypot(500 * (fx - fy), 200 * (fy - fz));
+}
+
 }  // namespace
+
+double chroma_ab(const std::array<float, 3>& rgb) {
+  const Luv c = to_luv(rgb);
+  if (!(c.Y > 0) || !std::isfinite(c.Y)) return 0;
+  return chroma_ab_of_uv(c.u, c.v);
+}
 
 double delta_uv_from_d65(const std::array<float, 3>& rgb) {
   const Luv c = to_luv(rgb);
@@ -78,9 +97,22 @@ std::array<float, 3> neutral_fog_colour(const std::array<float, 3>& rgb, const N
     return knee + (limit - knee) * std::tanh((x - knee) / (limit - knee));
   };
   const double along2 = soft_limit(along, along_limit), across2 = soft_limit(across, prior.off_locus_limit);
-  if (along2 == along && across2 == across) return rgb;  // a plausible light: as it is
   const double s = across > 0 ? across2 / across : 0.0;
-  const double u = kD65u + along2 * dir[0] + s * pu, v = kD65v + along2 * dir[1] + s * pv;
+  double du2 = along2 * dir[0] + s * pu, dv2 = along2 * dir[1] + s * pv;
+  // The chroma cap: scale the offset toward D65 until C*ab is within prior.max_chroma_ab.
+  bool capped = false;
+  if (chroma_ab_of_uv(kD65u + du2, kD65v + dv2) > prior.max_chroma_ab) {
+    double lo = 0, hi = 1;
+    for (int i = 0; i < 40; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (chroma_ab_of_uv(kD65u + mid * du2, kD65v + mid * dv2) > prior.max_chroma_ab ? hi : lo) = mid;
+    }
+    du2 *= lo;
+    dv2 *= lo;
+    capped = true;
+  }
+  if (along2 == along && across2 == across && !capped) return rgb;  // a plausible light: as it is
+  const double u = kD65u + du2, v = kD65v + dv2;
   // u'v' + Y back to XYZ: X = Y 9u / 4v, Z = Y (12 - 3u - 20v) / 4v.
   const double X = c.Y * 9 * u / (4 * v), Z = c.Y * (12 - 3 * u - 20 * v) / (4 * v);
   const double xyz[3] = {X, c.Y, Z};

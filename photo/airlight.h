@@ -33,6 +33,10 @@ struct NeutralPrior {
   /// k + (B - k) tanh((x - k) / (B - k)): continuous, monotonic, never beyond B. 1 gives a
   /// hard clamp at the limits (the bound alone).
   double knee_fraction = 0.5;
+  /// And at most this CIELAB chroma C*ab (at Y = 1, D65 white; scaled toward D65 when above):
+  /// that of the Planckian 4000 K, 33.6. CIE daylight D40 (which lies a little off the Planckian,
+  /// toward green-yellow) has 36.1, the bound the gallery's measure (gallery/measures.py) states.
+  double max_chroma_ab = 33.6;
 };
 
 /// The fog colour from an estimated light colour `rgb` (scene-linear Rec.709, D65 white), as
@@ -41,6 +45,9 @@ struct NeutralPrior {
 /// colour whose luminance is not positive and finite gives black.
 std::array<float, 3> neutral_fog_colour(const std::array<float, 3>& rgb,
                                         const NeutralPrior& prior = {});
+
+/// CIELAB C*ab of a scene-linear Rec.709 colour scaled to Y = 1 (D65 white; 0 for black).
+double chroma_ab(const std::array<float, 3>& rgb);
 
 /// CIE 1976 u'v' distance of a scene-linear Rec.709 colour from D65 (0 for black).
 double delta_uv_from_d65(const std::array<float, 3>& rgb);

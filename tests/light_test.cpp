@@ -81,13 +81,14 @@ TEST(FogColour, SaturatedEstimatesAreBoundedAndKeepTheirLuminanceAndLean) {
     const LocusOffset before = locus_offset(c);
     const auto out = photo::neutral_fog_colour(c);
     const LocusOffset after = locus_offset(out);
-    std::printf("  (%.2f %.2f %.2f) along %.4f across %.4f -> (%.3f %.3f %.3f) along %.4f "
-                "across %.4f\n",
-                c[0], c[1], c[2], before.along, before.across, out[0], out[1], out[2],
-                after.along, after.across);
+    std::printf("  (%.2f %.2f %.2f) along %.4f across %.4f C* %.1f -> (%.3f %.3f %.3f) along "
+                "%.4f across %.4f C* %.1f\n",
+                c[0], c[1], c[2], before.along, before.across, photo::chroma_ab(c), out[0],
+                out[1], out[2], after.along, after.across, photo::chroma_ab(out));
     // The independent u'v' matrices above are rounded to 4 digits: 2e-4 of slack.
     EXPECT_LE(after.along, (before.warm ? 0.043 : 0.029) + 2e-4);
     EXPECT_LE(after.across, 0.01 + 2e-4);
+    EXPECT_LE(photo::chroma_ab(out), 33.6 + 1e-3);  // C*ab of the Planckian 4000 K
     EXPECT_LE(after.along, before.along + 2e-4);  // only ever toward neutral
     if (before.along > 0.01) { EXPECT_EQ(after.warm, before.warm); }  // keeps its lean
     // Luminance kept: the test's coefficients are rounded to 4 digits (3e-4 relative for blue).
@@ -134,11 +135,13 @@ TEST(FogColour, AutomaticAirlightOfSaturatedSkiesIsBoundedAndNeutralFogStaysNeut
     const auto before = photo::estimate_airlight_dark_channel(photo.view(), raw);
     const Rgb after = estimate_airlight(photo);
     const LocusOffset b = locus_offset(before), a = locus_offset(after);
-    std::printf("  sky (%.2f %.2f %.2f): raw airlight du'v' %.4f -> %.4f\n", sky[0], sky[1],
-                sky[2], photo::delta_uv_from_d65(before), photo::delta_uv_from_d65(after));
+    std::printf("  sky (%.2f %.2f %.2f): raw airlight du'v' %.4f C* %.1f -> du'v' %.4f C* %.1f\n",
+                sky[0], sky[1], sky[2], photo::delta_uv_from_d65(before), photo::chroma_ab(before),
+                photo::delta_uv_from_d65(after), photo::chroma_ab(after));
     EXPECT_TRUE(b.along > (b.warm ? 0.043 : 0.029) || b.across > 0.01);  // raw: out of bounds
     EXPECT_LE(a.along, (a.warm ? 0.043 : 0.029) + 2e-4);
     EXPECT_LE(a.across, 0.01 + 2e-4);
+    EXPECT_LE(photo::chroma_ab(after), 33.6 + 1e-3);
     EXPECT_NEAR(luminance(after), luminance(before), 3e-4 * luminance(before));
   }
   // Neutral fog: a grey haze sky gives a grey airlight (the prior adds no colour).

@@ -59,6 +59,7 @@ void expect_scene_eq(const FogScene& a, const FogScene& b) {
   if (a.lighting.sun) {
     expect_eq(a.lighting.sun->direction_to_sun, b.lighting.sun->direction_to_sun, "sun.direction");
     expect_eq(a.lighting.sun->irradiance, b.lighting.sun->irradiance, "sun.irradiance");
+    EXPECT_EQ(a.lighting.sun->irradiance_auto, b.lighting.sun->irradiance_auto);
     EXPECT_EQ(a.lighting.sun->angular_radius_deg, b.lighting.sun->angular_radius_deg);
   }
   ASSERT_EQ(a.lighting.sky_radiance.has_value(), b.lighting.sky_radiance.has_value());
@@ -363,6 +364,14 @@ TEST(SceneJson, Version1DefaultsArePinned) {
   EXPECT_EQ(t.medium.height_fog->scale_height_m, 20);
   expect_eq(t.lighting.sun->direction_to_sun, {0, 1, 0}, "direction_to_sun");
   expect_eq(t.lighting.sun->irradiance, {3, 3, 3}, "irradiance");
+  // No irradiance: relative to the photo's exposure (issue 11 item 5); "auto" says the same and
+  // is what a scene with an automatic sun is written with.
+  EXPECT_TRUE(t.lighting.sun->irradiance_auto);
+  const FogScene u = scene_from_json(doc("\"lighting\": {\"sun\": {\"irradiance\": \"auto\"}}"), "u");
+  EXPECT_TRUE(u.lighting.sun->irradiance_auto);
+  EXPECT_TRUE(scene_from_json(scene_to_json(u), "u2").lighting.sun->irradiance_auto);
+  const FogScene v = scene_from_json(doc("\"lighting\": {\"sun\": {\"irradiance\": 2}}"), "v");
+  EXPECT_FALSE(v.lighting.sun->irradiance_auto);
   EXPECT_EQ(t.lighting.sun->angular_radius_deg, 0.27);
   const Lamp& lamp = t.lighting.lamps.at(0);
   expect_eq(lamp.position_m, {0, 0, 0}, "lamp.position_m");

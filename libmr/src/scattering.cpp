@@ -14,6 +14,7 @@
 #include "mr/error.h"
 #include "photo/airlight.h"
 #include "photo/composite.h"
+#include "photo/illumination.h"
 #include "render/depth_downsample.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
@@ -64,8 +65,9 @@ void check_lamps_outside_geometry(const Image& distance_m, const Camera& camera,
 }  // namespace
 
 ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
-                                   const Camera& camera, const FogScene& scene,
+                                   const Camera& camera, const FogScene& scene_given,
                                    const CancelToken* cancel) {
+  FogScene scene = scene_given;  // an automatic sun irradiance is resolved into it below
   const auto start = Clock::now();
   constexpr const char* kWhat = "render_scattering";
   throw_if_cancelled(cancel, kWhat);
@@ -96,16 +98,24 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     return render_scattering(photo, clamped, camera, scene, cancel);
   }
   const bool need_sky_estimate = !scene.lighting.sky_radiance.has_value();
-  if (need_sky_estimate && (photo.empty() || photo.channels() < 3 ||
-                            photo.width() != camera.width || photo.height() != camera.height))
+  const bool need_sun_estimate = scene.lighting.sun && scene.lighting.sun->irradiance_auto;
+  if ((need_sky_estimate || need_sun_estimate) &&
+      (photo.empty() || photo.channels() < 3 || photo.width() != camera.width ||
+       photo.height() != camera.height))
     throw Error(ErrorCode::invalid_argument,
-                "render_scattering: the sky radiance is 'auto' but no photo of the camera's size "
-                "was given to estimate it from");
+                std::string("render_scattering: the ") +
+                    (need_sky_estimate ? "sky radiance" : "sun irradiance") +
+                    " is 'auto' but no photo of the camera's size was given to estimate it from");
   check_lamps_outside_geometry(distance_m, camera, scene);
 
   ScatteringLayers out;
   out.sky_radiance = need_sky_estimate ? photo::estimate_airlight_dark_channel(photo.view())
                                        : *scene.lighting.sky_radiance;
+  if (need_sun_estimate) {  // issue 11 item 5: the sun relative to the photo's exposure
+    scene.lighting.sun->irradiance =
+        photo::exposure_relative_sun(photo.view(), distance_m.view(), out.sky_radiance).irradiance;
+    scene.lighting.sun->irradiance_auto = false;
+  }
   const int w = camera.width, h = camera.height;
   out.transmittance = Image::uninitialized(w, h, 3);
   out.inscatter = Image::uninitialized(w, h, 3);

@@ -134,7 +134,10 @@ Sun read_sun(const Json& j, const std::string& p, const Reader& r) {
       r.fail(p + "/elevation_deg", el->dump() + ": must be in [-90, 90]");
     sun.direction_to_sun = direction_from_azimuth_elevation(azimuth, elevation);
   }
-  if (const Json* v = member(j, "irradiance")) sun.irradiance = r.rgb(*v, p + "/irradiance");
+  // No irradiance, or "auto": relative to each photo's exposure (Sun::irradiance_auto).
+  const Json* irradiance = member(j, "irradiance");
+  sun.irradiance_auto = !irradiance || (irradiance->is_string() && *irradiance == "auto");
+  if (irradiance && !sun.irradiance_auto) sun.irradiance = r.rgb(*irradiance, p + "/irradiance");
   if (const Json* v = member(j, "angular_radius_deg"))
     sun.angular_radius_deg = r.number(*v, p + "/angular_radius_deg");
   return sun;
@@ -428,7 +431,9 @@ Json to_document(const FogScene& s) {
   const Lighting& l = s.lighting;
   Json& lighting = doc["lighting"] = Json::object();
   lighting["sun"] = l.sun ? Json{{"direction_to_sun", vec3_json(l.sun->direction_to_sun)},
-                                 {"irradiance", rgb_json(l.sun->irradiance)},
+                                 {"irradiance", l.sun->irradiance_auto
+                                                    ? Json("auto")
+                                                    : rgb_json(l.sun->irradiance)},
                                  {"angular_radius_deg", l.sun->angular_radius_deg}}
                           : Json(nullptr);
   lighting["sky_radiance"] = l.sky_radiance ? rgb_json(*l.sky_radiance) : Json("auto");
