@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/ximgproc/edge_filter.hpp>
 #include <string>
 
 #include "cv_bridge.h"
@@ -24,6 +23,12 @@ void require_size(const Image& image, const render::SurfaceGeometry& geometry, c
                     std::to_string(s.width()) + "x" + std::to_string(s.height()));
 }
 
+// Model shading below this share of its mean over the surfaces is not trusted: grazing or deep
+// shadow in an estimated geometry, mostly wrong at depth edges, where the photo shows the
+// surface lit. Dividing by it would make D explode (and clamp); with the floor, D times the
+// floored shading still reproduces the photo's radiance, so its brightness there is kept.
+constexpr double kShadingFloor = 0.05;
+
 }  // namespace
 
 Image diffuse_shading(const render::SurfaceGeometry& geometry, const Lighting& lighting) {
@@ -41,16 +46,60 @@ Image diffuse_shading(const render::SurfaceGeometry& geometry, const Lighting& l
   return out;
 }
 
-Image photo_detail(const Image& photo, const Image& shading,
-                   const render::SurfaceGeometry& geometry, const DetailOptions& options) {
-  require_size(photo, geometry, "photo");
+namespace {
+
+// Local mean of `values` (CV_32F, 1 or 3 channels, the full image) over the pixels whose group is
+// g, for those pixels: normalised convolution with a tent (two box passes, support 4 r + 1; O(1)
+// per pixel in r), so that nothing outside the group (another region, the sky) leaks in.
+// Calls out(x, y, mean) for each pixel of the group.
+template <class Out>
+void group_mean(const cv::Mat& values, const cv::Mat& group, int g, int radius, Out&& out) {
+  const int w = values.cols, h = values.rows;
+  int x0 = w, y0 = h, x1 = -1, y1 = -1;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (group.at<int>(y, x) == g)
+        x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+  if (x1 < 0) return;
+  const int reach = 2 * radius;
+  const cv::Rect box(cv::Point(std::max(0, x0 - reach), std::max(0, y0 - reach)),
+                     cv::Point(std::min(w, x1 + reach + 1), std::min(h, y1 + reach + 1)));
+  cv::Mat weight(box.size(), CV_32F, cv::Scalar(0));
+  cv::Mat weighted(box.size(), values.type(), cv::Scalar::all(0));
+  const cv::Mat source = values(box);
+  for (int y = 0; y < box.height; ++y)
+    for (int x = 0; x < box.width; ++x)
+      if (group.at<int>(y + box.y, x + box.x) == g) {
+        weight.at<float>(y, x) = 1;
+        if (values.channels() == 3)
+          weighted.at<cv::Vec3f>(y, x) = source.at<cv::Vec3f>(y, x);
+        else
+          weighted.at<float>(y, x) = source.at<float>(y, x);
+      }
+  const cv::Size window(2 * radius + 1, 2 * radius + 1);
+  for (int pass = 0; pass < 2; ++pass) {
+    cv::boxFilter(weight, weight, -1, window, cv::Point(-1, -1), true, cv::BORDER_CONSTANT);
+    cv::boxFilter(weighted, weighted, -1, window, cv::Point(-1, -1), true, cv::BORDER_CONSTANT);
+  }
+  tbb::parallel_for(0, box.height, [&](int y) {
+    for (int x = 0; x < box.width; ++x) {
+      if (group.at<int>(y + box.y, x + box.x) != g) continue;
+      const float wsum = weight.at<float>(y, x);
+      if (!(wsum > 0)) continue;
+      float mean[3] = {0, 0, 0};
+      for (int c = 0; c < values.channels(); ++c)
+        mean[c] = (values.channels() == 3 ? weighted.at<cv::Vec3f>(y, x)[c]
+                                          : weighted.at<float>(y, x)) / wsum;
+      out(x + box.x, y + box.y, mean);
+    }
+  });
+}
+
+}  // namespace
+
+Image floored_shading(const Image& shading, const render::SurfaceGeometry& geometry) {
   require_size(shading, geometry, "shading");
-  if (photo.channels() < 3)
-    throw Error(ErrorCode::invalid_argument, "photo_detail: the photo needs 3 channels");
-  if (!(options.min_detail > 0 && options.max_detail >= options.min_detail && options.eps_log > 0))
-    throw Error(ErrorCode::invalid_argument, "photo_detail: bad options (min/max detail, eps)");
-  const int w = photo.width(), h = photo.height();
-  // Shading below 1e-3 of the image's mean is too dark to divide by (deep shadow, grazing).
+  const int w = shading.width(), h = shading.height();
   double mean_shading = 0;
   std::size_t n = 0;
   for (int y = 0; y < h; ++y)
@@ -59,52 +108,62 @@ Image photo_detail(const Image& photo, const Image& shading,
         mean_shading += (shading.at(x, y, 0) + shading.at(x, y, 1) + shading.at(x, y, 2)) / 3.0;
         ++n;
       }
-  Image detail(w, h, 3);
-  for (float& v : detail.pixels()) v = 1.0f;
-  if (n == 0) return detail;
-  mean_shading /= double(n);
-  const float floor_shading = float(1e-3 * mean_shading);
-  constexpr float kFloorRadiance = 1e-5f;
-
-  cv::Mat log_albedo(h, w, CV_32FC3);
-  cv::Mat usable(h, w, CV_8U, cv::Scalar(0));
-  double log_sum[3] = {0, 0, 0};
-  std::size_t usable_count = 0;
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      bool ok = geometry.surface.at(x, y, 0) > 0;
-      for (int c = 0; c < 3 && ok; ++c) ok = shading.at(x, y, c) > floor_shading;
-      auto* la = log_albedo.ptr<cv::Vec3f>(y) + x;
-      if (!ok) continue;
-      usable.at<unsigned char>(y, x) = 1;
-      ++usable_count;
-      for (int c = 0; c < 3; ++c) {
-        (*la)[c] = std::log(std::max(photo.at(x, y, c), kFloorRadiance) / shading.at(x, y, c));
-        log_sum[c] += (*la)[c];
-      }
-    }
-  if (usable_count == 0) return detail;
-  // Unusable pixels (sky, unlit) take the mean so that they neither pull edges nor halos.
+  Image out = shading;
+  if (n == 0 || !(mean_shading > 0)) return out;
+  const float floor_value = float(kShadingFloor * mean_shading / double(n));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
-      if (!usable.at<unsigned char>(y, x)) {
-        auto* la = log_albedo.ptr<cv::Vec3f>(y) + x;
-        for (int c = 0; c < 3; ++c) (*la)[c] = float(log_sum[c] / double(usable_count));
-      }
+      if (geometry.surface.at(x, y, 0) > 0)
+        for (int c = 0; c < 3; ++c) out.at(x, y, c) = std::max(out.at(x, y, c), floor_value);
+  return out;
+}
+
+Image photo_detail(const Image& photo, const Image& shading_in,
+                   const render::SurfaceGeometry& geometry, const DetailOptions& options) {
+  require_size(photo, geometry, "photo");
+  require_size(shading_in, geometry, "shading");
+  if (options.region_labels) require_size(*options.region_labels, geometry, "region labels");
+  if (photo.channels() < 3)
+    throw Error(ErrorCode::invalid_argument, "photo_detail: the photo needs 3 channels");
+  if (!(options.min_detail > 0 && options.max_detail >= options.min_detail))
+    throw Error(ErrorCode::invalid_argument, "photo_detail: bad options (min/max detail)");
+  const int w = photo.width(), h = photo.height();
+  const Image shading = floored_shading(shading_in, geometry);
+  constexpr float kFloorRadiance = 1e-5f;
+  Image detail(w, h, 3);
+  for (float& v : detail.pixels()) v = 1.0f;
+
+  // Groups whose base is smoothed separately: the regions (label > 0; label 0 is one more
+  // group), or all surfaces as one. Smoothing across a region's border would bleed the
+  // neighbour's albedo into the base and leave a band of wrong D (a halo, speckle on thin gaps).
+  cv::Mat group(h, w, CV_32S, cv::Scalar(-1));
+  int groups = 0;
+  cv::Mat log_albedo(h, w, CV_32FC3, cv::Scalar::all(0));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!(geometry.surface.at(x, y, 0) > 0)) continue;
+      bool ok = true;
+      for (int c = 0; c < 3; ++c) ok = ok && shading.at(x, y, c) > 0 && std::isfinite(photo.at(x, y, c));
+      if (!ok) continue;
+      const int g = options.region_labels
+                        ? std::max(0, int(options.region_labels->at(x, y, 0)))
+                        : 0;
+      group.at<int>(y, x) = g;
+      groups = std::max(groups, g + 1);
+      auto& la = log_albedo.ptr<cv::Vec3f>(y)[x];
+      for (int c = 0; c < 3; ++c)
+        la[c] = std::log(std::max(photo.at(x, y, c), kFloorRadiance) / shading.at(x, y, c));
+    }
   const int radius = options.radius_px > 0
                          ? options.radius_px
-                         : std::clamp(int(std::lround(0.02 * std::min(w, h))), 4, 48);
-  cv::Mat smooth;
-  cv::ximgproc::guidedFilter(log_albedo, log_albedo, smooth, radius, options.eps_log);
+                         : std::clamp(int(std::lround(0.08 * std::min(w, h))), 8, 256);
   const float lo = std::log(options.min_detail), hi = std::log(options.max_detail);
-  tbb::parallel_for(0, h, [&](int y) {
-    for (int x = 0; x < w; ++x) {
-      if (!usable.at<unsigned char>(y, x)) continue;
-      const auto& la = log_albedo.ptr<cv::Vec3f>(y)[x];
-      const auto& ls = smooth.ptr<cv::Vec3f>(y)[x];
-      for (int c = 0; c < 3; ++c) detail.at(x, y, c) = std::exp(std::clamp(la[c] - ls[c], lo, hi));
-    }
-  });
+  for (int g = 0; g < groups; ++g)
+    group_mean(log_albedo, group, g, radius, [&](int x, int y, const float* base) {
+      const auto& la = log_albedo.at<cv::Vec3f>(y, x);
+      for (int c = 0; c < 3; ++c)
+        detail.at(x, y, c) = std::exp(std::clamp(la[c] - base[c], lo, hi));
+    });
   return detail;
 }
 
@@ -124,16 +183,94 @@ void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting&
                         const render::ShadingTerms terms =
                             render::shading_terms(point, lighting, material.roughness);
                         float* o = out.pixel(x, y);
+                        // A darker-than-base pixel is mostly a small shadow (a crevice, mortar,
+                        // a leaf's shade), which shades the specular lobe too; a brighter one is
+                        // mostly albedo (paint, lichen), which does not. Without this a glossy
+                        // new material lays an even sheen over the texture (a pastel wash).
+                        float occlusion = 1.0f;
+                        if (detail) {
+                          const float* d = detail->pixel(x, y);
+                          occlusion = std::min(
+                              1.0f, 0.2126f * d[0] + 0.7152f * d[1] + 0.0722f * d[2]);
+                        }
                         for (int c = 0; c < 3; ++c) {
                           const float d = detail ? detail->at(x, y, c) : 1.0f;
                           // `shading` is terms.diffuse; taking it from the argument keeps the
                           // caller's (possibly exposure-matched) shading authoritative.
                           o[c] = d * material.diffuse_albedo[c] * shading.at(x, y, c) +
-                                 material.specular_albedo * terms.specular_f0[c] +
-                                 terms.specular_bias[c];
+                                 occlusion * (material.specular_albedo * terms.specular_f0[c] +
+                                              terms.specular_bias[c]);
                         }
                       }
                     });
+}
+
+render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry& geometry,
+                                                   const Image& region_labels, int radius_px) {
+  require_size(region_labels, geometry, "region labels");
+  const int w = region_labels.width(), h = region_labels.height();
+  const int radius =
+      radius_px > 0 ? radius_px : std::clamp(int(std::lround(0.01 * std::min(w, h))), 2, 24);
+  cv::Mat group(h, w, CV_32S, cv::Scalar(-1));
+  cv::Mat normal(h, w, CV_32FC3, cv::Scalar::all(0)), sun(h, w, CV_32F, cv::Scalar(0)),
+      sky(h, w, CV_32F, cv::Scalar(0));
+  int groups = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int k = int(region_labels.at(x, y, 0));
+      if (k <= 0 || !(geometry.surface.at(x, y, 0) > 0)) continue;
+      group.at<int>(y, x) = k;
+      groups = std::max(groups, k + 1);
+      for (int c = 0; c < 3; ++c) normal.at<cv::Vec3f>(y, x)[c] = geometry.normal.at(x, y, c);
+      sun.at<float>(y, x) = geometry.sun_visibility.at(x, y, 0);
+      sky.at<float>(y, x) = geometry.sky_visibility.at(x, y, 0);
+    }
+  render::SurfaceGeometry out = geometry;
+  for (int g = 1; g < groups; ++g) {
+    group_mean(normal, group, g, radius, [&](int x, int y, const float* n) {
+      const float length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      if (!(length > 1e-3f)) return;
+      for (int c = 0; c < 3; ++c) out.normal.at(x, y, c) = n[c] / length;
+    });
+    group_mean(sun, group, g, radius,
+               [&](int x, int y, const float* v) { out.sun_visibility.at(x, y, 0) = v[0]; });
+    group_mean(sky, group, g, radius,
+               [&](int x, int y, const float* v) { out.sky_visibility.at(x, y, 0) = v[0]; });
+  }
+  return out;
+}
+
+Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometry& geometry,
+                        int gap_px) {
+  require_size(region_labels, geometry, "region labels");
+  if (gap_px <= 0) return region_labels;
+  const int w = region_labels.width(), h = region_labels.height();
+  cv::Mat any(h, w, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) any.at<unsigned char>(y, x) = region_labels.at(x, y, 0) > 0 ? 255 : 0;
+  // A closing fills gaps up to 2 * gap_px wide between or inside regions, never grows a region's
+  // outline into open space (a straight or convex border is its own closing).
+  cv::Mat closed;
+  const cv::Mat kernel = cv::getStructuringElement(
+      cv::MORPH_ELLIPSE, cv::Size(2 * gap_px + 1, 2 * gap_px + 1));
+  cv::morphologyEx(any, closed, cv::MORPH_CLOSE, kernel, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+  // Each filled pixel joins the nearest region (label of the nearest region pixel).
+  cv::Mat not_region = 255 - any, distance, nearest;
+  cv::distanceTransform(not_region, distance, nearest, cv::DIST_L2, 3, cv::DIST_LABEL_PIXEL);
+  std::vector<float> label_of_index(1, 0.0f);  // DIST_LABEL_PIXEL numbers zero pixels row by row
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (any.at<unsigned char>(y, x)) label_of_index.push_back(region_labels.at(x, y, 0));
+  Image out = region_labels;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (any.at<unsigned char>(y, x) || !closed.at<unsigned char>(y, x)) continue;
+      if (!(geometry.surface.at(x, y, 0) > 0)) continue;  // sky seen through a gap stays sky
+      const int index = nearest.at<int>(y, x);
+      if (index > 0 && std::size_t(index) < label_of_index.size())
+        out.at(x, y, 0) = label_of_index[std::size_t(index)];
+    }
+  return out;
 }
 
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
@@ -148,21 +285,22 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
   const int regions = int(materials.size());
   // Per region: its pixels (surface only) and, for feathering, the distance to its border.
   std::vector<std::vector<std::int32_t>> pixels(regions);
-  cv::Mat inside(h, w, CV_8U, cv::Scalar(0));
   cv::Mat label_mat(h, w, CV_32S, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const float v = region_labels.at(x, y, 0);
       const int k = v >= 1 && v <= float(regions) ? int(v) : 0;
-      label_mat.at<int>(y, x) = k;
       if (k == 0 || !(geometry.surface.at(x, y, 0) > 0)) continue;
+      label_mat.at<int>(y, x) = k;
       pixels[k - 1].push_back(y * w + x);
     }
   Image rendered = photo;
   for (int k = 0; k < regions; ++k)
     render_with_detail(geometry, lighting, shading, detail, materials[k], pixels[k], rendered);
-  // Distance (px) from each region pixel to the nearest pixel not of its own region: a pixel is
-  // "inside" when its 4-neighbours share its label (image borders count as inside).
+  // Distance (px) from each region pixel to the nearest pixel not of its own region, sky
+  // included (a region's sky pixels stay the photo's, so its surface is feathered into them as
+  // into any other border): a pixel is "inside" when its 4-neighbours share its label (image
+  // borders count as inside).
   cv::Mat same(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {

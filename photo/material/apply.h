@@ -5,18 +5,18 @@
 //   photo I = A * S + specular,  S = shading of a unit-albedo Lambert surface under the photo's
 //   lights (sun with shadows, sky, lamps; render/surface_shading.h), so A = I / S is the photo's
 //   apparent albedo, with everything the lighting model does not explain folded into it.
-//   A is split in log space with an edge-aware filter (OpenCV ximgproc guided filter, guided by
-//   log A itself): log A = log A_smooth + log D. A_smooth is the material's base colour, which
-//   the new material replaces; D (clamped to [min_detail, max_detail]) is the fine texture and the
-//   small-scale shading the model misses (mortar lines, grain, small unmodelled shadows), which
-//   is kept:
-//   new = D * diffuse_albedo * S + specular(new material).
+//   A is split in log space by a local mean over each region's own pixels (a normalised tent
+//   filter): log A = log A_smooth + log D. A_smooth is the material's base colour, which the new
+//   material replaces; D is the texture and the shading the model misses (mortar lines, grain,
+//   leaves, small unmodelled shadows), which is kept:
+//   new = D * diffuse_albedo * S + min(1, Y(D)) * specular(new material),
+//   so the diffuse part is the photo's radiance times diffuse_albedo / A_smooth: its texture and
+//   shading kept, only the base colour changed. (An edge-aware split, tried first, put real
+//   photos' strong texture into A_smooth, where it was replaced by a flat pastel colour.)
 // Limits: the photo's own highlights are part of A (a glossy original leaves bright blobs in D
 // when they are smaller than the filter radius, and in A_smooth otherwise, where they are
 // replaced); large-scale errors of the lighting estimate (a wrong sun direction, shadows of things
-// the depth map lacks) are larger than the filter and get replaced by the model's shading;
-// strong edges inside a region (log-contrast well above sqrt(eps)) stay in A_smooth, so they are
-// replaced too instead of being carried as detail.
+// the depth map lacks) are larger than the filter and get replaced by the model's shading.
 #pragma once
 #include <cstdint>
 #include <span>
@@ -28,17 +28,43 @@
 namespace mr::photo {
 
 struct DetailOptions {
-  int radius_px = 0;        ///< guided-filter radius; 0: 2 % of the image's short side, 4..48
-  double eps_log = 0.5;     ///< guided-filter eps in (log albedo)^2: only edges of log-contrast
-                            ///< above ~sqrt(eps) = 0.7 (a factor 2) stay in the smooth part
-  float min_detail = 0.2f;  ///< D is clamped to [min_detail, max_detail]
-  float max_detail = 5.0f;
+  /// Radius of the base's smoothing (a tent of two box filters, support 4 r + 1); 0: 8 % of the
+  /// image's short side, 8..256. Texture and shading finer than about r are kept in D.
+  int radius_px = 0;
+  /// Optional (null = all surfaces are one group): 1 channel, the photo's size; the base is
+  /// smoothed over each region's own pixels (label 0 is one more group), so that no albedo of a
+  /// neighbouring region or of the sky leaks across a border into D.
+  const Image* region_labels = nullptr;
+  float min_detail = 1.0f / 32;  ///< D is clamped to [min_detail, max_detail] (a safety only:
+  float max_detail = 32.0f;      ///< with the shading floor D x S reproduces the photo)
 };
 
 /// Unit-albedo diffuse shading S (3 channels, the geometry's size; 0 where there is no surface):
 /// render::shading_terms(...).diffuse, exactly the part of the rendering that scales with the
 /// diffuse albedo (no Fresnel-at-grazing specular, which a {diffuse 1, F0 0} render would add).
 Image diffuse_shading(const render::SurfaceGeometry& geometry, const Lighting& lighting);
+
+/// `shading` raised to 5 % of its mean over the surfaces where it is lower (grazing or deep
+/// shadow in the model: at depth edges of an estimated geometry mostly wrong). photo_detail
+/// divides by it, so D x floored shading is the photo's radiance over the base everywhere; the
+/// rendering with detail must use it too.
+Image floored_shading(const Image& shading, const render::SurfaceGeometry& geometry);
+
+/// The geometry with normals (renormalised), sun and sky visibility averaged over each region's
+/// own surface pixels (label > 0) with a tent of radius `radius_px` (0: 1 % of the short side,
+/// 2..24). A distance map estimated from one photo has junk at the pixel scale (normals flipping
+/// at the edges of its columns, 1-pixel shadow slivers): rendered as is, a new material's
+/// specular lobe turns it into bright and dark lines. Used for photo targets only; a 3D-scene
+/// target's geometry is exact.
+render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry& geometry,
+                                                   const Image& region_labels, int radius_px = 0);
+
+/// Region labels with thin gaps closed: label-0 surface pixels in gaps up to 2 x gap_px wide
+/// between or inside regions (a morphological closing of their union) join the nearest region.
+/// Masks painted or derived from depth leave such seams; left as the photo, each would show as
+/// a line or specks of the old material between re-rendered pixels. Sky pixels are not added.
+Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometry& geometry,
+                        int gap_px = 2);
 
 /// The detail layer D of `photo` (scene-linear RGB, the geometry's size) given its diffuse
 /// shading S (see the file comment). 3 channels; 1 where there is no surface or S is ~0.
@@ -49,7 +75,8 @@ Image photo_detail(const Image& photo, const Image& shading,
 /// `photo` with each region k (labels(x, y) = k in 1..materials.size(), surface pixels only)
 /// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular, or without `detail`
 /// (null) the plain rendering. Composited with a linear ramp of `feather_px` pixels inside each
-/// region's border (0: hard edges); pixels outside the regions and sky pixels are the photo's.
+/// region's border, sky pixels counting as outside (0: hard edges); pixels outside the regions
+/// and sky pixels are the photo's. With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,

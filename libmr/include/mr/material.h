@@ -40,12 +40,18 @@ struct MaterialCandidates {
   std::vector<MaterialCandidate> candidates;  ///< distinct, well-fitted; at least one
   Image segment_labels;  ///< 1 channel, the sample's size: segment id per pixel, -1 = unused
   std::vector<std::string> notes;  ///< one line per decision, for a person to read
+  /// Lines a person should see even when not reading the notes (also among the notes), e.g. that
+  /// no segment fitted within max_relative_rms and looser fits were kept.
+  std::vector<std::string> warnings;
 };
 
 struct MaterialTransferOptions {
   int max_candidates = 8;            ///< keep at most this many candidates (1..64)
   double superpixel_size_px = 0;     ///< segmentation scale; 0 = from the sample's size
-  double max_relative_rms = 0.25;    ///< candidates fitting worse are dropped
+  /// Candidates fitting worse are dropped. When no segment fits this well (common for real
+  /// photos under a guessed light), the segments within 1.5 x the best fit's relative RMS are
+  /// kept instead, with a warning (MaterialCandidates::warnings).
+  double max_relative_rms = 0.25;
   double smoothness_weight = 0.1;    ///< weight of the material-gradient term (>= 0)
   int tabu_max_iterations = 200;     ///< Tabu search: iterations at most
   int tabu_patience = 40;            ///< stop after this many iterations without a new best
@@ -66,8 +72,12 @@ struct ShadedPhoto {
 
 /// Candidate materials from a sample image: segments it (superpixels merged by colour), fits the
 /// BRDF of each segment by inverse rendering under the sample's lighting (Ceres), drops poorly
-/// fitted ones and keeps the distinct ones. Throws mr::Error(invalid_argument) for a sample with no
-/// usable segment (too small, all sky, flat black, non-finite pixels everywhere) and
+/// fitted ones (see max_relative_rms: loose fits are kept with a warning when nothing fits well)
+/// and keeps the distinct ones. A sample larger than 0.5 MP is reduced by an integer factor
+/// first (a pixel budget: the fits use 2000 pixels per segment); segment_labels are at the
+/// sample's own size. Throws mr::Error(invalid_argument) for a sample with no
+/// usable segment (too small, all sky, flat black, non-finite pixels everywhere, no fit at all;
+/// the message says what was tried and what to do) and
 /// mr::Error(size_mismatch) when the distance map or camera differ from the photo's size.
 MaterialCandidates extract_material_candidates(const ShadedPhoto& sample,
                                                const MaterialTransferOptions& options = {});
@@ -79,6 +89,7 @@ struct MaterialTransferResult {
   double objective = 0;         ///< the style objective of the assignment (lower is better)
   std::vector<double> best_objective_history;  ///< best-so-far per Tabu iteration
   std::vector<std::string> notes;
+  std::vector<std::string> warnings;  ///< as MaterialCandidates::warnings (also among the notes)
 };
 
 /// Re-materials the regions of `target`. A target with `photo` null is a 3D scene given by its
