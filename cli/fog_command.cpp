@@ -757,7 +757,10 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
   std::atomic<std::size_t> done{0}, skipped{0}, failed{0}, interrupted_jobs{0};
   std::mutex failures_mutex;
   std::vector<std::string> failures;
-  const int threads = o.threads > 0 ? o.threads : tbb::this_task_arena::max_concurrency();
+  // -j is at most kMaxThreads (the parser), and photos in flight beyond 4 per core only cost
+  // memory and threads (each holds a photo; thread creation can fail under a memory limit).
+  const int cores = tbb::this_task_arena::max_concurrency();
+  const int threads = o.threads > 0 ? std::min(o.threads, 4 * cores) : cores;
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
   tbb::task_arena arena(threads);
   arena.execute([&] {

@@ -48,6 +48,12 @@ int main(int argc, char** argv) {
   CLI::App* estimate = mr::cli::add_estimate_command(app, estimate_options);
   mr::cli::MaterialCommandOptions material_options;
   CLI::App* material = mr::cli::add_material_command(app, material_options);
+  // A usage error is one line, the last one printed: "ERROR: <problem>; see mr <command> --help".
+  app.failure_message([](const CLI::App* failed, const CLI::Error& e) {
+    std::string where = "mr";
+    for (const CLI::App* sub : failed->get_subcommands()) where += " " + sub->get_name();
+    return "ERROR: " + std::string(e.what()) + " (see " + where + " --help)\n";
+  });
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
