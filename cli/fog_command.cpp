@@ -312,7 +312,9 @@ DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image&
     const bool sun_given = o.sun_azimuth_deg || o.sun_elevation_deg || !o.sun_direction.empty() ||
                            !o.sun_irradiance.empty() || o.sun_radius_deg;
     if (est.scene.lighting.sun && !sun_given) scene.lighting.sun = est.scene.lighting.sun;
-    if (est.scene.lighting.sky_radiance && o.airlight == "auto")
+    // The estimate's sky radiance only where nothing set one: --airlight and a --scene file's
+    // sky_radiance (e.g. a night look's dark sky) both win over it.
+    if (est.scene.lighting.sky_radiance && !scene.lighting.sky_radiance)
       scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
     DepthMap depth;
     depth.distance_m = std::move(est.geometry.distance_m);
