@@ -164,6 +164,31 @@ TEST_F(EstimateCli, FogSavesOneEstimatedScenePerPhoto) {
   EXPECT_FALSE(fs::exists(dir / "scenes" / "same.json.png"));
 }
 
+// Issue 11 item 4: an estimated photo's fog gets a top (half the visibility, 30 m..2 km) unless
+// the command line gives one (--layer, --layer-top) or asks for none.
+TEST_F(EstimateCli, EstimatedPhotosFogLiesInALayerWithATop) {
+  write_image(dir / "c.png", test::make_test_photo(96, 72));
+  auto top = [&](const std::string& options, int* exit_code = nullptr) {
+    const fs::path scene = dir / "c.top.json";  // per photo: the scene it was rendered with
+    fs::remove(scene);
+    const auto r = test::run(kMr + " fog " + q(dir / "c.png") +
+                             " --depth auto --quality draft -q --overwrite -o " + q(dir / "o") +
+                             " --save-scene '{dir}/{stem}.top.json' " + options);
+    if (exit_code) *exit_code = r.exit_code;
+    if (r.exit_code != 0) return std::nan("");
+    return load_scene(scene).medium.layer_top_m;
+  };
+  EXPECT_NEAR(top("--visibility 150m"), 75, 1e-3);
+  EXPECT_NEAR(top("--visibility 3km"), 1500, 0.05);
+  EXPECT_NEAR(top("--visibility 150m --layer-top 60m"), 60, 1e-9);
+  EXPECT_TRUE(std::isinf(top("--visibility 150m --layer-top none")));
+  EXPECT_NEAR(top("--visibility 150m --layer 0,40"), 40, 1e-9);
+  EXPECT_TRUE(std::isinf(top("--visibility 150m --height-fog 0,20")));
+  int code = 0;
+  top("--layer 0,40 --layer-top 60m", &code);
+  EXPECT_EQ(code, 2);
+}
+
 // A ground grid (0.15 m stripes every 2 m) under a gradient sky, seen from 1.6 m by a camera
 // 60 degrees across, pitched -8, rolled 4, turned 30 degrees (so both stripe families have
 // finite vanishing points), 4x4 supersampled. Scene-linear (written as an 8-bit PNG: no EXIF).
