@@ -41,12 +41,19 @@ constexpr float kBlackRadiance = 1e-4f;
 // Regions larger than this are capped when computing statistics for the search (every pixel is
 // still re-rendered): the statistics are sums, so an even stride keeps them unbiased.
 constexpr std::size_t kMaxStatisticsPixels = 200000;
-// Rays per pixel for the sky's occlusion: the default 16 leaves visible grain in re-rendered
-// regions under sky light (the specular term is not divided out like the diffuse one is).
-constexpr int kSkyRays = 64;
-// At most this many segments per wanted candidate are fitted, each on this many pixels.
+// Rays per pixel for the sky's occlusion. A 3D-scene target is rendered as traced, where 16
+// left visible grain under sky light, so it gets 64. A photo target's regions get their
+// geometry averaged over a few pixels (photo::smooth_geometry_in_regions) and their diffuse
+// part from the photo (D x shading), and a sample's fits average 2000 pixels each: 16 rays do
+// there, a quarter of the tracing (most of the geometry's time).
+constexpr int kSceneSkyRays = 64;
+constexpr int kPhotoSkyRays = 16;
+// At most this many segments per wanted candidate are fitted, each on this many pixels (a
+// deterministic stride over the segment; five parameters, so 1000 pixels are plenty: the fits
+// are most of the extraction's time, and 2000 gave the same candidates on the synthetic tests
+// within their noise).
 constexpr int kFittedSegmentsPerCandidate = 3;
-constexpr int kFitPixels = 2000;
+constexpr int kFitPixels = 1000;
 // When no segment fits within max_relative_rms (real photos under a guessed light: texture,
 // small shadows and an approximate light all count as misfit), the segments fitting within this
 // factor of the best fit are kept, with a warning, instead of failing.
@@ -55,7 +62,7 @@ constexpr double kLooseFitFactor = 1.5;
 // nearest surface per block for the distance map, the block mean for the photo) before its
 // geometry is traced, segmented and fitted. The fits use kFitPixels per segment and the
 // segmentation works at 0.5 MP anyway, so a 12 MP sample gives the same candidates at a
-// fraction of the cost (its sky visibility is 64 rays per pixel).
+// fraction of the cost.
 constexpr double kExtractionPixelBudget = 0.5e6;
 
 std::string format(const char* fmt, auto... args) {
@@ -116,10 +123,11 @@ Image checked_rgb(const ShadedPhoto& p, const char* what) {
   return photo.select_channels(std::array{0, 1, 2});
 }
 
-render::SurfaceGeometry geometry_of(const ShadedPhoto& p, const MaterialTransferOptions& o) {
+render::SurfaceGeometry geometry_of(const ShadedPhoto& p, const MaterialTransferOptions& o,
+                                    int sky_rays) {
   render::SurfaceGeometryOptions g;
   g.threads = o.threads;
-  g.sky_rays = kSkyRays;
+  g.sky_rays = sky_rays;
   return render::surface_geometry_from_depth(*p.distance_m, p.camera, p.scene.pose,
                                              p.scene.lighting, g);
 }
@@ -226,7 +234,7 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
   }
   const Image& rgb = reduced.factor > 1 ? reduced.rgb : full_rgb;
   const int w = rgb.width(), h = rgb.height();
-  const render::SurfaceGeometry geometry = geometry_of(working, options);
+  const render::SurfaceGeometry geometry = geometry_of(working, options, kPhotoSkyRays);
   const double geometry_s = seconds_since(start);
   const Lighting& lighting = sample.scene.lighting;
   if (light_level_out) *light_level_out = light_level(geometry, lighting);
@@ -521,7 +529,8 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
   const int regions = checked_region_count(region_labels_in, w, h);
   return in_arena(options.threads, [&] {
     const auto start = std::chrono::steady_clock::now();
-    const render::SurfaceGeometry traced = geometry_of(target, options);
+    const render::SurfaceGeometry traced =
+        geometry_of(target, options, scene_only ? kSceneSkyRays : kPhotoSkyRays);
     const double target_geometry_s = seconds_since(start);
     const Lighting& lighting = target.scene.lighting;
     // Thin unlabelled seams between or inside regions (masks from depth or painted by hand)

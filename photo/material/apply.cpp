@@ -52,8 +52,10 @@ namespace {
 // g, for those pixels: normalised convolution with a tent (two box passes, support 4 r + 1; O(1)
 // per pixel in r), so that nothing outside the group (another region, the sky) leaks in.
 // Calls out(x, y, mean) for each pixel of the group.
+// `weights` (CV_32F, optional) weights each pixel.
 template <class Out>
-void group_mean(const cv::Mat& values, const cv::Mat& group, int g, int radius, Out&& out) {
+void group_mean(const cv::Mat& values, const cv::Mat& group, int g, int radius, Out&& out,
+                const cv::Mat* weights = nullptr) {
   const int w = values.cols, h = values.rows;
   int x0 = w, y0 = h, x1 = -1, y1 = -1;
   for (int y = 0; y < h; ++y)
@@ -70,11 +72,12 @@ void group_mean(const cv::Mat& values, const cv::Mat& group, int g, int radius, 
   for (int y = 0; y < box.height; ++y)
     for (int x = 0; x < box.width; ++x)
       if (group.at<int>(y + box.y, x + box.x) == g) {
-        weight.at<float>(y, x) = 1;
+        const float wt = weights ? weights->at<float>(y + box.y, x + box.x) : 1.0f;
+        weight.at<float>(y, x) = wt;
         if (values.channels() == 3)
-          weighted.at<cv::Vec3f>(y, x) = source.at<cv::Vec3f>(y, x);
+          weighted.at<cv::Vec3f>(y, x) = wt * source.at<cv::Vec3f>(y, x);
         else
-          weighted.at<float>(y, x) = source.at<float>(y, x);
+          weighted.at<float>(y, x) = wt * source.at<float>(y, x);
       }
   const cv::Size window(2 * radius + 1, 2 * radius + 1);
   for (int pass = 0; pass < 2; ++pass) {
@@ -85,7 +88,7 @@ void group_mean(const cv::Mat& values, const cv::Mat& group, int g, int radius, 
     for (int x = 0; x < box.width; ++x) {
       if (group.at<int>(y + box.y, x + box.x) != g) continue;
       const float wsum = weight.at<float>(y, x);
-      if (!(wsum > 0)) continue;
+      if (!(wsum > 1e-12f)) continue;
       float mean[3] = {0, 0, 0};
       for (int c = 0; c < values.channels(); ++c)
         mean[c] = (values.channels() == 3 ? weighted.at<cv::Vec3f>(y, x)[c]
@@ -158,12 +161,43 @@ Image photo_detail(const Image& photo, const Image& shading_in,
                          ? options.radius_px
                          : std::clamp(int(std::lround(0.08 * std::min(w, h))), 8, 256);
   const float lo = std::log(options.min_detail), hi = std::log(options.max_detail);
-  for (int g = 0; g < groups; ++g)
-    group_mean(log_albedo, group, g, radius, [&](int x, int y, const float* base) {
+  // The base is a robust local mean: after a plain one, pixels far from it in log albedo (a
+  // window in a wall, a dark gap in foliage) are down-weighted (Welsch, scale kRobustLog) and the
+  // mean taken again. Otherwise a dark window pulls the wall's base down around it, and the
+  // wall's D, hence the new material, glows in a halo the size of the filter.
+  constexpr float kRobustLog = 0.5f;
+  cv::Mat base(h, w, CV_32FC3, cv::Scalar::all(0));
+  cv::Mat robust_weight(h, w, CV_32F, cv::Scalar(1));
+  for (int pass = 0; pass < 3; ++pass) {
+    for (int g = 0; g < groups; ++g)
+      group_mean(
+          log_albedo, group, g, radius,
+          [&](int x, int y, const float* b) {
+            for (int c = 0; c < 3; ++c) base.at<cv::Vec3f>(y, x)[c] = b[c];
+          },
+          pass == 0 ? nullptr : &robust_weight);
+    if (pass == 2) break;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (group.at<int>(y, x) < 0) continue;
+        float r2 = 0;
+        for (int c = 0; c < 3; ++c) {
+          const float r = log_albedo.at<cv::Vec3f>(y, x)[c] - base.at<cv::Vec3f>(y, x)[c];
+          r2 += r * r / 3;
+        }
+        // A floor keeps every pixel in its own mean (no empty windows).
+        robust_weight.at<float>(y, x) =
+            std::max(1e-3f, std::exp(-r2 / (2 * kRobustLog * kRobustLog)));
+      }
+  }
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      if (group.at<int>(y, x) < 0) continue;
       const auto& la = log_albedo.at<cv::Vec3f>(y, x);
-      for (int c = 0; c < 3; ++c)
-        detail.at(x, y, c) = std::exp(std::clamp(la[c] - base[c], lo, hi));
-    });
+      const auto& b = base.at<cv::Vec3f>(y, x);
+      for (int c = 0; c < 3; ++c) detail.at(x, y, c) = std::exp(std::clamp(la[c] - b[c], lo, hi));
+    }
+  });
   return detail;
 }
 

@@ -5,8 +5,9 @@
 //   photo I = A * S + specular,  S = shading of a unit-albedo Lambert surface under the photo's
 //   lights (sun with shadows, sky, lamps; render/surface_shading.h), so A = I / S is the photo's
 //   apparent albedo, with everything the lighting model does not explain folded into it.
-//   A is split in log space by a local mean over each region's own pixels (a normalised tent
-//   filter): log A = log A_smooth + log D. A_smooth is the material's base colour, which the new
+//   A is split in log space by a robust local mean over each region's own pixels (a normalised
+//   tent filter, re-weighted twice against pixels far from it, so a window does not pull a
+//   wall's base down into a halo): log A = log A_smooth + log D. A_smooth is the material's base colour, which the new
 //   material replaces; D is the texture and the shading the model misses (mortar lines, grain,
 //   leaves, small unmodelled shadows), which is kept:
 //   new = D * diffuse_albedo * S + min(1, Y(D)) * specular(new material),
