@@ -10,11 +10,12 @@
 #
 # Same fog for all: visibility 150 m, airlight 0.8 (linear), quality-95 4:4:4 JPEG out.
 # BATCH=N (default 0: off) also times a batch of N 2 MP photos: `mr fog` on the folder against
-# oiiotool per photo (sequential, and two at a time with xargs -P2).
+# one oiiotool process over the numbered frames (the floor without start-up per photo) and
+# oiiotool per photo two at a time (xargs -P2).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 mr=$(realpath "${1:-$here/../build/cli/mr}")
-sizes=${2:-"2 12 24"}
+sizes=${2-"2 12 24"}  # "" with BATCH=N: the batch alone
 runs=${3:-5}
 scratch=${SCRATCH:-/tmp/compare_fog}
 python=/usr/bin/python3  # Debian's, with python3-numpy and python3-openimageio
