@@ -77,12 +77,12 @@ struct Medium {
 struct Sun {
   Vec3 direction_to_sun{0, 1, 0};  ///< normalised by the core
   Rgb irradiance{3, 3, 3};
+  double angular_radius_deg = 0.27;  ///< > 0 gives soft shaft edges (penumbra)
   /// True: `irradiance` is replaced, per photo, by one relative to the photo's exposure
   /// (mr::exposure_relative_sun_irradiance in mr/fog.h, with the scene's sky radiance), when a
   /// photo is rendered (render_scattering needs the photo then). A scene document whose sun has
-  /// no irradiance, or "auto", sets it.
+  /// no irradiance, or "auto", sets it. (Last, so that Sun{dir, irradiance, radius} still works.)
   bool irradiance_auto = false;
-  double angular_radius_deg = 0.27;  ///< > 0 gives soft shaft edges (penumbra)
 };
 
 /// A point lamp, optionally a spot: radiant intensity I (per steradian), irradiance at x is
