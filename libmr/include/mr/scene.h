@@ -81,7 +81,7 @@ struct Sun {
   /// True: `irradiance` is replaced, per photo, by one relative to the photo's exposure
   /// (mr::exposure_relative_sun_irradiance in mr/fog.h, with the scene's sky radiance), when a
   /// photo is rendered (render_scattering needs the photo then). A scene document whose sun has
-  /// no irradiance, or "auto", sets it.
+  /// no irradiance, or "auto", sets it. (Last, so that Sun{dir, irradiance, radius} still works.)
   bool irradiance_auto = false;
 };
 
