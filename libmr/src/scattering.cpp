@@ -13,6 +13,7 @@
 #include "mr/error.h"
 #include "photo/airlight.h"
 #include "photo/composite.h"
+#include "render/blockers.h"
 #include "render/depth_downsample.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
@@ -151,6 +152,10 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         } else {
           mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose);
         }
+        // What the photo does not show: structures cut by the frame, the scene's skyline,
+        // polygons and canopy (the same mesh feeds both backends).
+        render::append_blockers(mesh, distance_m.view(), normals.view(), camera, scene.pose,
+                                scene.blockers);
         out.timings.mesh_s = seconds_since(t);
         occluder_mesh = std::move(mesh);
         throw_if_cancelled(cancel, kWhat);
@@ -163,6 +168,8 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     in.scene = &scene;
     in.distance_m = distance_m.view();
     if (!normals.empty()) in.normals = normals.view();
+    // The photo lets the surface term tell a misplaced mesh shadow from a real one (issue 13).
+    if (photo.channels() >= 3 && photo.width() == w && photo.height() == h) in.photo = photo.view();
     in.sky_radiance = out.sky_radiance;
     in.cancel = cancel;
     render::CoreOutputs core{out.transmittance.view(), out.inscatter.view(),
