@@ -141,7 +141,10 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       if (scene.render.volumetric_shadows) {
         // The preset's mesh resolution (a coarse mesh builds and traces faster), unless the
         // image is too small to coarsen.
-        int mesh_step = render::march_plan(scene.render).mesh_step;
+        // The Vulkan backend rasterizes the mesh into shadow maps (cheap at any resolution):
+        // from the coarse draft mesh, whose surface lies up to a fine pixel's depth step in
+        // front of the ground, 23 % of a flat sunlit ground shadowed itself (issue 13).
+        int mesh_step = gpu ? 1 : render::march_plan(scene.render).mesh_step;
         if (w / mesh_step < 16 || h / mesh_step < 16) mesh_step = 1;
         render::TriangleMesh mesh;
         if (mesh_step > 1) {
