@@ -235,18 +235,22 @@ struct Plane {
   V3 normal() const { return {nx, ny, nz}; }
 };
 
-/// Distance at which the plane of a pixel at distance d_m meets the unit ray w, or d_m itself
-/// when the ray meets the plane nearly edge-on or behind the camera (the extrapolated plane then
-/// says nothing reliable about the ray; in practice: rays just past the horizon of a ground
-/// plane). A factor 4 window admits every legitimate case, where the pixel's own centre ray is
-/// at most a pixel away.
+/// Distance at which the plane of a pixel at distance d_m meets the unit ray w, within a factor
+/// 4 window around d_m (which admits every legitimate case, where the pixel's own centre ray is
+/// at most a pixel away). A ray that meets the plane beyond the window, edge-on or not at all in
+/// front of the camera has passed the plane's horizon (in practice: the top corners of the
+/// last ground row under the sky): it gets the window's far end, 4 d_m, so the pixel's
+/// triangles stay close to its plane (at d_m they rose to the camera's height within one pixel,
+/// a wall on which the sun shadowed that row at every quality, issue 13). A ray that meets it
+/// nearer than d_m / 4 gets d_m.
 inline double plane_distance(const Plane& plane, double d_m, V3 w) {
   const double den = dot(plane.normal(), w);
   if (den < 0) {
     const double t = double(plane.h) / den;
-    if (t >= 0.25 * d_m && t <= 4.0 * d_m) return t;
+    if (t >= 0.25 * d_m) return std::min(t, 4.0 * d_m);
+    return d_m;
   }
-  return d_m;
+  return 4.0 * d_m;
 }
 
 /// Whether neighbouring pixels p and q lie on one continuous surface (MeshOptions).

@@ -35,7 +35,8 @@ namespace mr::render {
 /// triangles 2N + 2f and 2N + 2f + 1 of the f-th fanned pixel are (m, c00, c10) and
 /// (m, c01, c00). In every surface triangle cross(v1 - v0, v2 - v0) points towards the camera.
 /// Triangles after the first 2N + 2F (surface_triangle_count) are the optional silhouette
-/// extrusions (MeshOptions::thickness_m; their winding is unspecified).
+/// extrusions (MeshOptions::thickness_m; their winding is unspecified), and after those any
+/// blockers the photo does not show (render/blockers.h).
 struct TriangleMesh {
   std::vector<float> positions;            ///< x, y, z per vertex, world metres
   std::vector<std::uint32_t> indices;      ///< 3 vertex indices per triangle

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <vector>
 
 #include "render/embree_scene.h"
@@ -387,6 +388,50 @@ class Core {
     return s;
   }
 
+  // Where a surface pixel's shadow and AO rays start: its point moved onto the occluder mesh
+  // along the view ray (when the mesh is coarse), then 1 mm + 1e-3 of its distance off along
+  // its normal. A coarse mesh (draft: the nearest surface of each mesh_step x mesh_step block,
+  // render/depth_downsample.h) lies up to a fine pixel's depth step in front of the pixel's own
+  // surface: on flat ground that is about (mesh_step - 1) / (2 f) of the distance (f in pixels)
+  // above it, as much as the normal offset, so 41 % of a sunlit ground shadowed
+  // itself at draft before. Moving onto the mesh first makes the offset count from the surface
+  // the rays are traced against. The search along the view ray reaches back only by the largest
+  // depth change to a neighbour within mesh_step pixels that continues the surface (within
+  // 30 %, or on the pixel's plane), so a foreground object widened by the coarse mesh never
+  // captures the point.
+  Vec3d shadow_origin(int x, int y, double distance, const Vec3d& n) const {
+    const Vec3d w = ray(x, y);
+    double t_surface = distance;
+    if (in_.occluders && plan_.mesh_step > 1) {
+      const int r = plan_.mesh_step;
+      const int w_px = in_.distance_m.width, h_px = in_.distance_m.height;
+      // How far the surface's depth changes within mesh_step pixels (either way: the last row
+      // has no nearer neighbour, yet its block's coarse surface lies as far in front of it).
+      // A neighbour continues the surface when within 30 % or where the pixel's plane predicts
+      // it within 5 % (near the horizon, ground rows differ by more than 30 %).
+      const double plane_offset = dot(w, n) * distance;  // dot(x0 - camera, n)
+      double change = 0;
+      for (int j = std::max(0, y - r); j <= std::min(h_px - 1, y + r); ++j)
+        for (int i = std::max(0, x - r); i <= std::min(w_px - 1, x + r); ++i) {
+          const double d = in_.distance_m.at(i, j, 0);
+          if (!std::isfinite(d)) continue;
+          bool same = std::fabs(d - distance) <= 0.3 * distance;
+          if (!same) {
+            const double den = dot(ray(i, j), n);
+            same = den < 0 && std::fabs(plane_offset / den - d) <= 0.05 * d;
+          }
+          if (same) change = std::max(change, std::fabs(d - distance));
+        }
+      const double t_lo = std::max(0.0, (distance - change) * (1 - 2e-3) - 1e-3);
+      const double t_hi = distance * (1 + 1e-4) + 1e-4;
+      rays_.local() += 1;
+      const double hit = in_.occluders->intersect_distance(f3(origin_), f3(w), float(t_lo),
+                                                            float(t_hi));
+      if (std::isfinite(hit)) t_surface = std::min(hit, distance);
+    }
+    return add(add(origin_, w, t_surface), n, 1e-3 + 1e-3 * distance);
+  }
+
   // Ambient occlusion at a surface pixel (1 when there is nothing to occlude or no need).
   double ambient_occlusion_at(int x, int y) const {
     if (!in_.occluders || plan_.ao_rays <= 0 || in_.normals.data == nullptr) return 1.0;
@@ -394,7 +439,7 @@ class Core {
     if (!std::isfinite(distance)) return 1.0;
     const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
     if (dot(n, n) < 0.5) return 1.0;
-    const Vec3d x0 = add(add(origin_, ray(x, y), distance), n, 1e-3 + 1e-3 * distance);
+    const Vec3d x0 = shadow_origin(x, y, distance, n);
     rays_.local() += std::size_t(plan_.ao_rays);
     return ambient_occlusion(*in_.occluders, f3(x0), f3(n), plan_.ao_rays,
                              float(std::max(1.0, 0.25 * distance)),
@@ -410,7 +455,7 @@ class Core {
     const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
     if (dot(n, n) < 0.5 || dot(n, sun_dir_) <= 0) return -1;
     if (!in_.occluders) return 1;
-    const Vec3d xo = add(add(origin_, ray(x, y), distance), n, 1e-3 + 1e-3 * distance);
+    const Vec3d xo = shadow_origin(x, y, distance, n);
     const int count = sun_tan_radius_ > 0 ? plan_.sun_surface_rays : 1;
     rays_.local() += std::size_t(count);
     int seen = 0;
@@ -443,6 +488,66 @@ class Core {
     return double(seen) / count;
   }
 
+  // Whether the photo shows a sun-facing surface pixel that the mesh calls (partly) shadowed as
+  // sunlit (issue 13, section 3). The model predicts the contrast between the sunlit and the
+  // shadowed parts of one surface, k = (E cos + pi L_sky AO) / (pi L_sky AO). The pixel's
+  // neighbours within 3 pixels that lie on its plane and face the same way give the photo's two
+  // levels: the median of those the mesh calls fully sunlit and of those it calls fully
+  // shadowed. The pixel counts as sunlit when it is at least sqrt(k) times brighter than the
+  // shadowed level (so inside a real shadow, where the mesh's edge may have put a few sunlit
+  // neighbours that the photo shows dark, it stays shadowed) and no more than sqrt(k) times
+  // darker than the sunlit level. Each level needs 3 neighbours; with neither (deep inside a
+  // shadow there are no sunlit ones: the shadowed level decides) the mesh decides, as it does
+  // where lit and shadowed would look alike (k < 1.25).
+  bool photo_shows_sunlit(int x, int y, double ao, const std::vector<float>& disk) const {
+    if (in_.photo.data == nullptr || !scene_.lighting.sun) return false;
+    const double distance = in_.distance_m.at(x, y, 0);
+    const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
+    const double cos_i = dot(n, sun_dir_);
+    if (!std::isfinite(distance) || cos_i <= 0) return false;
+    auto luminance = [](const float* rgb) {
+      return 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+    };
+    const double e = luminance(scene_.lighting.sun->irradiance.data()) * cos_i;
+    const double amb = kPi * luminance(in_.sky_radiance.data()) * ao;
+    const double k = amb > 0 ? std::min(100.0, (e + amb) / amb) : 100.0;
+    if (k < 1.25) return false;
+    const Vec3d xp = add(origin_, ray(x, y), distance);
+    constexpr int kRadius = 3;
+    constexpr int kMax = (2 * kRadius + 1) * (2 * kRadius + 1);
+    double lit[kMax], dark[kMax];
+    int n_lit = 0, n_dark = 0;
+    const int w = in_.distance_m.width, h = in_.distance_m.height;
+    for (int j = std::max(0, y - kRadius); j <= std::min(h - 1, y + kRadius); ++j)
+      for (int i = std::max(0, x - kRadius); i <= std::min(w - 1, x + kRadius); ++i) {
+        if (i == x && j == y) continue;
+        const float v = disk[std::size_t(j) * w + i];
+        if (v != 1.0f && v != 0.0f) continue;
+        const double dn = in_.distance_m.at(i, j, 0);
+        if (!std::isfinite(dn)) continue;
+        const Vec3d nn = {in_.normals.at(i, j, 0), in_.normals.at(i, j, 1),
+                          in_.normals.at(i, j, 2)};
+        if (dot(nn, n) < 0.9) continue;
+        const Vec3d xn = add(origin_, ray(i, j), dn);
+        if (std::fabs(dot(sub(xn, xp), n)) > 0.02 * distance) continue;
+        (v == 1.0f ? lit[n_lit++] : dark[n_dark++]) = luminance(in_.photo.pixel(i, j));
+      }
+    auto median = [](double* v, int count) {
+      std::nth_element(v, v + count / 2, v + count);
+      return v[count / 2];
+    };
+    const double here = luminance(in_.photo.pixel(x, y));
+    const double root_k = std::sqrt(k);
+    if (n_lit < 3 && n_dark < 3) return false;
+    if (n_dark >= 3 && !(here >= root_k * median(dark, n_dark))) return false;
+    if (n_lit >= 3 && !(here >= median(lit, n_lit) / root_k)) return false;
+    return here > 0;
+  }
+  bool photo_fallback() const {
+    return in_.photo.data != nullptr && scene_.lighting.sun && in_.occluders &&
+           in_.normals.data != nullptr;
+  }
+
   // T's surface factor S (DESIGN.md section 3) at a surface pixel; writes the sun visibility.
   // known_sun_disk: the pixel's sun_disk_visibility when already known (interpolation), else -1.
   void surface_term(int x, int y, double ao, double known_sun_disk, double S[3],
@@ -456,7 +561,12 @@ class Core {
     if (dot(n, n) < 0.5) return;
     const Medium& m = scene_.medium;
     const Vec3d x0 = add(origin_, ray(x, y), distance);
-    const Vec3d xo = add(x0, n, 1e-3 + 1e-3 * distance);  // off the surface for shadow rays
+    // Lamp shadow rays leave from here (traced only where the pixel has a lamp in front of it).
+    std::optional<Vec3d> xo_cache;
+    auto xo = [&] {
+      if (!xo_cache) xo_cache = shadow_origin(x, y, distance, n);
+      return *xo_cache;
+    };
     double direct[3] = {0, 0, 0}, direct_fogged[3] = {0, 0, 0};
     std::size_t rays = 0;
     if (scene_.lighting.sun) {
@@ -487,7 +597,7 @@ class Core {
       if (spot <= 0) continue;
       if (in_.occluders) {
         ++rays;
-        if (in_.occluders->occluded(f3(xo), f3(l), 0.0f, float(r * (1 - 1e-4)))) continue;
+        if (in_.occluders->occluded(f3(xo()), f3(l), 0.0f, float(r * (1 - 1e-4)))) continue;
       }
       const double od_lamp =
           scene_.render.light_path_attenuation ? RayDensity(m, x0, l).optical_depth(0, r) : 0.0;
@@ -744,6 +854,22 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   exact_count += exact_more.combine(std::plus<>());
 
   // Pass 3: per pixel, the transmittance map T = tau(camera, surface) * S(surface) and the AOVs.
+  // With the photo, every surface pixel's sun visibility first (the photo fallback compares a
+  // pixel with its neighbours', see Core::photo_shows_sunlit).
+  const bool photo_fallback = core.photo_fallback();
+  std::vector<float> disk;
+  if (photo_fallback) {
+    disk.assign(std::size_t(w) * h, -1.0f);
+    tbb::parallel_for(0, h, [&](int y) {
+      if (stop()) return;
+      for (int x = 0; x < w; ++x) {
+        const PixelSample& s = sparse.at(x, y);
+        disk[std::size_t(y) * w + x] =
+            float(s.sun_disk >= 0 ? s.sun_disk : core.sun_disk_visibility(x, y));
+      }
+    });
+    throw_if_stopped();
+  }
   const bool closed_form_camera = !core.has_noise();
   tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y < rows.end(); ++y) {
@@ -754,7 +880,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         if (closed_form_camera) core.camera_optical_depth(x, y, od);
         double S[3];
         float sun_visible = 1.0f;
-        core.surface_term(x, y, s.ao, s.sun_disk, S, &sun_visible);
+        double sun_disk = s.sun_disk;
+        if (photo_fallback) {
+          sun_disk = disk[std::size_t(y) * w + x];
+          if (sun_disk >= 0 && sun_disk < 1 && core.photo_shows_sunlit(x, y, s.ao, disk))
+            sun_disk = 1;
+        }
+        core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible);
         for (int c = 0; c < 3; ++c) {
           out.transmittance.at(x, y, c) = float(std::exp(-od[c]) * S[c]);
           out.inscatter.at(x, y, c) = float(s.inscatter[c]);

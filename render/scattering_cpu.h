@@ -37,6 +37,12 @@ struct CoreInputs {
   const FogScene* scene = nullptr;
   ConstImageView distance_m;          ///< 1 channel, +inf = sky
   ConstImageView normals;             ///< 3 channels, world; may be empty when no sun/lamps
+  /// The photo (scene-linear, >= 3 channels, the distance map's size), or empty. Where the
+  /// occluder mesh says a sun-facing surface is shadowed but the photo shows it as bright as its
+  /// sunlit neighbours on the same plane (silhouettes, shadow edges the mesh misplaces), the
+  /// surface term takes the sun as unshadowed (S from the light path's transmittance) instead of
+  /// S = 1. Empty: the mesh alone decides.
+  ConstImageView photo;
   const OccluderScene* occluders = nullptr;  ///< nullptr: nothing casts shadows
   std::array<float, 3> sky_radiance{};
   /// Checked between rows of every pass (a relaxed load per row); requested: the core throws

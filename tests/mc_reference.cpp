@@ -212,6 +212,43 @@ bool Geometry::occluded(const Vec3& o, const Vec3& d, double t_max) const {
   return false;
 }
 
+Vec3 Geometry::first_hit_normal(const Vec3& o, const Vec3& d) const {
+  double best = kInfinity;
+  Vec3 n{0, 0, 0};
+  if (ground && d.y != 0) {
+    const double t = -o.y / d.y;
+    if (t > kRayEpsilon && t < best) best = t, n = {0, o.y >= 0 ? 1.0 : -1.0, 0};
+  }
+  for (const Box& b : boxes) {
+    double t0, t1;
+    if (!box_span(b, o, d, t0, t1)) continue;
+    const double t = t0 > kRayEpsilon ? t0 : t1;
+    if (!(t > kRayEpsilon && t < best)) continue;
+    best = t;
+    // The face the hit lies on: the coordinate closest to one of the box's bounds.
+    const Vec3 p = at(o, d, t);
+    const double ps[3] = {p.x, p.y, p.z};
+    const double mins[3] = {b.min.x, b.min.y, b.min.z}, maxs[3] = {b.max.x, b.max.y, b.max.z};
+    double closest = kInfinity;
+    for (int a = 0; a < 3; ++a)
+      for (int side = 0; side < 2; ++side) {
+        const double gap = std::fabs(ps[a] - (side ? maxs[a] : mins[a]));
+        if (gap < closest) {
+          closest = gap;
+          double v[3] = {0, 0, 0};
+          v[a] = side ? 1 : -1;
+          n = {v[0], v[1], v[2]};
+        }
+      }
+  }
+  for (const Quad& q : quads) {
+    const double t = quad_hit(q, o, d);
+    if (t > kRayEpsilon && t < best) best = t, n = normalized(cross(q.edge_u, q.edge_v));
+  }
+  if (dot(n, d) > 0) n = -1.0 * n;
+  return n;
+}
+
 Image distance_map(const Camera& camera, const CameraPose& pose, const Geometry& geometry) {
   Image out(camera.width, camera.height, 1, {"Z"});
   for (int y = 0; y < camera.height; ++y)
@@ -533,6 +570,82 @@ RayEstimate estimate_ray(const Vec3& w_in, double distance, const FogScene& scen
     out.standard_error[c] = std::sqrt(var / (double(B) * (B - 1)));
   }
   return out;
+}
+
+SurfaceResult surface_reference(const Image& distance_m, const Camera& camera,
+                                const FogScene& scene, const Geometry& geometry, int rays) {
+  if (!scene.lighting.lamps.empty())
+    throw std::invalid_argument("mc surface reference: lamps are not supported");
+  if (!scene.lighting.sky_radiance)
+    throw std::invalid_argument("mc surface reference: lighting.sky_radiance must be given");
+  const int W = camera.width, H = camera.height;
+  SurfaceResult res{Image(W, H, 3), Image(W, H, 3), Image(W, H, 3), Image(W, H, 1)};
+  const Medium& m = scene.medium;
+  const Rgb& sky = *scene.lighting.sky_radiance;
+  tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& range) {
+    for (int y = range.begin(); y < range.end(); ++y)
+      for (int x = 0; x < W; ++x) {
+        const Vec3 o = scene.pose.position_m;
+        const Vec3 w = scene.pose.ray_direction(camera, x, y);
+        const double d = distance_m.at(x, y, 0);
+        if (!std::isfinite(d)) {
+          const RayEstimate e = estimate_ray(w, d, scene, geometry, Settings{2, 1, 1}, 0);
+          for (int c = 0; c < 3; ++c) res.transmittance.at(x, y, c) = float(e.transmittance[c]);
+          continue;
+        }
+        const Vec3 x0 = at(o, w, d);
+        const Vec3 n = geometry.first_hit_normal(o, w);
+        // Off the surface by a hair, so the point's own surface does not block its rays.
+        const Vec3 xo = x0 + (1e-6 * (1 + d)) * n;
+        Rng rng(mix_seed(0x5eed, std::uint64_t(y) * W + x, 17));
+        auto u = [&rng] { return rng.uniform(); };
+        double visible = 0, cos_i = 0;
+        if (scene.lighting.sun) {
+          const Vec3 l = normalized(scene.lighting.sun->direction_to_sun);
+          cos_i = dot(n, l);
+          if (cos_i > 0) {
+            const double radius = scene.lighting.sun->angular_radius_deg * kPi / 180;
+            int seen = 0;
+            for (int i = 0; i < rays; ++i) {
+              const Vec3 dir = sample_cone(l, radius, (i + u()) / rays, u());
+              seen += dot(dir, n) > 0 && !geometry.occluded(xo, dir);
+            }
+            visible = double(seen) / rays;
+          }
+        }
+        // Ambient occlusion: cosine-weighted directions about n, up to max(1, d / 4).
+        const Vec3 helper = std::fabs(n.x) < 0.9 ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+        const Vec3 t1 = normalized(cross(n, helper)), t2 = cross(n, t1);
+        int open = 0;
+        for (int i = 0; i < rays; ++i) {
+          const double u1 = (i + u()) / rays, phi = 2 * kPi * u();
+          const double r = std::sqrt(u1), cz = std::sqrt(std::max(0.0, 1 - u1));
+          const Vec3 dir =
+              normalized((r * std::cos(phi)) * t1 + (r * std::sin(phi)) * t2 + cz * n);
+          open += !geometry.occluded(xo, dir, std::max(1.0, 0.25 * d));
+        }
+        const double ao = double(open) / rays;
+        const double view_od = density_integral(m, o, w, 0, d);
+        double sun_od = 0;
+        if (scene.lighting.sun && scene.render.light_path_attenuation)
+          sun_od = density_integral(m, x0, normalized(scene.lighting.sun->direction_to_sun), 0,
+                                    kInfinity);
+        res.sun_visibility.at(x, y, 0) = float(visible);
+        for (int c = 0; c < 3; ++c) {
+          const double direct =
+              scene.lighting.sun ? scene.lighting.sun->irradiance[c] * std::max(0.0, cos_i) * visible
+                                 : 0.0;
+          const double ambient = kPi * sky[c] * ao;
+          const double total = direct + ambient;
+          const double S =
+              total > 0 ? (direct * exp_neg(m.sigma_t_per_m[c], sun_od) + ambient) / total : 1.0;
+          res.transmittance.at(x, y, c) = float(exp_neg(m.sigma_t_per_m[c], view_od) * S);
+          res.direct.at(x, y, c) = float(direct);
+          res.ambient.at(x, y, c) = float(ambient);
+        }
+      }
+  });
+  return res;
 }
 
 Result render(const Image& distance_m, const Camera& camera, const FogScene& scene,

@@ -93,6 +93,9 @@ struct Geometry {
   double first_hit(const Vec3& o, const Vec3& d, double t_max = kInfinity) const;
   /// Whether anything lies on the unit ray o + t d for t in (0, t_max).
   bool occluded(const Vec3& o, const Vec3& d, double t_max = kInfinity) const;
+  /// The unit normal of the surface the unit ray o + t d first meets (facing the ray's origin),
+  /// or (0, 0, 0) if it meets none.
+  Vec3 first_hit_normal(const Vec3& o, const Vec3& d) const;
 };
 
 /// The distance map the core gets: each pixel-centre ray cast against `geometry`; sky = +inf.
@@ -152,5 +155,26 @@ struct Result {
 /// (scene.lighting.sky_radiance), else std::invalid_argument.
 Result render(const Image& distance_m, const Camera& camera, const FogScene& scene,
               const Geometry& geometry, const Settings& settings = {});
+
+/// The surface term of the transmittance map (DESIGN.md section 3, T = tau(o, x0) S) from the
+/// exact geometry, per surface pixel (pixel-centre ray, surface point x0 at the map's distance,
+/// normal n from the geometry):
+///   direct  = E_sun (n . l)+ V tau_sun-free,  V = fraction of `rays` directions uniform in the sun's
+///             disk (angular_radius_deg) not blocked;
+///   ambient = pi L_sky A,  A = fraction of `rays` cosine-weighted directions about n that travel
+///             max(1, d / 4) metres without meeting the geometry (the core's ambient occlusion);
+///   S       = (direct tau_sun(x0) + ambient) / (direct + ambient), tau_sun by quadrature (1 with
+///             no light-path attenuation); 1 where direct + ambient is 0;
+///   T       = tau(o, x0) S.
+/// Lamps are not supported (std::invalid_argument). Sky pixels: T = tau to the end of the
+/// march (as render()), direct = ambient = 0. Stratified (jittered) directions, deterministic.
+struct SurfaceResult {
+  Image transmittance;   ///< T (R,G,B)
+  Image direct;          ///< E_sun (n . l)+ V (R,G,B): the sun's share of the surface's light
+  Image ambient;         ///< pi L_sky A (R,G,B)
+  Image sun_visibility;  ///< V (1 channel; 0 facing away from the sun)
+};
+SurfaceResult surface_reference(const Image& distance_m, const Camera& camera,
+                                const FogScene& scene, const Geometry& geometry, int rays = 256);
 
 }  // namespace mr::mcref

@@ -255,7 +255,7 @@ TEST(SceneJson, RoundTripOfDefaultsAndUnboundedLayer) {
 
 TEST(SceneJson, WritesEveryKeyPrettyAndReadably) {
   const std::string text = scene_to_json(every_field_set());
-  EXPECT_EQ(text.rfind("{\n  \"format\": \"libmr-scene\",\n  \"version\": 2,\n", 0), 0u) << text;
+  EXPECT_EQ(text.rfind("{\n  \"format\": \"libmr-scene\",\n  \"version\": 3,\n", 0), 0u) << text;
   for (const char* key : {"camera_pose",
                           "position_m",
                           "yaw_deg",
@@ -575,9 +575,9 @@ TEST(SceneJson, BadEnumStrings) {
 }
 
 TEST(SceneJson, FormatAndVersion) {
-  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 3}"),
-                  "scene.json: /version: version 3 is newer than this libmr supports (it reads "
-                  "versions 1 to 2); upgrade libmr");
+  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 4}"),
+                  "scene.json: /version: version 4 is newer than this libmr supports (it reads "
+                  "versions 1 to 3); upgrade libmr");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 0}"),
                   "scene.json: /version: version 0 does not exist");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\"}"), "scene.json: /version: missing");
@@ -585,8 +585,8 @@ TEST(SceneJson, FormatAndVersion) {
   EXPECT_CONTAINS(parse_error("{\"format\": \"gltf\", \"version\": 1}"),
                   "scene.json: /format: expected \"libmr-scene\", found a string (\"gltf\")");
   // A newer document is refused for its version, not for the keys this libmr does not know.
-  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 4, \"depth\": {}}"),
-                  "/version: version 4 is newer");
+  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 5, \"depth\": {}}"),
+                  "/version: version 5 is newer");
 }
 
 // ---- the camera (format version 2) ----
@@ -600,7 +600,7 @@ TEST(SceneJson, CameraRoundTripsAndIsOptional) {
   FogScene s;
   s.camera = SceneCamera{1600, 1200, 1234.5678901234567, std::nullopt};
   const std::string text = scene_to_json(s);
-  EXPECT_CONTAINS(text, "\"version\": 2");
+  EXPECT_CONTAINS(text, "\"version\": 3");
   EXPECT_CONTAINS(text, "\"camera\": {");
   EXPECT_EQ(text.find("principal_point_px"), std::string::npos);  // the centre: left out
   const FogScene back = scene_from_json(text, "cam.json");

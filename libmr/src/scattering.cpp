@@ -15,6 +15,7 @@
 #include "photo/airlight.h"
 #include "photo/composite.h"
 #include "photo/illumination.h"
+#include "render/blockers.h"
 #include "render/depth_downsample.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
@@ -164,7 +165,10 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       if (scene.render.volumetric_shadows) {
         // The preset's mesh resolution (a coarse mesh builds and traces faster), unless the
         // image is too small to coarsen.
-        int mesh_step = render::march_plan(scene.render).mesh_step;
+        // The Vulkan backend rasterizes the mesh into shadow maps (cheap at any resolution):
+        // from the coarse draft mesh, whose surface lies up to a fine pixel's depth step in
+        // front of the ground, 23 % of a flat sunlit ground shadowed itself (issue 13).
+        int mesh_step = gpu ? 1 : render::march_plan(scene.render).mesh_step;
         if (w / mesh_step < 16 || h / mesh_step < 16) mesh_step = 1;
         render::TriangleMesh mesh;
         if (mesh_step > 1) {
@@ -175,6 +179,10 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         } else {
           mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose);
         }
+        // What the photo does not show: structures cut by the frame, the scene's skyline,
+        // polygons and canopy (the same mesh feeds both backends).
+        render::append_blockers(mesh, distance_m.view(), normals.view(), camera, scene.pose,
+                                scene.blockers);
         out.timings.mesh_s = seconds_since(t);
         occluder_mesh = std::move(mesh);
         throw_if_cancelled(cancel, kWhat);
@@ -187,6 +195,8 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     in.scene = &scene;
     in.distance_m = distance_m.view();
     if (!normals.empty()) in.normals = normals.view();
+    // The photo lets the surface term tell a misplaced mesh shadow from a real one (issue 13).
+    if (photo.channels() >= 3 && photo.width() == w && photo.height() == h) in.photo = photo.view();
     in.sky_radiance = out.sky_radiance;
     in.cancel = cancel;
     render::CoreOutputs core{out.transmittance.view(), out.inscatter.view(),

@@ -285,6 +285,72 @@ SceneCamera read_camera(const Json& j, const std::string& p, const Reader& r) {
   return c;
 }
 
+Blockers read_blockers(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(j, p, {"completion", "skyline", "polygons", "canopy"});
+  Blockers b;
+  if (const Json* c = member(j, "completion")) {
+    const std::string cp = p + "/completion";
+    r.object(*c, cp);
+    r.check_keys(*c, cp, {"enabled", "max_height_m", "max_extent_m", "prism_max_width_m"});
+    Blockers::Completion& k = b.completion;
+    if (const Json* v = member(*c, "enabled")) k.enabled = r.boolean(*v, cp + "/enabled");
+    if (const Json* v = member(*c, "max_height_m")) k.max_height_m = r.number(*v, cp + "/max_height_m");
+    if (const Json* v = member(*c, "max_extent_m")) k.max_extent_m = r.number(*v, cp + "/max_extent_m");
+    if (const Json* v = member(*c, "prism_max_width_m"))
+      k.prism_max_width_m = r.number(*v, cp + "/prism_max_width_m");
+  }
+  if (const Json* sk = member(j, "skyline"); sk && !sk->is_null()) {
+    const std::string sp = p + "/skyline";
+    r.object(*sk, sp);
+    r.check_keys(*sk, sp, {"distance_m", "samples"});
+    Blockers::Skyline line;
+    if (const Json* v = member(*sk, "distance_m")) line.distance_m = r.number(*v, sp + "/distance_m");
+    const Json* samples = member(*sk, "samples");
+    if (!samples) r.fail(sp + "/samples", "missing; give [[azimuth_deg, height_m], ...]");
+    if (!samples->is_array()) r.expected(sp + "/samples", "an array of [azimuth_deg, height_m]", *samples);
+    for (std::size_t i = 0; i < samples->size(); ++i) {
+      const std::string ip = sp + "/samples/" + std::to_string(i);
+      const Json& e = (*samples)[i];
+      if (!e.is_array() || e.size() != 2) r.expected(ip, "an array of 2 numbers [azimuth_deg, height_m]", e);
+      line.samples.push_back({r.number(e[0], ip + "/0"), r.number(e[1], ip + "/1")});
+    }
+    b.skyline = line;
+  }
+  if (const Json* polys = member(j, "polygons")) {
+    const std::string pp = p + "/polygons";
+    if (!polys->is_array()) r.expected(pp, "an array of polygon objects", *polys);
+    for (std::size_t i = 0; i < polys->size(); ++i) {
+      const std::string ip = pp + "/" + std::to_string(i);
+      const Json& e = (*polys)[i];
+      r.object(e, ip);
+      r.check_keys(e, ip, {"corners_m"});
+      const Json* corners = member(e, "corners_m");
+      if (!corners) r.fail(ip + "/corners_m", "missing; give [[x, y, z], ...] (3 or more)");
+      if (!corners->is_array()) r.expected(ip + "/corners_m", "an array of [x, y, z]", *corners);
+      Blockers::Polygon poly;
+      for (std::size_t k = 0; k < corners->size(); ++k)
+        poly.corners_m.push_back(r.vec3((*corners)[k], ip + "/corners_m/" + std::to_string(k)));
+      b.polygons.push_back(std::move(poly));
+    }
+  }
+  if (const Json* c = member(j, "canopy"); c && !c->is_null()) {
+    const std::string cp = p + "/canopy";
+    r.object(*c, cp);
+    r.check_keys(*c, cp, {"height_m", "gap_fraction", "radius_m", "cell_m", "seed"});
+    Blockers::Canopy k;
+    if (const Json* v = member(*c, "height_m")) k.height_m = r.number(*v, cp + "/height_m");
+    if (const Json* v = member(*c, "gap_fraction")) k.gap_fraction = r.number(*v, cp + "/gap_fraction");
+    if (const Json* v = member(*c, "radius_m")) k.radius_m = r.number(*v, cp + "/radius_m");
+    if (const Json* v = member(*c, "cell_m")) k.cell_m = r.number(*v, cp + "/cell_m");
+    if (const Json* v = member(*c, "seed"))
+      k.seed = static_cast<std::uint32_t>(
+          r.integer(*v, cp + "/seed", 0, std::numeric_limits<std::uint32_t>::max()));
+    b.canopy = k;
+  }
+  return b;
+}
+
 FogScene read_document(const Json& doc, const Reader& r) {
   if (!doc.is_object())
     r.fail("", "expected a JSON object at the top level, found " + describe(doc));
@@ -312,8 +378,18 @@ FogScene read_document(const Json& doc, const Reader& r) {
            "version " + std::to_string(v) + " does not exist; this libmr reads " + supported);
 
   r.check_keys(doc, "",
-               {"format", "version", "camera_pose", "medium", "lighting", "render", "camera"});
+               {"format", "version", "camera_pose", "medium", "lighting", "render", "camera",
+                "blockers"});
   FogScene s;
+  // Completing structures cut by the frame came with version 3; older documents keep rendering
+  // as they did.
+  if (v < 3) s.blockers.completion.enabled = false;
+  if (const Json* j = member(doc, "blockers")) {
+    if (v < 3)
+      r.fail("/blockers", "blockers are part of the format from version 3 on; this document is "
+                          "version " + std::to_string(v));
+    s.blockers = read_blockers(*j, "/blockers", r);
+  }
   if (const Json* j = member(doc, "camera_pose")) s.pose = read_pose(*j, "/camera_pose", r);
   if (const Json* j = member(doc, "medium")) s.medium = read_medium(*j, "/medium", r);
   if (const Json* j = member(doc, "lighting")) s.lighting = read_lighting(*j, "/lighting", r);
@@ -468,6 +544,34 @@ Json to_document(const FogScene& s) {
           Json::array({(*s.camera->principal_point_px)[0], (*s.camera->principal_point_px)[1]});
     doc["camera"] = std::move(camera);
   }
+  const Blockers& b = s.blockers;
+  Json blockers = Json::object();
+  blockers["completion"] = Json{{"enabled", b.completion.enabled},
+                                {"max_height_m", b.completion.max_height_m},
+                                {"max_extent_m", b.completion.max_extent_m},
+                                {"prism_max_width_m", b.completion.prism_max_width_m}};
+  if (b.skyline) {
+    Json samples = Json::array();
+    for (const Blockers::SkylineSample& k : b.skyline->samples)
+      samples.push_back(Json::array({k.azimuth_deg, k.height_m}));
+    blockers["skyline"] = Json{{"distance_m", b.skyline->distance_m}, {"samples", std::move(samples)}};
+  }
+  if (!b.polygons.empty()) {
+    Json polys = Json::array();
+    for (const Blockers::Polygon& poly : b.polygons) {
+      Json corners = Json::array();
+      for (const Vec3& c : poly.corners_m) corners.push_back(vec3_json(c));
+      polys.push_back(Json{{"corners_m", std::move(corners)}});
+    }
+    blockers["polygons"] = std::move(polys);
+  }
+  if (b.canopy)
+    blockers["canopy"] = Json{{"height_m", b.canopy->height_m},
+                              {"gap_fraction", b.canopy->gap_fraction},
+                              {"radius_m", b.canopy->radius_m},
+                              {"cell_m", b.canopy->cell_m},
+                              {"seed", b.canopy->seed}};
+  doc["blockers"] = std::move(blockers);
   return doc;
 }
 

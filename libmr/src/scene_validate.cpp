@@ -150,6 +150,60 @@ void validate_render(const RenderSettings& r) {
     fail("render.threads", std::to_string(r.threads), "must be >= 0 (0: all cores)");
 }
 
+// Bounds that keep the added geometry to a size the BVH builds in well under a second.
+constexpr double kMaxBlockerExtentM = 10e3;
+constexpr double kMaxCanopyCells = 4e6;  // (radius / cell)^2 * 4
+constexpr std::size_t kMaxSkylineSamples = 100000;
+constexpr std::size_t kMaxPolygonCorners = 100000;
+
+void validate_blockers(const Blockers& b) {
+  const Blockers::Completion& c = b.completion;
+  if (!(std::isfinite(c.max_height_m) && c.max_height_m > 0 && c.max_height_m <= kMaxBlockerExtentM))
+    fail("blockers.completion.max_height_m", show(c.max_height_m),
+         "must be in (0, " + show(kMaxBlockerExtentM) + "] metres");
+  if (!(std::isfinite(c.max_extent_m) && c.max_extent_m > 0 && c.max_extent_m <= kMaxBlockerExtentM))
+    fail("blockers.completion.max_extent_m", show(c.max_extent_m),
+         "must be in (0, " + show(kMaxBlockerExtentM) + "] metres");
+  closed("blockers.completion.prism_max_width_m", c.prism_max_width_m, 0, kMaxBlockerExtentM);
+  if (b.skyline) {
+    const Blockers::Skyline& k = *b.skyline;
+    if (!(std::isfinite(k.distance_m) && k.distance_m > 0 && k.distance_m <= kMaxBlockerExtentM))
+      fail("blockers.skyline.distance_m", show(k.distance_m),
+           "must be in (0, " + show(kMaxBlockerExtentM) + "] metres");
+    if (k.samples.size() < 2 || k.samples.size() > kMaxSkylineSamples)
+      fail("blockers.skyline.samples", std::to_string(k.samples.size()) + " samples",
+           "need 2 to " + std::to_string(kMaxSkylineSamples));
+    for (std::size_t i = 0; i < k.samples.size(); ++i) {
+      const std::string p = "blockers.skyline.samples[" + std::to_string(i) + "]";
+      closed(p + ".azimuth_deg", k.samples[i].azimuth_deg, -720, 720);
+      closed(p + ".height_m", k.samples[i].height_m, 0, kMaxBlockerExtentM);
+    }
+  }
+  for (std::size_t i = 0; i < b.polygons.size(); ++i) {
+    const std::string p = "blockers.polygons[" + std::to_string(i) + "].corners_m";
+    const auto& corners = b.polygons[i].corners_m;
+    if (corners.size() < 3 || corners.size() > kMaxPolygonCorners)
+      fail(p, std::to_string(corners.size()) + " corners",
+           "need 3 to " + std::to_string(kMaxPolygonCorners));
+    for (std::size_t k = 0; k < corners.size(); ++k)
+      finite_vec(p + "[" + std::to_string(k) + "]", corners[k]);
+  }
+  if (b.canopy) {
+    const Blockers::Canopy& c2 = *b.canopy;
+    if (!(std::isfinite(c2.height_m) && c2.height_m > 0 && c2.height_m <= kMaxBlockerExtentM))
+      fail("blockers.canopy.height_m", show(c2.height_m),
+           "must be in (0, " + show(kMaxBlockerExtentM) + "] metres");
+    closed("blockers.canopy.gap_fraction", c2.gap_fraction, 0, 1);
+    positive("blockers.canopy.radius_m", c2.radius_m);
+    positive("blockers.canopy.cell_m", c2.cell_m);
+    const double cells = 4 * (c2.radius_m / c2.cell_m) * (c2.radius_m / c2.cell_m);
+    if (!(cells <= kMaxCanopyCells))
+      fail("blockers.canopy.cell_m", show(c2.cell_m),
+           "too small for radius_m = " + show(c2.radius_m) + ": at most " +
+               show(kMaxCanopyCells) + " cells (4 (radius / cell)^2)");
+  }
+}
+
 }  // namespace
 
 void validate_scene(const FogScene& scene) {
@@ -157,6 +211,7 @@ void validate_scene(const FogScene& scene) {
   validate_medium(scene.medium);
   validate_lighting(scene.lighting);
   validate_render(scene.render);
+  validate_blockers(scene.blockers);
 }
 
 }  // namespace mr

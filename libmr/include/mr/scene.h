@@ -141,6 +141,55 @@ struct SceneCamera {
   std::optional<std::array<double, 2>> principal_point_px;
 };
 
+/// Geometry that shadows the scene but that the photo does not show (docs/scene.md,
+/// "blockers"): the occluder mesh is what the photo shows, so a colonnade or a facade cut by the
+/// top of the photo, a wall beside the frame or a canopy overhead would otherwise let full
+/// sunlight into the fog they shade. All of it casts shadows only (it is never seen). Heights
+/// are world y (the ground at 0), azimuths as for the sun (0 = +Z, 90 = +X).
+struct Blockers {
+  /// Structures cut by the frame's top and side edges, continued beyond the frame along their
+  /// own plane: vertical ones straight up to a height estimated from the tops of vertical
+  /// structures the photo shows at a similar distance, else to max_height_m; other surfaces
+  /// cut by the top, and everything cut by a side edge except floors, by up to max_extent_m.
+  /// Structures narrower than prism_max_width_m at the frame's top (pillars, trunks) become
+  /// prisms as deep as they are wide, from their visible foot up.
+  struct Completion {
+    bool enabled = true;
+    double max_height_m = 30;      ///< > 0, world y
+    double max_extent_m = 30;      ///< > 0, metres along the surface beyond the frame
+    double prism_max_width_m = 3;  ///< >= 0; 0: no prisms
+  } completion;
+  /// A skyline above the frame: a vertical wall standing on the ground, distance_m from the
+  /// camera (horizontally), whose top is at height_m at each azimuth, linear in between (the
+  /// samples sorted by azimuth; the wall closes around when they span 360 degrees).
+  struct SkylineSample {
+    double azimuth_deg = 0;
+    double height_m = 0;  ///< >= 0
+  };
+  struct Skyline {
+    double distance_m = 50;  ///< > 0
+    std::vector<SkylineSample> samples;  ///< at least 2
+  };
+  std::optional<Skyline> skyline;
+  /// An off-frame wall or tree line: a planar convex polygon in the world (3 or more corners,
+  /// in order around it).
+  struct Polygon {
+    std::vector<Vec3> corners_m;
+  };
+  std::vector<Polygon> polygons;
+  /// A canopy overhead: a horizontal layer at height_m over a disk of radius_m around the
+  /// camera, made of cells of cell_m x cell_m of which a fraction gap_fraction (chosen
+  /// deterministically by the seed) are gaps that let the sun through.
+  struct Canopy {
+    double height_m = 8;        ///< > 0
+    double gap_fraction = 0.3;  ///< in [0, 1]
+    double radius_m = 30;       ///< > 0
+    double cell_m = 1;          ///< > 0
+    std::uint32_t seed = 1;
+  };
+  std::optional<Canopy> canopy;
+};
+
 /// A whole fog scene (the JSON scene document, docs/scene.md, holds the same).
 struct FogScene {
   CameraPose pose;
@@ -150,6 +199,8 @@ struct FogScene {
   /// The camera the scene was estimated or rendered for; nullopt: none recorded (the photo's
   /// EXIF or a default then decides, as before).
   std::optional<SceneCamera> camera;
+  /// Shadow casters the photo does not show (completion of structures cut by the frame on).
+  Blockers blockers;
 };
 
 }  // namespace mr

@@ -20,8 +20,10 @@ namespace mr {
 inline constexpr const char* kSceneFormatName = "libmr-scene";
 /// The newest document version this libmr reads and the one it writes. Readers accept every
 /// version from 1 up to this one. Version 2 added the optional "camera" (the rest of the
-/// format, defaults included, is version 1's).
-inline constexpr int kSceneFormatVersion = 2;
+/// format, defaults included, is version 1's). Version 3 added "blockers" (shadow casters the
+/// photo does not show) with the completion of structures cut by the frame on by default;
+/// documents of versions 1 and 2 read with it off, so they render as before.
+inline constexpr int kSceneFormatVersion = 3;
 
 /// Parses a scene document. `source_name` (usually the file name) starts every error message.
 /// The result has passed validate_scene.
