@@ -24,6 +24,7 @@
 #include "mr/error.h"
 #include "mr/scattering.h"
 #include "oiio_bridge.h"
+#include "oiio_formats.h"
 #include "photo/composite.h"
 #include "render/medium.h"
 
@@ -31,51 +32,14 @@ namespace mr {
 
 namespace {
 
+using detail::automatic_pixel_type;
+using detail::drop_encoding_attributes;
+using detail::format_supports;
+using detail::to_oiio;
+
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 bool is_integer(PixelType t) { return t == PixelType::uint8 || t == PixelType::uint16; }
-
-OIIO::TypeDesc to_oiio(PixelType t) {
-  switch (t) {
-    case PixelType::uint8: return OIIO::TypeDesc::UINT8;
-    case PixelType::uint16: return OIIO::TypeDesc::UINT16;
-    case PixelType::half: return OIIO::TypeDesc::HALF;
-    default: return OIIO::TypeDesc::FLOAT;
-  }
-}
-
-// As write_image (io.cpp): pixel types each writer stores without silently converting.
-bool format_supports(const std::string& format, PixelType t) {
-  static const std::map<std::string, std::set<PixelType>> kSupported = {
-      {"jpeg", {PixelType::uint8}},
-      {"bmp", {PixelType::uint8}},
-      {"targa", {PixelType::uint8}},
-      {"webp", {PixelType::uint8}},
-      {"png", {PixelType::uint8, PixelType::uint16}},
-      {"openexr", {PixelType::half, PixelType::float32}},
-      {"hdr", {PixelType::float32}},
-      {"pnm", {PixelType::uint8, PixelType::uint16, PixelType::float32}},
-  };
-  auto it = kSupported.find(format);
-  return it == kSupported.end() || it->second.count(t) > 0;
-}
-
-PixelType automatic_pixel_type(const std::string& format) {
-  if (format == "openexr" || format == "hdr") return PixelType::float32;
-  if (format == "tiff") return PixelType::uint16;
-  return PixelType::uint8;
-}
-
-// As io.cpp: attributes that describe the input file's encoding, not the picture.
-void drop_encoding_attributes(OIIO::ParamValueList& attrs) {
-  for (const char* name : {"oiio:BitsPerSample", "oiio:ColorSpace", "oiio:Gamma", "Compression",
-                           "CompressionQuality", "oiio:UnassociatedAlpha", "tiff:RowsPerStrip",
-                           "tiff:Compression", "tiff:PhotometricInterpretation",
-                           "tiff:PlanarConfiguration", "png:compressionLevel", "ICCProfile",
-                           "jpeg:subsampling", "openexr:chunkCount", "openexr:lineOrder",
-                           "Exif:YCbCrSubsampling", "GPS:VersionID"})
-    attrs.remove(name);
-}
 
 int depth_channel(const OIIO::ImageSpec& spec) {
   for (const char* name : {"Z", "depth.Z", "Y", "depth.Y", "R"})

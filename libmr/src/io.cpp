@@ -17,10 +17,16 @@
 #include "atomic_file.h"
 #include "mr/error.h"
 #include "oiio_bridge.h"
+#include "oiio_formats.h"
 
 namespace mr {
 
 namespace {
+
+using detail::automatic_pixel_type;
+using detail::drop_encoding_attributes;
+using detail::format_supports;
+using detail::to_oiio;
 
 std::string lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -38,38 +44,8 @@ PixelType from_oiio(OIIO::TypeDesc t) {
   }
 }
 
-OIIO::TypeDesc to_oiio(PixelType t) {
-  switch (t) {
-    case PixelType::uint8: return OIIO::TypeDesc::UINT8;
-    case PixelType::uint16: return OIIO::TypeDesc::UINT16;
-    case PixelType::half: return OIIO::TypeDesc::HALF;
-    default: return OIIO::TypeDesc::FLOAT;
-  }
-}
 
 bool is_integer(PixelType t) { return t == PixelType::uint8 || t == PixelType::uint16; }
-
-// Pixel types each writer can store without silently converting. Formats not listed take all.
-bool format_supports(const std::string& format, PixelType t) {
-  static const std::map<std::string, std::set<PixelType>> kSupported = {
-      {"jpeg", {PixelType::uint8}},
-      {"bmp", {PixelType::uint8}},
-      {"targa", {PixelType::uint8}},
-      {"webp", {PixelType::uint8}},
-      {"png", {PixelType::uint8, PixelType::uint16}},
-      {"openexr", {PixelType::half, PixelType::float32}},
-      {"hdr", {PixelType::float32}},
-      {"pnm", {PixelType::uint8, PixelType::uint16, PixelType::float32}},
-  };
-  auto it = kSupported.find(format);
-  return it == kSupported.end() || it->second.count(t) > 0;
-}
-
-PixelType automatic_pixel_type(const std::string& format) {
-  if (format == "openexr" || format == "hdr") return PixelType::float32;
-  if (format == "tiff") return PixelType::uint16;
-  return PixelType::uint8;
-}
 
 const ColorConfig& config_or_default(const ColorConfig* given, ColorConfig& storage) {
   if (given) return *given;
@@ -171,18 +147,6 @@ Image reorient(const Image& stored, int orientation) {
   return out;
 }
 
-// Attributes that describe the input file's encoding, not the picture: never carried over.
-void drop_encoding_attributes(OIIO::ParamValueList& attrs) {
-  for (const char* name : {"oiio:BitsPerSample", "oiio:ColorSpace", "oiio:Gamma", "Compression",
-                           "CompressionQuality", "oiio:UnassociatedAlpha", "tiff:RowsPerStrip",
-                           "tiff:Compression", "tiff:PhotometricInterpretation",
-                           "tiff:PlanarConfiguration", "png:compressionLevel", "ICCProfile",
-                           "jpeg:subsampling", "openexr:chunkCount", "openexr:lineOrder",
-                           // OIIO 2.4 reads these EXIF tags but cannot write them back (it
-                           // prints a debug line); both describe the encoding or are constant.
-                           "Exif:YCbCrSubsampling", "GPS:VersionID"})
-    attrs.remove(name);
-}
 
 void write_buf(const std::filesystem::path& path, const OIIO::ImageSpec& spec,
                OIIO::TypeDesc data_type, const void* data, bool overwrite) {
