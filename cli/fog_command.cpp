@@ -483,6 +483,8 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
         throw Error(ErrorCode::invalid_argument, job.photo.string() + ": output " + out->string() +
                                                      " is an input file; refusing to overwrite it");
   }
+  // -v: the moment a photo's work starts (a test sends its signals on it).
+  if (o.verbose) report.info("note: " + job.photo.string() + ": rendering");
   if (const std::optional<Outcome> streamed = run_streamed(o, plan, job, report)) return *streamed;
   ReadOptions read;
   read.colorspace = o.input_colorspace;
@@ -513,7 +515,6 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
                    depth.invalid_pixels, depth.sky_threshold_pixels, depth.clamped_pixels);
   ScatteringLayers aovs;
-  if (o.verbose) report.info("note: " + job.photo.string() + ": rendering");
   const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs);
   // The Vulkan fall-back, once per run: a warning when a GPU failed; on a machine without a
   // usable GPU the CPU is the expected choice, a note in verbose mode only.

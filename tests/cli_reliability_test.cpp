@@ -500,10 +500,12 @@ TEST_F(CliReliability, CtrlCFinishesThePhotoInFlight) {
 // Defect: SIGTERM was ignored by a run blocked on its input. SIGTERM ends the run: the photo in
 // flight is finished (within a grace period), nothing else starts.
 TEST_F(CliReliability, SigtermEndsTheRun) {
-  photo_with_depth(in, "a", 320, 240);
-  photo_with_depth(in, "b", 320, 240);
-  photo_with_depth(in, "c", 320, 240);
-  const auto r = signal_when({"fog", in.string(), "-o", out.string(), "-j", "1", "-v"},
+  // A sun: sky-only photos stream in milliseconds, the run could end before the signal comes.
+  photo_with_depth(in, "a", 640, 480);
+  photo_with_depth(in, "b", 640, 480);
+  photo_with_depth(in, "c", 640, 480);
+  const auto r = signal_when({"fog", in.string(), "-o", out.string(), "-j", "1", "-v",
+                              "--sun-elevation", "20", "--sun-azimuth", "30", "--layer", "0,30"},
                              "a.png: rendering", SIGTERM);
   EXPECT_TRUE(r.exit_code == 130 || r.exit_code == 128 + SIGTERM) << r.exit_code << "\n" << r.output;
   EXPECT_FALSE(fs::exists(out / "c_fog.png")) << r.output;

@@ -308,6 +308,8 @@ TEST(FogStream, CommandLineMatchesTheFullFramePath) {
     c.scene.medium.sigma_t_per_m = {sigma, sigma, sigma};
     c.scene.render.backend = Backend::cpu;
     if (!auto_sky) c.scene.lighting.sky_radiance = Rgb{0.7f, 0.75f, 0.8f};
+    // mr fog's default for display-referred outputs: the highlight roll-off (mr/color.h).
+    c.write.colorspace = ColorConfig::builtin().display_colorspace();
     full_frame(c, dir / (auto_sky ? "full_auto.jpg" : "full.jpg"));
     expect_same_pixels(dir / (auto_sky ? "full_auto.jpg" : "full.jpg"), out / "leuven_fog.jpg");
   }
