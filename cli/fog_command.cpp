@@ -527,6 +527,26 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
         report.info("note: " + aovs.backend_notice);
     });
   }
+  // What the render guessed beyond the frame (issue 13): worth a look when a shaft seems wrong.
+  if (o.verbose)
+    for (const CompletedBlocker& b : aovs.completed_blockers) {
+      const char* edge = b.edge == CompletedBlocker::Edge::top    ? "top"
+                         : b.edge == CompletedBlocker::Edge::left ? "left"
+                                                                  : "right";
+      char text[256];
+      std::snprintf(text, sizeof text,
+                    "note: %s: a structure cut by the %s edge (pixels %d-%d) continued %s%s, "
+                    "confidence %.1f",
+                    job.photo.string().c_str(), edge, b.first_px, b.last_px,
+                    b.vertical ? "up" : "along its plane", b.prism ? " as a box" : "",
+                    b.confidence);
+      std::string line = text;
+      if (b.vertical) {
+        std::snprintf(text, sizeof text, " (to %.1f m)", b.top_m);
+        line.insert(line.find(", confidence"), text);
+      }
+      report.info(line);
+    }
   // Interrupted (Ctrl-C) while this photo rendered: it is finished and written all the same
   // (the README's promise); only photos not yet started are left.
 

@@ -157,7 +157,7 @@ class Builder {
   // edge; `corner_ray(k)`: the ray through the frame's edge between positions k - 1 and k (k in
   // 0..count); `outward`: the frustum side plane's outward normal.
   template <typename EdgePx, typename CornerRay, typename Inner>
-  void complete_edge(CompletedStructure::Edge edge, int count, EdgePx edge_px, CornerRay corner_ray,
+  void complete_edge(CompletedBlocker::Edge edge, int count, EdgePx edge_px, CornerRay corner_ray,
                      Inner inner_px, const V& outward) {
     std::vector<Px> px(static_cast<std::size_t>(count));
     std::vector<V> rays(static_cast<std::size_t>(count));
@@ -182,7 +182,7 @@ class Builder {
   }
 
   template <typename CornerRay, typename Inner>
-  void complete_run(CompletedStructure::Edge edge, int a, int b, const std::vector<Px>& px,
+  void complete_run(CompletedBlocker::Edge edge, int a, int b, const std::vector<Px>& px,
                     CornerRay corner_ray, Inner inner_px, const V& outward) {
     const int n = b - a + 1;
     std::vector<double> ny;
@@ -206,13 +206,13 @@ class Builder {
     }
     // A representative normal (the middle pixel's).
     const V normal = px[std::size_t((a + b) / 2)].n;
-    CompletedStructure s;
+    CompletedBlocker s;
     s.edge = edge;
-    s.first = a;
-    s.last = b;
+    s.first_px = a;
+    s.last_px = b;
     s.vertical = vertical;
     const double max_y = b_.completion.max_height_m;
-    if (edge == CompletedStructure::Edge::top && vertical) {
+    if (edge == CompletedBlocker::Edge::top && vertical) {
       double cut_y = -1e300, r_sum = 0;
       for (const V& p : outline) {
         cut_y = std::max(cut_y, p[1]);
@@ -239,13 +239,13 @@ class Builder {
         s.confidence -= 0.1;
         std::vector<V> normals;
         for (int k = a; k <= b; ++k) normals.push_back(px[std::size_t(k)].n);
-        prism(outline, normals, width, inner_px((a + b) / 2), top);
+        prism(outline, normals, inner_px((a + b) / 2), top);
       }
     } else {
       // Along the surface's plane, away from the frame: the in-plane direction perpendicular to
       // where the plane crosses the frustum's side, pointing out of the frustum. Vertical
       // surfaces cut by a side edge stay level.
-      V dir = vertical && edge != CompletedStructure::Edge::top
+      V dir = vertical && edge != CompletedBlocker::Edge::top
                   ? unit(cross(normal, V{0, 1, 0}))
                   : unit(cross(cross(normal, outward), normal));
       if (dot(dir, outward) < 0) dir = {-dir[0], -dir[1], -dir[2]};
@@ -261,7 +261,7 @@ class Builder {
       // A vertical wall cut by a side edge and by the top: the corner beyond both, up to the
       // height the top edge's completion gave its column.
       if (vertical && a == 0) {
-        const double top = edge == CompletedStructure::Edge::left ? top_height_.front()
+        const double top = edge == CompletedBlocker::Edge::left ? top_height_.front()
                                                                   : top_height_.back();
         const V& p = outline.front();
         const V q = extended(p);
@@ -272,12 +272,13 @@ class Builder {
   }
 
   // Closes a pillar whose faces the photo shows (`outline`, at the frame's top edge, segment k
-  // on the plane with normals[k]) from the foot of the visible pillar up to `top`. Two faces
-  // seen (the normals turn by more than ~25 degrees) make an L whose parallelogram is completed
-  // (exact for a box); else a back face as far behind the outline (away from the camera,
-  // horizontally) as the outline is wide across the line of sight: a square section for a
-  // square pillar, a guess otherwise.
-  void prism(const std::vector<V>& outline, const std::vector<V>& normals, double width,
+  // on the plane with normals[k]) from the foot of the visible pillar up to `top`, as a box
+  // aligned with its widest visible face: as wide as the outline spans along that face, as deep
+  // as it is wide (a square section; a round trunk's guess too) or as the visible side shows,
+  // whichever is more. Measured from the face's plane, not behind each outline point: a side
+  // face seen at a grazing angle already shows part of the depth (behind every point, a pillar
+  // 1.2 m deep became 2.1 m).
+  void prism(const std::vector<V>& outline, const std::vector<V>& normals,
              const std::pair<int, int>& column, double top) {
     // The foot: walk down the middle column while the pixels stay on the same vertical face.
     const auto [x, y0] = column;
@@ -290,48 +291,54 @@ class Builder {
       prev = p;
     }
     for (const V& p : outline) foot = std::min(foot, p[1]);
-    // The hidden part of the outline, from its last point back to its first.
-    std::vector<V> hidden;
-    std::size_t corner = 0;
-    for (std::size_t k = 1; k < normals.size(); ++k)
-      if (dot(normals[k], normals[0]) < 0.9) {
-        corner = k;  // outline[corner] lies between the two faces
-        break;
+    // The widest face: the segments whose normals agree with one segment's, the most length
+    // of outline between them; its normal their length-weighted mean (a single pixel's normal
+    // is noisy, and a turned box grows with it; pixels that straddle a corner have a blend of
+    // both faces' normals, hence the tight agreement).
+    V along{0, 0, 0};
+    double best = -1;
+    for (std::size_t i = 0; i < normals.size(); ++i) {
+      const V ni = unit(V{normals[i][0], 0, normals[i][2]});
+      V sum{0, 0, 0};
+      double length = 0;
+      for (std::size_t k = 0; k < normals.size(); ++k) {
+        const V nk = unit(V{normals[k][0], 0, normals[k][2]});
+        if (dot(nk, ni) > 0.97) {
+          const double l = norm(sub(at_height(outline[k + 1], 0), at_height(outline[k], 0)));
+          sum = add(sum, nk, l);
+          length += l;
+        }
       }
-    if (corner > 0) {
-      const V& a = outline.front();
-      const V& c = outline[corner];
-      const V& b = outline.back();
-      hidden = {b, add(add(a, b), c, -1), a};
-    } else {
-      const V mid = outline[outline.size() / 2];
-      const V view = unit(V{mid[0] - o_[0], 0, mid[2] - o_[2]});
-      // As deep as it is wide across the line of sight.
-      const V across{view[2], 0, -view[0]};
-      double lo = 1e300, hi = -1e300;
-      for (const V& p : outline) {
-        lo = std::min(lo, dot(sub(p, mid), across));
-        hi = std::max(hi, dot(sub(p, mid), across));
+      if (length > best && norm(sum) > 0) {
+        best = length;
+        along = unit(V{-sum[2], 0, sum[0]});
       }
-      width = hi - lo;
-      const V back = add(V{0, 0, 0}, view, width);
-      hidden.push_back(outline.back());
-      for (std::size_t k = outline.size(); k-- > 0;) hidden.push_back(add(outline[k], back));
-      hidden.push_back(outline.front());
     }
-    for (std::size_t k = 0; k + 1 < hidden.size(); ++k) {
-      const V& p = hidden[k];
-      const V& q = hidden[k + 1];
+    if (best <= 0) return;
+    const V mid = outline[outline.size() / 2];
+    // Into the pillar: away from the camera, horizontally.
+    V inward{along[2], 0, -along[0]};
+    if (dot(inward, V{mid[0] - o_[0], 0, mid[2] - o_[2]}) < 0) inward = {-inward[0], 0, -inward[2]};
+    double lo = 1e300, hi = -1e300, near = 1e300, far = -1e300;
+    for (const V& p : outline) {
+      lo = std::min(lo, dot(sub(p, mid), along));
+      hi = std::max(hi, dot(sub(p, mid), along));
+      near = std::min(near, dot(sub(p, mid), inward));
+      far = std::max(far, dot(sub(p, mid), inward));
+    }
+    const double depth = std::max(hi - lo, far - near);
+    auto corner = [&](double a, double b) {
+      return add(add(at_height(mid, 0), along, a), inward, b);
+    };
+    const std::array<V, 4> ring{corner(lo, near), corner(hi, near), corner(hi, near + depth),
+                                corner(lo, near + depth)};
+    for (std::size_t k = 0; k < 4; ++k) {
+      const V& p = ring[k];
+      const V& q = ring[(k + 1) % 4];
       add_quad(at_height(p, foot), at_height(q, foot), at_height(q, top), at_height(p, top));
     }
-    // The cap: a fan over the closed outline (visible part, then hidden part).
-    std::vector<V> ring = outline;
-    ring.insert(ring.end(), hidden.begin() + 1, hidden.end() - 1);
-    V centre{0, 0, 0};
-    for (const V& p : ring) centre = add(centre, p, 1.0 / double(ring.size()));
-    for (std::size_t k = 0; k < ring.size(); ++k)
-      add_triangle(at_height(centre, top), at_height(ring[k], top),
-                   at_height(ring[(k + 1) % ring.size()], top));
+    add_quad(at_height(ring[0], top), at_height(ring[1], top), at_height(ring[2], top),
+             at_height(ring[3], top));
   }
 
   // Outward normal of the frustum plane through the camera and rays r1, r2, on the side of
@@ -353,13 +360,13 @@ class Builder {
     const V top_out = outward(tl, tr, up_cam_);
     using Pos = std::pair<int, int>;
     complete_edge(
-        CompletedStructure::Edge::top, w, [](int k) { return Pos{k, 0}; },
+        CompletedBlocker::Edge::top, w, [](int k) { return Pos{k, 0}; },
         [&](int k) { return ray(k - 0.5, -0.5); }, [](int k) { return Pos{k, 0}; }, top_out);
     complete_edge(
-        CompletedStructure::Edge::left, h, [](int k) { return Pos{0, k}; },
+        CompletedBlocker::Edge::left, h, [](int k) { return Pos{0, k}; },
         [&](int k) { return ray(-0.5, k - 0.5); }, [](int k) { return Pos{0, k}; }, left_out);
     complete_edge(
-        CompletedStructure::Edge::right, h, [&](int k) { return Pos{w - 1, k}; },
+        CompletedBlocker::Edge::right, h, [&](int k) { return Pos{w - 1, k}; },
         [&](int k) { return ray(w - 0.5, k - 0.5); }, [&](int k) { return Pos{w - 1, k}; },
         right_out);
   }

@@ -19,23 +19,9 @@
 
 namespace mr::render {
 
-/// One structure continued beyond the frame.
-struct CompletedStructure {
-  enum class Edge { top, left, right };
-  Edge edge = Edge::top;
-  int first = 0, last = 0;  ///< the pixels along that edge (columns for top, rows for sides)
-  bool vertical = false;    ///< continued straight up (else along its plane)
-  bool prism = false;       ///< closed as a prism as deep as it is wide (pillars, trunks)
-  double top_m = 0;         ///< world height it was continued to (vertical ones), else 0
-  /// How much to trust the continuation, in [0, 1]: 0.7 for a vertical structure whose height
-  /// comes from the visible tops of others at a similar distance, 0.3 when it is the scene's
-  /// maximum, 0.4 for surfaces continued along their plane by max_extent_m (the extent is a
-  /// guess); a prism's guessed depth takes 0.1 off.
-  double confidence = 0;
-};
-
+/// What append_blockers added.
 struct BlockerReport {
-  std::vector<CompletedStructure> completed;
+  std::vector<CompletedBlocker> completed;  ///< structures cut by the frame, continued
   std::size_t triangles = 0;  ///< triangles appended (completion and explicit blockers)
 };
 

@@ -181,8 +181,9 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         }
         // What the photo does not show: structures cut by the frame, the scene's skyline,
         // polygons and canopy (the same mesh feeds both backends).
-        render::append_blockers(mesh, distance_m.view(), normals.view(), camera, scene.pose,
-                                scene.blockers);
+        const render::BlockerReport blockers = render::append_blockers(
+            mesh, distance_m.view(), normals.view(), camera, scene.pose, scene.blockers);
+        out.completed_blockers = blockers.completed;
         out.timings.mesh_s = seconds_since(t);
         occluder_mesh = std::move(mesh);
         throw_if_cancelled(cancel, kWhat);
@@ -266,6 +267,7 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
     layers_out->optical_depth = std::move(layers.optical_depth);
     layers_out->sky_radiance = layers.sky_radiance;
     layers_out->timings = layers.timings;
+    layers_out->completed_blockers = std::move(layers.completed_blockers);
     layers_out->backend = std::move(layers.backend);
     layers_out->backend_notice = std::move(layers.backend_notice);
     layers_out->backend_notice_is_warning = layers.backend_notice_is_warning;

@@ -40,6 +40,9 @@ struct ScatteringLayers {
     double download_s = 0;     ///< T, R and the AOVs back to the host
     int tiles = 0;             ///< dispatches the image was split into
   } timings;
+  /// Structures cut by the frame that were continued beyond it (empty with completion off or
+  /// without sun or lamps: only light paths need them).
+  std::vector<CompletedBlocker> completed_blockers;
   std::string backend;         ///< what rendered: "cpu" or "vulkan: <device name>"
   std::string backend_notice;  ///< one line when Backend::automatic fell back to the CPU
   /// false when the fall-back is the expected choice on this machine (no Vulkan loader, no

@@ -151,13 +151,14 @@ struct Blockers {
   /// own plane: vertical ones straight up to a height estimated from the tops of vertical
   /// structures the photo shows at a similar distance, else to max_height_m; other surfaces
   /// cut by the top, and everything cut by a side edge except floors, by up to max_extent_m.
-  /// Structures narrower than prism_max_width_m at the frame's top (pillars, trunks) become
-  /// prisms as deep as they are wide, from their visible foot up.
+  /// Free-standing structures narrower than prism_max_width_m at the frame's top (pillars,
+  /// trunks) become boxes as deep as they are wide (or as their visible side shows), from their
+  /// visible foot up.
   struct Completion {
     bool enabled = true;
     double max_height_m = 30;      ///< > 0, world y
     double max_extent_m = 30;      ///< > 0, metres along the surface beyond the frame
-    double prism_max_width_m = 3;  ///< >= 0; 0: no prisms
+    double prism_max_width_m = 3;  ///< >= 0; 0: no boxes
   } completion;
   /// A skyline above the frame: a vertical wall standing on the ground, distance_m from the
   /// camera (horizontally), whose top is at height_m at each azimuth, linear in between (the
@@ -188,6 +189,21 @@ struct Blockers {
     std::uint32_t seed = 1;
   };
   std::optional<Canopy> canopy;
+};
+
+/// A structure cut by the frame that the render continued beyond it (Blockers::Completion):
+/// what was guessed and how much to trust it, so a front end can show it or ask the user.
+struct CompletedBlocker {
+  enum class Edge { top, left, right };
+  Edge edge = Edge::top;
+  int first_px = 0, last_px = 0;  ///< pixels along that edge: columns (top) or rows (sides)
+  bool vertical = false;  ///< continued straight up (else along its own plane, by max_extent_m)
+  bool prism = false;     ///< closed as a box (a free-standing pillar or trunk)
+  double top_m = 0;       ///< world height it was continued to (vertical ones), else 0
+  /// In [0, 1]: 0.7 when the height comes from the visible tops of structures at a similar
+  /// distance, 0.3 when it is Completion::max_height_m, 0.4 for surfaces continued along their
+  /// plane; a box's guessed depth takes 0.1 off.
+  double confidence = 0;
 };
 
 /// A whole fog scene (the JSON scene document, docs/scene.md, holds the same).
