@@ -237,7 +237,7 @@ FogPlan make_plan(const FogCommandOptions& o) {
     std::vector<std::pair<fs::path, fs::path>> targets;  // scene file, its photo
     for (const fs::path& photo : photos) {
       const fs::path target = expand_pattern(o.save_scene_path, photo);
-      check_output_file(target);  // a FIFO, a link, a device: an error, not replaced
+      check_output_path(target);  // a FIFO, a link, a device: an error, not replaced
       for (const fs::path& input : {photo, find_depth(o, photo)})
         if (same_file(target, input))
           throw Error(ErrorCode::invalid_argument,

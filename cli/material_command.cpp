@@ -172,7 +172,7 @@ LoadedPhoto load_scene_target(const std::string& depth_path, const std::string& 
 void write_text_atomically(const fs::path& path, const std::string& text) {
   // Beside the final file, renamed over it when complete (as mr::write_image does), named as
   // libmr names its temporaries so that a killed run's leftover is recognised and removed.
-  check_output_file(path);
+  check_output_path(path);
   const fs::path temp = path.parent_path() / ("." + path.stem().string() + ".mr-tmp-" +
                                               std::to_string(::getpid()) + "-0" +
                                               path.extension().string());
@@ -272,7 +272,7 @@ int run_material_command(const MaterialCommandOptions& o) {
       if (!in.empty() && in != "auto" && same_file(*out, in))
         return fail(2, *out + ": is an input file; refusing to overwrite it");
     try {
-      check_output_file(*out);
+      check_output_path(*out);
     } catch (const Error& e) {
       return fail(2, e.what());
     }

@@ -19,16 +19,6 @@ namespace mr::cli {
 
 namespace {
 
-std::string kind_of(mode_t mode) {
-  if (S_ISDIR(mode)) return "a folder";
-  if (S_ISFIFO(mode)) return "a FIFO (named pipe)";
-  if (S_ISCHR(mode)) return "a character device";
-  if (S_ISBLK(mode)) return "a block device";
-  if (S_ISSOCK(mode)) return "a socket";
-  if (S_ISLNK(mode)) return "a symbolic link";
-  return "not a regular file";
-}
-
 // A key that names one file whatever the path that leads to it: device and inode for files that
 // exist (hard and symbolic links, "a/../b"), else the normalised absolute path.
 std::string file_key(const fs::path& p) {
@@ -49,15 +39,6 @@ bool written_by_mr_fog(const fs::path& path) {
   }
 }
 
-void check_output_file(const fs::path& path) {
-  struct stat st {};
-  if (::lstat(path.c_str(), &st) != 0) return;
-  if (!S_ISREG(st.st_mode))
-    throw Error(ErrorCode::io, path.string() + ": is " + kind_of(st.st_mode) +
-                                   "; outputs are only written as regular files (remove it or "
-                                   "choose another name)");
-}
-
 std::vector<std::string> check_planned_outputs(
     const std::vector<fs::path>& inputs, const std::vector<std::vector<PlannedOutput>>& outputs) {
   std::map<std::string, fs::path> input_keys;
@@ -76,7 +57,7 @@ std::vector<std::string> check_planned_outputs(
         break;
       }
       try {
-        check_output_file(out.path);
+        check_output_path(out.path);
       } catch (const Error& e) {
         errors[j] = out.owner + ": output " + e.what();
         break;

@@ -14,10 +14,6 @@ namespace mr::cli {
 inline constexpr const char* kOutputSoftware = "mr fog (libmr)";
 bool written_by_mr_fog(const std::filesystem::path& path);
 
-/// Throws mr::Error(io) "<path>: is a FIFO (named pipe); outputs are only written as regular
-/// files ..." when `path` exists and is not a regular file (not following symbolic links: a
-/// symbolic link, a FIFO, a device, a folder). A missing path is fine.
-void check_output_file(const std::filesystem::path& path);
 
 /// One file a run will write, and whose file it is (the photo, or the option that names it).
 struct PlannedOutput {

@@ -451,6 +451,8 @@ bool is_readable_image_extension(const std::filesystem::path& path) {
   return ext.size() > 1 && extensions.count(ext.substr(1)) > 0;
 }
 
+void check_output_path(const std::filesystem::path& path) { detail::check_output_target(path); }
+
 bool is_writable_image_extension(const std::filesystem::path& path) {
   if (!is_readable_image_extension(path)) return false;
   return OIIO::ImageOutput::create(path.string()) != nullptr;

@@ -101,6 +101,12 @@ struct ExrLayer {
 void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLayer> layers,
                       const Metadata& metadata, PixelType pixel_type = PixelType::half);
 
+/// Throws mr::Error(io) "<path>: is a FIFO (named pipe); outputs are only written as regular
+/// files ..." when `path` exists and is not a regular file (not following symbolic links: a
+/// symbolic link, a FIFO, a device, a folder). A missing path is fine. Every writer of libmr
+/// checks this; front ends call it to refuse a target before any work.
+void check_output_path(const std::filesystem::path& path);
+
 /// True if `path` has an extension OpenImageIO can write.
 bool is_writable_image_extension(const std::filesystem::path& path);
 /// True if `path` has an extension OpenImageIO can read.
