@@ -94,7 +94,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   const float bright_ref = lum_above[k];
 
   cv::Mat cand(h, w, CV_8U, cv::Scalar(0)), colour(h, w, CV_8U, cv::Scalar(0));
-  cv::Mat blueish(h, w, CV_8U, cv::Scalar(0));
+  cv::Mat blueish(h, w, CV_8U, cv::Scalar(0)), dark(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y) {
     const cv::Vec3f* p = small.ptr<cv::Vec3f>(y);
     for (int x = 0; x < w; ++x) {
@@ -103,10 +103,14 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       const float mx = std::max({r, g, b}), mn = std::min({r, g, b});
       const float sat = mx > 1e-4f ? (mx - mn) / mx : 0;
       const bool blue = b > r + 0.03f && b >= g - 0.02f && l > 0.2f;
+      // Twilight and dusk: a deep, saturated blue darker than a day sky (kept only where it
+      // reaches the top border, below).
+      const bool dusk = !blue && b > r + 0.03f && b > g + 0.02f && sat > 0.3f && l > 0.05f;
       const bool grey_bright = sat < 0.2f && l > 0.35f && l >= o.bright_fraction * bright_ref;
-      if (!blue && !grey_bright) continue;
+      if (!blue && !dusk && !grey_bright) continue;
       colour.at<std::uint8_t>(y, x) = 1;
-      blueish.at<std::uint8_t>(y, x) = blue;
+      blueish.at<std::uint8_t>(y, x) = blue || dusk;
+      dark.at<std::uint8_t>(y, x) = dusk;
       if (texture.at<float>(y, x) <= o.max_texture) cand.at<std::uint8_t>(y, x) = 1;
     }
   }
@@ -115,13 +119,14 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   // the photo shows blue sky, touching it (clouds do; white walls and panels mostly do not).
   cv::Mat labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(cand, labels, stats, centroids, 8, CV_32S);
-  std::vector<int> blue_count(std::size_t(n), 0);
+  std::vector<int> blue_count(std::size_t(n), 0), dark_count(std::size_t(n), 0);
   std::vector<std::uint8_t> top(std::size_t(n), 0), side(std::size_t(n), 0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const int lab = labels.at<int>(y, x);
       if (lab == 0) continue;
       blue_count[lab] += blueish.at<std::uint8_t>(y, x);
+      dark_count[lab] += dark.at<std::uint8_t>(y, x);
       if (y == 0) top[lab] = 1;
       if (x == 0 || x == w - 1) side[lab] = 1;
     }
@@ -130,7 +135,10 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   for (int i = 1; i < n; ++i) {
     const int area = stats.at<int>(i, cv::CC_STAT_AREA);
     is_blue[i] = 2 * blue_count[i] > area;
-    if (is_blue[i] && (top[i] || side[i] || area > 0.002 * w * h)) keep[i] = 1, blue_area += area;
+    // Mostly dusk blue: only from the top border down (a dark blue wall or car rarely is).
+    const bool dusk = 2 * dark_count[i] > area;
+    if (is_blue[i] && (top[i] || (!dusk && (side[i] || area > 0.002 * w * h))))
+      keep[i] = 1, blue_area += area;
   }
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)

@@ -494,7 +494,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // under a hazy sky, a hill fading into it) goes to the sky's distance there, so that the fog,
   // opaque in the sky, is continuous across the boundary (photo/geometry.h, sky_fold).
   std::vector<float> fold;
-  if (options.refine_depth && mask.pixels > 0) {
+  if (options.refine_depth && options.sky_fold && mask.pixels > 0) {
     fold = photo::sky_proximity(photo->view(), mask.sky);
     for (std::size_t i = 0; i < n; ++i) {
       const int cls = pixel_class[i];
