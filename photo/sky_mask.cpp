@@ -103,9 +103,10 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       const float mx = std::max({r, g, b}), mn = std::min({r, g, b});
       const float sat = mx > 1e-4f ? (mx - mn) / mx : 0;
       const bool blue = b > r + 0.03f && b >= g - 0.02f && l > 0.2f;
-      // Twilight and dusk: a deep, saturated blue darker than a day sky (kept only where it
-      // reaches the top border, below).
-      const bool dusk = !blue && b > r + 0.03f && b > g + 0.02f && sat > 0.3f && l > 0.05f;
+      // Twilight and dusk: a deep, strongly saturated blue darker than a day sky (kept only
+      // in large components from the top border down, below; dark grey-blue glass is less
+      // saturated).
+      const bool dusk = !blue && b > r + 0.08f && b > g + 0.04f && sat > 0.45f && l > 0.05f;
       const bool grey_bright = sat < 0.2f && l > 0.35f && l >= o.bright_fraction * bright_ref;
       if (!blue && !dusk && !grey_bright) continue;
       colour.at<std::uint8_t>(y, x) = 1;
@@ -137,7 +138,8 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     is_blue[i] = 2 * blue_count[i] > area;
     // Mostly dusk blue: only from the top border down (a dark blue wall or car rarely is).
     const bool dusk = 2 * dark_count[i] > area;
-    if (is_blue[i] && (top[i] || (!dusk && (side[i] || area > 0.002 * w * h))))
+    if (is_blue[i] && (dusk ? top[i] && area > 0.01 * w * h
+                            : top[i] || side[i] || area > 0.002 * w * h))
       keep[i] = 1, blue_area += area;
   }
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));

@@ -607,5 +607,53 @@ TEST(RealPhoto, NoSkyBoundsTheDepth) {
   }
 }
 
+// A dusk sky (a real case from the tuning half: a launch pad at twilight): deep blue at the top,
+// too dark for a day sky's test, lighter toward the horizon; a building on the right reaching
+// the top border with dark grey-blue windows, which stay out of the sky.
+TEST(RealPhoto, DuskSkyIsSkyWindowsAreNot) {
+  cv::Mat m(kH, kW, CV_32FC3);
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<float> grain(-0.06f, 0.06f);
+  const cv::Vec3f zenith(0.07f, 0.13f, 0.26f), low(0.25f, 0.34f, 0.50f);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const float n = grain(rng);
+      m.at<cv::Vec3f>(y, x) = y < kHorizonRow ? mix(zenith, low, float(y / kHorizonRow))
+                                              : cv::Vec3f(0.2f + n, 0.18f + n, 0.15f + n);
+    }
+  const int x0 = 470;
+  for (int y = 0; y < kH; ++y)
+    for (int x = x0; x < kW; ++x) {
+      const float n = 0.5f * grain(rng);
+      m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.35f + n, 0.30f + n, 0.28f + n);
+    }
+  for (int wy = 0; wy < 220; wy += 45)  // the first row of windows touches the top border
+    for (int wx = x0 + 12; wx + 28 < kW; wx += 44)
+      cv::rectangle(m, cv::Point(wx, wy), cv::Point(wx + 27, wy + 30),
+                    cv::Scalar(0.12, 0.14, 0.18), cv::FILLED);
+  const Image photo = to_photo(m);
+  dump("dusk_photo", photo);
+  const std::array<PixelPoint, 2> horizon{PixelPoint{0, kHorizonRow},
+                                          PixelPoint{kW - 1, kHorizonRow}};
+  const photo::SkyMask mask = photo::estimate_sky_mask(photo.view(), horizon);
+  std::vector<std::uint8_t> truth(std::size_t(kW) * kH, 0);
+  std::size_t inter = 0, uni = 0, building_sky = 0, top_sky = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const std::size_t i = std::size_t(y) * kW + x;
+      const bool t = y < kHorizonRow && x < x0;
+      inter += t && mask.sky[i];
+      uni += t || mask.sky[i];
+      building_sky += x >= x0 + 2 && mask.sky[i];
+      top_sky += y < 40 && x < x0 && mask.sky[i];
+    }
+  const double v = uni ? double(inter) / double(uni) : 0.0;
+  std::printf("dusk: sky IoU %.4f, building pixels taken as sky %zu, top band %zu of %d\n", v,
+              building_sky, top_sky, 40 * x0);
+  EXPECT_GE(v, 0.95);
+  EXPECT_GE(double(top_sky), 0.95 * 40 * x0);  // the deep blue at the top is sky
+  EXPECT_EQ(building_sky, 0u);
+}
+
 }  // namespace
 }  // namespace mr
