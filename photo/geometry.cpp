@@ -447,6 +447,23 @@ std::vector<float> sky_proximity(ConstImageView photo, const std::vector<std::ui
   bool any = false;
   for (std::size_t i = 0; i < n; ++i) out[i] = sky[i] ? 1.0f : 0.0f, any |= sky[i] != 0;
   if (!any || w < 4 || h < 4 || photo.channels < 1) return out;
+  // Only the open sky spreads: components that reach the frame's border. An enclosed piece
+  // (sky seen through foliage, or a pale patch misjudged as sky: a highlight on a cheek) would
+  // otherwise pull the smooth surface around it to the sky's distance too.
+  cv::Mat open_sky(h, w, CV_8U);
+  {
+    cv::Mat binary(h, w, CV_8U);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) binary.at<std::uint8_t>(y, x) = sky[std::size_t(y) * w + x] != 0;
+    cv::Mat labels;
+    const int count = cv::connectedComponents(binary, labels, 8, CV_32S);
+    std::vector<std::uint8_t> border(std::size_t(count), 0);
+    for (int x = 0; x < w; ++x) border[labels.at<int>(0, x)] = border[labels.at<int>(h - 1, x)] = 1;
+    for (int y = 0; y < h; ++y) border[labels.at<int>(y, 0)] = border[labels.at<int>(y, w - 1)] = 1;
+    border[0] = 0;  // the background (not sky)
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) open_sky.at<std::uint8_t>(y, x) = border[labels.at<int>(y, x)];
+  }
   const double s = std::min(1.0, std::sqrt(o.working_pixels / double(n)));
   const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
   const cv::Mat src = detail::as_mat(photo);
@@ -463,7 +480,7 @@ std::vector<float> sky_proximity(ConstImageView photo, const std::vector<std::ui
         d[x][c] =
             cv::saturate_cast<std::uint8_t>(255.0f * std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f));
       }
-      indicator.at<float>(y, x) = out[std::size_t(y) * w + x];
+      indicator.at<float>(y, x) = open_sky.at<std::uint8_t>(y, x) ? 1.0f : 0.0f;
     }
   }
   cv::Mat guide = display, map = indicator;

@@ -144,7 +144,9 @@ float refine_keep_weight(float confidence);
 /// photo): 1 inside the sky, about 0.5 on a surface pixel next to the sky where the photo shows
 /// no edge (a calm sea meeting a hazy sky, a hill fading into it), falling over about
 /// sqrt(lambda) working pixels away from it, and near 0 across an edge of the photo (a roof
-/// line, a dark ridge). Row-major at the photo's size; sky pixels exactly 1. Throws
+/// line, a dark ridge). Only the open sky (the mask's components that reach the frame's border)
+/// spreads: enclosed pieces (sky through foliage, a pale patch misjudged as sky) do not pull
+/// the surface around them away. Row-major at the photo's size; sky pixels exactly 1. Throws
 /// mr::Error(size_mismatch) when `sky` is not the photo's size.
 struct SkyProximityOptions {
   double working_pixels = 0.5e6;

@@ -187,8 +187,11 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   // edge pixels are mixtures, so the window sees texture), enclosed in textured structure, whose
   // colour is the open sky's. Without this, a billboard fills every gap: no sky through the
   // canopy, no sunlight between the branches.
+  // Only under a blue sky: a pale grey "sky" may be a studio backdrop or a white wall, whose
+  // colour a highlight on a cheek or a sleeve matches (and sunlight through a canopy, what
+  // the gaps are for, comes with a blue sky).
   std::size_t gap_pixels_working = 0;
-  if (o.max_gap_fraction > 0) {
+  if (o.max_gap_fraction > 0 && blue_sky) {
     std::vector<cv::Vec3d> sky_rgb;
     std::vector<float> sky_luma;
     for (int y = 0; y < h; ++y)
