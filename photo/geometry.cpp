@@ -429,4 +429,76 @@ std::vector<float> refine_inverse_distance(ConstImageView photo,
   return out;
 }
 
+float sky_fold(float proximity) {
+  if (!(proximity > 0)) return 1.0f;  // NaN too: apart from the sky
+  const float t = std::clamp(1.0f - 2.0f * proximity, 0.0f, 1.0f);
+  return t * t;
+}
+
+std::vector<float> sky_proximity(ConstImageView photo, const std::vector<std::uint8_t>& sky,
+                                 const SkyProximityOptions& o) {
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(w) * h;
+  if (sky.size() != n)
+    throw Error(ErrorCode::size_mismatch, "sky_proximity: the photo is " + std::to_string(w) +
+                                              "x" + std::to_string(h) + " but the sky mask holds " +
+                                              std::to_string(sky.size()) + " values");
+  std::vector<float> out(n, 0.0f);
+  bool any = false;
+  for (std::size_t i = 0; i < n; ++i) out[i] = sky[i] ? 1.0f : 0.0f, any |= sky[i] != 0;
+  if (!any || w < 4 || h < 4 || photo.channels < 1) return out;
+  // Only the open sky spreads: components that reach the frame's border. An enclosed piece
+  // (sky seen through foliage, or a pale patch misjudged as sky: a highlight on a cheek) would
+  // otherwise pull the smooth surface around it to the sky's distance too.
+  cv::Mat open_sky(h, w, CV_8U);
+  {
+    cv::Mat binary(h, w, CV_8U);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) binary.at<std::uint8_t>(y, x) = sky[std::size_t(y) * w + x] != 0;
+    cv::Mat labels;
+    const int count = cv::connectedComponents(binary, labels, 8, CV_32S);
+    std::vector<std::uint8_t> border(std::size_t(count), 0);
+    for (int x = 0; x < w; ++x) border[labels.at<int>(0, x)] = border[labels.at<int>(h - 1, x)] = 1;
+    for (int y = 0; y < h; ++y) border[labels.at<int>(y, 0)] = border[labels.at<int>(y, w - 1)] = 1;
+    border[0] = 0;  // the background (not sky)
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) open_sky.at<std::uint8_t>(y, x) = border[labels.at<int>(y, x)];
+  }
+  const double s = std::min(1.0, std::sqrt(o.working_pixels / double(n)));
+  const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
+  const cv::Mat src = detail::as_mat(photo);
+  cv::Mat display(h, w, CV_8UC3), indicator(h, w, CV_32F);
+  const int ch = photo.channels;
+  for (int y = 0; y < h; ++y) {
+    const float* row = src.ptr<float>(y);
+    cv::Vec3b* d = display.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < w; ++x) {
+      const float* p = row + std::ptrdiff_t(x) * ch;
+      for (int c = 0; c < 3; ++c) {
+        float v = p[ch >= 3 ? c : 0];
+        if (!std::isfinite(v)) v = 0;
+        d[x][c] =
+            cv::saturate_cast<std::uint8_t>(255.0f * std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f));
+      }
+      indicator.at<float>(y, x) = open_sky.at<std::uint8_t>(y, x) ? 1.0f : 0.0f;
+    }
+  }
+  cv::Mat guide = display, map = indicator;
+  if (s < 1) {
+    cv::resize(display, guide, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
+    cv::resize(indicator, map, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
+  }
+  cv::Mat smoothed;
+  cv::ximgproc::fastGlobalSmootherFilter(guide, map, smoothed, o.lambda, o.sigma_color);
+  if (s < 1) cv::resize(smoothed, smoothed, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      if (sky[i]) continue;
+      const float v = smoothed.at<float>(y, x);
+      out[i] = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) : 0.0f;
+    }
+  return out;
+}
+
 }  // namespace mr::photo

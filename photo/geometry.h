@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -136,5 +137,31 @@ std::vector<float> refine_inverse_distance(ConstImageView photo,
                                            const DepthRefineOptions& options = {});
 /// The weight refine_inverse_distance gives a pixel's own value: smoothstep(0.5, 1, confidence).
 float refine_keep_weight(float confidence);
+
+/// How much of the sky a pixel "sees" through the photo (issue 11 item 4: no discontinuity
+/// between the sky and what meets it with no edge). The binary sky mask smoothed with the same
+/// confidence-free fast global smoother as refine_inverse_distance (guide: the display-referred
+/// photo): 1 inside the sky, about 0.5 on a surface pixel next to the sky where the photo shows
+/// no edge (a calm sea meeting a hazy sky, a hill fading into it), falling over about
+/// sqrt(lambda) working pixels away from it, and near 0 across an edge of the photo (a roof
+/// line, a dark ridge). Only the open sky (the mask's components that reach the frame's border)
+/// spreads: enclosed pieces (sky through foliage, a pale patch misjudged as sky) do not pull
+/// the surface around them away. Row-major at the photo's size; sky pixels exactly 1. Throws
+/// mr::Error(size_mismatch) when `sky` is not the photo's size.
+struct SkyProximityOptions {
+  double working_pixels = 0.5e6;
+  double lambda = 1500;    ///< smoothness (working pixels^2)
+  double sigma_color = 4;  ///< of 255, display-referred
+};
+std::vector<float> sky_proximity(ConstImageView photo, const std::vector<std::uint8_t>& sky,
+                                 const SkyProximityOptions& options = {});
+
+/// The factor on a surface pixel's inverse distance at sky proximity `p` (sky_proximity):
+/// (1 - 2 p)^2 clamped to [0, 1]: 1 where the pixel is apart from the sky (p = 0), 0 where it
+/// meets the sky with no edge (p >= 0.5), so that there its distance reaches the sky's (+inf)
+/// and the fog on both sides of the boundary is the same, and rising smoothly in between (the
+/// square makes the distance's return from infinity gentle: the fog's transmittance
+/// exp(-sigma d) ramps over many pixels rather than a few, for thin haze too).
+float sky_fold(float proximity);
 
 }  // namespace mr::photo

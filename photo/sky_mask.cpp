@@ -94,7 +94,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   const float bright_ref = lum_above[k];
 
   cv::Mat cand(h, w, CV_8U, cv::Scalar(0)), colour(h, w, CV_8U, cv::Scalar(0));
-  cv::Mat blueish(h, w, CV_8U, cv::Scalar(0));
+  cv::Mat blueish(h, w, CV_8U, cv::Scalar(0)), dark(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y) {
     const cv::Vec3f* p = small.ptr<cv::Vec3f>(y);
     for (int x = 0; x < w; ++x) {
@@ -103,10 +103,15 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       const float mx = std::max({r, g, b}), mn = std::min({r, g, b});
       const float sat = mx > 1e-4f ? (mx - mn) / mx : 0;
       const bool blue = b > r + 0.03f && b >= g - 0.02f && l > 0.2f;
+      // Twilight and dusk: a deep, strongly saturated blue darker than a day sky (kept only
+      // in large components from the top border down, below; dark grey-blue glass is less
+      // saturated).
+      const bool dusk = !blue && b > r + 0.08f && b > g + 0.04f && sat > 0.45f && l > 0.05f;
       const bool grey_bright = sat < 0.2f && l > 0.35f && l >= o.bright_fraction * bright_ref;
-      if (!blue && !grey_bright) continue;
+      if (!blue && !dusk && !grey_bright) continue;
       colour.at<std::uint8_t>(y, x) = 1;
-      blueish.at<std::uint8_t>(y, x) = blue;
+      blueish.at<std::uint8_t>(y, x) = blue || dusk;
+      dark.at<std::uint8_t>(y, x) = dusk;
       if (texture.at<float>(y, x) <= o.max_texture) cand.at<std::uint8_t>(y, x) = 1;
     }
   }
@@ -115,13 +120,14 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   // the photo shows blue sky, touching it (clouds do; white walls and panels mostly do not).
   cv::Mat labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(cand, labels, stats, centroids, 8, CV_32S);
-  std::vector<int> blue_count(std::size_t(n), 0);
+  std::vector<int> blue_count(std::size_t(n), 0), dark_count(std::size_t(n), 0);
   std::vector<std::uint8_t> top(std::size_t(n), 0), side(std::size_t(n), 0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const int lab = labels.at<int>(y, x);
       if (lab == 0) continue;
       blue_count[lab] += blueish.at<std::uint8_t>(y, x);
+      dark_count[lab] += dark.at<std::uint8_t>(y, x);
       if (y == 0) top[lab] = 1;
       if (x == 0 || x == w - 1) side[lab] = 1;
     }
@@ -130,7 +136,11 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   for (int i = 1; i < n; ++i) {
     const int area = stats.at<int>(i, cv::CC_STAT_AREA);
     is_blue[i] = 2 * blue_count[i] > area;
-    if (is_blue[i] && (top[i] || side[i] || area > 0.002 * w * h)) keep[i] = 1, blue_area += area;
+    // Mostly dusk blue: only from the top border down (a dark blue wall or car rarely is).
+    const bool dusk = 2 * dark_count[i] > area;
+    if (is_blue[i] && (dusk ? top[i] && area > 0.01 * w * h
+                            : top[i] || side[i] || area > 0.002 * w * h))
+      keep[i] = 1, blue_area += area;
   }
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
@@ -177,8 +187,11 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   // edge pixels are mixtures, so the window sees texture), enclosed in textured structure, whose
   // colour is the open sky's. Without this, a billboard fills every gap: no sky through the
   // canopy, no sunlight between the branches.
+  // Only under a blue sky: a pale grey "sky" may be a studio backdrop or a white wall, whose
+  // colour a highlight on a cheek or a sleeve matches (and sunlight through a canopy, what
+  // the gaps are for, comes with a blue sky).
   std::size_t gap_pixels_working = 0;
-  if (o.max_gap_fraction > 0) {
+  if (o.max_gap_fraction > 0 && blue_sky) {
     std::vector<cv::Vec3d> sky_rgb;
     std::vector<float> sky_luma;
     for (int y = 0; y < h; ++y)

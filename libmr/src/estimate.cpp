@@ -396,6 +396,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   }
 
   constexpr int kFar = 5, kContact = 6;
+  // Issue 11: a close-up or an interior, where the sky mask finds (next to) no sky, has no
+  // horizon to run the ground to.
+  constexpr double kBoundedSkyFraction = 0.002;
+  const bool bounded = double(mask.pixels) < kBoundedSkyFraction * double(n);
   std::vector<std::uint8_t> pixel_class(n, 0);              // what decided each pixel's distance
   std::vector<double> column_forward(std::size_t(w), 0.0);  // the structure above the horizon
   std::vector<int> column_cov(std::size_t(w), 0);
@@ -416,6 +420,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       } else if (map.coverage[i] == photo::Coverage::ground && column_forward[std::size_t(x)] > 0) {
         const float b = billboard(x, y, column_forward[std::size_t(x)]);
         if (b < d) d = b, cov = column_cov[std::size_t(x)];
+      } else if (map.coverage[i] == photo::Coverage::ground && bounded) {
+        // No sky: nothing in the photo is known to be far, and a ground plane running to
+        // the horizon behind a table top or a wall would end in a seam where it meets the far
+        // billboard above the horizon; the far billboard closes the scene (bounded depth).
+        const float b = billboard(x, y, far_forward);
+        if (b < d) d = b, cov = kFar;
       }
       ++counts[cov];
       pixel_class[i] = std::uint8_t(cov);
@@ -480,6 +490,20 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       c[i] = conf;
     }
   if (options.refine_depth) q = photo::refine_inverse_distance(photo->view(), q, c, refine);
+  // Issue 11 item 4: a surface that meets the sky where the photo shows no edge (a calm sea
+  // under a hazy sky, a hill fading into it) goes to the sky's distance there, so that the fog,
+  // opaque in the sky, is continuous across the boundary (photo/geometry.h, sky_fold).
+  std::vector<float> fold;
+  if (options.refine_depth && options.sky_fold && mask.pixels > 0) {
+    fold = photo::sky_proximity(photo->view(), mask.sky);
+    for (std::size_t i = 0; i < n; ++i) {
+      const int cls = pixel_class[i];
+      fold[i] = cls == int(photo::Coverage::hint) || cls == int(photo::Coverage::plane)
+                    ? 1.0f
+                    : photo::sky_fold(fold[i]);
+      q[i] *= fold[i];
+    }
+  }
   // Farther than this a surface is as good as sky for any fog that is not almost clear air.
   constexpr float kMaxFiniteDistanceM = 1e5f;
   for (int y = 0; y < h; ++y)
@@ -489,7 +513,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       float& d = g.distance_m.at(x, y, 0);
       if (!std::isfinite(d)) continue;  // sky stays sky
       const bool refined = options.refine_depth && photo::refine_keep_weight(c[i]) < 1.0f;
-      if (!refined && !blended[i]) continue;  // kept exactly
+      const bool folded = !fold.empty() && fold[i] < 1.0f;
+      if (!refined && !blended[i] && !folded) continue;  // kept exactly
       d = std::min(kMaxFiniteDistanceM, q[i] > 0 ? 1.0f / q[i] : kMaxFiniteDistanceM);
     }
   return g;

@@ -55,6 +55,11 @@ struct EstimateOptions {
   /// GeometryEstimate::sky_alpha). false: the depth as before (binary sky, hard billboards),
   /// except for the matte's blend.
   bool refine_depth = true;
+  /// With refine_depth: a surface that meets the sky where the photo shows no edge (a calm sea
+  /// under a hazy sky, a hill fading into it) goes to the sky's distance at the boundary and
+  /// returns to its own over the refinement's reach (photo/geometry.h, sky_proximity and
+  /// sky_fold), so that the fog, opaque in the sky for haze, is continuous there. false: off.
+  bool sky_fold = true;
 };
 
 /// Where a value came from.
