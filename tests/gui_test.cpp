@@ -176,6 +176,7 @@ class GuiTest : public QObject {
   void fogPanelRoundTripEveryParameter();
   void blockersPanelEditsValidatesAndRoundTrips();
   void blockersShadeTheSunnyPreview();
+  void blockersFromThePhotosAnnotations();
 
  private:
   void annotateEstimateUndoSaveExportBody();
@@ -1613,6 +1614,34 @@ void GuiTest::blockersShadeTheSunnyPreview() {
   QCOMPARE(QString::fromStdString(mr::scene_to_json(reopened.fogPanel()->scene())),
            QString::fromStdString(mr::scene_to_json(w.fogPanel()->scene())));
   QTRY_VERIFY_WITH_TIMEOUT(settled(reopened), 120000);
+}
+
+// Blockers stated in the photo's annotations file ({stem}_annotations.json) are the scene's, as in
+// mr fog: the panel shows them and the preview renders with them.
+void GuiTest::blockersFromThePhotosAnnotations() {
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  const QString photo = leuvenCopy(dir);
+  mr::Annotations a;
+  mr::Blockers b;
+  b.skyline = mr::Blockers::Skyline{80, {{-50, 20}, {60, 35}}};
+  b.polygons.push_back({{{12, 0, -30}, {12, 0, 15}, {12, 30, 15}, {12, 30, -30}}});
+  a.blockers = b;
+  mr::save_annotations(dir.filePath("street_annotations.json").toStdString(), a);
+  MainWindow w;
+  w.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+  w.show();
+  openAndSettle(w, photo);
+  mr::FogScene want, got;
+  want.blockers = b;
+  got.blockers = w.blockersPanel()->blockers();
+  QCOMPARE(QString::fromStdString(mr::scene_to_json(got)),
+           QString::fromStdString(mr::scene_to_json(want)));
+  got.blockers = w.preview()->scene.blockers;
+  QCOMPARE(QString::fromStdString(mr::scene_to_json(got)),
+           QString::fromStdString(mr::scene_to_json(want)));
+  QCOMPARE(w.blockersPanel()->wallList()->count(), 1);
+  QCOMPARE(w.blockersPanel()->skylineTable()->rowCount(), 2);
 }
 
 // Sanitizer builds (MR_SANITIZE): Qt 5.15's offscreen platform plugin never deletes its screen
