@@ -46,7 +46,7 @@ QDoubleSpinBox* spin(double lo, double hi, double value, int decimals, const QSt
 // one control must not round the others' exact values from a scene file.
 double pick(const QDoubleSpinBox* s, double stored) {
   return std::abs(s->value() - stored) <= 0.5 * std::pow(10.0, -s->decimals()) ? stored
-                                                                                : s->value();
+                                                                               : s->value();
 }
 
 void sortByAzimuth(std::vector<mr::Blockers::SkylineSample>& s) {
@@ -311,8 +311,8 @@ void PlanView::paintEvent(QPaintEvent*) {
   const QPointF c = positionOf(camera_m_.x, camera_m_.z);
   const double px_per_m = 1 / metresPerPixel();
   auto along = [&](double azimuth_deg, double metres) {
-    return c + QPointF(std::sin(azimuth_deg * kDeg), -std::cos(azimuth_deg * kDeg)) * metres *
-                   px_per_m;
+    return c +
+           QPointF(std::sin(azimuth_deg * kDeg), -std::cos(azimuth_deg * kDeg)) * metres * px_per_m;
   };
   // Distance rings.
   const double step = niceCeil(range_m_ / 4);
@@ -536,7 +536,8 @@ BlockersPanel::BlockersPanel(QWidget* parent) : QWidget(parent) {
   canopy_box_->setObjectName("canopyBox");
   canopy_box_->setCheckable(true);
   canopy_box_->setChecked(false);
-  canopy_box_->setToolTip(tr("A layer of leaves over the camera with gaps that let the sun through"));
+  canopy_box_->setToolTip(
+      tr("A layer of leaves over the camera with gaps that let the sun through"));
   auto* kf = new QFormLayout(canopy_box_);
   canopy_height_ = spin(0.01, 1e6, 8, 1, tr(" m"), 0.5, tr("Height of the canopy"));
   canopy_gap_ = spin(0, 1, 0.3, 2, QString(), 0.05,
@@ -645,14 +646,13 @@ BlockersPanel::BlockersPanel(QWidget* parent) : QWidget(parent) {
     s.erase(s.begin() + row);
     applySamples(s);
   });
-  connect(plan_, &PlanView::wallDrawn, this,
-          [this](QPointF a, QPointF b) { addWall(a, b); });
+  connect(plan_, &PlanView::wallDrawn, this, [this](QPointF a, QPointF b) { addWall(a, b); });
   connect(plan_, &PlanView::polygonClicked, this, [this](int i) {
     if (i >= 0) wall_list_->setCurrentRow(i);
   });
   connect(wall_list_, &QListWidget::currentRowChanged, this, &BlockersPanel::showWall);
-  for (QDoubleSpinBox* s : {wall_bottom_, wall_top_, wall_end_[0], wall_end_[1], wall_end_[2],
-                            wall_end_[3]})
+  for (QDoubleSpinBox* s :
+       {wall_bottom_, wall_top_, wall_end_[0], wall_end_[1], wall_end_[2], wall_end_[3]})
     connect(s, qOverload<double>(&QDoubleSpinBox::valueChanged), this,
             [this] { applySelectedWall(); });
   connect(remove_wall_, &QPushButton::clicked, this, [this] {
@@ -758,8 +758,8 @@ void BlockersPanel::applyFromControls() {
     k.gap_fraction = pick(canopy_gap_, old.gap_fraction);
     k.radius_m = pick(canopy_radius_, old.radius_m);
     k.cell_m = pick(canopy_cell_, old.cell_m);
-    k.seed = std::uint32_t(canopy_seed_->value()) == std::min<std::uint32_t>(
-                                                         old.seed, std::numeric_limits<int>::max())
+    k.seed = std::uint32_t(canopy_seed_->value()) ==
+                     std::min<std::uint32_t>(old.seed, std::numeric_limits<int>::max())
                  ? old.seed
                  : std::uint32_t(canopy_seed_->value());
     b.canopy = k;
@@ -785,12 +785,11 @@ void BlockersPanel::applySelectedWall() {
 
 void BlockersPanel::showWall(int row) {
   const bool valid = row >= 0 && row < int(blockers_.polygons.size());
-  const std::optional<Wall> w =
-      valid ? wallOf(blockers_.polygons[std::size_t(row)]) : std::nullopt;
+  const std::optional<Wall> w = valid ? wallOf(blockers_.polygons[std::size_t(row)]) : std::nullopt;
   const bool was = updating_;
   updating_ = true;
-  for (QDoubleSpinBox* s : {wall_bottom_, wall_top_, wall_end_[0], wall_end_[1], wall_end_[2],
-                            wall_end_[3]})
+  for (QDoubleSpinBox* s :
+       {wall_bottom_, wall_top_, wall_end_[0], wall_end_[1], wall_end_[2], wall_end_[3]})
     s->setEnabled(bool(w));
   remove_wall_->setEnabled(valid);
   if (w) {
@@ -828,7 +827,8 @@ void BlockersPanel::refresh() {
     skyline_table_->setItem(int(i), 1,
                             new QTableWidgetItem(QString::number(samples[i].height_m, 'g', 10)));
   }
-  if (table_row >= 0 && table_row < int(samples.size())) skyline_table_->setCurrentCell(table_row, 0);
+  if (table_row >= 0 && table_row < int(samples.size()))
+    skyline_table_->setCurrentCell(table_row, 0);
   const int wall_row = wall_list_->currentRow();
   wall_list_->clear();
   for (std::size_t i = 0; i < b.polygons.size(); ++i) {
@@ -852,7 +852,8 @@ void BlockersPanel::refresh() {
     canopy_gap_->setValue(b.canopy->gap_fraction);
     canopy_radius_->setValue(b.canopy->radius_m);
     canopy_cell_->setValue(b.canopy->cell_m);
-    canopy_seed_->setValue(int(std::min<std::uint32_t>(b.canopy->seed, std::numeric_limits<int>::max())));
+    canopy_seed_->setValue(
+        int(std::min<std::uint32_t>(b.canopy->seed, std::numeric_limits<int>::max())));
   }
   updating_ = was;
 }

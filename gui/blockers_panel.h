@@ -112,7 +112,8 @@ class BlockersPanel : public QWidget {
   void setBlockers(const mr::Blockers& blockers);
   const mr::Blockers& blockers() const { return blockers_; }
   /// The camera and the sun, drawn for orientation (from the document's scene and camera).
-  void setContext(const mr::CameraPose& pose, double hfov_deg, std::optional<double> sun_azimuth_deg);
+  void setContext(const mr::CameraPose& pose, double hfov_deg,
+                  std::optional<double> sun_azimuth_deg);
 
   /// Replaces the blockers when mr::validate_scene accepts them (emits changed, true); else
   /// keeps the last valid ones, shows why and emits rejected (false).
@@ -162,10 +163,10 @@ class BlockersPanel : public QWidget {
   void rejected(const QString& message);  ///< an edit was refused (the library's message)
 
  private:
-  void refresh();               ///< every control from blockers_
-  void showWall(int row);       ///< the selected polygon's values into its controls
-  void applyFromControls();     ///< completion, skyline distance, canopy from their controls
-  void applySelectedWall();     ///< the selected wall from its controls
+  void refresh();            ///< every control from blockers_
+  void showWall(int row);    ///< the selected polygon's values into its controls
+  void applyFromControls();  ///< completion, skyline distance, canopy from their controls
+  void applySelectedWall();  ///< the selected wall from its controls
   void applySamples(std::vector<mr::Blockers::SkylineSample> samples);
 
   mr::Blockers blockers_;

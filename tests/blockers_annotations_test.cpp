@@ -158,8 +158,7 @@ TEST(BlockersAnnotations, PolygonsMustBePlanarConvexWithAnArea) {
   // regular hexagon tilted in space, a 1 km wall.
   EXPECT_EQ(with({{1, 0, 2}, {3, 0, 2}, {3, 5, 2}}), "no error");
   EXPECT_EQ(with({{12, 0, -30}, {12, 0, 15}, {12, 30, 15}, {12, 30, -30}}), "no error");
-  EXPECT_EQ(with({{12, 0, -30}, {12, 0, 0}, {12, 0, 15}, {12, 30, 15}, {12, 30, -30}}),
-            "no error");
+  EXPECT_EQ(with({{12, 0, -30}, {12, 0, 0}, {12, 0, 15}, {12, 30, 15}, {12, 30, -30}}), "no error");
   EXPECT_EQ(with({{12, 30, -30}, {12, 30, 15}, {12, 0, 15}, {12, 0, -30}}), "no error");
   std::vector<Vec3> hexagon;
   for (int k = 0; k < 6; ++k) {
@@ -175,7 +174,8 @@ TEST(BlockersAnnotations, PolygonsMustBePlanarConvexWithAnArea) {
   EXPECT_NE(with({{0, 0, 5}, {0, 0, 5}, {0, 0, 5}}).find("no area"), std::string::npos);
   EXPECT_NE(with({{0, 0, 5}, {4, 0, 5}, {4, 3, 9}, {0, 3, 5}}).find("one plane"),
             std::string::npos);
-  const std::string reflex = with({{0, 0, 5}, {4, 0, 5}, {4, 1, 5}, {1, 1, 5}, {1, 4, 5}, {0, 4, 5}});
+  const std::string reflex =
+      with({{0, 0, 5}, {4, 0, 5}, {4, 1, 5}, {1, 1, 5}, {1, 4, 5}, {0, 4, 5}});
   EXPECT_NE(reflex.find("blockers.polygons[0].corners_m[3] = a reflex corner"), std::string::npos)
       << reflex;
   std::vector<Vec3> star;  // a pentagram: every turn the same way, twice around
@@ -202,8 +202,9 @@ TEST(BlockersAnnotations, EstimateCopiesThemIntoTheScene) {
   EXPECT_EQ(scene_to_json(est.scene), scene_to_json(want));  // the blockers, nothing else
   bool noted = false;
   for (const std::string& n : est.notes)
-    noted |= n == "blockers: annotated (a skyline of 3 points, 1 polygon(s), a canopy, completion "
-                  "of structures cut by the frame off)";
+    noted |= n ==
+             "blockers: annotated (a skyline of 3 points, 1 polygon(s), a canopy, completion "
+             "of structures cut by the frame off)";
   EXPECT_TRUE(noted);
   // Without blockers in the annotations the scene keeps its defaults.
   EXPECT_EQ(scene_to_json(plain.scene).find("\"polygons\""), std::string::npos);

@@ -1394,7 +1394,8 @@ void GuiTest::blockersPanelEditsValidatesAndRoundTrips() {
   const int rejected_before = rejected.count();
   panel.maxHeightSpin()->setValue(20000);
   QCOMPARE(rejected.count(), rejected_before + 1);
-  QVERIFY2(panel.message().contains("blockers.completion.max_height_m"), qPrintable(panel.message()));
+  QVERIFY2(panel.message().contains("blockers.completion.max_height_m"),
+           qPrintable(panel.message()));
   QCOMPARE(panel.blockers().completion.max_height_m, 45.0);
   QCOMPARE(panel.maxHeightSpin()->value(), 45.0);
 
@@ -1490,7 +1491,8 @@ void GuiTest::blockersPanelEditsValidatesAndRoundTrips() {
   panel.canopyCellSpin()->setValue(0.01);
   QVERIFY2(panel.message().contains("blockers.canopy.cell_m"), qPrintable(panel.message()));
   QCOMPARE(panel.blockers().canopy->cell_m, 1.0);
-  qInfo("blockers panel: %d edits applied, %d refused", int(changed.count()), int(rejected.count()));
+  qInfo("blockers panel: %d edits applied, %d refused", int(changed.count()),
+        int(rejected.count()));
   QVERIFY(changed.count() >= 15);
   QVERIFY(panel.grab().save(outDir() + "/blockers_panel.png"));
 
@@ -1591,8 +1593,9 @@ void GuiTest::blockersShadeTheSunnyPreview() {
   QVERIFY(w.preview()->scene.blockers.polygons.empty());
   const double skyline = inscatter_mean();
   QVERIFY(w.preview()->composite.save(outDir() + "/blockers_2_skyline.png"));
-  qInfo("mean in-scatter (G, scene-linear): sunny %.4f, wall %.4f (%.0f %%), skyline %.4f (%.0f %%)",
-        sunny, walled, 100 * (walled / sunny - 1), skyline, 100 * (skyline / sunny - 1));
+  qInfo(
+      "mean in-scatter (G, scene-linear): sunny %.4f, wall %.4f (%.0f %%), skyline %.4f (%.0f %%)",
+      sunny, walled, 100 * (walled / sunny - 1), skyline, 100 * (skyline / sunny - 1));
   // Measured with mr fog on the full photo: 0.175 -> 0.117 (-33 %) for the wall; the bar is
   // loose (the shade must be plain to see, not a rounding difference).
   QVERIFY2(walled < 0.8 * sunny, qPrintable(QString("%1 vs %2").arg(walled).arg(sunny)));
@@ -1610,7 +1613,8 @@ void GuiTest::blockersShadeTheSunnyPreview() {
   mr::FogScene s1, s2;
   s1.blockers = w.fogPanel()->scene().blockers;
   s2.blockers = reopened.blockersPanel()->blockers();
-  QCOMPARE(QString::fromStdString(mr::scene_to_json(s2)), QString::fromStdString(mr::scene_to_json(s1)));
+  QCOMPARE(QString::fromStdString(mr::scene_to_json(s2)),
+           QString::fromStdString(mr::scene_to_json(s1)));
   QCOMPARE(QString::fromStdString(mr::scene_to_json(reopened.fogPanel()->scene())),
            QString::fromStdString(mr::scene_to_json(w.fogPanel()->scene())));
   QTRY_VERIFY_WITH_TIMEOUT(settled(reopened), 120000);

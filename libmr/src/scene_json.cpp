@@ -490,7 +490,8 @@ Json blockers_document(const Blockers& b) {
     Json samples = Json::array();
     for (const Blockers::SkylineSample& k : b.skyline->samples)
       samples.push_back(Json::array({k.azimuth_deg, k.height_m}));
-    blockers["skyline"] = Json{{"distance_m", b.skyline->distance_m}, {"samples", std::move(samples)}};
+    blockers["skyline"] =
+        Json{{"distance_m", b.skyline->distance_m}, {"samples", std::move(samples)}};
   }
   if (!b.polygons.empty()) {
     Json polys = Json::array();
