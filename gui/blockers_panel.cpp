@@ -821,12 +821,17 @@ void BlockersPanel::refresh() {
   skyline_plot_->setSamples(samples);
   const int table_row = skyline_table_->currentRow();
   skyline_table_->setRowCount(int(samples.size()));
-  for (std::size_t i = 0; i < samples.size(); ++i) {
-    skyline_table_->setItem(int(i), 0,
-                            new QTableWidgetItem(QString::number(samples[i].azimuth_deg, 'g', 10)));
-    skyline_table_->setItem(int(i), 1,
-                            new QTableWidgetItem(QString::number(samples[i].height_m, 'g', 10)));
-  }
+  // Existing items are updated, not replaced: refresh() also runs from the table's own
+  // cellChanged (a refused edit), where the item being edited must outlive the signal.
+  for (std::size_t i = 0; i < samples.size(); ++i)
+    for (int col = 0; col < 2; ++col) {
+      const double v = col == 0 ? samples[i].azimuth_deg : samples[i].height_m;
+      const QString text = QString::number(v, 'g', 10);
+      if (QTableWidgetItem* item = skyline_table_->item(int(i), col))
+        item->setText(text);
+      else
+        skyline_table_->setItem(int(i), col, new QTableWidgetItem(text));
+    }
   if (table_row >= 0 && table_row < int(samples.size()))
     skyline_table_->setCurrentCell(table_row, 0);
   const int wall_row = wall_list_->currentRow();
