@@ -316,6 +316,9 @@ DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image&
     // sky_radiance (e.g. a night look's dark sky) both win over it.
     if (est.scene.lighting.sky_radiance && !scene.lighting.sky_radiance)
       scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
+    // Blockers stated in the photo's annotations replace the scene file's (they are this
+    // photo's, in the world of its estimated pose).
+    if (annotations.blockers) scene.blockers = est.scene.blockers;
     DepthMap depth;
     depth.distance_m = std::move(est.geometry.distance_m);
     depth.no_surface_pixels = est.geometry.sky_pixels;

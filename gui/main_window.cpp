@@ -40,7 +40,9 @@
 #include <QtConcurrent/QtConcurrentRun>
 #include <atomic>
 #include <cmath>
+#include <optional>
 
+#include "blockers_panel.h"
 #include "export_dialog.h"
 #include "fog_panel.h"
 #include "grabcut_assist.h"
@@ -103,6 +105,20 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
   addDockWidget(Qt::RightDockWidgetArea, fog_dock_);
   buildAnnotationDock();
   tabifyDockWidget(fog_dock_, annotation_dock_);
+  // Blockers the photo does not show (issue 13): they live in the scene (fog_panel_'s base
+  // scene); the panel edits a copy and writes it back.
+  blockers_panel_ = new BlockersPanel;
+  blockers_panel_->setObjectName("blockersPanel");
+  auto* blockers_scroll = new QScrollArea;
+  blockers_scroll->setWidget(blockers_panel_);
+  blockers_scroll->setWidgetResizable(true);
+  blockers_scroll->setHorizontalScrollBarPolicy(Qt::ScrollBarAlwaysOff);
+  blockers_dock_ = new QDockWidget(tr("Blockers"), this);
+  blockers_dock_->setObjectName("blockersDock");
+  blockers_dock_->setFeatures(QDockWidget::DockWidgetMovable | QDockWidget::DockWidgetFloatable);
+  blockers_dock_->setWidget(blockers_scroll);
+  addDockWidget(Qt::RightDockWidgetArea, blockers_dock_);
+  tabifyDockWidget(annotation_dock_, blockers_dock_);
   fog_dock_->raise();
 
   layer_box_ = new QComboBox;
@@ -212,9 +228,20 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
           [this](int v) { view_->setSplit(v / 100.0); });
   connect(fog_panel_, &FogPanel::sceneChanged, this, [this] {
     scene_modified_ = true;
+    syncBlockersContext();
     updateTitle();
     requestPreview();
   });
+  connect(blockers_panel_, &BlockersPanel::changed, this, [this] {
+    mr::FogScene scene = fog_panel_->scene();
+    scene.blockers = blockers_panel_->blockers();
+    fog_panel_->setScene(scene);
+    scene_modified_ = true;
+    updateTitle();
+    requestPreview();
+  });
+  connect(blockers_panel_, &BlockersPanel::rejected, this,
+          [this](const QString& m) { statusBar()->showMessage(tr("Blockers: %1").arg(m), 10000); });
   estimate_timer_.setSingleShot(true);
   estimate_timer_.setInterval(250);
   connect(&estimate_timer_, &QTimer::timeout, this, [this] { reestimate(true); });
@@ -360,6 +387,8 @@ void MainWindow::openPhoto(const QString& path) {
           view_->setBefore(doc->photo_display);
           view_->setAfter(QImage());
           fog_panel_->setScene(pending_scene_ ? *pending_scene_ : doc->scene);
+          blockers_panel_->setBlockers(fog_panel_->scene().blockers);
+          syncBlockersContext();
           pending_scene_.reset();
           pending_annotations_.reset();
           editor_->reset(doc->annotations);
@@ -382,6 +411,17 @@ void MainWindow::openPhoto(const QString& path) {
         },
         Qt::QueuedConnection);
   });
+}
+
+void MainWindow::syncBlockersContext() {
+  const mr::FogScene scene = fog_panel_->scene();
+  std::optional<double> sun_azimuth;
+  if (scene.lighting.sun) {
+    const mr::Vec3 d = scene.lighting.sun->direction_to_sun;
+    if (std::hypot(d.x, d.z) > 1e-9) sun_azimuth = std::atan2(d.x, d.z) * 180 / M_PI;
+  }
+  const double hfov = document_ ? document_->camera.horizontal_fov_deg() : 60.0;
+  blockers_panel_->setContext(scene.pose, hfov, sun_azimuth);
 }
 
 void MainWindow::requestPreview() {
@@ -839,6 +879,7 @@ void MainWindow::onEstimateDone(std::shared_ptr<EstimateResult> result, QString 
       scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
     if (!est.scene.lighting.lamps.empty()) scene.lighting.lamps = est.scene.lighting.lamps;
     fog_panel_->setScene(scene);
+    syncBlockersContext();
     requestPreview();
   }
   showLayer();

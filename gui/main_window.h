@@ -34,6 +34,7 @@ class QSlider;
 
 namespace mrstudio {
 
+class BlockersPanel;
 class FogPanel;
 class ImageView;
 
@@ -107,6 +108,9 @@ class MainWindow : public QMainWindow {
   QStringList recentFiles() const;
 
   FogPanel* fogPanel() const { return fog_panel_; }
+  /// Blockers the photo does not show (the scene's mr::Blockers; its own dock).
+  BlockersPanel* blockersPanel() const { return blockers_panel_; }
+  QDockWidget* blockersDock() const { return blockers_dock_; }
   ImageView* imageView() const { return view_; }
   QComboBox* layerBox() const { return layer_box_; }
   QSlider* splitSlider() const { return split_slider_; }
@@ -144,6 +148,8 @@ class MainWindow : public QMainWindow {
   void onRenderDone(std::shared_ptr<PreviewResult> result, QString error, int generation,
                     bool cancelled = false);
   void showLayer();
+  /// The camera and the sun of the scene into the blockers panel (drawn for orientation).
+  void syncBlockersContext();
   void updateTitle();
   void onOpen();
   void onSaveProject();
@@ -164,6 +170,8 @@ class MainWindow : public QMainWindow {
   mr::ColorConfig color_;
   ImageView* view_;
   FogPanel* fog_panel_;
+  BlockersPanel* blockers_panel_;
+  QDockWidget* blockers_dock_;
   QComboBox* layer_box_;
   QSlider* split_slider_;
   QLabel* backend_label_;

@@ -57,6 +57,8 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
     doc->annotations = *given_annotations;
   else if (annotated)
     doc->annotations = mr::load_annotations(annotations_path);
+  // Blockers the annotations state (what the photo does not show) are the scene's, as in mr fog.
+  if (doc->annotations.blockers) doc->scene.blockers = *doc->annotations.blockers;
   fs::path depth_path;
   for (const char* ext : {".exr", ".tif", ".tiff", ".pfm", ".png"}) {
     fs::path candidate = photo_path.parent_path() / (photo_path.stem().string() + "_depth" + ext);

@@ -312,5 +312,34 @@ TEST_F(EstimateCli, SceneCarriesTheVanishingPointFocalLengthToFog) {
   EXPECT_EQ(r.exit_code, 0) << r.output;
 }
 
+// Blockers stated in the annotations (issue 13): `mr estimate -o` writes them into the scene,
+// and `mr fog --depth auto --annotations` renders with them (the per-photo --save-scene shows
+// them).
+TEST_F(EstimateCli, AnnotatedBlockersReachTheScene) {
+  Blockers b;
+  b.skyline = Blockers::Skyline{30, {{-60, 14}, {80, 9.5}}};
+  b.polygons.push_back({{{10, 0, -20}, {10, 0, 12}, {10, 25, 12}, {10, 25, -20}}});
+  annotations.blockers = b;
+  save_annotations(dir / "b.json", annotations);
+  auto r = test::run(kMr + " estimate " + q(dir / "photo.png") + " --annotations " +
+                     q(dir / "b.json") + " --fov 50 -o " + q(dir / "scene.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("blockers: annotated (a skyline of 2 points, 1 polygon(s)"),
+            std::string::npos)
+      << r.output;
+  FogScene want;
+  want.blockers = b;
+  FogScene got;
+  got.blockers = load_scene(dir / "scene.json").blockers;
+  EXPECT_EQ(scene_to_json(got), scene_to_json(want));
+
+  r = test::run(kMr + " fog " + q(dir / "photo.png") + " --depth auto --annotations " +
+                q(dir / "b.json") + " --fov 50 --quality draft --out-dir " + q(dir / "out") +
+                " --save-scene " + q(dir / "{stem}.scene.json"));  // per photo: as rendered
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  got.blockers = load_scene(dir / "photo.scene.json").blockers;
+  EXPECT_EQ(scene_to_json(got), scene_to_json(want));
+}
+
 }  // namespace
 }  // namespace mr

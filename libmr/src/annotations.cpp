@@ -17,8 +17,10 @@
 #include <utility>
 
 #include "atomic_file.h"
+#include "blockers_json.h"
 #include "json_reading.h"
 #include "mr/error.h"
+#include "mr/scattering.h"
 
 namespace mr {
 
@@ -60,7 +62,7 @@ Annotations from_document(const Json& doc, const Reader& r) {
   r.check_keys(doc, "",
                {"format", "version", "horizon", "camera_height_m", "known_length", "planes",
                 "distance_hints", "shadow_pairs", "sunlit_patch", "shadowed_patch", "lamps",
-                "lamp_patches", "interior_box"});
+                "lamp_patches", "interior_box", "blockers"});
   const Json* format = member(doc, "format");
   if (!format)
     r.fail("/format", std::string("missing; expected \"") + kAnnotationsFormatName + "\"");
@@ -185,8 +187,36 @@ Annotations from_document(const Json& doc, const Reader& r) {
       b.ceiling_point = r.point(*c, "/interior_box/ceiling_point");
     a.interior_box = std::move(b);
   }
+  if (const Json* b = member(doc, "blockers"))
+    a.blockers = detail::read_blockers_json(*b, "/blockers", r);
   validate_annotations(a, "");  // re-thrown below with the source name
   return a;
+}
+
+// The JSON pointer of a field validate_scene names by its C++ path, within the blockers
+// object: "blockers.skyline.samples[3].height_m" -> "/blockers/skyline/samples/3/1" (a sample
+// is [azimuth_deg, height_m], a corner [x, y, z]).
+std::string blockers_pointer(const std::string& cpp_path) {
+  std::vector<std::string> tokens;
+  std::string word;
+  for (char c : cpp_path + ".") {
+    if (c == '.' || c == '[' || c == ']') {
+      if (!word.empty()) tokens.push_back(word);
+      word.clear();
+    } else {
+      word += c;
+    }
+  }
+  std::string pointer;
+  for (std::size_t i = 0; i < tokens.size(); ++i) {
+    std::string t = tokens[i];
+    const std::string parent = i >= 2 ? tokens[i - 2] : "";
+    if (parent == "samples" && t == "azimuth_deg") t = "0";
+    if (parent == "samples" && t == "height_m") t = "1";
+    if (parent == "corners_m") t = t == "x" ? "0" : t == "y" ? "1" : t == "z" ? "2" : t;
+    pointer += "/" + json::pointer_token(t);
+  }
+  return pointer;
 }
 
 Json point_json(const PixelPoint& p) {
@@ -304,6 +334,18 @@ void validate_annotations(const Annotations& a, const std::string& source_name) 
            "with ceiling_point it fixes the camera height; give camera_height_m or known_length, "
            "or drop one of ceiling_height_m and ceiling_point");
   }
+  if (a.blockers) {
+    // The scene's rules, not a copy of them: the same fields are valid in both documents.
+    FogScene probe;
+    probe.blockers = *a.blockers;
+    try {
+      validate_scene(probe);
+    } catch (const Error& e) {
+      const std::string what = e.what();
+      const auto eq = what.find(" = ");
+      fail(eq == std::string::npos ? "/blockers" : blockers_pointer(what.substr(0, eq)), what);
+    }
+  }
   if (a.lamps.empty() != a.lamp_patches.empty())
     fail(a.lamps.empty() ? "/lamps" : "/lamp_patches",
          "missing: lamps are fitted to the shading of lamp_patches; mark both or neither");
@@ -387,6 +429,7 @@ std::string annotations_to_json(const Annotations& a) {
     if (box->ceiling_point) j["ceiling_point"] = point_json(*box->ceiling_point);
     doc["interior_box"] = std::move(j);
   }
+  if (a.blockers) doc["blockers"] = detail::blockers_json(*a.blockers);
   return doc.dump(2) + "\n";
 }
 

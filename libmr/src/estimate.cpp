@@ -715,6 +715,20 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
         fmt("%.1f", 100 * fit.median_abs_residual) + " % median (of the median patch radiance)" +
         (fit.converged ? "" : "; Ceres did not report convergence"));
   }
+  // What the annotations say the photo does not show (off-frame walls, a skyline, a canopy;
+  // validated with the annotations) goes into the scene as stated.
+  if (annotations.blockers) {
+    const Blockers& b = *annotations.blockers;
+    est.scene.blockers = b;
+    std::string what;
+    auto add = [&](const std::string& s) { what += (what.empty() ? "" : ", ") + s; };
+    if (b.skyline) add("a skyline of " + std::to_string(b.skyline->samples.size()) + " points");
+    if (!b.polygons.empty()) add(std::to_string(b.polygons.size()) + " polygon(s)");
+    if (b.canopy) add("a canopy");
+    add(std::string("completion of structures cut by the frame ") +
+        (b.completion.enabled ? "on" : "off"));
+    est.notes.push_back("blockers: annotated (" + what + ")");
+  }
   return est;
 }
 

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "atomic_file.h"
+#include "blockers_json.h"
 #include "json_reading.h"
 #include "mr/error.h"
 #include "mr/fog.h"
@@ -478,6 +479,38 @@ Json bound_json(double v) {
   return std::isinf(v) ? Json(nullptr) : Json(v);
 }
 
+// The "blockers" object (scenes, and annotations documents since they carry the same schema).
+Json blockers_document(const Blockers& b) {
+  Json blockers = Json::object();
+  blockers["completion"] = Json{{"enabled", b.completion.enabled},
+                                {"max_height_m", b.completion.max_height_m},
+                                {"max_extent_m", b.completion.max_extent_m},
+                                {"prism_max_width_m", b.completion.prism_max_width_m}};
+  if (b.skyline) {
+    Json samples = Json::array();
+    for (const Blockers::SkylineSample& k : b.skyline->samples)
+      samples.push_back(Json::array({k.azimuth_deg, k.height_m}));
+    blockers["skyline"] =
+        Json{{"distance_m", b.skyline->distance_m}, {"samples", std::move(samples)}};
+  }
+  if (!b.polygons.empty()) {
+    Json polys = Json::array();
+    for (const Blockers::Polygon& poly : b.polygons) {
+      Json corners = Json::array();
+      for (const Vec3& c : poly.corners_m) corners.push_back(vec3_json(c));
+      polys.push_back(Json{{"corners_m", std::move(corners)}});
+    }
+    blockers["polygons"] = std::move(polys);
+  }
+  if (b.canopy)
+    blockers["canopy"] = Json{{"height_m", b.canopy->height_m},
+                              {"gap_fraction", b.canopy->gap_fraction},
+                              {"radius_m", b.canopy->radius_m},
+                              {"cell_m", b.canopy->cell_m},
+                              {"seed", b.canopy->seed}};
+  return blockers;
+}
+
 Json to_document(const FogScene& s) {
   Json doc = Json::object();
   doc["format"] = kSceneFormatName;
@@ -544,34 +577,7 @@ Json to_document(const FogScene& s) {
           Json::array({(*s.camera->principal_point_px)[0], (*s.camera->principal_point_px)[1]});
     doc["camera"] = std::move(camera);
   }
-  const Blockers& b = s.blockers;
-  Json blockers = Json::object();
-  blockers["completion"] = Json{{"enabled", b.completion.enabled},
-                                {"max_height_m", b.completion.max_height_m},
-                                {"max_extent_m", b.completion.max_extent_m},
-                                {"prism_max_width_m", b.completion.prism_max_width_m}};
-  if (b.skyline) {
-    Json samples = Json::array();
-    for (const Blockers::SkylineSample& k : b.skyline->samples)
-      samples.push_back(Json::array({k.azimuth_deg, k.height_m}));
-    blockers["skyline"] = Json{{"distance_m", b.skyline->distance_m}, {"samples", std::move(samples)}};
-  }
-  if (!b.polygons.empty()) {
-    Json polys = Json::array();
-    for (const Blockers::Polygon& poly : b.polygons) {
-      Json corners = Json::array();
-      for (const Vec3& c : poly.corners_m) corners.push_back(vec3_json(c));
-      polys.push_back(Json{{"corners_m", std::move(corners)}});
-    }
-    blockers["polygons"] = std::move(polys);
-  }
-  if (b.canopy)
-    blockers["canopy"] = Json{{"height_m", b.canopy->height_m},
-                              {"gap_fraction", b.canopy->gap_fraction},
-                              {"radius_m", b.canopy->radius_m},
-                              {"cell_m", b.canopy->cell_m},
-                              {"seed", b.canopy->seed}};
-  doc["blockers"] = std::move(blockers);
+  doc["blockers"] = blockers_document(s.blockers);
   return doc;
 }
 
@@ -700,5 +706,18 @@ void save_scene(const fs::path& path, const FogScene& scene) {
   }
   file.commit();
 }
+
+namespace detail {
+
+Blockers read_blockers_json(const json::Json& j, const std::string& pointer,
+                            const json::JsonReader& reader) {
+  return read_blockers(j, pointer, reader);
+}
+
+json::Json blockers_json(const Blockers& blockers) {
+  return blockers_document(blockers);
+}
+
+}  // namespace detail
 
 }  // namespace mr

@@ -5,9 +5,12 @@
 // Message shape (one line): "<C++ field path> = <value found>: <rule>", e.g.
 // "lighting.lamps[2].position_m.y = nan: must be finite". scene_json.cpp relies on this shape:
 // it maps the path before " = " to a JSON pointer, so keep paths free of " = ".
+#include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <numbers>
 #include <string>
+#include <vector>
 
 #include "mr/error.h"
 #include "mr/scattering.h"
@@ -156,6 +159,56 @@ constexpr double kMaxCanopyCells = 4e6;  // (radius / cell)^2 * 4
 constexpr std::size_t kMaxSkylineSamples = 100000;
 constexpr std::size_t kMaxPolygonCorners = 100000;
 
+// A blocker polygon is drawn as a fan from its first corner (render/blockers.cpp), which covers
+// the polygon exactly only when it is planar and convex; a polygon of no area casts no shadow
+// and is almost surely a mistake (a wall drawn as a click, its top at its bottom). Tolerances
+// are relative to the polygon's size: 1 mm per metre off its plane, turns that go back by
+// less than 1e-9 of its size squared (collinear corners) pass.
+void check_convex_planar(const std::string& path, const std::vector<Vec3>& c) {
+  const std::size_t n = c.size();
+  auto sub = [](const Vec3& a, const Vec3& b) { return Vec3{a.x - b.x, a.y - b.y, a.z - b.z}; };
+  auto cross = [](const Vec3& a, const Vec3& b) {
+    return Vec3{a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+  };
+  auto dot = [](const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; };
+  double extent = 0;
+  Vec3 normal{0, 0, 0}, centre{0, 0, 0};  // Newell's normal: twice the area, along the normal
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec3& a = c[k];
+    const Vec3& b = c[(k + 1) % n];
+    const Vec3 ab = cross(a, b);
+    normal = {normal.x + ab.x, normal.y + ab.y, normal.z + ab.z};
+    centre = {centre.x + a.x / double(n), centre.y + a.y / double(n), centre.z + a.z / double(n)};
+    extent = std::max(extent, std::sqrt(dot(sub(b, c[0]), sub(b, c[0]))));
+  }
+  const double twice_area = std::sqrt(dot(normal, normal));
+  if (!(twice_area > 1e-9 * extent * extent) || !(extent > 0))
+    fail(path, "area " + show(0.5 * twice_area) + " m^2",
+         "the polygon has no area (its corners are on one point or one line)");
+  const Vec3 u{normal.x / twice_area, normal.y / twice_area, normal.z / twice_area};
+  for (std::size_t k = 0; k < n; ++k) {
+    const double off = std::fabs(dot(sub(c[k], centre), u));
+    if (off > 1e-3 * extent)
+      fail(path + "[" + std::to_string(k) + "]", show(off) + " m off the polygon's plane",
+           "the corners must lie in one plane (within 1 mm per metre of the polygon's size)");
+  }
+  // Convex and simple: every turn goes the same way around the normal, and they add up to one
+  // full turn (a star polygon turns the same way but more than once).
+  double turning = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec3 e0 = sub(c[(k + 1) % n], c[k]);
+    const Vec3 e1 = sub(c[(k + 2) % n], c[(k + 1) % n]);
+    const double s = dot(cross(e0, e1), u);
+    if (s < -1e-9 * extent * extent)
+      fail(path + "[" + std::to_string((k + 1) % n) + "]", "a reflex corner",
+           "the polygon must be convex, its corners in order around it");
+    if (dot(e0, e0) > 0 && dot(e1, e1) > 0) turning += std::atan2(std::max(s, 0.0), dot(e0, e1));
+  }
+  if (turning > 2 * std::numbers::pi * 1.001)
+    fail(path, "turns " + show(turning * 180 / std::numbers::pi) + " degrees",
+         "the polygon must be simple and convex (its edges turn once around, 360 degrees)");
+}
+
 void validate_blockers(const Blockers& b) {
   const Blockers::Completion& c = b.completion;
   if (!(std::isfinite(c.max_height_m) && c.max_height_m > 0 && c.max_height_m <= kMaxBlockerExtentM))
@@ -187,6 +240,7 @@ void validate_blockers(const Blockers& b) {
            "need 3 to " + std::to_string(kMaxPolygonCorners));
     for (std::size_t k = 0; k < corners.size(); ++k)
       finite_vec(p + "[" + std::to_string(k) + "]", corners[k]);
+    check_convex_planar(p, corners);
   }
   if (b.canopy) {
     const Blockers::Canopy& c2 = *b.canopy;

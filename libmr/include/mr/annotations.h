@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "mr/scene.h"
+
 namespace mr {
 
 /// A point in the photo, in pixels (x right, y down; (0, 0) = centre of the top-left pixel).
@@ -93,6 +95,12 @@ struct Annotations {
     std::optional<PixelPoint> ceiling_point;
   };
   std::optional<InteriorBox> interior_box;
+  /// What the photo does not show but shadows the scene: a skyline above the frame, off-frame
+  /// walls or tree lines, a canopy, and how structures cut by the frame are continued; the
+  /// scene document's "blockers" (same JSON schema and rules, docs/scene.md). In world
+  /// coordinates of the estimated pose (the camera above x = z = 0 at yaw 0, looking along +Z).
+  /// estimate_scene copies it into the scene it estimates. nullopt: the scene's defaults.
+  std::optional<Blockers> blockers;
 };
 
 /// The value of the document's "format" key.
@@ -106,7 +114,9 @@ inline constexpr int kAnnotationsFormatVersion = 1;
 /// lamp offsets >= 0, lamp colours >= 0 and not black, lamp-patch albedos in (0, 1], both lamps
 /// and lamp_patches or neither; an interior box with >= 3 floor points, consecutive ones >= 1 px
 /// apart, and not ceiling_height_m and ceiling_point together with camera_height_m or
-/// known_length.
+/// known_length; blockers by validate_scene's rules (mr/scattering.h), the message then naming
+/// the field both ways ("/blockers/skyline/samples/0/1: blockers.skyline.samples[0].height_m =
+/// -5: must be in [0, 10000]").
 /// Throws mr::Error(invalid_argument) "source: /json/pointer: problem", e.g.
 ///   "a.json: /planes/2/polygon: expected at least 3 points, found 2".
 void validate_annotations(const Annotations& annotations,
