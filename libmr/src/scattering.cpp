@@ -159,6 +159,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     }
     render::TriangleMesh occluder_mesh;  // the Vulkan backend rasterizes it into shadow maps
     if (lights) {
+      report_progress(cancel, "occluders", 0, 2);  // normals + mesh, BVH; then "render"
       auto t = Clock::now();
       normals = render::estimate_normals(distance_m.view(), camera, scene.pose);
       throw_if_cancelled(cancel, kWhat);
@@ -186,6 +187,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         out.timings.mesh_s = seconds_since(t);
         occluder_mesh = std::move(mesh);
         throw_if_cancelled(cancel, kWhat);
+        report_progress(cancel, "occluders", 1, 2);
       } else {
         out.timings.mesh_s = seconds_since(t);
       }
@@ -207,6 +209,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       if (occluder_mesh.triangle_count() > 0) occluders.emplace(std::move(occluder_mesh));
       out.timings.bvh_s = seconds_since(t);
       throw_if_cancelled(cancel, kWhat);
+      report_progress(cancel, "occluders", 2, 2);
       in.occluders = occluders ? &*occluders : nullptr;
       t = Clock::now();
       render::render_scattering_cpu(in, core);
