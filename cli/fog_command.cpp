@@ -147,13 +147,15 @@ FogPlan make_plan(const FogCommandOptions& o) {
         parts.push_back(text.substr(pos, semi - pos));
         pos = semi + 1;
       }
-      if (parts.size() != 2 && parts.size() != 4)
+      if (parts.size() != 1 && parts.size() != 2 && parts.size() != 4)
         throw std::invalid_argument("--lamp '" + text +
-                                    "': expected x,y,z;R,G,B[;dx,dy,dz;inner,outer]");
+                                    "': expected x,y,z[;R,G,B|auto[;dx,dy,dz;inner,outer]]");
       Lamp lamp;
       const auto p = parse_numbers(parts[0], 3, "--lamp position");
       lamp.position_m = {p[0], p[1], p[2]};
-      lamp.intensity_per_sr = parse_rgb(parts[1]);
+      // No intensity, or 'auto': relative to each photo's exposure (Lamp::intensity_auto).
+      lamp.intensity_auto = parts.size() == 1 || parts[1] == "auto";
+      if (!lamp.intensity_auto) lamp.intensity_per_sr = parse_rgb(parts[1]);
       if (parts.size() == 4) {
         const auto d = parse_numbers(parts[2], 3, "--lamp spot direction");
         const auto a = parse_numbers(parts[3], 2, "--lamp spot angles");
@@ -660,8 +662,9 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
   cmd->add_option("--sun-radius", o.sun_radius_deg,
                   "Sun's angular radius, degrees (soft shafts) [default: 0.27]");
   cmd->add_option("--lamp", o.lamps,
-                  "A lamp: x,y,z;R,G,B (position m; intensity per sr), spot: add "
-                  ";dx,dy,dz;inner,outer (degrees). Repeatable");
+                  "A lamp: x,y,z[;R,G,B] (position m; intensity per sr; none or 'auto': "
+                  "relative to the photo's exposure), spot: add ;dx,dy,dz;inner,outer "
+                  "(degrees). Repeatable");
   cmd->add_option("--height-fog", o.height_fog,
                   "Exponential height fog: base,scale (m); density exp(-(y - base) / scale)");
   cmd->add_option("--layer", o.layer, "Fog only between heights bottom,top (m)");
