@@ -5,6 +5,7 @@
 #include <tbb/task_arena.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -147,9 +148,11 @@ FogPlan make_plan(const FogCommandOptions& o) {
         parts.push_back(text.substr(pos, semi - pos));
         pos = semi + 1;
       }
-      if (parts.size() != 1 && parts.size() != 2 && parts.size() != 4)
+      if ((parts.size() != 1 && parts.size() != 2 && parts.size() != 4) ||
+          std::count(parts[0].begin(), parts[0].end(), ',') != 2)
         throw std::invalid_argument("--lamp '" + text +
-                                    "': expected x,y,z[;R,G,B|auto[;dx,dy,dz;inner,outer]]");
+                                    "': expected x,y,z;R,G,B[;dx,dy,dz;inner,outer] (R,G,B "
+                                    "'auto' or left out: relative to the photo's exposure)");
       Lamp lamp;
       const auto p = parse_numbers(parts[0], 3, "--lamp position");
       lamp.position_m = {p[0], p[1], p[2]};
