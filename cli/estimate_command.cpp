@@ -12,6 +12,7 @@
 #include "mr/io.h"
 #include "mr/scene_json.h"
 #include "output_safety.h"
+#include "progress.h"
 
 namespace mr::cli {
 
@@ -45,6 +46,8 @@ CLI::App* add_estimate_command(CLI::App& app, EstimateCommandOptions& o) {
                   "replaces the estimated depth")
       ->check(CLI::ExistingFile);
   cmd->add_flag("-q,--quiet", o.quiet, "Print only errors");
+  cmd->add_flag("-v,--verbose", o.verbose,
+                "Progress notes on stderr when it is not a terminal (on a terminal: a bar)");
   cmd->add_flag("--overwrite", o.overwrite,
                 "Replace an existing --depth-out (a depth map is an input of mr fog; default: "
                 "refuse)");
@@ -125,7 +128,20 @@ int run_estimate_command(const EstimateCommandOptions& o) {
         focal_source += conf;
       }
     }
-    est = estimate_scene(photo, camera, annotations);
+    {
+      // Progress on stderr: a bar on a terminal, -v notes in a pipe; erased before the report.
+      Reporter report(1, o.quiet, o.verbose);
+      const PhotoProgress progress(report, o.photo, {{estimate_stages(), 1}});
+      EstimateOptions options;
+      options.cancel = progress.token();
+      try {
+        est = estimate_scene(photo, camera, annotations, options);
+      } catch (...) {
+        report.finish();
+        throw;
+      }
+      report.finish();
+    }
     // Recorded so that `mr fog --scene` renders with this focal length (the one found from the
     // vanishing points, say) rather than falling back to EXIF or the default.
     est.scene.camera = scene_camera(camera);

@@ -21,6 +21,7 @@ struct EstimateCommandOptions {
   std::string overlay_out;  ///< --overlay o.png
   std::string depth_network;  ///< --depth-network model.onnx; empty: none
   bool quiet = false;
+  bool verbose = false;    ///< -v: progress notes when stderr is not a terminal
   bool overwrite = false;  ///< replace an existing --depth-out (an input of mr fog)
 };
 

@@ -5,6 +5,7 @@
 #include <tbb/task_arena.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -147,13 +148,17 @@ FogPlan make_plan(const FogCommandOptions& o) {
         parts.push_back(text.substr(pos, semi - pos));
         pos = semi + 1;
       }
-      if (parts.size() != 2 && parts.size() != 4)
+      if ((parts.size() != 1 && parts.size() != 2 && parts.size() != 4) ||
+          std::count(parts[0].begin(), parts[0].end(), ',') != 2)
         throw std::invalid_argument("--lamp '" + text +
-                                    "': expected x,y,z;R,G,B[;dx,dy,dz;inner,outer]");
+                                    "': expected x,y,z;R,G,B[;dx,dy,dz;inner,outer] (R,G,B "
+                                    "'auto' or left out: relative to the photo's exposure)");
       Lamp lamp;
       const auto p = parse_numbers(parts[0], 3, "--lamp position");
       lamp.position_m = {p[0], p[1], p[2]};
-      lamp.intensity_per_sr = parse_rgb(parts[1]);
+      // No intensity, or 'auto': relative to each photo's exposure (Lamp::intensity_auto).
+      lamp.intensity_auto = parts.size() == 1 || parts[1] == "auto";
+      if (!lamp.intensity_auto) lamp.intensity_per_sr = parse_rgb(parts[1]);
       if (parts.size() == 4) {
         const auto d = parse_numbers(parts[2], 3, "--lamp spot direction");
         const auto a = parse_numbers(parts[3], 2, "--lamp spot angles");
@@ -289,7 +294,7 @@ Camera make_camera(const FogCommandOptions& o, const FogScene& scene, const fs::
 // estimated pose (and sun, sky, when the annotations give them) replace the plan's; options on
 // the command line still win. --camera-height also scales the estimated depth.
 DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image& photo,
-                        const Camera& camera, FogScene& scene) {
+                        const Camera& camera, FogScene& scene, const CancelToken* progress) {
   try {
     Annotations annotations;
     if (!o.annotations.empty()) {
@@ -300,6 +305,7 @@ DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image&
       if (!pattern || fs::exists(path, ec)) annotations = load_annotations(path);
     }
     EstimateOptions options;
+    options.cancel = progress;
     if (o.camera_height_m) options.default_camera_height_m = *o.camera_height_m;
     SceneEstimate est =
         estimate_scene(photo.channels() >= 3 ? photo : photo.select_channels(std::array{0, 0, 0}),
@@ -411,6 +417,7 @@ std::optional<Outcome> run_streamed(const FogCommandOptions& o, const FogPlan& p
                                     const Job& job, Reporter& report) {
   if (!is_sky_only(plan.scene) || plan.scene.render.backend == Backend::vulkan || o.aovs)
     return std::nullopt;
+  const PhotoProgress progress(report, job.photo.string(), {{{"render"}, 1}});
   std::error_code ec;
   if (o.depth == "auto" && !fs::exists(job.depth, ec)) return std::nullopt;
   static StreamerPool pool;
@@ -440,7 +447,7 @@ std::optional<Outcome> run_streamed(const FogCommandOptions& o, const FogPlan& p
   request.software = kOutputSoftware;  // marks the output as ours (output_safety.h)
   request.input_colorspace = o.input_colorspace;
   request.write = output_write_options(o, plan, job, probe_image(job.photo));
-  const StreamFogResult result = streamer->fog_file(request);
+  const StreamFogResult result = streamer->fog_file(request, progress.token());
   pool.release(std::move(streamer));
   if (!result.streamed) return std::nullopt;
   warn_about_depth(report, o, job.depth.string(),
@@ -505,7 +512,14 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
                             ? camera_for_photo(photo).camera
                             : make_camera(o, plan.scene, job.photo, photo);
   scene.camera = scene_camera(camera);  // what --save-scene records for this photo
-  const DepthMap depth = estimated ? estimate_depth(o, job, photo, camera, scene)
+  // Progress inside the photo (a bar on a terminal, -v notes in a pipe): the estimate's steps,
+  // the occluders (with a sun or lamps) and the render, weighted by their usual shares of time.
+  const bool lights = scene.lighting.sun || !scene.lighting.lamps.empty();
+  const PhotoProgress progress(report, job.photo.string(),
+                               {{estimate_stages(), estimated ? 1.0 : 0.0},
+                                {{"occluders"}, lights ? 1.0 : 0.0},
+                                {{"render"}, 2}});
+  const DepthMap depth = estimated ? estimate_depth(o, job, photo, camera, scene, progress.token())
                                    : read_depth(job.depth, camera, plan.depth);
   // Issue 11 item 4: an estimated scene's fog lies in a layer with a top, so the sky is seen
   // through it (clouds and sunsets attenuated, not painted over) and the sun enters it from
@@ -518,7 +532,7 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
                    depth.invalid_pixels, depth.sky_threshold_pixels, depth.clamped_pixels);
   ScatteringLayers aovs;
-  const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs);
+  const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs, progress.token());
   // The Vulkan fall-back, once per run: a warning when a GPU failed; on a machine without a
   // usable GPU the CPU is the expected choice, a note in verbose mode only.
   if (!aovs.backend_notice.empty() && (aovs.backend_notice_is_warning || o.verbose)) {
@@ -640,7 +654,8 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
       ->check(CLI::Range(0, kMaxThreads));
   cmd->add_flag("-q,--quiet", o.quiet, "Print errors and the summary only");
   cmd->add_flag("-v,--verbose", o.verbose,
-                "Also print notes: each photo as it renders, the backend chosen, files cleaned up");
+                "Also print notes: each photo as it renders, its progress (stages and fractions, "
+                "when stderr is not a terminal), the backend chosen, files cleaned up");
   cmd->add_option("--sky-depth", o.sky_depth_m,
                   "Stored depth values (times --depth-scale) at or above this are sky, metres; "
                   "reads Blender's 1e10, 1e6 and 65504 as sky; inf: none")
@@ -673,8 +688,9 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
   cmd->add_option("--sun-radius", o.sun_radius_deg,
                   "Sun's angular radius, degrees (soft shafts) [default: 0.27]");
   cmd->add_option("--lamp", o.lamps,
-                  "A lamp: x,y,z;R,G,B (position m; intensity per sr), spot: add "
-                  ";dx,dy,dz;inner,outer (degrees). Repeatable");
+                  "A lamp: x,y,z[;R,G,B] (position m; intensity per sr; none or 'auto': "
+                  "relative to the photo's exposure), spot: add ;dx,dy,dz;inner,outer "
+                  "(degrees). Repeatable");
   cmd->add_option("--height-fog", o.height_fog,
                   "Exponential height fog: base,scale (m); density exp(-(y - base) / scale)");
   cmd->add_option("--layer", o.layer, "Fog only between heights bottom,top (m)");
@@ -779,7 +795,7 @@ int run_fog_command(const FogCommandOptions& o, const std::atomic<bool>& interru
   for (const fs::path& stale : remove_stale_temporaries(o.out_dir))
     if (o.verbose) std::fprintf(stderr, "note: removed %s (left by a killed run)\n", stale.c_str());
 
-  Reporter report(jobs.size(), o.quiet);
+  Reporter report(jobs.size(), o.quiet, o.verbose);
   std::atomic<std::size_t> done{0}, skipped{0}, failed{0}, interrupted_jobs{0};
   std::mutex failures_mutex;
   std::vector<std::string> failures;

@@ -29,6 +29,7 @@ struct MaterialCommandOptions {
   int threads = 0;
   bool overwrite = false;
   bool quiet = false;
+  bool verbose = false;  ///< -v: progress notes when stderr is not a terminal
 };
 
 /// Adds the `material` subcommand to `app`; `options` must outlive parsing.

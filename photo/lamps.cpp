@@ -6,11 +6,13 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <string>
 
 #include "mr/error.h"
 #include "photo/geometry.h"
+#include "photo/illumination.h"
 #include "render/depth_downsample.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
@@ -524,6 +526,53 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
   for (std::size_t k = 0; k < patches.size(); ++k)
     fit.patch_rms_residual.push_back(std::sqrt(patch_sq[k] / double(patch_count[k])));
   return fit;
+}
+
+ExposureRelativeLamp exposure_relative_lamp(const Image& photo, const Image& distance_m,
+                                            const Camera& camera, const CameraPose& pose,
+                                            const Vec3& lamp_position_m,
+                                            const std::array<float, 3>& colour) {
+  if (photo.channels() < 3)
+    throw Error(ErrorCode::invalid_argument, "lamp intensity 'auto': the photo must be RGB, has " +
+                                                 std::to_string(photo.channels()) + " channels");
+  for (const Image* im : {&photo, &distance_m})
+    if (im->width() != camera.width || im->height() != camera.height)
+      throw Error(ErrorCode::size_mismatch,
+                  "lamp intensity 'auto': image is " + std::to_string(im->width()) + "x" +
+                      std::to_string(im->height()) + ", camera is " + std::to_string(camera.width) +
+                      "x" + std::to_string(camera.height));
+  ExposureRelativeLamp out;
+  out.bright_surface_luminance =
+      exposure_relative_sun(photo.view(), distance_m.view(), {0.0f, 0.0f, 0.0f})
+          .bright_surface_luminance;
+  // The nearest surface point: a grid of at most about 250,000 pixels (a pixel's footprint is
+  // far below the distances that matter).
+  constexpr double kMinNearestM = 0.25;
+  const int w = camera.width, h = camera.height;
+  const int step = std::max(1, int(std::ceil(std::sqrt(double(w) * h / 250'000.0))));
+  double nearest2 = INFINITY;
+  for (int y = step / 2; y < h; y += step)
+    for (int x = step / 2; x < w; x += step) {
+      const float d = distance_m.at(x, y, 0);
+      if (!std::isfinite(d) || !(d > 0)) continue;
+      const Vec3 v = sub(point_at(distance_m, camera, pose, x, y), lamp_position_m);
+      nearest2 = std::min(nearest2, dot(v, v));
+    }
+  if (std::isfinite(nearest2)) {
+    out.nearest_surface_m = std::sqrt(nearest2);
+  } else {
+    const Vec3 v = sub(lamp_position_m, pose.position_m);
+    out.nearest_surface_m = std::sqrt(dot(v, v));
+  }
+  out.nearest_surface_m = std::max(kMinNearestM, out.nearest_surface_m);
+  const double intensity = std::numbers::pi * out.bright_surface_luminance * out.nearest_surface_m *
+                           out.nearest_surface_m;
+  const double lum = luminance({colour[0], colour[1], colour[2]});
+  for (int c = 0; c < 3; ++c)
+    out.intensity_per_sr[std::size_t(c)] =
+        float(intensity *
+              (lum > 0 && std::isfinite(lum) ? std::max(0.0f, colour[std::size_t(c)]) / lum : 1.0));
+  return out;
 }
 
 }  // namespace mr::photo

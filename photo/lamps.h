@@ -130,4 +130,33 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
                   const CameraPose& pose, const std::vector<LampMark>& lamps,
                   const std::vector<LampPatch>& patches, const LampFitOptions& options = {});
 
+/// A lamp's intensity relative to the photo's exposure (issue 11 item 5), for a lamp placed
+/// without a given strength (Lamp::intensity_auto), so that a night look's lamps neither blow
+/// the frame to white nor vanish, whatever the photo's exposure.
+///
+/// Rule: the lamp is as strong as would light a white (albedo 1) Lambertian surface facing it,
+/// at the distance of the nearest surface the photo shows, exactly as bright as the photo's
+/// bright surfaces:
+///   I = pi L_bright d_near^2   (then (1 / pi) I / d_near^2 = L_bright),
+/// L_bright: the 99th percentile of the surface pixels' Rec. 709 luminance (as for the sun,
+/// exposure_relative_sun; all pixels when under 1 % are surfaces), d_near: the distance from the
+/// lamp to the nearest surface point of the distance map (pixels sampled on a grid of at most
+/// about 250,000), at least 0.25 m; without any surface pixel, the lamp's distance from the
+/// camera. A lamp over a ground of photo luminance L_0 at height h (the ground below it in
+/// view) gets I = pi L_0 h^2. The colour is `colour`'s chromaticity (scaled to luminance 1; a
+/// colour without positive luminance: grey).
+struct ExposureRelativeLamp {
+  std::array<float, 3> intensity_per_sr{};
+  double bright_surface_luminance = 0;  ///< L_bright
+  double nearest_surface_m = 0;         ///< d_near
+};
+
+/// `photo`: scene-linear RGB; `distance_m`: its distance map (1 channel, +inf = sky), of the
+/// camera's size. Throws mr::Error(invalid_argument) for a non-RGB photo, size_mismatch for
+/// images not of the camera's size.
+ExposureRelativeLamp exposure_relative_lamp(const Image& photo, const Image& distance_m,
+                                            const Camera& camera, const CameraPose& pose,
+                                            const Vec3& lamp_position_m,
+                                            const std::array<float, 3>& colour);
+
 }  // namespace mr::photo

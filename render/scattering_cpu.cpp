@@ -718,12 +718,22 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   if (gx.back() != w - 1) gx.push_back(w - 1);
   for (int y = 0; y < h; y += g) gy.push_back(y);
   if (gy.back() != h - 1) gy.push_back(h - 1);
+  // Progress (mr/cancel.h): one "render" stage in units of work weighted by their measured cost
+  // (1280x720 street with sun, grid step 3: pass 1 0.75 s for 103k samples, pass 2 0.12 s for
+  // 102k cells, pass 3 0.12 s for 0.9 MP): a sample 8, a cell 1, a row of pass 3 w / 8.
+  constexpr std::size_t kSampleWork = 8, kCellWork = 1;
+  const std::size_t kRowWork = std::max<std::size_t>(1, std::size_t(w) / 8);
+  const std::size_t cells = g > 1 ? (gx.size() - 1) * (gy.size() - 1) : 0;
+  ProgressCounter progress(
+      in.cancel, "render",
+      gx.size() * gy.size() * kSampleWork + cells * kCellWork + std::size_t(h) * kRowWork);
   tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, gy.size(), 0, gx.size()),
                     [&](const tbb::blocked_range2d<std::size_t>& r) {
                       for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j) {
                         if (stop()) return;
                         for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i)
                           exact(gx[i], gy[j], plan.steps);
+                        progress.add(r.cols().size() * kSampleWork);
                       }
                     });
   throw_if_stopped();
@@ -847,6 +857,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                   interpolated[idx] = 1;
                 }
             }
+            progress.add(r.cols().size() * kCellWork);
           }
         });
   }
@@ -894,6 +905,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         }
         out.sun_visibility.at(x, y, 0) = sun_visible;
       }
+      progress.add(kRowWork);
     }
   });
   throw_if_stopped();

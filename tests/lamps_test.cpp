@@ -21,6 +21,8 @@
 #include "mr/error.h"
 #include "mr/estimate.h"
 #include "mr/io.h"
+#include "mr/scattering.h"
+#include "mr/scene_json.h"
 #include "photo/lamps.h"
 
 namespace mr::photo {
@@ -565,6 +567,121 @@ TEST(Lamps, AnnotationsAreStrict) {
   EXPECT_EQ(a.lamps[0].offset_m, 0.25);
   EXPECT_EQ(*a.lamps[0].color, (std::array<double, 3>{0.5, 0.5, 0.5}));
   EXPECT_FALSE(a.lamp_patches[0].albedo);
+}
+
+// Automatic lamp intensity (issue 11 item 5, photo::exposure_relative_lamp): a camera 1.6 m
+// above a grey ground of photo luminance L0 (sky pixels far brighter, not surfaces), a lamp h
+// metres above the ground point seen at a pixel. The ground straight below is the nearest
+// surface, so the rule's closed form is I = pi L0 h^2: a white surface there is lit to
+// (1 / pi) I / h^2 = L0, the photo's bright-surface luminance. Tolerance 1e-3 relative (the
+// nearest sampled ground point is within a pixel's footprint, ~1 cm at 5 m, of the one below).
+struct GroundScene {
+  Camera camera = Camera::from_horizontal_fov(320, 240, 60);
+  CameraPose pose;
+  Image photo, distance_m;
+  GroundScene(float ground_luminance) {
+    pose.position_m = {0, 1.6, 0};
+    pose.pitch_deg = -30;
+    photo = Image(320, 240, 3);
+    distance_m = Image(320, 240, 1, {"Z"});
+    for (int y = 0; y < 240; ++y)
+      for (int x = 0; x < 320; ++x) {
+        const Vec3 d = pose.ray_direction(camera, x, y);
+        const bool ground = d.y < 0;
+        distance_m.at(x, y, 0) = ground ? float(-1.6 / d.y) : INFINITY;
+        for (int c = 0; c < 3; ++c) photo.at(x, y, c) = ground ? ground_luminance : 1.0f;
+      }
+  }
+  Vec3 above_ground_at(int x, int y, double h) const {
+    const Vec3 d = pose.ray_direction(camera, x, y);
+    const double t = distance_m.at(x, y, 0);
+    return {pose.position_m.x + t * d.x, h, pose.position_m.z + t * d.z};
+  }
+};
+
+double luminance_of(const std::array<float, 3>& c) {
+  return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+}
+
+TEST(LampAuto, LampOverGreyGroundLightsAWhiteSurfaceAsBrightAsThePhoto) {
+  for (const float l0 : {0.18f, 0.72f}) {
+    const GroundScene g(l0);
+    for (const double h : {0.5, 3.0, 6.0}) {
+      const Vec3 lamp = g.above_ground_at(160, 200, h);
+      const photo::ExposureRelativeLamp e = photo::exposure_relative_lamp(
+          g.photo, g.distance_m, g.camera, g.pose, lamp, {100, 90, 70});
+      EXPECT_NEAR(e.bright_surface_luminance, l0, 1e-6);
+      EXPECT_NEAR(e.nearest_surface_m, h, 1e-3 * h) << "h " << h;
+      const double intensity = luminance_of(e.intensity_per_sr);
+      EXPECT_NEAR(intensity, std::numbers::pi * l0 * h * h, 1e-3 * intensity) << "h " << h;
+      // What it means: the white surface below reads L0.
+      EXPECT_NEAR(intensity / (std::numbers::pi * h * h), l0, 1e-3 * l0);
+      // The colour's chromaticity is kept.
+      EXPECT_NEAR(e.intensity_per_sr[0] / e.intensity_per_sr[2], 100.0 / 70.0, 1e-5);
+      EXPECT_NEAR(e.intensity_per_sr[1] / e.intensity_per_sr[2], 90.0 / 70.0, 1e-5);
+    }
+  }
+  // A colour without luminance: grey.
+  const GroundScene g(0.18f);
+  const photo::ExposureRelativeLamp grey = photo::exposure_relative_lamp(
+      g.photo, g.distance_m, g.camera, g.pose, g.above_ground_at(160, 200, 2), {0, 0, 0});
+  EXPECT_FLOAT_EQ(grey.intensity_per_sr[0], grey.intensity_per_sr[2]);
+  EXPECT_GT(grey.intensity_per_sr[0], 0.0f);
+}
+
+TEST(LampAuto, RenderWithAnAutoLampUsesTheRulesIntensity) {
+  const GroundScene g(0.3f);
+  FogScene scene;
+  scene.pose = g.pose;
+  scene.medium.sigma_t_per_m = {0.05f, 0.05f, 0.05f};
+  scene.lighting.sky_radiance = Rgb{0.01f, 0.01f, 0.012f};
+  scene.render.backend = Backend::cpu;
+  scene.render.quality = Quality::draft;
+  Lamp lamp;
+  lamp.position_m = g.above_ground_at(160, 200, 3);
+  lamp.intensity_per_sr = {60, 40, 16};  // sodium: the colour only
+  lamp.intensity_auto = true;
+  FogScene explicit_scene = scene;
+  explicit_scene.lighting.lamps = {lamp};
+  explicit_scene.lighting.lamps[0].intensity_auto = false;
+  explicit_scene.lighting.lamps[0].intensity_per_sr =
+      photo::exposure_relative_lamp(g.photo, g.distance_m, g.camera, g.pose, lamp.position_m,
+                                    lamp.intensity_per_sr)
+          .intensity_per_sr;
+  scene.lighting.lamps = {lamp};
+  const ScatteringLayers a = render_scattering(g.photo, g.distance_m, g.camera, scene);
+  const ScatteringLayers b = render_scattering(g.photo, g.distance_m, g.camera, explicit_scene);
+  double max_diff = 0, max_r = 0;
+  for (std::size_t i = 0; i < a.inscatter.pixels().size(); ++i) {
+    max_diff =
+        std::max(max_diff, double(std::fabs(a.inscatter.pixels()[i] - b.inscatter.pixels()[i])));
+    max_r = std::max(max_r, double(a.inscatter.pixels()[i]));
+  }
+  EXPECT_EQ(max_diff, 0.0);
+  EXPECT_GT(max_r, 0.01);  // the lamp's glow is there
+  // Without a photo the rule has nothing to go by: a clear error.
+  EXPECT_THROW((void)render_scattering(Image(), g.distance_m, g.camera, scene), Error);
+}
+
+TEST(LampAuto, SceneJsonAutoWhenNoIntensityOrAuto) {
+  const std::string head = R"({"format": "libmr-scene", "version": 2, "lighting": {"lamps": [)";
+  const FogScene none = scene_from_json(head + R"({"position_m": [0, 3, 5]}]}})", "a.json");
+  ASSERT_EQ(none.lighting.lamps.size(), 1u);
+  EXPECT_TRUE(none.lighting.lamps[0].intensity_auto);
+  const FogScene coloured = scene_from_json(
+      head + R"({"position_m": [0, 3, 5], "intensity_per_sr": "auto", "color": [60, 40, 16]}]}})",
+      "b.json");
+  EXPECT_TRUE(coloured.lighting.lamps[0].intensity_auto);
+  EXPECT_FLOAT_EQ(coloured.lighting.lamps[0].intensity_per_sr[1], 40.0f);
+  const FogScene again = scene_from_json(scene_to_json(coloured), "c.json");
+  EXPECT_TRUE(again.lighting.lamps[0].intensity_auto);
+  EXPECT_FLOAT_EQ(again.lighting.lamps[0].intensity_per_sr[2], 16.0f);
+  const FogScene fixed = scene_from_json(
+      head + R"({"position_m": [0, 3, 5], "intensity_per_sr": [1, 2, 3]}]}})", "d.json");
+  EXPECT_FALSE(fixed.lighting.lamps[0].intensity_auto);
+  EXPECT_FALSE(scene_from_json(scene_to_json(fixed), "e.json").lighting.lamps[0].intensity_auto);
+  EXPECT_THROW((void)scene_from_json(head + R"({"intensity_per_sr": 5, "color": 1}]}})", "f.json"),
+               Error);
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "mr/annotations.h"
+#include "mr/cancel.h"
 #include "mr/error.h"
 #include "mr/io.h"
 #include "mr/material.h"
@@ -709,6 +710,60 @@ TEST(MaterialApply, DetailIsOneOnAnUntexturedSurfaceAndPlainRenderingIsExact) {
       const Rgb e = render::shade_pixel(kGlossy, g, s.scene.lighting, x, y);
       for (int c = 0; c < 3; ++c) ASSERT_NEAR(out.at(x, y, c), e[c], 1e-5f * std::max(1.0f, e[c]));
     }
+}
+
+// Progress (mr/cancel.h): the steps in order, the fits forward to their count, the same
+// result as without a token; a callback that cancels during the fits stops the transfer.
+TEST(MaterialTransfer, ReportsItsStepsAndCanBeCancelledFromTheCallback) {
+  const Synthetic sample = glossy_sphere();
+  const Synthetic target = textured_ground();
+  CancelToken token;
+  struct Seen {
+    std::string stage;
+    std::size_t done, total;
+  };
+  std::vector<Seen> seen;
+  token.set_progress(
+      [&](const Progress& p) {
+        seen.push_back({std::string(p.stage), p.done, p.total});
+      },
+      {});
+  MaterialTransferOptions options;
+  options.cancel = &token;
+  const MaterialTransferResult with =
+      transfer_material(shaded(sample), shaded(target), target.labels, options);
+  std::vector<std::string> order;
+  for (const Seen& s : seen)
+    if (order.empty() || order.back() != s.stage) order.push_back(s.stage);
+  EXPECT_EQ(order, (std::vector<std::string>{"target geometry", "sample geometry", "segments",
+                                             "fit", "statistics", "search", "apply"}));
+  std::vector<Seen> fits;
+  for (const Seen& s : seen)
+    if (s.stage == "fit") fits.push_back(s);
+  ASSERT_GE(fits.size(), 2u);
+  EXPECT_EQ(fits.front().done, 0u);
+  EXPECT_EQ(fits.back().done, fits.back().total);
+  for (std::size_t i = 1; i < fits.size(); ++i) EXPECT_GT(fits[i].done, fits[i - 1].done);
+  EXPECT_EQ(seen.back().stage, "apply");
+  EXPECT_EQ(seen.back().done, 1u);
+  options.cancel = nullptr;
+  const MaterialTransferResult without =
+      transfer_material(shaded(sample), shaded(target), target.labels, options);
+  EXPECT_EQ(test::max_abs_diff(with.image, without.image), 0.0);
+
+  CancelToken stopper;
+  stopper.set_progress(
+      [&](const Progress& p) {
+        if (p.stage == "fit") stopper.request();
+      },
+      {});
+  options.cancel = &stopper;
+  try {
+    (void)transfer_material(shaded(sample), shaded(target), target.labels, options);
+    FAIL() << "no throw";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::cancelled) << e.what();
+  }
 }
 
 }  // namespace

@@ -479,8 +479,11 @@ TEST(SceneJson, SunFromAzimuthAndElevation) {
 TEST(SceneJson, UnknownKeyIsAnErrorNamingItsPath) {
   EXPECT_CONTAINS(parse_error(doc("\"medium\": {\"albdo\": 0.5}")),
                   "scene.json: /medium/albdo: unknown key; did you mean \"albedo\"?");
+  EXPECT_CONTAINS(parse_error(doc("\"lighting\": {\"lamps\": [{}, {\"brightness\": 1}]}")),
+                  "scene.json: /lighting/lamps/1/brightness: unknown key; expected one of:");
+  // A lamp has a "color" (with intensity "auto"): the British spelling is a near miss.
   EXPECT_CONTAINS(parse_error(doc("\"lighting\": {\"lamps\": [{}, {\"colour\": 1}]}")),
-                  "scene.json: /lighting/lamps/1/colour: unknown key; expected one of:");
+                  "scene.json: /lighting/lamps/1/colour: unknown key; did you mean \"color\"?");
   EXPECT_CONTAINS(parse_error(doc("\"mediums\": {}")), "scene.json: /mediums: unknown key");
   // A key holding an escaped newline or a '/' is shown escaped: the message stays one line
   // and the pointer stays a valid RFC 6901 pointer.

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "cv_bridge.h"
+#include "mr/cancel.h"
 #include "mr/error.h"
 #include "mr/scene_json.h"
 #include "photo/airlight.h"
@@ -162,8 +163,34 @@ EstimateSource source_of(photo::HorizonCue cue) {
   return EstimateSource::fallback;
 }
 
+// An estimate's progress (mr/cancel.h): as each step starts, (its name, steps finished, steps
+// planned); at the end, (the last step, planned, planned). A requested token stops the estimate
+// at the next step.
+class Steps {
+ public:
+  Steps(const CancelToken* cancel, std::size_t planned) : cancel_(cancel), planned_(planned) {}
+  void start(const char* name) {
+    throw_if_cancelled(cancel_, "estimate");
+    if (current_) ++done_;
+    current_ = name;
+    report_progress(cancel_, name, std::min(done_, planned_ - 1), planned_);
+  }
+  void finish() {
+    if (current_) report_progress(cancel_, current_, planned_, planned_);
+  }
+
+ private:
+  const CancelToken* cancel_;
+  std::size_t planned_, done_ = 0;
+  const char* current_ = nullptr;
+};
+
+// The geometry's steps: horizon, sky mask, depth, refine.
+constexpr std::size_t kGeometrySteps = 4;
+
 GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annotations& annotations,
-                          const EstimateOptions& options) {
+                          const EstimateOptions& options, Steps& steps) {
+  steps.start("horizon");
   check_camera(camera);
   validate_annotations(annotations, "");
   const bool automatic = photo && options.automatic;
@@ -210,6 +237,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     throw Error(ErrorCode::invalid_argument,
                 "default_camera_height_m: must be > 0, found " + fmt("%g", height));
   g.pose.position_m = {0, height, 0};
+  steps.start("sky mask");
   g.horizon = photo::horizon_of_pose(camera, g.pose);
   photo::DistanceMap map = photo::distance_map(camera, g.pose, annotations);
   g.distance_m = std::move(map.distance_m);
@@ -257,6 +285,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // billboard; the ground behind a column's structure takes the structure's distance.
   const photo::SkyMask mask = photo::estimate_sky_mask(photo->view(), g.horizon);
   g.sky_from_mask = true;
+  steps.start("depth");
   const int w = camera.width, h = camera.height;
   const std::size_t n = std::size_t(w) * h;
   const double depression = options.billboard_depression_deg;
@@ -489,6 +518,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       q[i] = inv;
       c[i] = conf;
     }
+  steps.start("refine");
   if (options.refine_depth) q = photo::refine_inverse_distance(photo->view(), q, c, refine);
   // Issue 11 item 4: a surface that meets the sky where the photo shows no edge (a calm sea
   // under a hazy sky, a hill fading into it) goes to the sky's distance there, so that the fog,
@@ -524,12 +554,18 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
 
 GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
                                    const EstimateOptions& options) {
-  return geometry(nullptr, camera, annotations, options);
+  Steps steps(options.cancel, kGeometrySteps);
+  GeometryEstimate g = geometry(nullptr, camera, annotations, options, steps);
+  steps.finish();
+  return g;
 }
 
 GeometryEstimate estimate_geometry(const Image& photo, const Camera& camera,
                                    const Annotations& annotations, const EstimateOptions& options) {
-  return geometry(&photo, camera, annotations, options);
+  Steps steps(options.cancel, kGeometrySteps);
+  GeometryEstimate g = geometry(&photo, camera, annotations, options, steps);
+  steps.finish();
+  return g;
 }
 
 SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
@@ -545,7 +581,9 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                                                  std::to_string(photo.channels()) +
                                                  " channel(s); RGB is needed");
   SceneEstimate est;
-  est.geometry = estimate_geometry(photo, camera, annotations, options);
+  Steps steps(options.cancel, kGeometrySteps + 1);
+  est.geometry = geometry(&photo, camera, annotations, options, steps);
+  steps.start("light");  // the sun, the sky, the lamps
   const GeometryEstimate& g = est.geometry;
   est.scene.pose = g.pose;
   // The scene records the camera it was estimated with (a focal length from vanishing points
@@ -729,6 +767,7 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
         (b.completion.enabled ? "on" : "off"));
     est.notes.push_back("blockers: annotated (" + what + ")");
   }
+  steps.finish();
   return est;
 }
 

@@ -286,6 +286,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   bool stopped = false;
   const double alpha_scale = 1.0 / (photo_bits == 16 ? 65535.0 : 255.0);
   const double out_max_code = out_bits == 8 ? 255.0 : 65535.0;
+  report_progress(cancel, "render", 0, std::size_t(h));  // mr/cancel.h: rows written
   tbb::parallel_pipeline(
       tokens,
       // Decode the photo's next rows (libjpeg & co. decode in order: one strip at a time).
@@ -424,6 +425,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
             result.invalid_pixels += s->counts.invalid;
             result.sky_threshold_pixels += s->counts.sky_threshold;
             result.clamped_pixels += s->counts.clamped;
+            report_progress(cancel, "render", std::size_t(s->y0 + s->rows), std::size_t(h));
           }));
   if (stopped) throw_if_cancelled(cancel, "fog_file");
   if (in) in->close();

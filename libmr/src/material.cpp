@@ -16,6 +16,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "mr/annotations.h"
+#include "mr/cancel.h"
 #include "mr/error.h"
 #include "mr/io.h"
 #include "photo/material/apply.h"
@@ -220,9 +221,25 @@ ReducedSample reduce_sample(const Image& rgb, const ShadedPhoto& sample) {
   return r;
 }
 
+// One step of a transfer (progress, mr/cancel.h): (name, 0, 1) as it starts, after a check of
+// the cancellation; (name, 1, 1) at end().
+class Step {
+ public:
+  Step(const CancelToken* cancel, const char* name) : cancel_(cancel), name_(name) {
+    throw_if_cancelled(cancel_, "material");
+    report_progress(cancel_, name_, 0, 1);
+  }
+  void end() { report_progress(cancel_, name_, 1, 1); }
+
+ private:
+  const CancelToken* cancel_;
+  const char* name_;
+};
+
 MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOptions& options,
                            double* light_level_out = nullptr) {
   const auto start = std::chrono::steady_clock::now();
+  Step geometry_step(options.cancel, "sample geometry");
   const Image full_rgb = checked_rgb(sample, "sample");
   const int full_w = full_rgb.width(), full_h = full_rgb.height();
   const ReducedSample reduced = reduce_sample(full_rgb, sample);
@@ -236,6 +253,7 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
   const int w = rgb.width(), h = rgb.height();
   const render::SurfaceGeometry geometry = geometry_of(working, options, kPhotoSkyRays);
   const double geometry_s = seconds_since(start);
+  geometry_step.end();
   const Lighting& lighting = sample.scene.lighting;
   if (light_level_out) *light_level_out = light_level(geometry, lighting);
 
@@ -268,7 +286,9 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
                     kSampleAdvice);
   photo::SegmentOptions seg_options;
   seg_options.superpixel_size_px = options.superpixel_size_px / reduced.factor;
+  Step segment_step(options.cancel, "segments");
   const photo::Segmentation seg = photo::segment_image(rgb, &valid, seg_options);
+  segment_step.end();
 
   MaterialCandidates out;
   out.notes.push_back("sample: " + counts + "; " + std::to_string(seg.count) + " segments");
@@ -305,7 +325,10 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
   photo::BrdfFitOptions fit_options;
   fit_options.max_pixels = kFitPixels;
   const auto fit_start = std::chrono::steady_clock::now();
+  throw_if_cancelled(options.cancel, "material");
+  ProgressCounter fit_progress(options.cancel, "fit", std::size_t(fitted_segments));  // segments
   tbb::parallel_for(0, fitted_segments, [&](int i) {
+    if (options.cancel && options.cancel->requested()) return;
     const int s = by_size[i];
     try {
       fits[s].fit = photo::fit_brdf(rgb, geometry, lighting, segment_pixels[s], fit_options);
@@ -314,7 +337,9 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
     } catch (const Error& e) {
       fits[s].failure = std::string("not fitted: ") + e.what();
     }
+    fit_progress.add(1);
   });
+  throw_if_cancelled(options.cancel, "material");
   const double fit_s = seconds_since(fit_start);
 
   // Well fitted, then the largest first; a near-duplicate joins the candidate it duplicates.
@@ -529,9 +554,11 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
   const int regions = checked_region_count(region_labels_in, w, h);
   return in_arena(options.threads, [&] {
     const auto start = std::chrono::steady_clock::now();
+    Step target_step(options.cancel, "target geometry");
     const render::SurfaceGeometry traced =
         geometry_of(target, options, scene_only ? kSceneSkyRays : kPhotoSkyRays);
     const double target_geometry_s = seconds_since(start);
+    target_step.end();
     const Lighting& lighting = target.scene.lighting;
     // Thin unlabelled seams between or inside regions (masks from depth or painted by hand)
     // join their nearest region, so no line of the old material is left between new pixels.
@@ -610,12 +637,16 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
         regions, std::vector<photo::StyleStatistics>(m));
     {
       Image rendered(w, h, 3);
+      throw_if_cancelled(options.cancel, "material");
+      report_progress(options.cancel, "statistics", 0, std::size_t(m));  // candidates rendered
       for (int c = 0; c < m; ++c) {
+        throw_if_cancelled(options.cancel, "material");
         photo::render_with_detail(geometry, lighting, shading, detail_used, candidates[c].material,
                                   all_stats_pixels, rendered);
         tbb::parallel_for(0, regions, [&](int r) {
           region_stats[r][c] = photo::style_statistics(rendered, stats_pixels[r], target_reference);
         });
+        report_progress(options.cancel, "statistics", std::size_t(c) + 1, std::size_t(m));
       }
     }
     std::vector<Material> materials;
@@ -627,6 +658,7 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     tabu.max_iterations = options.tabu_max_iterations;
     tabu.patience = options.tabu_patience;
     tabu.seed = options.seed;
+    Step search_step(options.cancel, "search");
     const photo::TabuResult search = photo::tabu_search(
         regions, m, [&](std::span<const int> a) { return objective(a); }, tabu);
     result.assignment = search.assignment;
@@ -636,8 +668,11 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     std::vector<Material> assigned;
     for (int r = 0; r < regions; ++r) assigned.push_back(materials[result.assignment[r]]);
     const double search_s = seconds_since(search_start);
+    search_step.end();
+    Step apply_step(options.cancel, "apply");
     result.image = photo::apply_materials(target_rgb, geometry, lighting, shading, region_labels,
                                           assigned, detail_used);
+    apply_step.end();
 
     // Style distance of the regions to the sample, before and after (whole composite).
     const photo::StyleStatistics before =

@@ -4,6 +4,7 @@
 
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <optional>
@@ -15,6 +16,7 @@
 #include "photo/airlight.h"
 #include "photo/composite.h"
 #include "photo/illumination.h"
+#include "photo/lamps.h"
 #include "render/blockers.h"
 #include "render/depth_downsample.h"
 #include "render/embree_scene.h"
@@ -100,12 +102,17 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
   }
   const bool need_sky_estimate = !scene.lighting.sky_radiance.has_value();
   const bool need_sun_estimate = scene.lighting.sun && scene.lighting.sun->irradiance_auto;
-  if ((need_sky_estimate || need_sun_estimate) &&
+  const bool need_lamp_estimate =
+      std::any_of(scene.lighting.lamps.begin(), scene.lighting.lamps.end(),
+                  [](const Lamp& l) { return l.intensity_auto; });
+  if ((need_sky_estimate || need_sun_estimate || need_lamp_estimate) &&
       (photo.empty() || photo.channels() < 3 || photo.width() != camera.width ||
        photo.height() != camera.height))
     throw Error(ErrorCode::invalid_argument,
                 std::string("render_scattering: the ") +
-                    (need_sky_estimate ? "sky radiance" : "sun irradiance") +
+                    (need_sky_estimate   ? "sky radiance"
+                     : need_sun_estimate ? "sun irradiance"
+                                         : "lamp intensity") +
                     " is 'auto' but no photo of the camera's size was given to estimate it from");
   check_lamps_outside_geometry(distance_m, camera, scene);
 
@@ -117,6 +124,13 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         photo::exposure_relative_sun(photo.view(), distance_m.view(), out.sky_radiance).irradiance;
     scene.lighting.sun->irradiance_auto = false;
   }
+  for (Lamp& lamp : scene.lighting.lamps)  // issue 11 item 5: lamps relative to the exposure too
+    if (lamp.intensity_auto) {
+      lamp.intensity_per_sr = photo::exposure_relative_lamp(photo, distance_m, camera, scene.pose,
+                                                            lamp.position_m, lamp.intensity_per_sr)
+                                  .intensity_per_sr;
+      lamp.intensity_auto = false;
+    }
   const int w = camera.width, h = camera.height;
   out.transmittance = Image::uninitialized(w, h, 3);
   out.inscatter = Image::uninitialized(w, h, 3);
@@ -159,6 +173,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     }
     render::TriangleMesh occluder_mesh;  // the Vulkan backend rasterizes it into shadow maps
     if (lights) {
+      report_progress(cancel, "occluders", 0, 2);  // normals + mesh, BVH; then "render"
       auto t = Clock::now();
       normals = render::estimate_normals(distance_m.view(), camera, scene.pose);
       throw_if_cancelled(cancel, kWhat);
@@ -187,6 +202,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
         out.timings.mesh_s = seconds_since(t);
         occluder_mesh = std::move(mesh);
         throw_if_cancelled(cancel, kWhat);
+        report_progress(cancel, "occluders", 1, 2);
       } else {
         out.timings.mesh_s = seconds_since(t);
       }
@@ -208,6 +224,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       if (occluder_mesh.triangle_count() > 0) occluders.emplace(std::move(occluder_mesh));
       out.timings.bvh_s = seconds_since(t);
       throw_if_cancelled(cancel, kWhat);
+      report_progress(cancel, "occluders", 2, 2);
       in.occluders = occluders ? &*occluders : nullptr;
       t = Clock::now();
       render::render_scattering_cpu(in, core);

@@ -146,13 +146,23 @@ Sun read_sun(const Json& j, const std::string& p, const Reader& r) {
 
 Lamp read_lamp(const Json& j, const std::string& p, const Reader& r) {
   r.object(j, p);
-  r.check_keys(
-      j, p,
-      {"position_m", "intensity_per_sr", "spot_direction", "inner_angle_deg", "outer_angle_deg"});
+  r.check_keys(j, p,
+               {"position_m", "intensity_per_sr", "color", "spot_direction", "inner_angle_deg",
+                "outer_angle_deg"});
   Lamp lamp;
   if (const Json* v = member(j, "position_m")) lamp.position_m = r.vec3(*v, p + "/position_m");
-  if (const Json* v = member(j, "intensity_per_sr"))
-    lamp.intensity_per_sr = r.rgb(*v, p + "/intensity_per_sr");
+  // No intensity, or "auto": relative to each photo's exposure (Lamp::intensity_auto), in the
+  // colour of "color" (default: the default intensity's warm white).
+  const Json* intensity = member(j, "intensity_per_sr");
+  lamp.intensity_auto = !intensity || (intensity->is_string() && *intensity == "auto");
+  if (intensity && !lamp.intensity_auto)
+    lamp.intensity_per_sr = r.rgb(*intensity, p + "/intensity_per_sr");
+  if (const Json* v = member(j, "color")) {
+    if (!lamp.intensity_auto)
+      r.fail(p + "/color",
+             "only with intensity_per_sr \"auto\" (a given intensity has its colour)");
+    lamp.intensity_per_sr = r.rgb(*v, p + "/color");
+  }
   if (const Json* v = member(j, "spot_direction"))
     lamp.spot_direction = r.vec3(*v, p + "/spot_direction");
   if (const Json* v = member(j, "inner_angle_deg"))
@@ -547,12 +557,16 @@ Json to_document(const FogScene& s) {
                           : Json(nullptr);
   lighting["sky_radiance"] = l.sky_radiance ? rgb_json(*l.sky_radiance) : Json("auto");
   Json lamps = Json::array();
-  for (const Lamp& lamp : l.lamps)
-    lamps.push_back(Json{{"position_m", vec3_json(lamp.position_m)},
-                         {"intensity_per_sr", rgb_json(lamp.intensity_per_sr)},
-                         {"spot_direction", vec3_json(lamp.spot_direction)},
-                         {"inner_angle_deg", lamp.inner_angle_deg},
-                         {"outer_angle_deg", lamp.outer_angle_deg}});
+  for (const Lamp& lamp : l.lamps) {
+    Json j{
+        {"position_m", vec3_json(lamp.position_m)},
+        {"intensity_per_sr", lamp.intensity_auto ? Json("auto") : rgb_json(lamp.intensity_per_sr)}};
+    if (lamp.intensity_auto) j["color"] = rgb_json(lamp.intensity_per_sr);
+    j["spot_direction"] = vec3_json(lamp.spot_direction);
+    j["inner_angle_deg"] = lamp.inner_angle_deg;
+    j["outer_angle_deg"] = lamp.outer_angle_deg;
+    lamps.push_back(std::move(j));
+  }
   lighting["lamps"] = std::move(lamps);
 
   const RenderSettings& r = s.render;

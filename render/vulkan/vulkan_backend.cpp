@@ -800,6 +800,7 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
   double host_down = 0;
   std::size_t exact = 0, interpolated = 0;
   int tile_index = 0;
+  report_progress(in.cancel, "render", 0, std::size_t(tiles_x * tiles_y));  // mr/cancel.h: tiles
   for (int ty = 0; ty < tiles_y; ++ty)
     for (int tx = 0; tx < tiles_x; ++tx, ++tile_index) {
       const int x0 = tx * tw, y0 = ty * th;
@@ -908,6 +909,8 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
       }
       exact += counts[0] + grid_in_tile;
       interpolated += counts[1];
+      report_progress(in.cancel, "render", std::size_t(tile_index) + 1,
+                      std::size_t(tiles_x * tiles_y));
     }
   out.exact_pixels = exact;
   out.interpolated_pixels = interpolated;

@@ -16,6 +16,7 @@
 
 #include "mr/annotations.h"
 #include "mr/camera.h"
+#include "mr/cancel.h"
 #include "mr/image.h"
 #include "mr/scene.h"
 
@@ -60,6 +61,12 @@ struct EstimateOptions {
   /// returns to its own over the refinement's reach (photo/geometry.h, sky_proximity and
   /// sky_fold), so that the fog, opaque in the sky for haze, is continuous there. false: off.
   bool sky_fold = true;
+  /// Optional, caller-owned (mr/cancel.h): requested, the estimate stops at its next step with
+  /// mr::Error(cancelled); its progress callback hears each step as it starts, in order
+  /// "horizon", "sky mask", "depth", "refine" (and "light" for estimate_scene), with done = the
+  /// steps finished and total = the steps planned (4, or 5), then the last step at done = total.
+  /// Steps that do not apply (no photo, an interior box) pass at once.
+  const CancelToken* cancel = nullptr;
 };
 
 /// Where a value came from.

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 #include "mr/camera.h"
+#include "mr/cancel.h"
 #include "mr/image.h"
 #include "mr/scene.h"
 
@@ -58,6 +59,12 @@ struct MaterialTransferOptions {
   std::uint32_t seed = 1;            ///< equal seeds give identical results
   bool keep_detail = true;           ///< carry the photo's fine texture into the new material
   int threads = 0;                   ///< 0: all cores
+  /// Optional, caller-owned (mr/cancel.h): requested, the call stops at its next step (or
+  /// segment fit) with mr::Error(cancelled). Its progress callback hears, in order,
+  /// "target geometry" (transfer only), "sample geometry", "segments" (each 0 then 1 of 1),
+  /// "fit" (segments fitted of those fitted), then for a transfer "statistics" (candidates
+  /// rendered), "search" and "apply" (0 then 1 of 1).
+  const CancelToken* cancel = nullptr;
 };
 
 /// A photo (or sample) with what shading it needs: scene-linear RGB, the distance map (metres

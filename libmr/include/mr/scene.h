@@ -95,6 +95,12 @@ struct Lamp {
   Vec3 spot_direction{0, -1, 0};
   double inner_angle_deg = 180;
   double outer_angle_deg = 180;
+  /// True: `intensity_per_sr` gives only the colour (its chromaticity), and its strength is set
+  /// per photo relative to the photo's exposure (photo::exposure_relative_lamp, photo/lamps.h:
+  /// a white surface at the lamp's nearest surface is lit as bright as the photo's bright
+  /// surfaces), when a photo is rendered (render_scattering needs the photo then). A scene
+  /// document's lamp without intensity_per_sr, or "auto", sets it; `mr fog --lamp x,y,z` too.
+  bool intensity_auto = false;
 };
 
 struct Lighting {
