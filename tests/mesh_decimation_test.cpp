@@ -23,12 +23,13 @@
 #include "mr/scene.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
+#include "render/scattering_cpu.h"
 
 namespace mr::render {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr double kMergeTolerance = 2e-4;  // the value the CPU core uses (libmr/src/scattering.cpp)
+constexpr double kMergeTolerance = kCpuPlanarMergeTolerance;  // as the CPU backend uses it
 
 struct Box {
   Vec3 min_m, max_m;
