@@ -64,6 +64,10 @@ struct CoreOutputs {
   ImageView sun_visibility;  ///< 1 channel
   ImageView optical_depth;   ///< 3 channels
   std::size_t exact_pixels = 0, interpolated_pixels = 0, shadow_rays = 0;
+  /// Wall seconds of the passes (bench/bench_scattering.cpp prints them): the exact samples on
+  /// the sparse grid, the interpolation with its exact recomputations, and the per-pixel surface
+  /// term of T (with the AOVs).
+  double grid_s = 0, interpolation_s = 0, surface_s = 0;
 };
 
 /// Renders every pixel of the outputs (all the distance map's size). Runs in parallel in the

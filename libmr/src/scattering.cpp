@@ -171,7 +171,12 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       int mesh_step = render::march_plan(scene.render).mesh_step;
       if (w / mesh_step < 16 || h / mesh_step < 16) mesh_step = 1;
       request.mesh_step = mesh_step;
-      request.mesh_options.planar_merge_tolerance = render::kCpuPlanarMergeTolerance;
+      // Only the full-resolution mesh is decimated: on draft's coarse one the merged
+      // triangles' edges cross the fine pixels' rays in places where Embree's fast edge test
+      // lets some through, and 16 of 7680 flat ground pixels shadowed themselves
+      // (Scattering.FlatSunlitGroundSurfaceTermAtEveryPreset).
+      if (mesh_step == 1)
+        request.mesh_options.planar_merge_tolerance = render::kCpuPlanarMergeTolerance;
       request.cancel = cancel;
       render::OccluderGeometryTimings gt;
       cpu_geometry = render::occluder_geometry(request, &gt);
