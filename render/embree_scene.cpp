@@ -90,10 +90,10 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
     // each. In one BVH the long triangles' boxes overlap most of the surface's nodes, and every
     // shadow ray paid for them: with the frame's structures completed (issue 13) 1080p sun
     // shadow rays traced ~2.5x slower. Two BVHs, each tight, cost one more traversal of a tiny one.
-    const std::size_t split = mesh_.surface_triangle_count > 0 &&
-                                      mesh_.surface_triangle_count < triangles
-                                  ? mesh_.surface_triangle_count
-                                  : triangles;
+    const std::size_t split =
+        mesh_.surface_triangle_count > 0 && mesh_.surface_triangle_count < triangles
+            ? mesh_.surface_triangle_count
+            : triangles;
     if (triangles > 0) {
       // Embree reads vertices with 16-byte loads: the last one needs a float of padding.
       const std::size_t vertices = mesh_.vertex_count();

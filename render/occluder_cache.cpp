@@ -101,7 +101,7 @@ bool matches(const Entry& e, const OccluderGeometryRequest& r) {
 }  // namespace
 
 std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometryRequest& r,
-                                                         OccluderGeometryTimings* timings) {
+                                                          OccluderGeometryTimings* timings) {
   OccluderGeometryTimings t;
   {
     std::shared_ptr<const Entry> entry;
@@ -129,8 +129,8 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   if (r.mesh_step > 1) {
     const DownsampledDistance coarse =
         downsample_distance_nearest(r.distance_m, *r.camera, r.mesh_step);
-    mesh = reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, *r.pose,
-                                     r.mesh_options);
+    mesh =
+        reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, *r.pose, r.mesh_options);
   } else {
     mesh = reconstruct_occluder_mesh(r.distance_m, *r.camera, *r.pose, r.mesh_options);
   }

@@ -47,7 +47,7 @@ struct OccluderGeometryTimings {
 /// renders missing at once both build (the later one is kept). Throws what the builders throw,
 /// and mr::Error(cancelled) when the token is requested between stages.
 std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometryRequest& request,
-                                                         OccluderGeometryTimings* timings);
+                                                          OccluderGeometryTimings* timings);
 
 /// Drops the cached entry (tests; memory).
 void clear_occluder_geometry_cache();

@@ -350,8 +350,8 @@ void merge_planar_pixels(TriangleMesh& mesh, const std::vector<std::uint8_t>& fl
   // share their corners.
   auto corner = [&](int i, int j, int x1, int y1) {
     const bool right = i == x1, bottom = j == y1;
-    return vertex_of(i, j, right ? (bottom ? kTopLeft : kBottomLeft)
-                                 : (bottom ? kTopRight : kBottomRight));
+    return vertex_of(
+        i, j, right ? (bottom ? kTopLeft : kBottomLeft) : (bottom ? kTopRight : kBottomRight));
   };
   auto planar = [&](int x0, int y0, int x1, int y1) {
     const V3 a = position(corner(x0, y0, x1, y1)), b = position(corner(x1, y0, x1, y1)),
@@ -463,7 +463,6 @@ void merge_planar_pixels(TriangleMesh& mesh, const std::vector<std::uint8_t>& fl
   mesh.indices = std::move(indices);
   mesh.surface_triangle_count = surface_indices / 3;
 }
-
 
 }  // namespace
 

@@ -39,7 +39,8 @@ struct Box {
 double trace(const std::vector<Box>& boxes, const Vec3& o, const Vec3& w) {
   double best = w.y < 0 ? -o.y / w.y : kInf;
   for (const Box& b : boxes) {
-    const double lo[3] = {b.min_m.x, b.min_m.y, b.min_m.z}, hi[3] = {b.max_m.x, b.max_m.y, b.max_m.z};
+    const double lo[3] = {b.min_m.x, b.min_m.y, b.min_m.z},
+                 hi[3] = {b.max_m.x, b.max_m.y, b.max_m.z};
     const double oo[3] = {o.x, o.y, o.z}, ww[3] = {w.x, w.y, w.z};
     double t_enter = -kInf, t_exit = kInf;
     for (int a = 0; a < 3; ++a) {
@@ -142,7 +143,8 @@ TEST(MeshDecimation, PlanesBecomeFewTrianglesWithTheSameVerticesAndBoundary) {
       const double e2[3] = {p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]};
       const double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
                            e1[0] * e2[1] - e1[1] * e2[0]};
-      const double to_camera = n[0] * (o.x - p[0][0]) + n[1] * (o.y - p[0][1]) + n[2] * (o.z - p[0][2]);
+      const double to_camera =
+          n[0] * (o.x - p[0][0]) + n[1] * (o.y - p[0][1]) + n[2] * (o.z - p[0][2]);
       ASSERT_GT(to_camera, 0) << "triangle " << t;
     }
   }
@@ -196,8 +198,7 @@ TEST(MeshDecimation, NoLightLeaksThroughTheGroundAtRectangleSeams) {
       leaks_full_robust += !full_robust.occluded(origin, dir, 0.0f, float(2 * back));
       leaks_merged_robust += !merged_robust.occluded(origin, dir, 0.0f, float(2 * back));
     }
-    SCOPED_TRACE("boxes " + std::to_string(boxes.size()) + ": " + std::to_string(tested) +
-                 " rays");
+    SCOPED_TRACE("boxes " + std::to_string(boxes.size()) + ": " + std::to_string(tested) + " rays");
     EXPECT_GT(tested, 10000);
     // A crack along a seam would let through a good part of the rays aimed at it (a quarter
     // are aimed 1/1000 pixel beside an edge); rounding lets through a handful (3 of ~25000
@@ -205,10 +206,10 @@ TEST(MeshDecimation, NoLightLeaksThroughTheGroundAtRectangleSeams) {
     EXPECT_LE(leaks_merged_robust, leaks_full_robust + tested / 10000);
     EXPECT_LE(leaks_full_robust, tested / 5000);
     EXPECT_LE(leaks_merged, leaks_full);
-    std::printf("[ leaks    ] boxes %zu: %d rays; robust mode: full mesh %d, decimated %d; fast "
-                "mode: full %d, decimated %d\n",
-                boxes.size(), tested, leaks_full_robust, leaks_merged_robust, leaks_full,
-                leaks_merged);
+    std::printf(
+        "[ leaks    ] boxes %zu: %d rays; robust mode: full mesh %d, decimated %d; fast "
+        "mode: full %d, decimated %d\n",
+        boxes.size(), tested, leaks_full_robust, leaks_merged_robust, leaks_full, leaks_merged);
   }
 }
 
@@ -234,17 +235,19 @@ TEST(MeshDecimation, SameSunVisibilityOnRandomAndGrazingRays) {
                                        : std::asin(2 * u01(rng) - 1) * 180 / 3.141592653589793;
       const Vec3 sun = direction_from_azimuth_elevation(360 * u01(rng), elevation);
       const std::array<float, 3> dir{float(sun.x), float(sun.y), float(sun.z)};
-      const bool a = full.occluded(origin, dir, 0.0f, kInf), b = merged.occluded(origin, dir, 0.0f, kInf);
+      const bool a = full.occluded(origin, dir, 0.0f, kInf),
+                 b = merged.occluded(origin, dir, 0.0f, kInf);
       differ += a != b;
       occluded += a;
     }
     SCOPED_TRACE("boxes " + std::to_string(boxes.size()) + ", noise " + std::to_string(noise));
     EXPECT_GT(occluded, kRays / 20);  // the rays do meet the geometry
     EXPECT_LE(differ, kRays / 5000) << differ << " of " << kRays << " rays differ";
-    std::printf("[ rays     ] boxes %zu, noise %g: %d of %d rays occluded, %d differ; "
-                "triangles %zu -> %zu\n",
-                boxes.size(), noise, occluded, kRays, differ, m.full.surface_triangle_count,
-                m.merged.surface_triangle_count);
+    std::printf(
+        "[ rays     ] boxes %zu, noise %g: %d of %d rays occluded, %d differ; "
+        "triangles %zu -> %zu\n",
+        boxes.size(), noise, occluded, kRays, differ, m.full.surface_triangle_count,
+        m.merged.surface_triangle_count);
   }
 }
 
