@@ -360,8 +360,10 @@ void merge_planar_pixels(TriangleMesh& mesh, const std::vector<std::uint8_t>& fl
     const double n_len = length(n);
     if (!(n_len > 0)) return false;
     const V3 unit = (1.0 / n_len) * n;
-    for (int j = y0; j <= y1; ++j)
-      for (int i = x0; i <= x1; ++i) {
+    // Newest vertices first (the rectangle grows right and down): where the depth is not
+    // planar the check fails at once instead of after the whole rectangle.
+    for (int j = y1; j >= y0; --j)
+      for (int i = x1; i >= x0; --i) {
         const V3 v = position(corner(i, j, x1, y1));
         if (std::abs(dot(v - a, unit)) > tolerance * length(v - origin)) return false;
       }
