@@ -10,14 +10,31 @@
 // street, horizon at row 362 of 563: pitch +7.05 deg), resized with OIIO (depth: nearest, so
 // discontinuities stay sharp); a fog bank 15 m deep of 120 m visibility, albedo 0.9, g 0.5, sun
 // at azimuth -70, elevation 18 degrees, sky radiance from the photo.
+//
+// BM_Scattering renders through the public API. Its `reuse` argument: 0 = every render builds
+// the occluder geometry afresh (the cache of render/occluder_cache.h cleared first), 1 = the
+// geometry of the previous render of the same photo is reused (mr-studio slider changes).
+// BM_Stages runs the CPU core's stages one by one (private headers) and reports each one's wall
+// time, the render's process CPU time (user + system, all threads: compare it when other work
+// shares the machine) and the occluder triangle count:
+//
+//   build/bench/mr_bench_scattering --benchmark_filter=BM_Stages --benchmark_repetitions=5
+//   --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
+#include <chrono>
 #include <cmath>
+#include <ctime>
 #include <map>
 #include <tuple>
 
 #include "leuven_scene.h"
 #include "mr/mr.h"
+#include "render/blockers.h"
+#include "render/embree_scene.h"
+#include "render/occluder_cache.h"
+#include "render/occluder_mesh.h"
+#include "render/scattering_cpu.h"
 
 namespace {
 
@@ -60,11 +77,19 @@ void BM_Scattering(benchmark::State& state) {
   const auto quality = mr::Quality(state.range(2));
   const bool accelerate = state.range(3) != 0;
   const int threads = int(state.range(4));
+  const bool reuse = state.range(5) != 0;
   const Inputs& in = inputs(width, height);
   mr::FogScene s = scene(quality, accelerate);
   s.render.threads = threads;
+  s.render.backend = mr::Backend::cpu;
   mr::ScatteringLayers::Timings t;
+  if (reuse) mr::render_scattering(in.photo, in.depth, in.camera, s);  // builds the geometry
   for (auto _ : state) {
+    if (!reuse) {
+      state.PauseTiming();
+      mr::render::clear_occluder_geometry_cache();
+      state.ResumeTiming();
+    }
     const auto out = mr::render_scattering(in.photo, in.depth, in.camera, s);
     t = out.timings;
     benchmark::DoNotOptimize(out.inscatter.data());
@@ -78,17 +103,97 @@ void BM_Scattering(benchmark::State& state) {
     state.counters["accel_err_%"] = 100.0 * acceleration_error(in, quality);
 }
 
-// width, height, quality (0 draft, 1 normal, 2 final), acceleration, threads (0 = all)
+// width, height, quality (0 draft, 1 normal, 2 final), acceleration, threads (0 = all), reuse
 BENCHMARK(BM_Scattering)
-    ->ArgNames({"w", "h", "q", "accel", "threads"})
-    ->Args({1920, 1080, 0, 1, 0})
-    ->Args({1920, 1080, 1, 1, 0})
-    ->Args({1920, 1080, 1, 0, 0})
-    ->Args({1920, 1080, 2, 1, 0})
-    ->Args({1920, 1080, 1, 1, 1})
-    ->Args({3840, 2160, 0, 1, 0})
-    ->Args({3840, 2160, 1, 1, 0})
-    ->Args({3840, 2160, 1, 0, 0})
+    ->ArgNames({"w", "h", "q", "accel", "threads", "reuse"})
+    ->Args({1920, 1080, 0, 1, 0, 0})
+    ->Args({1920, 1080, 1, 1, 0, 0})
+    ->Args({1920, 1080, 1, 1, 0, 1})
+    ->Args({1920, 1080, 1, 0, 0, 0})
+    ->Args({1920, 1080, 2, 1, 0, 0})
+    ->Args({1920, 1080, 1, 1, 1, 0})
+    ->Args({3840, 2160, 0, 1, 0, 0})
+    ->Args({3840, 2160, 1, 1, 0, 0})
+    ->Args({3840, 2160, 1, 0, 0, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(1);
+
+double process_cpu_s() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+// The CPU core's stages as libmr/src/scattering.cpp runs them on a fresh photo (CPU backend,
+// full-resolution mesh, decimated when `merge` is 1 as the core does, the blockers' completion
+// on), each timed.
+void BM_Stages(benchmark::State& state) {
+  using Clock = std::chrono::steady_clock;
+  auto since = [](Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+  };
+  const int width = int(state.range(0)), height = int(state.range(1));
+  const auto quality = mr::Quality(state.range(2));
+  const Inputs& in = inputs(width, height);
+  mr::FogScene s = scene(quality, true);
+  s.lighting.sky_radiance = mr::estimate_airlight(in.photo);
+  mr::Image transmittance = mr::Image::uninitialized(width, height, 3);
+  mr::Image inscatter = mr::Image::uninitialized(width, height, 3);
+  mr::Image sun_visibility = mr::Image::uninitialized(width, height, 1);
+  mr::Image optical_depth = mr::Image::uninitialized(width, height, 3);
+  double normals_s = 0, mesh_s = 0, blockers_s = 0, bvh_s = 0, cpu_s = 0;
+  std::size_t triangles = 0;
+  mr::render::CoreOutputs out;
+  for (auto _ : state) {
+    const double cpu0 = process_cpu_s();
+    auto t = Clock::now();
+    const mr::Image normals = mr::render::estimate_normals(in.depth.view(), in.camera, s.pose);
+    normals_s = since(t);
+    t = Clock::now();
+    mr::render::MeshOptions mesh_options;
+    if (state.range(3) != 0)
+      mesh_options.planar_merge_tolerance = mr::render::kCpuPlanarMergeTolerance;
+    mr::render::TriangleMesh mesh =
+        mr::render::reconstruct_occluder_mesh(in.depth.view(), in.camera, s.pose, mesh_options);
+    mesh_s = since(t);
+    t = Clock::now();
+    mr::render::append_blockers(mesh, in.depth.view(), normals.view(), in.camera, s.pose,
+                                s.blockers);
+    blockers_s = since(t);
+    triangles = mesh.triangle_count();
+    t = Clock::now();
+    const mr::render::OccluderScene occluders(std::move(mesh));
+    bvh_s = since(t);
+    mr::render::CoreInputs core_in;
+    core_in.camera = &in.camera;
+    core_in.scene = &s;
+    core_in.distance_m = in.depth.view();
+    core_in.normals = normals.view();
+    core_in.photo = in.photo.view();
+    core_in.occluders = &occluders;
+    core_in.sky_radiance = *s.lighting.sky_radiance;
+    out = mr::render::CoreOutputs{transmittance.view(), inscatter.view(), sun_visibility.view(),
+                                  optical_depth.view()};
+    mr::render::render_scattering_cpu(core_in, out);
+    cpu_s = process_cpu_s() - cpu0;
+  }
+  state.counters["normals_ms"] = normals_s * 1e3;
+  state.counters["mesh_ms"] = mesh_s * 1e3;
+  state.counters["blockers_ms"] = blockers_s * 1e3;
+  state.counters["bvh_ms"] = bvh_s * 1e3;
+  state.counters["grid_ms"] = out.grid_s * 1e3;
+  state.counters["interp_ms"] = out.interpolation_s * 1e3;
+  state.counters["surface_ms"] = out.surface_s * 1e3;
+  state.counters["cpu_ms"] = cpu_s * 1e3;
+  state.counters["Mtriangles"] = double(triangles) / 1e6;
+  state.counters["Mrays"] = double(out.shadow_rays) / 1e6;
+}
+
+BENCHMARK(BM_Stages)
+    ->ArgNames({"w", "h", "q", "merge"})
+    ->Args({1920, 1080, 1, 0})
+    ->Args({1920, 1080, 1, 1})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(1);

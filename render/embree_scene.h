@@ -88,7 +88,8 @@ class OccluderScene {
   TriangleMesh mesh_;
   std::unique_ptr<ErrorSink> errors_;  // heap-allocated: Embree keeps a pointer to it
   RTCDevice device_ = nullptr;
-  RTCScene scene_ = nullptr;
+  RTCScene scene_ = nullptr;        // the surface triangles (mesh_.surface_triangle_count)
+  RTCScene extra_scene_ = nullptr;  // the triangles after them, if any (extrusions, blockers)
   bool native_ray8_ = false;
 };
 

@@ -310,6 +310,162 @@ constexpr std::array<CornerGroups, 256> kCornerTable = make_corner_table();
 
 constexpr int kTopLeft = 0, kTopRight = 1, kBottomLeft = 2, kBottomRight = 3;
 
+// Step 8 of reconstruct_occluder_mesh (MeshOptions::planar_merge_tolerance): replaces the two
+// triangles per pixel of planar rectangles of pixels by a triangulation of each rectangle's
+// boundary. Rectangles are grown greedily (right, then down) in bands of kMergeMax rows, over
+// pixels that are not fanned and share their corner vertices with each other (no discontinuity
+// inside), while every corner vertex of the rectangle lies within tolerance * its distance from
+// the camera of the plane through three of the rectangle's corners. The triangulation uses every
+// vertex on the rectangle's boundary (and only those), so the neighbours' edges end at vertices
+// of the rectangle's edges: no T-junction, hence no crack for light to leak through; the mesh
+// stays exactly as watertight as before, with the same vertex positions. A rectangle of n x m
+// pixels (n, m >= 2) takes 2 (n + m) - 2 triangles instead of 2 n m; the interior corners'
+// vertices stay in the buffer, unreferenced.
+constexpr int kMergeMax = 32;
+
+template <class VertexOf>
+void merge_planar_pixels(TriangleMesh& mesh, const std::vector<std::uint8_t>& flags, int width,
+                         int height, const std::vector<std::uint64_t>& row_pixel_offset,
+                         const std::vector<std::uint64_t>& row_fan_offset,
+                         std::uint64_t fan_triangle_base, double tolerance, V3 origin,
+                         const VertexOf& vertex_of) {
+  auto pixel_index = [width](int x, int y) { return std::size_t(y) * width + x; };
+  auto position = [&mesh](std::uint32_t v) {
+    const float* p = &mesh.positions[3 * std::size_t(v)];
+    return V3{p[0], p[1], p[2]};
+  };
+  auto mergeable = [&](int x, int y) {
+    return (flags[pixel_index(x, y)] & (kValid | kFan)) == kValid;
+  };
+  // Whether pixel (x, y) shares both vertices of its right (down) edge with its neighbour.
+  auto linked_right = [&](int x, int y) {
+    return vertex_of(x + 1, y, kBottomLeft) == vertex_of(x + 1, y, kBottomRight) &&
+           vertex_of(x + 1, y + 1, kTopLeft) == vertex_of(x + 1, y + 1, kTopRight);
+  };
+  auto linked_down = [&](int x, int y) {
+    return vertex_of(x, y + 1, kTopRight) == vertex_of(x, y + 1, kBottomRight) &&
+           vertex_of(x + 1, y + 1, kTopLeft) == vertex_of(x + 1, y + 1, kBottomLeft);
+  };
+  // The vertex at corner (i, j) of a rectangle ending at corners (x1, y1) whose pixels all
+  // share their corners.
+  auto corner = [&](int i, int j, int x1, int y1) {
+    const bool right = i == x1, bottom = j == y1;
+    return vertex_of(
+        i, j, right ? (bottom ? kTopLeft : kBottomLeft) : (bottom ? kTopRight : kBottomRight));
+  };
+  auto planar = [&](int x0, int y0, int x1, int y1) {
+    const V3 a = position(corner(x0, y0, x1, y1)), b = position(corner(x1, y0, x1, y1)),
+             c = position(corner(x0, y1, x1, y1));
+    const V3 n = cross(b - a, c - a);
+    const double n_len = length(n);
+    if (!(n_len > 0)) return false;
+    const V3 unit = (1.0 / n_len) * n;
+    // Newest vertices first (the rectangle grows right and down): where the depth is not
+    // planar the check fails at once instead of after the whole rectangle.
+    for (int j = y1; j >= y0; --j)
+      for (int i = x1; i >= x0; --i) {
+        const V3 v = position(corner(i, j, x1, y1));
+        if (std::abs(dot(v - a, unit)) > tolerance * length(v - origin)) return false;
+      }
+    return true;
+  };
+
+  const int bands = (height + kMergeMax - 1) / kMergeMax;
+  std::vector<std::vector<std::uint32_t>> band_indices(static_cast<std::size_t>(bands));
+  tbb::parallel_for(0, bands, [&](int band) {
+    const int y_begin = band * kMergeMax, y_end = std::min(height, y_begin + kMergeMax);
+    std::vector<std::uint8_t> in_rectangle(std::size_t(y_end - y_begin) * width, 0);
+    auto taken = [&](int x, int y) -> std::uint8_t& {
+      return in_rectangle[std::size_t(y - y_begin) * width + x];
+    };
+    std::vector<std::uint32_t>& out = band_indices[std::size_t(band)];
+    // Emits a triangle wound as the per-pixel ones (towards the camera: positive image-space
+    // signed area, y down), from its vertices' image corners.
+    auto emit = [&](std::uint32_t v0, std::uint32_t v1, std::uint32_t v2, int u0, int w0, int u1,
+                    int w1, int u2, int w2) {
+      const long area = long(u1 - u0) * (w2 - w0) - long(w1 - w0) * (u2 - u0);
+      out.push_back(v0);
+      out.push_back(area > 0 ? v1 : v2);
+      out.push_back(area > 0 ? v2 : v1);
+    };
+    for (int y = y_begin; y < y_end; ++y) {
+      const std::uint32_t* row_tris = mesh.indices.data() + 6 * row_pixel_offset[y];
+      std::uint64_t fan = row_fan_offset[y];
+      int rank = 0;  // the pixel's place among the row's surface pixels
+      for (int x = 0; x < width; ++x) {
+        const std::uint8_t f = flags[pixel_index(x, y)];
+        if (!(f & kValid)) continue;
+        const int k = rank++;
+        const bool fanned = (f & kFan) != 0;
+        const std::uint64_t my_fan = fanned ? fan++ : 0;
+        if (taken(x, y)) continue;
+        int n = 0, m = 0;
+        if (mergeable(x, y)) {
+          // Grow right, then down, while the rectangle stays linked and planar.
+          n = 1;
+          while (x + n < width && n < kMergeMax && mergeable(x + n, y) && !taken(x + n, y) &&
+                 linked_right(x + n - 1, y) && planar(x, y, x + n + 1, y + 1))
+            ++n;
+          m = 1;
+          while (n >= 2 && y + m < y_end) {
+            bool ok = true;
+            for (int i = x; i < x + n && ok; ++i)
+              ok = mergeable(i, y + m) && !taken(i, y + m) && linked_down(i, y + m - 1) &&
+                   (i == x || linked_right(i - 1, y + m));
+            if (!ok || !planar(x, y, x + n, y + m + 1)) break;
+            ++m;
+          }
+        }
+        if (n < 2 || m < 2) {
+          // The pixel's own triangles (two, or four when fanned).
+          const std::uint32_t* t = row_tris + 6 * k;
+          out.insert(out.end(), t, t + 6);
+          if (fanned) {
+            const std::uint32_t* e = mesh.indices.data() + 3 * (fan_triangle_base + 2 * my_fan);
+            out.insert(out.end(), e, e + 6);
+          }
+          continue;
+        }
+        for (int j = y; j < y + m; ++j)
+          for (int i = x; i < x + n; ++i) taken(i, j) = 1;
+        // Triangulate the boundary. With u along the longer side and s across: a fan from the
+        // second vertex of the first long chain (s = 0) to the first short side, one from the
+        // second-to-last vertex of the other chain to the other short side, and a zig-zag
+        // between the chains in between; every triangle spans the shorter side only.
+        const int x1 = x + n, y1 = y + m;
+        const bool along_x = n >= m;
+        const int len = along_x ? n : m, span = along_x ? m : n;
+        struct Point {
+          std::uint32_t vertex;
+          int i, j;
+        };
+        auto at = [&](int u, int s) {
+          const int i = along_x ? x + u : x + s, j = along_x ? y + s : y + u;
+          return Point{corner(i, j, x1, y1), i, j};
+        };
+        auto tri = [&](Point p, Point q, Point r) {
+          emit(p.vertex, q.vertex, r.vertex, p.i, p.j, q.i, q.j, r.i, r.j);
+        };
+        for (int s = 0; s < span; ++s) tri(at(0, s), at(0, s + 1), at(1, 0));
+        for (int s = 0; s < span; ++s) tri(at(len, s), at(len, s + 1), at(len - 1, span));
+        for (int u = 0; u + 1 < len; ++u) {
+          tri(at(u + 1, 0), at(u, span), at(u + 1, span));
+          tri(at(u + 1, 0), at(u + 1, span), at(u + 2, 0));
+        }
+      }
+    }
+  });
+  std::size_t surface_indices = 0;
+  for (const auto& b : band_indices) surface_indices += b.size();
+  std::vector<std::uint32_t> indices;
+  indices.reserve(surface_indices + (mesh.indices.size() - 3 * mesh.surface_triangle_count));
+  for (const auto& b : band_indices) indices.insert(indices.end(), b.begin(), b.end());
+  indices.insert(indices.end(), mesh.indices.begin() + 3 * mesh.surface_triangle_count,
+                 mesh.indices.end());
+  mesh.indices = std::move(indices);
+  mesh.surface_triangle_count = surface_indices / 3;
+}
+
 }  // namespace
 
 Image estimate_normals(ConstImageView distance_m, const Camera& camera, const CameraPose& pose,
@@ -333,6 +489,9 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
   if (!(options.centre_tolerance >= 0))
     throw Error(ErrorCode::invalid_argument, "mesh centre tolerance must be >= 0, got " +
                                                  std::to_string(options.centre_tolerance));
+  if (!(options.planar_merge_tolerance >= 0) || !std::isfinite(options.planar_merge_tolerance))
+    throw Error(ErrorCode::invalid_argument, "mesh planar merge tolerance must be >= 0, got " +
+                                                 std::to_string(options.planar_merge_tolerance));
   const int width = distance_m.width, height = distance_m.height;
   const double ratio = options.discontinuity_ratio;
   const RayFrame frame(camera, pose);
@@ -595,6 +754,10 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
       }
     }
   });
+  if (options.planar_merge_tolerance > 0) {
+    merge_planar_pixels(mesh, flags, width, height, row_pixel_offset, row_fan_offset,
+                        fan_triangle_base, options.planar_merge_tolerance, origin, vertex_of);
+  }
   if (extrude) {
     const double thickness_m = options.thickness_m;
     tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {

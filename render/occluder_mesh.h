@@ -34,6 +34,8 @@ namespace mr::render {
 /// vertex m. The F fanned pixels' other two triangles follow, in the same pixel order:
 /// triangles 2N + 2f and 2N + 2f + 1 of the f-th fanned pixel are (m, c00, c10) and
 /// (m, c01, c00). In every surface triangle cross(v1 - v0, v2 - v0) points towards the camera.
+/// With MeshOptions::planar_merge_tolerance > 0 the surface triangles (still the first
+/// surface_triangle_count) are fewer and in no per-pixel order.
 /// Triangles after the first 2N + 2F (surface_triangle_count) are the optional silhouette
 /// extrusions (MeshOptions::thickness_m; their winding is unspecified), and after those any
 /// blockers the photo does not show (render/blockers.h).
@@ -68,6 +70,15 @@ struct MeshOptions {
   /// input (plus float rounding). Only pixels at creases, or where the depth is noisy, are
   /// fanned; 0 fans nearly every pixel (twice the triangles), +inf none. Must be >= 0.
   double centre_tolerance = 1e-3;
+  /// Decimation (issue 12): > 0 merges rectangles of pixels (up to 32 x 32) whose corner
+  /// vertices all lie within this fraction of their distance from the camera of one plane, and
+  /// that no discontinuity or fanned pixel interrupts, into a triangulation of the rectangle's
+  /// boundary vertices: 2 (n + m) - 2 triangles for n x m pixels instead of 2 n m. No vertex
+  /// moves and no T-junction is made (every boundary vertex is a vertex of the triangulation),
+  /// so the mesh stays watertight; the surface inside a rectangle moves by at most twice the
+  /// tolerance (relative to the distance). The surface triangles are then no longer two per
+  /// pixel: the layout of TriangleMesh holds only with 0 (the default, off). Must be >= 0.
+  double planar_merge_tolerance = 0;
 };
 
 /// Estimates a unit surface normal per pixel of a distance map.

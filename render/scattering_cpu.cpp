@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -687,6 +688,11 @@ MarchPlan march_plan(const RenderSettings& settings) {
 }
 
 void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
+  using Clock = std::chrono::steady_clock;
+  auto seconds_since = [](Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+  };
+  auto pass_start = Clock::now();
   const MarchPlan plan = march_plan(in.scene->render);
   const Core core(in, plan);
   const int w = in.distance_m.width, h = in.distance_m.height;
@@ -738,6 +744,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                     });
   throw_if_stopped();
   std::size_t exact_count = gx.size() * gy.size();
+  out.grid_s = seconds_since(pass_start);
+  pass_start = Clock::now();
 
   // Pass 2: every other pixel from its cell's four samples with their gradients, where all
   // four are depth-continuous with it and agree on the sun's shadowing; else exactly.
@@ -863,6 +871,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   }
   throw_if_stopped();
   exact_count += exact_more.combine(std::plus<>());
+  out.interpolation_s = seconds_since(pass_start);
+  pass_start = Clock::now();
 
   // Pass 3: per pixel, the transmittance map T = tau(camera, surface) * S(surface) and the AOVs.
   // With the photo, every surface pixel's sun visibility first (the photo fallback compares a
@@ -911,6 +921,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   throw_if_stopped();
   std::size_t interpolated_count = 0;
   for (unsigned char v : interpolated) interpolated_count += v;
+  out.surface_s = seconds_since(pass_start);
   out.exact_pixels = exact_count;
   out.interpolated_pixels = interpolated_count;
   out.shadow_rays = core.shadow_rays();

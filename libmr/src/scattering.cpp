@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -20,6 +21,7 @@
 #include "render/blockers.h"
 #include "render/depth_downsample.h"
 #include "render/embree_scene.h"
+#include "render/occluder_cache.h"
 #include "render/occluder_mesh.h"
 #include "render/scattering_cpu.h"
 #include "render/vulkan/vulkan_backend.h"
@@ -172,8 +174,32 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       }
     }
     render::TriangleMesh occluder_mesh;  // the Vulkan backend rasterizes it into shadow maps
-    if (lights) {
-      report_progress(cancel, "occluders", 0, 2);  // normals + mesh, BVH; then "render"
+    // The CPU backend's normals, mesh and BVH, reused across renders of one photo (issue 12).
+    std::shared_ptr<const render::OccluderGeometry> cpu_geometry;
+    if (lights) report_progress(cancel, "occluders", 0, 2);  // normals + mesh, BVH; "render"
+    if (lights && !gpu && scene.render.volumetric_shadows) {
+      render::OccluderGeometryRequest request;
+      request.distance_m = distance_m.view();
+      request.camera = &camera;
+      request.pose = &scene.pose;
+      request.blockers = &scene.blockers;
+      int mesh_step = render::march_plan(scene.render).mesh_step;
+      if (w / mesh_step < 16 || h / mesh_step < 16) mesh_step = 1;
+      request.mesh_step = mesh_step;
+      // Only the full-resolution mesh is decimated: on draft's coarse one the merged
+      // triangles' edges cross the fine pixels' rays in places where Embree's fast edge test
+      // lets some through, and 16 of 7680 flat ground pixels shadowed themselves
+      // (Scattering.FlatSunlitGroundSurfaceTermAtEveryPreset).
+      if (mesh_step == 1)
+        request.mesh_options.planar_merge_tolerance = render::kCpuPlanarMergeTolerance;
+      request.cancel = cancel;
+      render::OccluderGeometryTimings gt;
+      cpu_geometry = render::occluder_geometry(request, &gt);
+      out.timings.mesh_s = gt.mesh_s;
+      out.timings.bvh_s = gt.bvh_s;
+      out.completed_blockers = cpu_geometry->completed_blockers;
+      report_progress(cancel, "occluders", 2, 2);
+    } else if (lights) {
       auto t = Clock::now();
       normals = render::estimate_normals(distance_m.view(), camera, scene.pose);
       throw_if_cancelled(cancel, kWhat);
@@ -212,6 +238,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     in.scene = &scene;
     in.distance_m = distance_m.view();
     if (!normals.empty()) in.normals = normals.view();
+    if (cpu_geometry) in.normals = cpu_geometry->normals.view();
     // The photo lets the surface term tell a misplaced mesh shadow from a real one (issue 13).
     if (photo.channels() >= 3 && photo.width() == w && photo.height() == h) in.photo = photo.view();
     in.sky_radiance = out.sky_radiance;
@@ -221,6 +248,12 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
     auto t = Clock::now();
     auto run_cpu = [&] {
       t = Clock::now();
+      if (cpu_geometry) {
+        in.occluders = cpu_geometry->occluders ? &*cpu_geometry->occluders : nullptr;
+        render::render_scattering_cpu(in, core);
+        out.backend = "cpu";
+        return;
+      }
       if (occluder_mesh.triangle_count() > 0) occluders.emplace(std::move(occluder_mesh));
       out.timings.bvh_s = seconds_since(t);
       throw_if_cancelled(cancel, kWhat);

@@ -1,0 +1,173 @@
+#include "render/occluder_cache.h"
+
+#include <chrono>
+#include <cstring>
+#include <mutex>
+#include <utility>
+#include <vector>
+
+#include "render/blockers.h"
+#include "render/depth_downsample.h"
+
+namespace mr::render {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+bool same(const Vec3& a, const Vec3& b) {
+  return a.x == b.x && a.y == b.y && a.z == b.z;
+}
+
+// Every field of Blockers (mr/scene.h): a field added there must be compared here, or renders
+// that differ only in it would share geometry.
+bool same(const Blockers& a, const Blockers& b) {
+  const auto& ca = a.completion;
+  const auto& cb = b.completion;
+  if (ca.enabled != cb.enabled || ca.max_height_m != cb.max_height_m ||
+      ca.max_extent_m != cb.max_extent_m || ca.prism_max_width_m != cb.prism_max_width_m)
+    return false;
+  if (a.skyline.has_value() != b.skyline.has_value()) return false;
+  if (a.skyline) {
+    if (a.skyline->distance_m != b.skyline->distance_m ||
+        a.skyline->samples.size() != b.skyline->samples.size())
+      return false;
+    for (std::size_t i = 0; i < a.skyline->samples.size(); ++i)
+      if (a.skyline->samples[i].azimuth_deg != b.skyline->samples[i].azimuth_deg ||
+          a.skyline->samples[i].height_m != b.skyline->samples[i].height_m)
+        return false;
+  }
+  if (a.polygons.size() != b.polygons.size()) return false;
+  for (std::size_t i = 0; i < a.polygons.size(); ++i) {
+    const auto &pa = a.polygons[i].corners_m, &pb = b.polygons[i].corners_m;
+    if (pa.size() != pb.size()) return false;
+    for (std::size_t k = 0; k < pa.size(); ++k)
+      if (!same(pa[k], pb[k])) return false;
+  }
+  if (a.canopy.has_value() != b.canopy.has_value()) return false;
+  if (a.canopy && (a.canopy->height_m != b.canopy->height_m ||
+                   a.canopy->gap_fraction != b.canopy->gap_fraction ||
+                   a.canopy->radius_m != b.canopy->radius_m ||
+                   a.canopy->cell_m != b.canopy->cell_m || a.canopy->seed != b.canopy->seed))
+    return false;
+  return true;
+}
+
+bool same(const MeshOptions& a, const MeshOptions& b) {
+  return a.discontinuity_ratio == b.discontinuity_ratio && a.thickness_m == b.thickness_m &&
+         a.centre_tolerance == b.centre_tolerance &&
+         a.planar_merge_tolerance == b.planar_merge_tolerance;
+}
+
+struct Entry {
+  std::vector<float> distance_m;  // the depth map it was built from, row-major
+  int width = 0, height = 0;
+  Camera camera;
+  CameraPose pose;
+  Blockers blockers;
+  int mesh_step = 1;
+  MeshOptions mesh_options;
+  std::shared_ptr<const OccluderGeometry> geometry;
+};
+
+std::mutex cache_mutex;
+std::shared_ptr<const Entry> cache_entry;  // guarded by cache_mutex
+
+bool matches(const Entry& e, const OccluderGeometryRequest& r) {
+  const ConstImageView& d = r.distance_m;
+  if (e.width != d.width || e.height != d.height) return false;
+  const Camera &ca = e.camera, &cb = *r.camera;
+  if (ca.width != cb.width || ca.height != cb.height || ca.focal_px != cb.focal_px ||
+      ca.cx != cb.cx || ca.cy != cb.cy)
+    return false;
+  const CameraPose &pa = e.pose, &pb = *r.pose;
+  if (!same(pa.position_m, pb.position_m) || pa.yaw_deg != pb.yaw_deg ||
+      pa.pitch_deg != pb.pitch_deg || pa.roll_deg != pb.roll_deg)
+    return false;
+  if (e.mesh_step != r.mesh_step || !same(e.mesh_options, r.mesh_options) ||
+      !same(e.blockers, *r.blockers))
+    return false;
+  // Bit for bit (memcmp: +inf sky compares equal to itself, as it should).
+  for (int y = 0; y < d.height; ++y)
+    if (std::memcmp(&e.distance_m[std::size_t(y) * d.width], &d.at(0, y, 0),
+                    sizeof(float) * std::size_t(d.width)) != 0)
+      return false;
+  return true;
+}
+
+}  // namespace
+
+std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometryRequest& r,
+                                                          OccluderGeometryTimings* timings) {
+  OccluderGeometryTimings t;
+  {
+    std::shared_ptr<const Entry> entry;
+    {
+      const std::lock_guard lock(cache_mutex);
+      entry = cache_entry;
+    }
+    if (entry && matches(*entry, r)) {
+      t.reused = true;
+      if (timings) *timings = t;
+      return entry->geometry;
+    }
+  }
+  {
+    // Another photo: drop the old geometry first, so that two are never held for one render.
+    const std::lock_guard lock(cache_mutex);
+    cache_entry.reset();
+  }
+  const char* what = "render_scattering";
+  auto start = Clock::now();
+  auto geometry = std::make_shared<OccluderGeometry>();
+  geometry->normals = estimate_normals(r.distance_m, *r.camera, *r.pose);
+  throw_if_cancelled(r.cancel, what);
+  TriangleMesh mesh;
+  if (r.mesh_step > 1) {
+    const DownsampledDistance coarse =
+        downsample_distance_nearest(r.distance_m, *r.camera, r.mesh_step);
+    mesh =
+        reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, *r.pose, r.mesh_options);
+  } else {
+    mesh = reconstruct_occluder_mesh(r.distance_m, *r.camera, *r.pose, r.mesh_options);
+  }
+  geometry->completed_blockers =
+      append_blockers(mesh, r.distance_m, geometry->normals.view(), *r.camera, *r.pose, *r.blockers)
+          .completed;
+  t.mesh_s = seconds_since(start);
+  throw_if_cancelled(r.cancel, what);
+  start = Clock::now();
+  if (mesh.triangle_count() > 0) geometry->occluders.emplace(std::move(mesh));
+  t.bvh_s = seconds_since(start);
+
+  auto entry = std::make_shared<Entry>();
+  const ConstImageView& d = r.distance_m;
+  entry->width = d.width;
+  entry->height = d.height;
+  entry->distance_m.resize(std::size_t(d.width) * d.height);
+  for (int y = 0; y < d.height; ++y)
+    std::memcpy(&entry->distance_m[std::size_t(y) * d.width], &d.at(0, y, 0),
+                sizeof(float) * std::size_t(d.width));
+  entry->camera = *r.camera;
+  entry->pose = *r.pose;
+  entry->blockers = *r.blockers;
+  entry->mesh_step = r.mesh_step;
+  entry->mesh_options = r.mesh_options;
+  entry->geometry = geometry;
+  {
+    const std::lock_guard lock(cache_mutex);
+    cache_entry = entry;
+  }
+  if (timings) *timings = t;
+  return geometry;
+}
+
+void clear_occluder_geometry_cache() {
+  const std::lock_guard lock(cache_mutex);
+  cache_entry.reset();
+}
+
+}  // namespace mr::render

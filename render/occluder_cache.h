@@ -1,0 +1,57 @@
+// Private to libmr: the CPU backend's occluder geometry (normals, occluder mesh, its Embree
+// BVH) of the latest render, reused by the next render of the same depth map, camera, pose and
+// blockers (issue 12 item 4: mr-studio re-renders one photo for every fog or sun slider change,
+// and the geometry depends on neither). One entry, process-wide: a render of another photo
+// replaces it (the old one is dropped before the new one is built, so peak memory does not
+// grow), and a render still using an entry keeps it alive (shared ownership).
+#pragma once
+
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "mr/camera.h"
+#include "mr/cancel.h"
+#include "mr/image.h"
+#include "mr/scene.h"
+#include "render/embree_scene.h"
+#include "render/occluder_mesh.h"
+
+namespace mr::render {
+
+struct OccluderGeometry {
+  Image normals;                           ///< estimate_normals of the full-resolution map
+  std::optional<OccluderScene> occluders;  ///< nullopt: no triangles (nothing casts shadows)
+  std::vector<CompletedBlocker> completed_blockers;  ///< what append_blockers continued
+};
+
+struct OccluderGeometryRequest {
+  ConstImageView distance_m;  ///< full resolution, 1 channel, the camera's size
+  const Camera* camera = nullptr;
+  const CameraPose* pose = nullptr;
+  const Blockers* blockers = nullptr;
+  /// Mesh resolution (MarchPlan::mesh_step; 1 = full) and options.
+  int mesh_step = 1;
+  MeshOptions mesh_options;
+  const CancelToken* cancel = nullptr;  ///< checked between the stages
+};
+
+struct OccluderGeometryTimings {
+  double mesh_s = 0;  ///< normals, mesh and blockers (0 when reused)
+  double bvh_s = 0;   ///< the Embree build (0 when reused)
+  bool reused = false;
+};
+
+/// The geometry for `request`: the cached one when its inputs are identical (depth values
+/// compared bit for bit, camera, pose, blockers, mesh step and options), else built (normals,
+/// mesh at mesh_step with the blockers appended, Embree scene) and cached. Thread-safe; two
+/// renders missing at once both build (the later one is kept). Throws what the builders throw,
+/// and mr::Error(cancelled) when the token is requested between stages.
+std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometryRequest& request,
+                                                          OccluderGeometryTimings* timings);
+
+/// Drops the cached entry (tests; memory).
+void clear_occluder_geometry_cache();
+
+}  // namespace mr::render
