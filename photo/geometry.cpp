@@ -358,6 +358,45 @@ DistanceMap distance_map(const Camera& camera, const CameraPose& pose,
   return out;
 }
 
+namespace {
+
+// `map` (the photo's size, float channels) smoothed edge-aware against the photo: the fast
+// global smoother guided by the photo in display-referred 8-bit (its guide must be 8-bit), both
+// area-averaged down to at most o.working_pixels and the result brought back up linearly.
+template <typename Options>  // DepthRefineOptions, SkyProximityOptions
+cv::Mat smooth_against_photo(ConstImageView photo, const cv::Mat& map, const Options& o) {
+  const int w = photo.width, h = photo.height;
+  const double s = std::min(1.0, std::sqrt(o.working_pixels / (double(w) * h)));
+  const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
+  const cv::Mat src = detail::as_mat(photo);
+  cv::Mat display(h, w, CV_8UC3);
+  const int ch = photo.channels;
+  for (int y = 0; y < h; ++y) {
+    const float* row = src.ptr<float>(y);
+    cv::Vec3b* d = display.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < w; ++x) {
+      const float* p = row + std::ptrdiff_t(x) * ch;
+      for (int c = 0; c < 3; ++c) {
+        float v = p[ch >= 3 ? c : 0];
+        if (!std::isfinite(v)) v = 0;
+        d[x][c] =
+            cv::saturate_cast<std::uint8_t>(255.0f * std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f));
+      }
+    }
+  }
+  cv::Mat guide = display, small = map;
+  if (s < 1) {
+    cv::resize(display, guide, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
+    cv::resize(map, small, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
+  }
+  cv::Mat smoothed;
+  cv::ximgproc::fastGlobalSmootherFilter(guide, small, smoothed, o.lambda, o.sigma_color);
+  if (s < 1) cv::resize(smoothed, smoothed, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+  return smoothed;
+}
+
+}  // namespace
+
 float refine_keep_weight(float confidence) {
   const float t = std::clamp((confidence - 0.5f) / 0.5f, 0.0f, 1.0f);
   return t * t * (3 - 2 * t);
@@ -381,40 +420,18 @@ std::vector<float> refine_inverse_distance(ConstImageView photo,
   for (const float c : confidence) all_kept &= refine_keep_weight(c) >= 1.0f;
   if (all_kept) return out;
 
-  // The working copy: display-referred 8-bit (the smoother's guide is 8-bit); the maps as
-  // (c q, c), area-averaged to the same size.
-  const double s = std::min(1.0, std::sqrt(o.working_pixels / double(n)));
-  const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
-  const cv::Mat src = detail::as_mat(photo);
-  cv::Mat display(h, w, CV_8UC3);
+  // The maps as (c q, c), smoothed against the photo.
   cv::Mat weighted(h, w, CV_32FC2);
-  const int ch = photo.channels;
   for (int y = 0; y < h; ++y) {
-    const float* row = src.ptr<float>(y);
-    cv::Vec3b* d = display.ptr<cv::Vec3b>(y);
     cv::Vec2f* m = weighted.ptr<cv::Vec2f>(y);
     for (int x = 0; x < w; ++x) {
-      const float* p = row + std::ptrdiff_t(x) * ch;
-      for (int c = 0; c < 3; ++c) {
-        float v = p[ch >= 3 ? c : 0];
-        if (!std::isfinite(v)) v = 0;
-        d[x][c] =
-            cv::saturate_cast<std::uint8_t>(255.0f * std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f));
-      }
       const std::size_t i = std::size_t(y) * w + x;
       // A little confidence everywhere, so that every pixel has a defined average.
       const float c = std::max(1e-3f, std::clamp(confidence[i], 0.0f, 1.0f));
       m[x] = {c * inverse_distance[i], c};
     }
   }
-  cv::Mat guide = display, maps = weighted;
-  if (s < 1) {
-    cv::resize(display, guide, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
-    cv::resize(weighted, maps, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
-  }
-  cv::Mat smoothed;
-  cv::ximgproc::fastGlobalSmootherFilter(guide, maps, smoothed, o.lambda, o.sigma_color);
-  if (s < 1) cv::resize(smoothed, smoothed, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+  const cv::Mat smoothed = smooth_against_photo(photo, weighted, o);
   for (int y = 0; y < h; ++y) {
     const cv::Vec2f* m = smoothed.ptr<cv::Vec2f>(y);
     for (int x = 0; x < w; ++x) {
@@ -464,33 +481,11 @@ std::vector<float> sky_proximity(ConstImageView photo, const std::vector<std::ui
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) open_sky.at<std::uint8_t>(y, x) = border[labels.at<int>(y, x)];
   }
-  const double s = std::min(1.0, std::sqrt(o.working_pixels / double(n)));
-  const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
-  const cv::Mat src = detail::as_mat(photo);
-  cv::Mat display(h, w, CV_8UC3), indicator(h, w, CV_32F);
-  const int ch = photo.channels;
-  for (int y = 0; y < h; ++y) {
-    const float* row = src.ptr<float>(y);
-    cv::Vec3b* d = display.ptr<cv::Vec3b>(y);
-    for (int x = 0; x < w; ++x) {
-      const float* p = row + std::ptrdiff_t(x) * ch;
-      for (int c = 0; c < 3; ++c) {
-        float v = p[ch >= 3 ? c : 0];
-        if (!std::isfinite(v)) v = 0;
-        d[x][c] =
-            cv::saturate_cast<std::uint8_t>(255.0f * std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f));
-      }
+  cv::Mat indicator(h, w, CV_32F);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
       indicator.at<float>(y, x) = open_sky.at<std::uint8_t>(y, x) ? 1.0f : 0.0f;
-    }
-  }
-  cv::Mat guide = display, map = indicator;
-  if (s < 1) {
-    cv::resize(display, guide, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
-    cv::resize(indicator, map, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
-  }
-  cv::Mat smoothed;
-  cv::ximgproc::fastGlobalSmootherFilter(guide, map, smoothed, o.lambda, o.sigma_color);
-  if (s < 1) cv::resize(smoothed, smoothed, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+  const cv::Mat smoothed = smooth_against_photo(photo, indicator, o);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;

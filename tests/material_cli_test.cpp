@@ -24,25 +24,10 @@ std::string q(const fs::path& p) {
   return "'" + p.string() + "'";
 }
 
-// Every third pixel (nearest neighbour keeps depth edges sharp) of a photo and its depth map.
+// A sample photo and its depth map at a third of their size.
 void write_reduced(const std::string& stem, const fs::path& dir) {
-  const Image photo = read_image(kSamples / (stem + ".jpg"));
-  ReadOptions raw;
-  raw.to_scene_linear = false;
-  raw.reject_non_finite = false;
-  const Image depth = read_image(kSamples / (stem + "_depth.exr"), raw);
-  const int w = photo.width() / 3, h = photo.height() / 3;
-  Image p(w, h, 3), d(w, h, 1, {"Z"});
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      for (int c = 0; c < 3; ++c) p.at(x, y, c) = photo.at(3 * x + 1, 3 * y + 1, c);
-      d.at(x, y, 0) = depth.at(3 * x + 1, 3 * y + 1, 0);
-    }
-  write_image(dir / (stem + ".png"), p);
-  WriteOptions wd;
-  wd.pixel_type = PixelType::float32;
-  wd.colorspace = colorspace::raw;
-  write_image(dir / (stem + "_depth.exr"), d, wd);
+  test::write_every_third_pixel(kSamples / (stem + ".jpg"), kSamples / (stem + "_depth.exr"),
+                                dir / (stem + ".png"), dir / (stem + "_depth.exr"));
 }
 
 class MaterialCli : public ::testing::Test {

@@ -12,6 +12,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "mr/io.h"
+
 namespace fs = std::filesystem;
 
 namespace mr::test {
@@ -89,6 +91,29 @@ double max_abs_diff(const Image& a, const Image& b) {
   for (std::size_t i = 0; i < a.pixels().size(); ++i)
     m = std::max(m, double(std::fabs(a.pixels()[i] - b.pixels()[i])));
   return m;
+}
+
+void write_every_third_pixel(const std::filesystem::path& photo_in,
+                             const std::filesystem::path& depth_in,
+                             const std::filesystem::path& photo_out,
+                             const std::filesystem::path& depth_out) {
+  const Image photo = read_image(photo_in);
+  ReadOptions raw;
+  raw.to_scene_linear = false;
+  raw.reject_non_finite = false;
+  const Image depth = read_image(depth_in, raw);
+  const int w = photo.width() / 3, h = photo.height() / 3;
+  Image p(w, h, 3), d(w, h, 1, {"Z"});
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) p.at(x, y, c) = photo.at(3 * x + 1, 3 * y + 1, c);
+      d.at(x, y, 0) = depth.at(3 * x + 1, 3 * y + 1, 0);
+    }
+  write_image(photo_out, p);
+  WriteOptions wd;
+  wd.pixel_type = PixelType::float32;
+  wd.colorspace = colorspace::raw;
+  write_image(depth_out, d, wd);
 }
 
 }  // namespace mr::test

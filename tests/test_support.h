@@ -41,4 +41,10 @@ Image make_test_photo(int width, int height);
 /// Largest |a - b| over all values; images must have equal shapes.
 double max_abs_diff(const Image& a, const Image& b);
 
+/// Every third pixel (nearest neighbour keeps depth edges sharp) of a photo and its depth map,
+/// written as an 8-bit PNG and a float EXR (raw: the depth's values as stored).
+void write_every_third_pixel(const std::filesystem::path& photo, const std::filesystem::path& depth,
+                             const std::filesystem::path& photo_out,
+                             const std::filesystem::path& depth_out);
+
 }  // namespace mr::test
