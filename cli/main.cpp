@@ -2,6 +2,7 @@
 #include <unistd.h>
 
 #include <csignal>
+#include <ctime>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
@@ -10,6 +11,7 @@
 #include "estimate_command.h"
 #include "fog_command.h"
 #include "material_command.h"
+#include "mr/io.h"
 #include "mr/version.h"
 
 namespace {
@@ -18,22 +20,60 @@ std::atomic<bool> g_interrupted{false};
 
 // How long the first SIGTERM leaves the photos in flight to finish before the process exits.
 constexpr unsigned kTermGraceSeconds = 10;
+// A tool that signals a process and then its process group (GNU `timeout`, some supervisors)
+// delivers one request twice within microseconds; a repeat from the same sending process this
+// soon is that request, not a second Ctrl-C.
+constexpr long kSameRequestNs = 500'000'000;
 
-extern "C" void on_alarm(int) { _exit(128 + SIGTERM); }
+volatile std::sig_atomic_t g_signals = 0;
+volatile pid_t g_first_sender = 0;
+volatile bool g_first_from_process = false;
+timespec g_first_time{};
 
-extern "C" void on_signal(int signal) {
+[[noreturn]] void end_now(int signal) {
+  mr::remove_unfinished_outputs();  // finished outputs stay; partial ones go
+  _exit(128 + signal);
+}
+
+extern "C" void on_alarm(int) { end_now(SIGTERM); }
+
+extern "C" void on_signal(int signal, siginfo_t* info, void*) {
   // First Ctrl-C: finish the files in flight (their outputs are written atomically), start no
-  // more. A second one kills the process the default way; temporary files are hidden dotfiles,
-  // removed by the next run. SIGTERM (a service manager, `timeout`, `kill`) must always end the
-  // run: the same, but if the files in flight take longer than kTermGraceSeconds (or a read
-  // hangs) the process exits anyway. Only async-signal-safe calls here.
+  // more. A second one ends the process at once, removing the temporaries of the outputs in
+  // flight. SIGTERM (a service manager, `timeout`, `kill`) must always end the run: the same,
+  // but if the files in flight take longer than kTermGraceSeconds (or a read hangs) the process
+  // exits anyway. Only async-signal-safe calls here.
+  timespec now{};
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  const bool from_process = info != nullptr && info->si_code == SI_USER;
+  if (g_signals > 0) {
+    const long elapsed_ns = (now.tv_sec - g_first_time.tv_sec) * 1'000'000'000L +
+                            (now.tv_nsec - g_first_time.tv_nsec);
+    if (from_process && g_first_from_process && info->si_pid == g_first_sender &&
+        elapsed_ns < kSameRequestNs)
+      return;
+    end_now(signal);
+  }
+  g_signals = 1;
+  g_first_time = now;
+  g_first_from_process = from_process;
+  g_first_sender = from_process ? info->si_pid : 0;
   g_interrupted = true;
-  std::signal(SIGINT, SIG_DFL);
-  std::signal(SIGTERM, SIG_DFL);
   if (signal == SIGTERM) {
     std::signal(SIGALRM, on_alarm);
     alarm(kTermGraceSeconds);
   }
+}
+
+void install_signal_handlers() {
+  struct sigaction action {};
+  action.sa_sigaction = on_signal;
+  action.sa_flags = SA_SIGINFO | SA_RESTART;
+  sigemptyset(&action.sa_mask);
+  sigaddset(&action.sa_mask, SIGINT);  // one handler at a time: the state above is not atomic
+  sigaddset(&action.sa_mask, SIGTERM);
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
 }
 
 }  // namespace
@@ -60,8 +100,7 @@ int main(int argc, char** argv) {
     const int code = app.exit(e);
     return code == 0 ? 0 : 2;  // usage errors exit 2
   }
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
+  install_signal_handlers();
   // Anything the commands do not turn into their own one-line error (std::bad_alloc, a thread
   // that cannot be created, ...) still ends as one, never as an abort.
   try {

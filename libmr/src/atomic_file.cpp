@@ -4,8 +4,10 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <cerrno>
+#include <climits>
 #include <cstring>
 #include <system_error>
 
@@ -15,6 +17,38 @@ namespace mr::detail {
 
 namespace {
 std::atomic<unsigned> g_counter{0};
+
+// The temporary files being written now, readable from a signal handler: a slot is claimed
+// (free -> claimed) by one writer, filled, then published (ready); the handler only reads
+// ready slots. A path too long for a slot is simply not registered (the next run's stale-file
+// sweep still removes it).
+enum SlotState : int { kFree = 0, kClaimed = 1, kReady = 2 };
+struct TemporarySlot {
+  std::atomic<int> state{kFree};
+  char path[PATH_MAX];
+};
+constexpr std::size_t kSlots = 256;  // photos in flight are at most 4 per core (mr fog -j)
+std::array<TemporarySlot, kSlots> g_temporaries;
+static_assert(std::atomic<int>::is_always_lock_free, "read from a signal handler");
+
+int register_temporary(const std::filesystem::path& p) {
+  const std::string& s = p.native();
+  if (s.size() >= PATH_MAX) return -1;
+  for (std::size_t i = 0; i < kSlots; ++i) {
+    int expected = kFree;
+    if (g_temporaries[i].state.compare_exchange_strong(expected, kClaimed,
+                                                       std::memory_order_acquire)) {
+      std::memcpy(g_temporaries[i].path, s.c_str(), s.size() + 1);
+      g_temporaries[i].state.store(kReady, std::memory_order_release);
+      return int(i);
+    }
+  }
+  return -1;
+}
+
+void unregister_temporary(int slot) {
+  if (slot >= 0) g_temporaries[std::size_t(slot)].state.store(kFree, std::memory_order_release);
+}
 
 // fsync so that a crash after rename cannot leave a renamed-but-empty file.
 void sync_file(const std::filesystem::path& p) {
@@ -76,6 +110,7 @@ AtomicFile::AtomicFile(std::filesystem::path final_path) : final_(std::move(fina
   const std::string name = "." + final_.stem().string() + ".mr-tmp-" + std::to_string(::getpid()) +
                            "-" + std::to_string(g_counter++) + final_.extension().string();
   temp_ = final_.parent_path() / name;
+  slot_ = register_temporary(temp_);
 }
 
 AtomicFile::~AtomicFile() {
@@ -83,6 +118,14 @@ AtomicFile::~AtomicFile() {
     std::error_code ec;
     std::filesystem::remove(temp_, ec);
   }
+  unregister_temporary(slot_);
+}
+
+void remove_temporaries_now() noexcept {
+  for (TemporarySlot& slot : g_temporaries)
+    if (slot.state.load(std::memory_order_acquire) == kReady &&
+        std::strstr(slot.path, ".mr-tmp-") != nullptr)  // a slot being reused is left alone
+      ::unlink(slot.path);
 }
 
 void AtomicFile::commit(bool overwrite) {
@@ -96,6 +139,8 @@ void AtomicFile::commit(bool overwrite) {
     throw Error(ErrorCode::io, final_.string() + ": cannot move the finished file into place: " +
                                    ec.message());
   committed_ = true;
+  unregister_temporary(slot_);
+  slot_ = -1;
 }
 
 }  // namespace mr::detail

@@ -41,6 +41,11 @@ class AtomicFile {
  private:
   std::filesystem::path final_, temp_;
   bool committed_ = false;
+  int slot_ = -1;  // in the registry remove_temporaries_now() reads
 };
+
+/// Unlinks the temporary files of every AtomicFile alive now (uncommitted outputs being
+/// written). Async-signal-safe: for a handler that ends the process at once.
+void remove_temporaries_now() noexcept;
 
 }  // namespace mr::detail

@@ -453,6 +453,8 @@ bool is_readable_image_extension(const std::filesystem::path& path) {
 
 void check_output_path(const std::filesystem::path& path) { detail::check_output_target(path); }
 
+void remove_unfinished_outputs() noexcept { detail::remove_temporaries_now(); }
+
 bool is_writable_image_extension(const std::filesystem::path& path) {
   if (!is_readable_image_extension(path)) return false;
   return OIIO::ImageOutput::create(path.string()) != nullptr;

@@ -107,6 +107,12 @@ void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLaye
 /// checks this; front ends call it to refuse a target before any work.
 void check_output_path(const std::filesystem::path& path);
 
+/// Removes the hidden temporary files of the outputs libmr is writing right now (every writer
+/// writes a temporary beside its output and renames it into place when complete), leaving
+/// finished outputs and inputs alone. Async-signal-safe (only unlink(2)): meant for a signal
+/// handler that ends the process at once, so that no partial file is left behind.
+void remove_unfinished_outputs() noexcept;
+
 /// True if `path` has an extension OpenImageIO can write.
 bool is_writable_image_extension(const std::filesystem::path& path);
 /// True if `path` has an extension OpenImageIO can read.
