@@ -156,6 +156,55 @@ QString annotationsJson(const mr::Annotations& a) {
   return QString::fromStdString(mr::annotations_to_json(a));
 }
 
+// What the status bar's progress showed (MainWindow::progressShown), split into runs at each
+// hiding (an empty text).
+struct ShownProgress {
+  QString text;
+  double fraction;
+  bool bar_visible;  ///< the bar's state when it was shown
+  QString bar_text;  ///< what the bar itself draws
+  bool ui_thread;    ///< emitted on the UI thread
+};
+
+// Checks a run of shown progress of one kind of work (`verb`: "rendering", "estimating",
+// "exporting"): every text is "<verb> NN %" or "<verb>: <stage> NN %" with NN = floor(100 x the
+// fraction); within a stage the fraction never falls; the bar showed exactly that text, on the
+// UI thread. Returns the stages seen, in order, whether a stage reached 1, and what was wrong.
+struct RunSummary {
+  QStringList stages;
+  bool reached_one = false;
+  bool strictly_between = false;  ///< some fraction in (0, 1): a report from the middle of a stage
+  QString error;                  ///< the first thing wrong; empty: none
+};
+RunSummary checkRun(const std::vector<ShownProgress>& run, const QString& verb) {
+  RunSummary summary;
+  static const QRegularExpression pattern(R"(^([a-z]+)(?:: ([a-z ]+))? (\d+) %$)");
+  double last = -1;
+  for (const ShownProgress& p : run) {
+    const QRegularExpressionMatch m = pattern.match(p.text);
+    if (!m.hasMatch() || m.captured(1) != verb)
+      summary.error = QString("'%1' is not '%2[: stage] NN %'").arg(p.text, verb);
+    else if (m.captured(3).toInt() != int(std::floor(p.fraction * 100)))
+      summary.error = QString("'%1' says another percentage than %2").arg(p.text).arg(p.fraction);
+    else if (!p.ui_thread || !p.bar_visible || p.bar_text != p.text)
+      summary.error = QString("'%1': not on the UI thread or not what the bar shows").arg(p.text);
+    if (!summary.error.isEmpty()) return summary;
+    const QString stage = m.captured(2);
+    if (summary.stages.isEmpty() || summary.stages.back() != stage) {
+      summary.stages << stage;
+      last = -1;
+    }
+    if (p.fraction < last) {
+      summary.error = QString("'%1' fell from %2 to %3").arg(stage).arg(last).arg(p.fraction);
+      return summary;
+    }
+    last = p.fraction;
+    summary.reached_one = summary.reached_one || p.fraction == 1.0;
+    summary.strictly_between = summary.strictly_between || (p.fraction > 0 && p.fraction < 1);
+  }
+  return summary;
+}
+
 }  // namespace
 
 class GuiTest : public QObject {
@@ -383,11 +432,28 @@ void GuiTest::photoWithoutDepthIsEstimated() {
   QVERIFY(QFile::copy(QStringLiteral(MR_SOURCE_DIR "/sample_photos/building.jpg"), photo));
   MainWindow w;
   w.show();
+  std::vector<ShownProgress> estimating;
+  connect(
+      &w, &MainWindow::progressShown, &w,
+      [&](const QString& text, double fraction) {
+        if (text.startsWith("estimating"))
+          estimating.push_back({text, fraction, w.progressBar()->isVisible(),
+                                w.progressBar()->text(),
+                                QThread::currentThread() == qApp->thread()});
+      },
+      Qt::DirectConnection);
   openAndSettle(w, photo);
   QVERIFY(w.document()->depth_estimated);
   QCOMPARE(w.document()->distance_m.width(), w.document()->photo.width());
   const auto p = w.preview();
   QVERIFY(meanAbsDiff(p->composite, p->photo_image) > 2);
+  // The estimate the load ran showed its steps in the status bar, in order, to the end (issue
+  // 11 item 7); then the bar hid.
+  const RunSummary e = checkRun(estimating, "estimating");
+  QVERIFY2(e.error.isEmpty(), qPrintable(e.error));
+  QCOMPARE(e.stages, QStringList({"horizon", "sky mask", "depth", "refine", "light"}));
+  QCOMPARE(estimating.back().fraction, 1.0);
+  QTRY_VERIFY_WITH_TIMEOUT(!w.progressBar()->isVisible(), 10000);
 }
 
 void GuiTest::draftThenRefineOnLargePhoto() {
@@ -1662,55 +1728,6 @@ extern "C" const char* __asan_default_options() {
 }
 extern "C" const char* __lsan_default_suppressions() {
   return "leak:libqoffscreen.so\n";
-}
-
-// What the status bar's progress showed (MainWindow::progressShown), split into runs at each
-// hiding (an empty text).
-struct ShownProgress {
-  QString text;
-  double fraction;
-  bool bar_visible;  ///< the bar's state when it was shown
-  QString bar_text;  ///< what the bar itself draws
-  bool ui_thread;    ///< emitted on the UI thread
-};
-
-// Checks a run of shown progress of one kind of work (`verb`: "rendering", "estimating",
-// "exporting"): every text is "<verb> NN %" or "<verb>: <stage> NN %" with NN = floor(100 x the
-// fraction); within a stage the fraction never falls; the bar showed exactly that text, on the
-// UI thread. Returns the stages seen, in order, whether a stage reached 1, and what was wrong.
-struct RunSummary {
-  QStringList stages;
-  bool reached_one = false;
-  bool strictly_between = false;  ///< some fraction in (0, 1): a report from the middle of a stage
-  QString error;                  ///< the first thing wrong; empty: none
-};
-RunSummary checkRun(const std::vector<ShownProgress>& run, const QString& verb) {
-  RunSummary summary;
-  static const QRegularExpression pattern(R"(^([a-z]+)(?:: ([a-z ]+))? (\d+) %$)");
-  double last = -1;
-  for (const ShownProgress& p : run) {
-    const QRegularExpressionMatch m = pattern.match(p.text);
-    if (!m.hasMatch() || m.captured(1) != verb)
-      summary.error = QString("'%1' is not '%2[: stage] NN %'").arg(p.text, verb);
-    else if (m.captured(3).toInt() != int(std::floor(p.fraction * 100)))
-      summary.error = QString("'%1' says another percentage than %2").arg(p.text).arg(p.fraction);
-    else if (!p.ui_thread || !p.bar_visible || p.bar_text != p.text)
-      summary.error = QString("'%1': not on the UI thread or not what the bar shows").arg(p.text);
-    if (!summary.error.isEmpty()) return summary;
-    const QString stage = m.captured(2);
-    if (summary.stages.isEmpty() || summary.stages.back() != stage) {
-      summary.stages << stage;
-      last = -1;
-    }
-    if (p.fraction < last) {
-      summary.error = QString("'%1' fell from %2 to %3").arg(stage).arg(last).arg(p.fraction);
-      return summary;
-    }
-    last = p.fraction;
-    summary.reached_one = summary.reached_one || p.fraction == 1.0;
-    summary.strictly_between = summary.strictly_between || (p.fraction > 0 && p.fraction < 1);
-  }
-  return summary;
 }
 
 // Issue 11 item 7: long work shows its progress in the status bar, through a queued signal from
