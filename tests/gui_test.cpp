@@ -1743,7 +1743,7 @@ void GuiTest::statusBarShowsProgress() {
   QVERIFY(bar);
   QVERIFY(!bar->isVisible());
   std::vector<std::vector<ShownProgress>> runs(1);
-  QImage mid_render;
+  QImage mid_render, mid_export;
   // Direct: the handler runs in the thread that emits, which must be the UI thread.
   connect(
       &w, &MainWindow::progressShown, &w,
@@ -1757,6 +1757,9 @@ void GuiTest::statusBarShowsProgress() {
                                QThread::currentThread() == qApp->thread()});
         if (mid_render.isNull() && text.startsWith("rendering") && fraction > 0.2 && fraction < 0.9)
           mid_render = w.grab().toImage();
+        if (mid_export.isNull() && text.startsWith("exporting") && fraction > 0.2 && fraction < 0.9)
+          if (auto* dialog = w.findChild<QProgressDialog*>("exportProgress"))
+            mid_export = dialog->grab().toImage();
       },
       Qt::DirectConnection);
   openAndSettle(w, kLeuven);
@@ -1832,6 +1835,8 @@ void GuiTest::statusBarShowsProgress() {
   QVERIFY(x.stages.contains(QString()));
   QCOMPARE(runs.front().back().fraction, 1.0);
   QVERIFY(x.reached_one);
+  QVERIFY(!mid_export.isNull());
+  QVERIFY(mid_export.save(outDir() + "/progress_export_dialog.png"));
 }
 
 int main(int argc, char** argv) {
