@@ -21,26 +21,13 @@
 
 #include "mr/error.h"
 #include "mr/scattering.h"
+#include "spin_box.h"
 
 namespace mrstudio {
 
 namespace {
 
 constexpr double kDeg = M_PI / 180.0;
-
-// Wide ranges: the library's rules (mr::validate_scene) decide what is valid, not the boxes.
-QDoubleSpinBox* spin(double lo, double hi, double value, int decimals, const QString& suffix,
-                     double step, const QString& tip) {
-  auto* s = new QDoubleSpinBox;
-  s->setRange(lo, hi);
-  s->setDecimals(decimals);
-  s->setSingleStep(step);
-  s->setValue(value);
-  s->setSuffix(suffix);
-  s->setKeyboardTracking(false);
-  s->setToolTip(tip);
-  return s;
-}
 
 // The spin box's value, or `stored` when the box shows `stored` rounded to its decimals: editing
 // one control must not round the others' exact values from a scene file.
@@ -446,12 +433,15 @@ BlockersPanel::BlockersPanel(QWidget* parent) : QWidget(parent) {
       tr("Walls, pillars and trunks that leave the photo at its top or sides are continued "
          "along their own plane (vertical ones straight up)"));
   cf->addRow(completion_);
-  max_height_ = spin(0.1, 1e6, 30, 1, tr(" m"), 1,
-                     tr("Height vertical structures are continued to when the photo shows no "
-                        "tops of others at a similar distance"));
-  max_extent_ = spin(0.1, 1e6, 30, 1, tr(" m"), 1,
-                     tr("How far other surfaces are continued beyond the frame, along them"));
-  prism_width_ = spin(0, 1e6, 3, 2, tr(" m"), 0.5,
+  max_height_ =
+      double_spin_box(0.1, 1e6, 30, 1, tr(" m"), 1,
+                      tr("Height vertical structures are continued to when the photo shows no "
+                         "tops of others at a similar distance"));
+  max_extent_ =
+      double_spin_box(0.1, 1e6, 30, 1, tr(" m"), 1,
+                      tr("How far other surfaces are continued beyond the frame, along them"));
+  prism_width_ =
+      double_spin_box(0, 1e6, 3, 2, tr(" m"), 0.5,
                       tr("Free-standing structures up to this wide (pillars, trunks) are closed "
                          "as prisms; 0: none"));
   cf->addRow(tr("Max height"), max_height_);
@@ -468,8 +458,9 @@ BlockersPanel::BlockersPanel(QWidget* parent) : QWidget(parent) {
          "buildings, a ridge or a tree line above or beside the photo"));
   auto* sv = new QVBoxLayout(skyline_box_);
   auto* sf = new QFormLayout;
-  skyline_distance_ = spin(0.1, 1e6, 50, 1, tr(" m"), 5,
-                           tr("Horizontal distance of the skyline's wall from the camera"));
+  skyline_distance_ =
+      double_spin_box(0.1, 1e6, 50, 1, tr(" m"), 5,
+                      tr("Horizontal distance of the skyline's wall from the camera"));
   sf->addRow(tr("Distance"), skyline_distance_);
   sv->addLayout(sf);
   skyline_plot_ = new SkylinePlot;
@@ -497,8 +488,9 @@ BlockersPanel::BlockersPanel(QWidget* parent) : QWidget(parent) {
   plan_->setObjectName("planView");
   wv->addWidget(plan_);
   auto* new_row = new QHBoxLayout;
-  new_bottom_ = spin(-1e6, 1e6, 0, 1, tr(" m"), 1, tr("Bottom height of walls drawn next"));
-  new_top_ = spin(-1e6, 1e6, 15, 1, tr(" m"), 1, tr("Top height of walls drawn next"));
+  new_bottom_ =
+      double_spin_box(-1e6, 1e6, 0, 1, tr(" m"), 1, tr("Bottom height of walls drawn next"));
+  new_top_ = double_spin_box(-1e6, 1e6, 15, 1, tr(" m"), 1, tr("Top height of walls drawn next"));
   new_row->addWidget(new QLabel(tr("New walls")));
   new_row->addWidget(new_bottom_);
   new_row->addWidget(new QLabel(tr("to")));
@@ -509,8 +501,8 @@ BlockersPanel::BlockersPanel(QWidget* parent) : QWidget(parent) {
   wall_list_->setMaximumHeight(90);
   wv->addWidget(wall_list_);
   auto* wf = new QFormLayout;
-  wall_bottom_ = spin(-1e6, 1e6, 0, 2, tr(" m"), 1, tr("Height of the wall's base"));
-  wall_top_ = spin(-1e6, 1e6, 15, 2, tr(" m"), 1, tr("Height of the wall's top"));
+  wall_bottom_ = double_spin_box(-1e6, 1e6, 0, 2, tr(" m"), 1, tr("Height of the wall's base"));
+  wall_top_ = double_spin_box(-1e6, 1e6, 15, 2, tr(" m"), 1, tr("Height of the wall's top"));
   wf->addRow(tr("Bottom"), wall_bottom_);
   wf->addRow(tr("Top"), wall_top_);
   // The ends: A and B, each x then z, a row each (four boxes in one row do not fit the dock).
@@ -518,8 +510,9 @@ BlockersPanel::BlockersPanel(QWidget* parent) : QWidget(parent) {
     auto* row = new QHBoxLayout;
     for (int k = 0; k < 2; ++k) {
       QDoubleSpinBox*& s = wall_end_[2 * end + k];
-      s = spin(-1e6, 1e6, 0, 2, tr(" m"), 1,
-               tr("World position of the wall's end, metres (x right, z ahead at yaw 0)"));
+      s = double_spin_box(
+          -1e6, 1e6, 0, 2, tr(" m"), 1,
+          tr("World position of the wall's end, metres (x right, z ahead at yaw 0)"));
       s->setPrefix(k == 0 ? "x " : "z ");
       s->setSizePolicy(QSizePolicy::Ignored, QSizePolicy::Fixed);
       s->setMinimumWidth(s->fontMetrics().horizontalAdvance("x -1000.00 m") + 28);
@@ -539,11 +532,13 @@ BlockersPanel::BlockersPanel(QWidget* parent) : QWidget(parent) {
   canopy_box_->setToolTip(
       tr("A layer of leaves over the camera with gaps that let the sun through"));
   auto* kf = new QFormLayout(canopy_box_);
-  canopy_height_ = spin(0.01, 1e6, 8, 1, tr(" m"), 0.5, tr("Height of the canopy"));
-  canopy_gap_ = spin(0, 1, 0.3, 2, QString(), 0.05,
-                     tr("Fraction of the canopy's cells that are gaps (0: closed, 1: open)"));
-  canopy_radius_ = spin(0.1, 1e6, 30, 1, tr(" m"), 5, tr("Radius around the camera"));
-  canopy_cell_ = spin(0.01, 1e6, 1, 2, tr(" m"), 0.25, tr("Size of a leaf cluster or gap"));
+  canopy_height_ = double_spin_box(0.01, 1e6, 8, 1, tr(" m"), 0.5, tr("Height of the canopy"));
+  canopy_gap_ =
+      double_spin_box(0, 1, 0.3, 2, QString(), 0.05,
+                      tr("Fraction of the canopy's cells that are gaps (0: closed, 1: open)"));
+  canopy_radius_ = double_spin_box(0.1, 1e6, 30, 1, tr(" m"), 5, tr("Radius around the camera"));
+  canopy_cell_ =
+      double_spin_box(0.01, 1e6, 1, 2, tr(" m"), 0.25, tr("Size of a leaf cluster or gap"));
   canopy_seed_ = new QSpinBox;
   canopy_seed_->setRange(0, std::numeric_limits<int>::max());
   canopy_seed_->setValue(1);

@@ -17,6 +17,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mr/fog.h"
+#include "spin_box.h"
 #include "sun_dial.h"
 
 namespace mrstudio {
@@ -39,16 +41,11 @@ void share_row(SpinBox* s, const QString& typical) {
   s->setMinimumWidth(s->fontMetrics().horizontalAdvance(typical) + 28);
 }
 
-QDoubleSpinBox* spin(double lo, double hi, double value, int decimals, const QString& suffix,
-                     double step) {
-  auto* s = new QDoubleSpinBox;
-  s->setRange(lo, hi);
-  s->setDecimals(decimals);
-  s->setSingleStep(step);
-  s->setValue(value);
-  s->setSuffix(suffix);
-  s->setKeyboardTracking(false);
-  return s;
+// The visibility (m) of an extinction coefficient (1/m): the inverse of the library's Koschmieder
+// conversion mr::extinction_from_visibility (sigma = k / V), whose constant k is its value at
+// V = 1 m, so that the panel and the library agree on k.
+double visibility_from_extinction(double sigma_t_per_m) {
+  return mr::extinction_from_visibility(1.0) / sigma_t_per_m;
 }
 
 }  // namespace
@@ -91,7 +88,7 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   visibility_slider_->setToolTip(
       tr("Meteorological visibility: the distance at which a black "
          "object fades to 2 % contrast (log scale)"));
-  visibility_spin_ = spin(kMinVisibility, kMaxVisibility, 150, 0, tr(" m"), 10);
+  visibility_spin_ = double_spin_box(kMinVisibility, kMaxVisibility, 150, 0, tr(" m"), 10);
   visibility_spin_->setObjectName("visibilitySpin");
   medium_form->addRow(tr("Visibility"), visibility_spin_);
   medium_form->addRow(visibility_slider_);
@@ -100,7 +97,7 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
     auto* tint_row = new QHBoxLayout;
     const char* names[] = {"R", "G", "B"};
     for (int c = 0; c < 3; ++c) {
-      tint_[c] = spin(0.05, 3, 1, 2, QString(), 0.05);
+      tint_[c] = double_spin_box(0.05, 3, 1, 2, QString(), 0.05);
       tint_[c]->setObjectName(QString("tint%1").arg(names[c]));
       tint_[c]->setPrefix(QString("%1 ").arg(names[c]));
       share_row(tint_[c], QStringLiteral("G 1.00"));
@@ -113,27 +110,27 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
     medium_form->addRow(new QLabel(tr("Extinction tint (R, G, B)")));
     medium_form->addRow(tint_row);
   }
-  g_spin_ = spin(-0.95, 0.95, 0.0, 2, QString(), 0.05);
+  g_spin_ = double_spin_box(-0.95, 0.95, 0.0, 2, QString(), 0.05);
   g_spin_->setToolTip(
       tr("Henyey-Greenstein asymmetry: > 0 scatters forward (bright halo "
          "toward the sun)"));
   medium_form->addRow(tr("Anisotropy g"), g_spin_);
   top_enabled_ = new QCheckBox(tr("Fog layer top"));
-  top_spin_ = spin(0.1, 5000, 10, 1, tr(" m"), 1);
+  top_spin_ = double_spin_box(0.1, 5000, 10, 1, tr(" m"), 1);
   top_spin_->setToolTip(tr("Height above the ground where the fog ends"));
   medium_form->addRow(top_enabled_, top_spin_);
   bottom_enabled_ = new QCheckBox(tr("Fog layer bottom"));
-  bottom_spin_ = spin(-5000, 5000, 0, 1, tr(" m"), 1);
+  bottom_spin_ = double_spin_box(-5000, 5000, 0, 1, tr(" m"), 1);
   bottom_spin_->setToolTip(tr("Height above the ground where the fog starts (a lifted layer)"));
   medium_form->addRow(bottom_enabled_, bottom_spin_);
-  albedo_spin_ = spin(0, 1, 1, 2, QString(), 0.05);
+  albedo_spin_ = double_spin_box(0, 1, 1, 2, QString(), 0.05);
   albedo_spin_->setToolTip(
       tr("Single-scattering albedo: the fraction of the light the fog removes that it "
          "scatters (1: water droplets, < 1: smoke, smog)"));
   medium_form->addRow(tr("Albedo"), albedo_spin_);
-  noise_amplitude_ = spin(0, 1, 0, 2, QString(), 0.05);
+  noise_amplitude_ = double_spin_box(0, 1, 0, 2, QString(), 0.05);
   noise_amplitude_->setToolTip(tr("Wisps: how strongly the density varies (0 = uniform)"));
-  noise_scale_ = spin(0.1, 1000, 10, 1, tr(" m"), 1);
+  noise_scale_ = double_spin_box(0.1, 1000, 10, 1, tr(" m"), 1);
   noise_scale_->setToolTip(tr("Size of the largest wisps"));
   medium_form->addRow(tr("Wisps"), noise_amplitude_);
   medium_form->addRow(tr("Wisp size"), noise_scale_);
@@ -156,9 +153,9 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   height_box_->setToolTip(
       tr("Density falls off with height: exp(-(height - base) / scale height)"));
   auto* height_form = new QFormLayout(height_box_);
-  height_base_ = spin(-1000, 5000, 0, 1, tr(" m"), 1);
+  height_base_ = double_spin_box(-1000, 5000, 0, 1, tr(" m"), 1);
   height_base_->setToolTip(tr("Height (above the ground) where the density is the visibility's"));
-  height_scale_ = spin(0.1, 5000, 20, 1, tr(" m"), 1);
+  height_scale_ = double_spin_box(0.1, 5000, 20, 1, tr(" m"), 1);
   height_scale_->setToolTip(tr("Height over which the density falls to 1/e"));
   height_form->addRow(tr("Base"), height_base_);
   height_form->addRow(tr("Scale height"), height_scale_);
@@ -171,7 +168,7 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   sky_form->addRow(sky_auto_);
   sky_button_ = new QPushButton;
   sky_button_->setToolTip(tr("Colour of the fog lit by the sky"));
-  sky_brightness_ = spin(0.01, 100, 1.0, 2, QString(), 0.1);
+  sky_brightness_ = double_spin_box(0.01, 100, 1.0, 2, QString(), 0.1);
   sky_brightness_->setToolTip(tr("Multiplies the colour (scene-linear radiance)"));
   sky_form->addRow(tr("Colour"), sky_button_);
   sky_form->addRow(tr("Brightness"), sky_brightness_);
@@ -181,10 +178,10 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   sun_box_->setCheckable(true);
   sun_box_->setChecked(false);
   auto* sun_form = new QFormLayout(sun_box_);
-  sun_azimuth_ = spin(-180, 360, 0, 1, tr(" °"), 5);
+  sun_azimuth_ = double_spin_box(-180, 360, 0, 1, tr(" °"), 5);
   sun_azimuth_->setToolTip(tr("0 = straight ahead, 90 = to the right"));
-  sun_elevation_ = spin(-90, 90, 30, 1, tr(" °"), 1);
-  sun_irradiance_ = spin(0, 1000, 3, 2, QString(), 0.5);
+  sun_elevation_ = double_spin_box(-90, 90, 30, 1, tr(" °"), 1);
+  sun_irradiance_ = double_spin_box(0, 1000, 3, 2, QString(), 0.5);
   sun_dial_ = new SunDial;
   sun_dial_->setObjectName("sunDial");
   sun_form->addRow(sun_dial_);
@@ -193,7 +190,7 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   sun_irradiance_->setToolTip(
       tr("Sunlight above the fog (scene-linear, perpendicular to the rays)"));
   sun_form->addRow(tr("Irradiance"), sun_irradiance_);
-  sun_radius_ = spin(0.01, 5, 0.27, 2, tr(" °"), 0.05);
+  sun_radius_ = double_spin_box(0.01, 5, 0.27, 2, tr(" °"), 0.05);
   sun_radius_->setToolTip(tr("Angular radius of the sun's disk: larger gives softer shaft edges"));
   sun_form->addRow(tr("Disk radius"), sun_radius_);
   layout->addWidget(sun_box_);
@@ -204,7 +201,7 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   lamp_list_->setObjectName("lampList");
   lamp_list_->setMaximumHeight(80);
   lamp_form->addRow(lamp_list_);
-  lamp_intensity_ = spin(0, 1e6, 100, 1, tr(" /sr"), 10);
+  lamp_intensity_ = double_spin_box(0, 1e6, 100, 1, tr(" /sr"), 10);
   lamp_intensity_->setToolTip(tr(
       "Radiant intensity of the selected lamp (scene-linear per steradian; its colour is kept)"));
   lamp_form->addRow(tr("Intensity"), lamp_intensity_);
@@ -212,7 +209,7 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
     const char* axes[] = {"x", "y", "z"};
     const QString labels[] = {tr("Right (x)"), tr("Height (y)"), tr("Ahead (z)")};
     for (int k = 0; k < 3; ++k) {
-      lamp_position_[k] = spin(-10000, 10000, 0, 2, tr(" m"), 0.1);
+      lamp_position_[k] = double_spin_box(-10000, 10000, 0, 2, tr(" m"), 0.1);
       lamp_position_[k]->setObjectName(QString("lamp_%1").arg(axes[k]));
       lamp_form->addRow(labels[k], lamp_position_[k]);
     }
@@ -223,9 +220,9 @@ FogPanel::FogPanel(QWidget* parent) : QWidget(parent) {
   lamp_spot_ = new QCheckBox(tr("Spot (cone)"));
   lamp_spot_->setToolTip(tr("A cone of light (its axis kept; a new spot points down)"));
   lamp_form->addRow(lamp_spot_);
-  lamp_inner_ = spin(0, 179, 30, 1, tr(" °"), 5);
+  lamp_inner_ = double_spin_box(0, 179, 30, 1, tr(" °"), 5);
   lamp_inner_->setToolTip(tr("Half-angle of full intensity"));
-  lamp_outer_ = spin(0.1, 179.9, 45, 1, tr(" °"), 5);
+  lamp_outer_ = double_spin_box(0.1, 179.9, 45, 1, tr(" °"), 5);
   lamp_outer_->setToolTip(tr("Half-angle where the light has faded to 0"));
   lamp_form->addRow(tr("Inner angle"), lamp_inner_);
   lamp_form->addRow(tr("Outer angle"), lamp_outer_);
@@ -352,7 +349,7 @@ void FogPanel::applyPreset(Preset preset) {
   mr::FogScene scene = this->scene();
   mr::Medium& m = scene.medium;
   auto visibility = [&](double metres) {
-    const float sigma = float(3.912 / metres);  // Koschmieder, 2 % contrast (as the panel)
+    const float sigma = float(mr::extinction_from_visibility(metres));
     m.sigma_t_per_m = {sigma, sigma, sigma};
   };
   m.height_fog.reset();
@@ -502,7 +499,7 @@ void FogPanel::setScene(const mr::FogScene& scene) {
   base_ = scene;
   const mr::Rgb& s = scene.medium.sigma_t_per_m;
   const double sigma = (double(s[0]) + s[1] + s[2]) / 3;
-  const double v = sigma > 0 ? 3.912 / sigma : kMaxVisibility;
+  const double v = sigma > 0 ? visibility_from_extinction(sigma) : kMaxVisibility;
   visibility_spin_->setValue(v);
   for (int c = 0; c < 3; ++c) tint_[c]->setValue(sigma > 0 ? s[c] / sigma : 1.0);
   visibility_slider_->setValue(sliderFromVisibility(v));
@@ -556,7 +553,7 @@ void FogPanel::setScene(const mr::FogScene& scene) {
 
 mr::FogScene FogPanel::scene() const {
   mr::FogScene scene = base_;
-  const double sigma = 3.912 / visibility_spin_->value();
+  const double sigma = mr::extinction_from_visibility(visibility_spin_->value());
   const double tint_mean = (tint_[0]->value() + tint_[1]->value() + tint_[2]->value()) / 3;
   for (int c = 0; c < 3; ++c)
     scene.medium.sigma_t_per_m[c] = float(sigma * tint_[c]->value() / tint_mean);

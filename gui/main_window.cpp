@@ -27,6 +27,7 @@
 #include <QMenuBar>
 #include <QMessageBox>
 #include <QMimeData>
+#include <QProgressBar>
 #include <QProgressDialog>
 #include <QPushButton>
 #include <QScrollArea>
@@ -38,7 +39,7 @@
 #include <QUndoStack>
 #include <QVBoxLayout>
 #include <QtConcurrent/QtConcurrentRun>
-#include <atomic>
+#include <algorithm>
 #include <cmath>
 #include <optional>
 
@@ -59,6 +60,10 @@ constexpr double kDraftPixels = 0.25e6;
 constexpr const char* kProjectFormat = "mr-studio-project";
 constexpr int kRecentFiles = 8;
 constexpr int kDefaultAutosaveMs = 60000;
+// The progress bars' resolution (per mille: a 2000-row render moves it every other row).
+constexpr int kProgressSteps = 1000;
+// The stage an export reports while it writes the file (mr::fog's stages come first).
+constexpr char kWritingStage[] = "writing";
 
 QString ms(double seconds) {
   return QString::number(seconds * 1000.0, 'f', 0) + " ms";
@@ -214,6 +219,18 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
   connect(statusBar(), &QStatusBar::messageChanged, warning_label_, [this](const QString& message) {
     warning_label_->setVisible(message.isEmpty() && has_warning_);
   });
+  // Permanent: a status message (a hint, "Exporting ...") must not hide the progress.
+  progress_bar_ = new QProgressBar;
+  progress_bar_->setObjectName("progressBar");
+  progress_bar_->setRange(0, kProgressSteps);
+  progress_bar_->setTextVisible(true);
+  progress_bar_->setFormat(QString());
+  progress_bar_->setFixedWidth(
+      progress_bar_->fontMetrics().horizontalAdvance(tr("estimating: sky mask 100 %")) + 24);
+  progress_bar_->setVisible(false);
+  statusBar()->addPermanentWidget(progress_bar_);
+  // Queued: the reports come from TBB workers; widgets are touched on the UI thread only.
+  connect(this, &MainWindow::progressReported, this, &MainWindow::onProgress, Qt::QueuedConnection);
   statusBar()->addPermanentWidget(timing_label_);
   statusBar()->addPermanentWidget(backend_label_);
   statusBar()->addPermanentWidget(zoom_label_);
@@ -358,11 +375,13 @@ void MainWindow::openPhoto(const QString& path) {
   const mr::ColorConfig color = color_;
   std::shared_ptr<const mr::Annotations> annotations;
   if (pending_annotations_) annotations = std::make_shared<mr::Annotations>(*pending_annotations_);
-  QtConcurrent::run(&pool_, [this, path, color, load, annotations] {
+  auto progress = std::make_shared<mr::CancelToken>();
+  const quint64 progress_id = startProgress(Job::load, *progress);
+  QtConcurrent::run(&pool_, [this, path, color, load, annotations, progress, progress_id] {
     std::shared_ptr<const Document> doc;
     QString error;
     try {
-      doc = load_document(path, color, annotations.get());
+      doc = load_document(path, color, annotations.get(), progress.get());
     } catch (const mr::Error& e) {
       error = QString::fromStdString(e.what());
     } catch (const std::exception& e) {
@@ -370,7 +389,8 @@ void MainWindow::openPhoto(const QString& path) {
     }
     QMetaObject::invokeMethod(
         this,
-        [this, doc, error, load] {
+        [this, doc, error, load, progress_id] {
+          endProgress(Job::load, progress_id);
           if (load != load_generation_) return;  // a newer open won
           if (!doc) {
             pending_scene_.reset();
@@ -453,9 +473,10 @@ void MainWindow::startRender(mr::Quality quality) {
   }
   request.cancel = std::make_shared<mr::CancelToken>();
   render_cancel_ = request.cancel;
+  const quint64 progress_id = startProgress(Job::preview, *request.cancel);
   rendering_ = true;
   const mr::ColorConfig color = color_;
-  QtConcurrent::run(&pool_, [this, request, color] {
+  QtConcurrent::run(&pool_, [this, request, color, progress_id] {
     std::shared_ptr<PreviewResult> result;
     QString error;
     bool cancelled = false;
@@ -470,7 +491,8 @@ void MainWindow::startRender(mr::Quality quality) {
     const int generation = request.generation;
     QMetaObject::invokeMethod(
         this,
-        [this, result, error, generation, cancelled] {
+        [this, result, error, generation, cancelled, progress_id] {
+          endProgress(Job::preview, progress_id);
           onRenderDone(result, error, generation, cancelled);
         },
         Qt::QueuedConnection);
@@ -523,6 +545,66 @@ void MainWindow::onRenderDone(std::shared_ptr<PreviewResult> result, QString err
   } else if (current && result && result->quality == mr::Quality::draft) {
     startRender(mr::Quality::normal);
   }
+}
+
+// ---- progress ----------------------------------------------------------------------------
+
+quint64 MainWindow::startProgress(Job job, mr::CancelToken& token) {
+  const quint64 id = ++last_progress_id_;
+  progress_[int(job)] = JobProgress{id, QString(), 0.0};
+  // Runs on whichever thread made the progress (a TBB worker): only a signal, which Qt queues
+  // to the UI thread (the connection in the constructor).
+  token.set_progress([this, job, id](const mr::Progress& p) {
+    emit progressReported(int(job), id, QString::fromUtf8(p.stage.data(), int(p.stage.size())),
+                          p.fraction());
+  });
+  showProgress();
+  return id;
+}
+
+void MainWindow::endProgress(Job job, quint64 id) {
+  JobProgress& p = progress_[int(job)];
+  if (p.id != id) return;  // a newer run of the job owns the bar's line
+  p = JobProgress{};
+  showProgress();
+}
+
+void MainWindow::onProgress(int job, quint64 id, const QString& stage, double fraction) {
+  if (job < 0 || job >= int(progress_.size())) return;
+  JobProgress& p = progress_[job];
+  if (p.id != id) return;  // a report of a run that ended or was replaced
+  p.stage = stage;
+  p.fraction = std::clamp(fraction, 0.0, 1.0);
+  showProgress();
+}
+
+void MainWindow::showProgress() {
+  // What each job does, and the stage its verb already says (not repeated in the text).
+  static const char* const verbs[] = {QT_TR_NOOP("exporting"), QT_TR_NOOP("estimating"),
+                                      QT_TR_NOOP("estimating"), QT_TR_NOOP("rendering")};
+  static const char* const own_stage[] = {"render", "", "", "render"};
+  QStringList running;
+  double fraction = 0;
+  for (int job = 0; job < int(progress_.size()); ++job) {
+    const JobProgress& p = progress_[job];
+    // A job shows from its first report: a load with a depth file reports nothing.
+    if (!p.id || p.stage.isEmpty()) continue;
+    const int percent = int(std::floor(p.fraction * 100));
+    const QString verb = tr(verbs[job]);
+    running << (p.stage == own_stage[job] ? tr("%1 %2 %").arg(verb).arg(percent)
+                                          : tr("%1: %2 %3 %").arg(verb, p.stage).arg(percent));
+    if (running.size() == 1) fraction = p.fraction;
+  }
+  const QString text = running.isEmpty() ? QString() : running.first();
+  const int value = int(std::lround(fraction * kProgressSteps));
+  if (text == progress_bar_->format() && value == progress_bar_->value() &&
+      progress_bar_->isVisibleTo(statusBar()) == !text.isEmpty())
+    return;
+  progress_bar_->setFormat(text);
+  progress_bar_->setValue(value);
+  progress_bar_->setToolTip(running.join("\n"));
+  progress_bar_->setVisible(!text.isEmpty());
+  emit progressShown(text, fraction);
 }
 
 void MainWindow::setLayer(Layer layer) {
@@ -827,22 +909,26 @@ void MainWindow::reestimate(bool apply_scene) {
                                        : QString();
   const mr::ColorConfig color = color_;
   const int generation = estimate_generation_;
-  QtConcurrent::run(&pool_, [this, doc, annotations, color, generation, apply_scene] {
-    std::shared_ptr<EstimateResult> result;
-    QString error;
-    try {
-      result = run_estimate(doc, annotations, color);
-      result->generation = generation;
-    } catch (const std::exception& e) {
-      error = QString::fromStdString(e.what());
-    }
-    QMetaObject::invokeMethod(
-        this,
-        [this, result, error, generation, apply_scene] {
-          onEstimateDone(result, error, generation, apply_scene);
-        },
-        Qt::QueuedConnection);
-  });
+  auto progress = std::make_shared<mr::CancelToken>();
+  const quint64 progress_id = startProgress(Job::estimate, *progress);
+  QtConcurrent::run(
+      &pool_, [this, doc, annotations, color, generation, apply_scene, progress, progress_id] {
+        std::shared_ptr<EstimateResult> result;
+        QString error;
+        try {
+          result = run_estimate(doc, annotations, color, progress.get());
+          result->generation = generation;
+        } catch (const std::exception& e) {
+          error = QString::fromStdString(e.what());
+        }
+        QMetaObject::invokeMethod(
+            this,
+            [this, result, error, generation, apply_scene, progress_id] {
+              endProgress(Job::estimate, progress_id);
+              onEstimateDone(result, error, generation, apply_scene);
+            },
+            Qt::QueuedConnection);
+      });
 }
 
 void MainWindow::onEstimateDone(std::shared_ptr<EstimateResult> result, QString error,
@@ -1174,17 +1260,19 @@ bool MainWindow::exportImage(const QString& path, const ExportSettings& settings
   // The render and the write run on the worker; the write goes through mr::write_image /
   // write_exr_layers, which write a temporary file and rename it (atomic). A cancel during the
   // render stops mr::fog (within a row); one before the write starts writes nothing.
+  // The token also carries the export's progress: mr::fog's stages, then "writing" (reported
+  // here: the writers have no progress of their own).
   std::shared_ptr<mr::CancelToken> cancelled = std::make_shared<mr::CancelToken>();
   export_cancel_ = cancelled;
-  std::shared_ptr<std::atomic<int>> stage = std::make_shared<std::atomic<int>>(0);
+  const quint64 progress_id = startProgress(Job::export_image, *cancelled);
   QFuture<QString> job =
-      QtConcurrent::run(&pool_, [doc, scene, color, path, settings, cancelled, stage]() -> QString {
+      QtConcurrent::run(&pool_, [doc, scene, color, path, settings, cancelled]() -> QString {
         try {
           mr::ScatteringLayers aovs;
           const mr::FogLayers layers =
               mr::fog(doc->photo, doc->distance_m, doc->camera, scene, &aovs, cancelled.get());
           if (cancelled->requested()) return QStringLiteral("cancelled");
-          stage->store(1);
+          mr::report_progress(cancelled.get(), kWritingStage, 0, 1);
           if (settings.aovs) {
             const mr::Image composite_rgb = layers.composite.select_channels(std::array{0, 1, 2});
             const mr::ExrLayer exr_layers[] = {{"", &composite_rgb},
@@ -1204,7 +1292,7 @@ bool MainWindow::exportImage(const QString& path, const ExportSettings& settings
             write.colorspace = settings.colorspace;
             mr::write_image(path.toStdString(), out, write);
           }
-          stage->store(2);
+          mr::report_progress(cancelled.get(), kWritingStage, 1, 1);
           return {};
         } catch (const mr::Error& e) {
           if (e.code() == mr::ErrorCode::cancelled) return QStringLiteral("cancelled");
@@ -1214,29 +1302,37 @@ bool MainWindow::exportImage(const QString& path, const ExportSettings& settings
         }
       });
   QProgressDialog* progress = nullptr;
-  QTimer poll;
   if (show_progress) {
     progress = new QProgressDialog(tr("Rendering %1...").arg(QFileInfo(path).fileName()),
-                                   tr("Cancel"), 0, 2, this);
+                                   tr("Cancel"), 0, kProgressSteps, this);
     progress->setObjectName("exportProgress");
     progress->setWindowModality(Qt::WindowModal);
     progress->setMinimumDuration(0);
+    // Each stage runs from 0 to 100 %: the end of the render is not the end of the export.
+    progress->setAutoReset(false);
+    progress->setAutoClose(false);
     progress->setValue(0);
     connect(progress, &QProgressDialog::canceled, this, &MainWindow::cancelExport);
-    connect(&poll, &QTimer::timeout, progress, [progress, stage, path] {
-      progress->setValue(stage->load());
-      if (stage->load() == 1)
-        progress->setLabelText(tr("Writing %1...").arg(QFileInfo(path).fileName()));
-    });
+    // The export's own progress, as the status bar gets it (on the UI thread, queued).
+    connect(
+        this, &MainWindow::progressReported, progress,
+        [progress, path, progress_id](int job, quint64 id, const QString& stage, double fraction) {
+          if (job != int(Job::export_image) || id != progress_id) return;
+          const QString file = QFileInfo(path).fileName();
+          progress->setLabelText(stage == kWritingStage ? tr("Writing %1...").arg(file)
+                                 : stage == "render"    ? tr("Rendering %1...").arg(file)
+                                                     : tr("Rendering %1: %2...").arg(file, stage));
+          progress->setValue(int(std::lround(fraction * kProgressSteps)));
+        },
+        Qt::QueuedConnection);
   }
-  poll.start(30);
   QFutureWatcher<QString> watcher;
   QEventLoop loop;
   connect(&watcher, &QFutureWatcher<QString>::finished, &loop, &QEventLoop::quit);
   watcher.setFuture(job);
   if (!job.isFinished()) loop.exec();
-  poll.stop();
   export_cancel_.reset();
+  endProgress(Job::export_image, progress_id);
   delete progress;
   const QString error = job.result();
   exporting_ = false;

@@ -8,6 +8,9 @@
 // the pose, the sun, the sky, the lamps (and the distance map when it was estimated) and the
 // "Estimation overlay" layer. Unsaved changes are asked about on close and open, autosaved to
 // a recovery file and offered back at start; recent files are kept in QSettings.
+// Long work (loading with an estimate, re-estimates, preview passes, exports) shows its progress
+// (mr::Progress, through the job's mr::CancelToken) in a bar in the status bar; the worker's
+// reports reach the UI thread through a queued signal.
 #pragma once
 #include <QElapsedTimer>
 #include <QFutureWatcher>
@@ -15,6 +18,7 @@
 #include <QMessageBox>
 #include <QThreadPool>
 #include <QTimer>
+#include <array>
 #include <atomic>
 #include <memory>
 
@@ -30,6 +34,7 @@ class QDoubleSpinBox;
 class QLabel;
 class QListWidget;
 class QMenu;
+class QProgressBar;
 class QSlider;
 
 namespace mrstudio {
@@ -126,6 +131,10 @@ class MainWindow : public QMainWindow {
   void setCancelStaleRenders(bool on) { cancel_stale_renders_ = on; }
   EventLoopMonitor* eventLoopMonitor() const { return monitor_; }
   void setLayer(Layer layer);
+  /// The status bar's progress of the running work (hidden when idle).
+  QProgressBar* progressBar() const { return progress_bar_; }
+  /// The long work whose progress the status bar shows; when several run, the first listed.
+  enum class Job { export_image, load, estimate, preview };
 
  signals:
   void photoLoaded();
@@ -133,6 +142,12 @@ class MainWindow : public QMainWindow {
   void errorShown(const QString& message);
   void estimateFinished(bool ok, const QString& message);
   void snapFinished(bool ok, const QString& message);
+  /// Emitted on the worker thread from a job's progress callback; it reaches onProgress queued.
+  /// `job`: int(Job); `id`: the job's run (reports of a run that has ended are dropped).
+  void progressReported(int job, quint64 id, const QString& stage, double fraction);
+  /// On the UI thread, after the status bar's progress changed: its text and fraction in
+  /// [0, 1]; an empty text: the bar is hidden (nothing runs).
+  void progressShown(const QString& text, double fraction);
 
  protected:
   void dragEnterEvent(QDragEnterEvent*) override;
@@ -166,6 +181,14 @@ class MainWindow : public QMainWindow {
   void addRecentFile(const QString& path);
   void rebuildRecentMenu();
   void openAny(const QString& path);  ///< photo or project, after maybeSave
+  /// Starts a run of `job` (a newer run replaces an older one's progress): the progress that
+  /// calls using `token` report reaches the status bar. Returns the run's id for endProgress.
+  /// Only before the job's call starts using the token.
+  quint64 startProgress(Job job, mr::CancelToken& token);
+  /// The run `id` of `job` has ended (a no-op when a newer run has replaced it).
+  void endProgress(Job job, quint64 id);
+  void onProgress(int job, quint64 id, const QString& stage, double fraction);
+  void showProgress();
 
   mr::ColorConfig color_;
   ImageView* view_;
@@ -178,7 +201,15 @@ class MainWindow : public QMainWindow {
   QLabel* timing_label_;
   QLabel* warning_label_;  ///< the preview scene's warnings (mr::scene_warnings)
   QLabel* zoom_label_;
+  QProgressBar* progress_bar_;
   EventLoopMonitor* monitor_;
+  struct JobProgress {
+    quint64 id = 0;  ///< the running run's, 0: none runs
+    QString stage;   ///< the stage last reported (empty before the first report)
+    double fraction = 0;
+  };
+  std::array<JobProgress, 4> progress_;  ///< by Job
+  quint64 last_progress_id_ = 0;
 
   std::shared_ptr<const Document> document_;
   std::shared_ptr<const PreviewResult> preview_;

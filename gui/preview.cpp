@@ -31,7 +31,8 @@ const char* to_string(mr::Quality quality) {
 }
 
 std::shared_ptr<const Document> load_document(const QString& path, const mr::ColorConfig& color,
-                                              const mr::Annotations* given_annotations) {
+                                              const mr::Annotations* given_annotations,
+                                              const mr::CancelToken* progress) {
   auto doc = std::make_shared<Document>();
   doc->photo_path = QFileInfo(path).absoluteFilePath();
   const fs::path photo_path = path.toStdString();
@@ -79,7 +80,10 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
     doc->distance_m = std::move(depth.distance_m);
   } else {
     try {
-      mr::SceneEstimate est = mr::estimate_scene(doc->photo, doc->camera, doc->annotations);
+      mr::EstimateOptions options;
+      options.cancel = progress;
+      mr::SceneEstimate est =
+          mr::estimate_scene(doc->photo, doc->camera, doc->annotations, options);
       doc->scene.pose = est.scene.pose;
       doc->scene.lighting.sun = est.scene.lighting.sun;
       doc->scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
@@ -144,12 +148,15 @@ mr::Annotations scale_annotations(const mr::Annotations& annotations, double sx,
 
 std::shared_ptr<EstimateResult> run_estimate(const std::shared_ptr<const Document>& document,
                                              const mr::Annotations& annotations,
-                                             const mr::ColorConfig& color) {
+                                             const mr::ColorConfig& color,
+                                             const mr::CancelToken* cancel) {
   const auto start = std::chrono::steady_clock::now();
   auto result = std::make_shared<EstimateResult>();
+  mr::EstimateOptions options;
+  options.cancel = cancel;
   if (document->depth_estimated ||
       double(document->photo.width()) * document->photo.height() <= kEstimatePixels) {
-    result->estimate = mr::estimate_scene(document->photo, document->camera, annotations);
+    result->estimate = mr::estimate_scene(document->photo, document->camera, annotations, options);
     result->overlay = to_display(
         mr::render_estimate_overlay(document->photo, result->estimate, annotations), color);
   } else {
@@ -161,7 +168,7 @@ std::shared_ptr<EstimateResult> run_estimate(const std::shared_ptr<const Documen
     const mr::Annotations scaled =
         scale_annotations(annotations, double(inputs->photo.width()) / document->photo.width(),
                           double(inputs->photo.height()) / document->photo.height());
-    result->estimate = mr::estimate_scene(inputs->photo, inputs->camera, scaled);
+    result->estimate = mr::estimate_scene(inputs->photo, inputs->camera, scaled, options);
     result->overlay =
         to_display(mr::render_estimate_overlay(inputs->photo, result->estimate, scaled), color);
   }

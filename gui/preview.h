@@ -46,9 +46,10 @@ struct Document {
 /// Reads the photo, its depth ({stem}_depth.{exr,tif,tiff,pfm,png} next to it, as `mr fog`
 /// finds it) or, without one, the geometry from mr::estimate_scene (automatic; with
 /// `annotations` when given, else {stem}_annotations.json when it exists). Throws mr::Error
-/// naming the file.
+/// naming the file. `progress` (may be null): the estimation's steps are reported to it.
 std::shared_ptr<const Document> load_document(const QString& path, const mr::ColorConfig& color,
-                                              const mr::Annotations* annotations = nullptr);
+                                              const mr::Annotations* annotations = nullptr,
+                                              const mr::CancelToken* progress = nullptr);
 
 /// A copy of `document` with another distance map (an estimate from edited annotations).
 std::shared_ptr<const Document> with_distance(const Document& document, mr::Image distance_m,
@@ -69,9 +70,11 @@ inline constexpr double kEstimatePixels = 2.0e6;
 /// Annotations of a photo resized by sx, sy (pixel-centre convention kept).
 mr::Annotations scale_annotations(const mr::Annotations& annotations, double sx, double sy);
 /// Throws mr::Error (annotations that do not fit the photo, contradictory shadow pairs, ...).
+/// `cancel` (may be null): the estimation's steps are reported to it, and it stops the estimate.
 std::shared_ptr<EstimateResult> run_estimate(const std::shared_ptr<const Document>& document,
                                              const mr::Annotations& annotations,
-                                             const mr::ColorConfig& color);
+                                             const mr::ColorConfig& color,
+                                             const mr::CancelToken* cancel = nullptr);
 
 /// The layers the view can show.
 enum class Layer { composite, photo, transmittance, inscatter, depth, estimate };
@@ -84,7 +87,8 @@ struct PreviewRequest {
   bool display_aovs = false;   ///< convert the transmittance and in-scatter for display too
   int generation = 0;
   /// Requested by the UI thread when a newer edit makes this render stale: mr::fog stops within
-  /// a row and render_preview throws mr::Error(cancelled). May be null.
+  /// a row and render_preview throws mr::Error(cancelled). Its progress callback (when set)
+  /// hears mr::fog's stages. May be null.
   std::shared_ptr<mr::CancelToken> cancel;
 };
 

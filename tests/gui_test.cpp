@@ -16,17 +16,21 @@
 #include <QMessageBox>
 #include <QMimeData>
 #include <QPainter>
+#include <QProgressBar>
 #include <QProgressDialog>
 #include <QPushButton>
+#include <QRegularExpression>
 #include <QSignalSpy>
 #include <QSlider>
 #include <QSpinBox>
 #include <QTableWidget>
 #include <QTemporaryDir>
+#include <QThread>
 #include <QUndoStack>
 #include <QtTest>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 #include "annotation_editor.h"
 #include "blockers_panel.h"
@@ -152,6 +156,55 @@ QString annotationsJson(const mr::Annotations& a) {
   return QString::fromStdString(mr::annotations_to_json(a));
 }
 
+// What the status bar's progress showed (MainWindow::progressShown), split into runs at each
+// hiding (an empty text).
+struct ShownProgress {
+  QString text;
+  double fraction;
+  bool bar_visible;  ///< the bar's state when it was shown
+  QString bar_text;  ///< what the bar itself draws
+  bool ui_thread;    ///< emitted on the UI thread
+};
+
+// Checks a run of shown progress of one kind of work (`verb`: "rendering", "estimating",
+// "exporting"): every text is "<verb> NN %" or "<verb>: <stage> NN %" with NN = floor(100 x the
+// fraction); within a stage the fraction never falls; the bar showed exactly that text, on the
+// UI thread. Returns the stages seen, in order, whether a stage reached 1, and what was wrong.
+struct RunSummary {
+  QStringList stages;
+  bool reached_one = false;
+  bool strictly_between = false;  ///< some fraction in (0, 1): a report from the middle of a stage
+  QString error;                  ///< the first thing wrong; empty: none
+};
+RunSummary checkRun(const std::vector<ShownProgress>& run, const QString& verb) {
+  RunSummary summary;
+  static const QRegularExpression pattern(R"(^([a-z]+)(?:: ([a-z ]+))? (\d+) %$)");
+  double last = -1;
+  for (const ShownProgress& p : run) {
+    const QRegularExpressionMatch m = pattern.match(p.text);
+    if (!m.hasMatch() || m.captured(1) != verb)
+      summary.error = QString("'%1' is not '%2[: stage] NN %'").arg(p.text, verb);
+    else if (m.captured(3).toInt() != int(std::floor(p.fraction * 100)))
+      summary.error = QString("'%1' says another percentage than %2").arg(p.text).arg(p.fraction);
+    else if (!p.ui_thread || !p.bar_visible || p.bar_text != p.text)
+      summary.error = QString("'%1': not on the UI thread or not what the bar shows").arg(p.text);
+    if (!summary.error.isEmpty()) return summary;
+    const QString stage = m.captured(2);
+    if (summary.stages.isEmpty() || summary.stages.back() != stage) {
+      summary.stages << stage;
+      last = -1;
+    }
+    if (p.fraction < last) {
+      summary.error = QString("'%1' fell from %2 to %3").arg(stage).arg(last).arg(p.fraction);
+      return summary;
+    }
+    last = p.fraction;
+    summary.reached_one = summary.reached_one || p.fraction == 1.0;
+    summary.strictly_between = summary.strictly_between || (p.fraction > 0 && p.fraction < 1);
+  }
+  return summary;
+}
+
 }  // namespace
 
 class GuiTest : public QObject {
@@ -177,6 +230,7 @@ class GuiTest : public QObject {
   void blockersPanelEditsValidatesAndRoundTrips();
   void blockersShadeTheSunnyPreview();
   void blockersFromThePhotosAnnotations();
+  void statusBarShowsProgress();
 
  private:
   void annotateEstimateUndoSaveExportBody();
@@ -378,11 +432,28 @@ void GuiTest::photoWithoutDepthIsEstimated() {
   QVERIFY(QFile::copy(QStringLiteral(MR_SOURCE_DIR "/sample_photos/building.jpg"), photo));
   MainWindow w;
   w.show();
+  std::vector<ShownProgress> estimating;
+  connect(
+      &w, &MainWindow::progressShown, &w,
+      [&](const QString& text, double fraction) {
+        if (text.startsWith("estimating"))
+          estimating.push_back({text, fraction, w.progressBar()->isVisible(),
+                                w.progressBar()->text(),
+                                QThread::currentThread() == qApp->thread()});
+      },
+      Qt::DirectConnection);
   openAndSettle(w, photo);
   QVERIFY(w.document()->depth_estimated);
   QCOMPARE(w.document()->distance_m.width(), w.document()->photo.width());
   const auto p = w.preview();
   QVERIFY(meanAbsDiff(p->composite, p->photo_image) > 2);
+  // The estimate the load ran showed its steps in the status bar, in order, to the end (issue
+  // 11 item 7); then the bar hid.
+  const RunSummary e = checkRun(estimating, "estimating");
+  QVERIFY2(e.error.isEmpty(), qPrintable(e.error));
+  QCOMPARE(e.stages, QStringList({"horizon", "sky mask", "depth", "refine", "light"}));
+  QCOMPARE(estimating.back().fraction, 1.0);
+  QTRY_VERIFY_WITH_TIMEOUT(!w.progressBar()->isVisible(), 10000);
 }
 
 void GuiTest::draftThenRefineOnLargePhoto() {
@@ -1657,6 +1728,115 @@ extern "C" const char* __asan_default_options() {
 }
 extern "C" const char* __lsan_default_suppressions() {
   return "leak:libqoffscreen.so\n";
+}
+
+// Issue 11 item 7: long work shows its progress in the status bar, through a queued signal from
+// the worker: a preview pass ("rendering NN %"), a re-estimate ("estimating: <step> NN %") and an
+// export ("exporting NN %", then "exporting: writing"); fractions rise within each stage to 1
+// and the bar hides when the work is done. A screenshot with the bar mid-render goes to out/gui/.
+void GuiTest::statusBarShowsProgress() {
+  MainWindow w;
+  w.resize(2560, 1440);  // a large view: a normal pass long enough for reports from its middle
+  w.show();
+  QVERIFY(QTest::qWaitForWindowExposed(&w));
+  QProgressBar* bar = w.progressBar();
+  QVERIFY(bar);
+  QVERIFY(!bar->isVisible());
+  std::vector<std::vector<ShownProgress>> runs(1);
+  QImage mid_render, mid_export;
+  // Direct: the handler runs in the thread that emits, which must be the UI thread.
+  connect(
+      &w, &MainWindow::progressShown, &w,
+      [&](const QString& text, double fraction) {
+        if (text.isEmpty()) {
+          QVERIFY(!bar->isVisible());
+          if (!runs.back().empty()) runs.emplace_back();
+          return;
+        }
+        runs.back().push_back({text, fraction, bar->isVisible(), bar->text(),
+                               QThread::currentThread() == qApp->thread()});
+        if (mid_render.isNull() && text.startsWith("rendering") && fraction > 0.2 && fraction < 0.9)
+          mid_render = w.grab().toImage();
+        if (mid_export.isNull() && text.startsWith("exporting") && fraction > 0.2 && fraction < 0.9)
+          if (auto* dialog = w.findChild<QProgressDialog*>("exportProgress"))
+            mid_export = dialog->grab().toImage();
+      },
+      Qt::DirectConnection);
+  openAndSettle(w, kLeuven);
+  QTRY_VERIFY_WITH_TIMEOUT(!w.estimating(), 60000);  // the overlay of leuven's annotations
+  QTRY_VERIFY_WITH_TIMEOUT(!bar->isVisible(), 10000);
+
+  // A preview: sun, shafts and wisps (a normal pass of about a second, as in
+  // newEditCancelsTheRunningRender).
+  runs.assign(1, {});
+  mr::FogScene heavy = w.fogPanel()->scene();
+  heavy.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-60, 25), {3, 3, 3}, 0.27};
+  heavy.medium.layer_top_m = 40;
+  heavy.medium.noise.amplitude = 0.3;
+  w.fogPanel()->setScene(heavy);
+  QSlider* slider = w.fogPanel()->visibilitySlider();
+  slider->setValue(slider->value() - slider->pageStep());
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+  QTRY_VERIFY_WITH_TIMEOUT(!bar->isVisible(), 10000);
+  if (runs.back().empty()) runs.pop_back();
+  QVERIFY(!runs.empty());
+  bool render_reached_one = false, render_between = false;
+  for (const auto& run : runs) {
+    const RunSummary s = checkRun(run, "rendering");
+    QVERIFY2(s.error.isEmpty(), qPrintable(s.error));
+    // The occluders (the sun's shadows) first, then the render itself.
+    QVERIFY(s.stages.contains(QString()));
+    for (const QString& stage : s.stages) QVERIFY(stage.isEmpty() || stage == "occluders");
+    render_reached_one = render_reached_one || s.reached_one;
+    render_between = render_between || s.strictly_between;
+  }
+  qInfo("preview: %d pass(es) showed progress, %d reports (last: %s)", int(runs.size()),
+        int(std::accumulate(runs.begin(), runs.end(), std::size_t(0),
+                            [](std::size_t n, const auto& run) { return n + run.size(); })),
+        qPrintable(runs.back().back().text));
+  QVERIFY(render_reached_one);
+  QVERIFY(render_between);
+  QVERIFY(!mid_render.isNull());
+  QVERIFY(mid_render.save(outDir() + "/progress_rendering.png"));
+
+  // A re-estimate: its steps in order, the last at 100 % (the preview it starts follows it).
+  runs.assign(1, {});
+  QSignalSpy estimated(&w, &MainWindow::estimateFinished);
+  w.reestimate(true);
+  QVERIFY(estimated.wait(60000));
+  QVERIFY(estimated.front().at(0).toBool());
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w) && !bar->isVisible(), 120000);
+  std::vector<ShownProgress> estimating;
+  for (const auto& run : runs)
+    for (const ShownProgress& p : run)
+      if (p.text.startsWith("estimating")) estimating.push_back(p);
+  QVERIFY(!estimating.empty());
+  const RunSummary e = checkRun(estimating, "estimating");
+  QVERIFY2(e.error.isEmpty(), qPrintable(e.error));
+  qInfo("re-estimate: %s", qPrintable(e.stages.join(", ")));
+  QCOMPARE(e.stages.front(), QString("horizon"));
+  QCOMPARE(e.stages.back(), QString("light"));
+  QCOMPARE(estimating.back().fraction, 1.0);
+  for (std::size_t i = 1; i < estimating.size(); ++i)  // steps finished / planned: never falls
+    QVERIFY(estimating[i].fraction >= estimating[i - 1].fraction);
+
+  // An export: the render, then the writing, each to 100 %; then the bar hides.
+  runs.assign(1, {});
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  QVERIFY(w.exportImage(dir.filePath("progress.exr"), {}, true));
+  QTRY_VERIFY_WITH_TIMEOUT(!bar->isVisible(), 10000);
+  if (runs.back().empty()) runs.pop_back();
+  QCOMPARE(int(runs.size()), 1);
+  const RunSummary x = checkRun(runs.front(), "exporting");
+  QVERIFY2(x.error.isEmpty(), qPrintable(x.error));
+  qInfo("export: %d reports, stages %s", int(runs.front().size()), qPrintable(x.stages.join(", ")));
+  QCOMPARE(x.stages.back(), QString("writing"));
+  QVERIFY(x.stages.contains(QString()));
+  QCOMPARE(runs.front().back().fraction, 1.0);
+  QVERIFY(x.reached_one);
+  QVERIFY(!mid_export.isNull());
+  QVERIFY(mid_export.save(outDir() + "/progress_export_dialog.png"));
 }
 
 int main(int argc, char** argv) {
