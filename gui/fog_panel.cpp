@@ -40,14 +40,6 @@ void share_row(SpinBox* s, const QString& typical) {
   s->setSizePolicy(QSizePolicy::Ignored, QSizePolicy::Fixed);
   s->setMinimumWidth(s->fontMetrics().horizontalAdvance(typical) + 28);
 }
-
-// The visibility (m) of an extinction coefficient (1/m): the inverse of the library's Koschmieder
-// conversion mr::extinction_from_visibility (sigma = k / V), whose constant k is its value at
-// V = 1 m, so that the panel and the library agree on k.
-double visibility_from_extinction(double sigma_t_per_m) {
-  return mr::extinction_from_visibility(1.0) / sigma_t_per_m;
-}
-
 }  // namespace
 
 int FogPanel::sliderFromVisibility(double metres) {
@@ -499,7 +491,7 @@ void FogPanel::setScene(const mr::FogScene& scene) {
   base_ = scene;
   const mr::Rgb& s = scene.medium.sigma_t_per_m;
   const double sigma = (double(s[0]) + s[1] + s[2]) / 3;
-  const double v = sigma > 0 ? visibility_from_extinction(sigma) : kMaxVisibility;
+  const double v = sigma > 0 ? mr::visibility_from_extinction(sigma) : kMaxVisibility;
   visibility_spin_->setValue(v);
   for (int c = 0; c < 3; ++c) tint_[c]->setValue(sigma > 0 ? s[c] / sigma : 1.0);
   visibility_slider_->setValue(sliderFromVisibility(v));

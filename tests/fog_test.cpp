@@ -20,6 +20,11 @@ TEST(Fog, KoschmiederExtinction) {
   EXPECT_THROW(extinction_from_visibility(0.0), Error);
   EXPECT_THROW(extinction_from_visibility(-5.0), Error);
   EXPECT_THROW(extinction_from_visibility(std::nan("")), Error);
+  // The inverse: T(V) = 0.02 at the visibility it gives, and a round trip.
+  EXPECT_NEAR(std::exp(-0.01 * visibility_from_extinction(0.01)), 0.02, 1e-4);
+  EXPECT_NEAR(visibility_from_extinction(extinction_from_visibility(1234.5)), 1234.5, 1e-9);
+  EXPECT_THROW(visibility_from_extinction(0.0), Error);
+  EXPECT_THROW(visibility_from_extinction(std::numeric_limits<double>::infinity()), Error);
 }
 
 TEST(Fog, CompositeIsExactlyItPlusAirlightTimesOneMinusT) {

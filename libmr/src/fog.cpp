@@ -23,11 +23,21 @@ void check_rgb(const Rgb& v, const char* name) {
 
 }  // namespace
 
+// -ln(0.02): the contrast threshold of 2 % that defines meteorological visibility.
+constexpr double kKoschmiederContrast = 3.912;
+
 double extinction_from_visibility(double visibility_m) {
   if (!std::isfinite(visibility_m) || !(visibility_m > 0))
     throw Error(ErrorCode::invalid_argument,
                 "visibility " + std::to_string(visibility_m) + " m must be positive and finite");
-  return 3.912 / visibility_m;  // -ln(0.02): contrast threshold of 2 %
+  return kKoschmiederContrast / visibility_m;
+}
+
+double visibility_from_extinction(double sigma_t_per_m) {
+  if (!std::isfinite(sigma_t_per_m) || !(sigma_t_per_m > 0))
+    throw Error(ErrorCode::invalid_argument, "extinction " + std::to_string(sigma_t_per_m) +
+                                                 " 1/m must be positive and finite");
+  return kKoschmiederContrast / sigma_t_per_m;
 }
 
 Rgb estimate_airlight(const Image& photo) {

@@ -15,6 +15,10 @@ using Rgb = std::array<float, 3>;
 /// Throws mr::Error(invalid_argument) unless V is finite and > 0.
 double extinction_from_visibility(double visibility_m);
 
+/// The inverse: the meteorological visibility (m) of an extinction coefficient (1/m),
+/// 3.912 / sigma_t. Throws mr::Error(invalid_argument) unless sigma_t is finite and > 0.
+double visibility_from_extinction(double sigma_t_per_m);
+
 /// Parameters of homogeneous fog lit only by the sky (the Koschmieder model).
 struct FogParams {
   Rgb sigma_t_per_m{0.01f, 0.01f, 0.01f};  ///< extinction coefficient, 1/m, per channel, >= 0
