@@ -175,12 +175,21 @@ class Builder {
   // The tops of vertical structures the photo shows (a vertical pixel below sky or below a
   // surface clearly behind it): (horizontal distance, world height), for estimating how tall
   // the structures cut by the frame are.
+  // The maps are read directly first: the rays (trigonometry per pixel) only for the few pixels
+  // that qualify (on a 1080p photo this stage took a third of a second, single-threaded).
   void collect_visible_tops() {
+    auto surface_at = [&](int x, int y, double* d) {
+      *d = d_.at(x, y, 0);
+      const double nx = n_.at(x, y, 0), ny = n_.at(x, y, 1), nz = n_.at(x, y, 2);
+      return *d > 0 && std::isfinite(*d) && nx * nx + ny * ny + nz * nz >= 0.5;
+    };
     for (int y = 1; y < cam_.height; ++y)
       for (int x = 0; x < cam_.width; ++x) {
+        double d = 0, d_above = 0;
+        if (!surface_at(x, y, &d) || std::fabs(n_.at(x, y, 1)) >= kVerticalNy) continue;
+        if (surface_at(x, y - 1, &d_above) && !(d_above > 1.15 * d)) continue;
         const Px p = pixel(x, y);
-        if (!p.surface || std::fabs(p.n[1]) >= kVerticalNy) continue;
-        if (!behind_or_sky(pixel(x, y - 1), p.d)) continue;
+        if (!p.surface || !behind_or_sky(pixel(x, y - 1), p.d)) continue;  // as checked above
         const V top = on_plane(p, ray(x, y - 0.5));
         tops_.push_back({horizontal(top), top[1]});
       }
