@@ -87,10 +87,11 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
     const std::size_t triangles = mesh_.triangle_count();
     // The surface (many small triangles, each about a pixel's footprint) and what follows it
     // (silhouette extrusions and blockers: few triangles, some tens of metres long) get a BVH
-    // each, so that the long triangles' boxes do not overlap the surface's nodes. (With the
-    // frame's structures completed, issue 13, a 1080p normal render of leuven costs ~1.7x more
-    // per shadow ray than without; the split's gain there was within the noise of a heavily
-    // loaded machine, so it is kept as the standard remedy, not as a measured one.)
+    // each, so that the long triangles' boxes do not overlap the surface's nodes. (The split's
+    // gain was within the noise of a heavily loaded machine, so it is kept as the standard
+    // remedy, not as a measured one. What had made the completion of issue 13 cost 1.8x per
+    // shadow ray at 1080p was the blockers' own per-pixel slivers overlapping each other: see
+    // kOutlineTolerance in render/blockers.cpp.)
     const std::size_t split =
         mesh_.surface_triangle_count > 0 && mesh_.surface_triangle_count < triangles
             ? mesh_.surface_triangle_count

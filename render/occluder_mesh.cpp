@@ -323,6 +323,11 @@ constexpr int kTopLeft = 0, kTopRight = 1, kBottomLeft = 2, kBottomRight = 3;
 // vertices stay in the buffer, unreferenced.
 constexpr int kMergeMax = 32;
 
+// Spare index capacity for what render/blockers.cpp appends (hundreds of triangles): without
+// it the first appended triangle reallocated and copied the whole index buffer (33-50 MB at
+// 1080p, fresh pages the kernel zeroes). Pages never written are never committed.
+constexpr std::size_t kAppendHeadroomIndices = 3 * 65536;
+
 template <class VertexOf>
 void merge_planar_pixels(TriangleMesh& mesh, const std::vector<std::uint8_t>& flags, int width,
                          int height, const std::vector<std::uint64_t>& row_pixel_offset,
@@ -458,7 +463,8 @@ void merge_planar_pixels(TriangleMesh& mesh, const std::vector<std::uint8_t>& fl
   std::size_t surface_indices = 0;
   for (const auto& b : band_indices) surface_indices += b.size();
   std::vector<std::uint32_t> indices;
-  indices.reserve(surface_indices + (mesh.indices.size() - 3 * mesh.surface_triangle_count));
+  indices.reserve(surface_indices + (mesh.indices.size() - 3 * mesh.surface_triangle_count) +
+                  kAppendHeadroomIndices);
   for (const auto& b : band_indices) indices.insert(indices.end(), b.begin(), b.end());
   indices.insert(indices.end(), mesh.indices.begin() + 3 * mesh.surface_triangle_count,
                  mesh.indices.end());
@@ -709,6 +715,8 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
   check_vertex_count(total_vertices);
   mesh.positions.resize(3 * total_vertices);  // within the reserved capacity
   mesh.surface_triangle_count = 2 * (surface_pixels + fanned_pixels);
+  mesh.indices.reserve(3 * (mesh.surface_triangle_count + 2 * extruded_edges) +
+                       kAppendHeadroomIndices);
   mesh.indices.resize(3 * (mesh.surface_triangle_count + 2 * extruded_edges));
 
   // 7. Two triangles per surface pixel; a fanned pixel's centre vertex and its other two
