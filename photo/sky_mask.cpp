@@ -327,12 +327,12 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     if (!(t > 0) || !(norm2 > 0)) return guided;
     const float a = std::clamp((I - F).dot(BF) / norm2, 0.0f, 1.0f);
     // Trust in the two-colour model: the pixel lies near the line from F to B (the residual,
-    // fading out at a quarter of their distance); a pixel off it (a leaf of another colour, a
+    // fading out at half their distance); a pixel off it (a leaf of another colour, a
     // dark crack beside a pale wall) keeps the guided filter's value.
     const float norm = std::sqrt(norm2);
     const cv::Vec3f off = I - F - a * BF;
     const float residual = std::sqrt(off.dot(off)) / norm;
-    const float model = std::clamp(1.0f - residual / 0.25f, 0.0f, 1.0f);
+    const float model = std::clamp(1.0f - residual / 0.5f, 0.0f, 1.0f);
     const float wt = t * t * (3 - 2 * t) * model;
     return wt * a + (1 - wt) * guided;
   };
