@@ -294,7 +294,8 @@ Camera make_camera(const FogCommandOptions& o, const FogScene& scene, const fs::
 // estimated pose (and sun, sky, when the annotations give them) replace the plan's; options on
 // the command line still win. --camera-height also scales the estimated depth.
 DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image& photo,
-                        const Camera& camera, FogScene& scene, const CancelToken* progress) {
+                        const Camera& camera, FogScene& scene, const CancelToken* progress,
+                        Image& sky_alpha) {
   try {
     Annotations annotations;
     if (!o.annotations.empty()) {
@@ -328,6 +329,7 @@ DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image&
     DepthMap depth;
     depth.distance_m = std::move(est.geometry.distance_m);
     depth.no_surface_pixels = est.geometry.sky_pixels;
+    sky_alpha = std::move(est.geometry.sky_alpha);  // issue 11 item 4: fog() mixes along it
     return depth;
   } catch (const Error& e) {
     throw Error(e.code(),
@@ -519,8 +521,10 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
                                {{estimate_stages(), estimated ? 1.0 : 0.0},
                                 {{"occluders"}, lights ? 1.0 : 0.0},
                                 {{"render"}, 2}});
-  const DepthMap depth = estimated ? estimate_depth(o, job, photo, camera, scene, progress.token())
-                                   : read_depth(job.depth, camera, plan.depth);
+  Image sky_alpha;  // the estimate's soft sky matte (empty for a depth file)
+  const DepthMap depth =
+      estimated ? estimate_depth(o, job, photo, camera, scene, progress.token(), sky_alpha)
+                : read_depth(job.depth, camera, plan.depth);
   // Issue 11 item 4: an estimated scene's fog lies in a layer with a top, so the sky is seen
   // through it (clouds and sunsets attenuated, not painted over) and the sun enters it from
   // above. Only where nothing gave the fog a top or a height profile.
@@ -532,7 +536,8 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
                    depth.invalid_pixels, depth.sky_threshold_pixels, depth.clamped_pixels);
   ScatteringLayers aovs;
-  const FogLayers layers = fog(photo, depth.distance_m, camera, scene, &aovs, progress.token());
+  const FogLayers layers =
+      fog(photo, depth.distance_m, sky_alpha, camera, scene, &aovs, progress.token());
   // The Vulkan fall-back, once per run: a warning when a GPU failed; on a machine without a
   // usable GPU the CPU is the expected choice, a note in verbose mode only.
   if (!aovs.backend_notice.empty() && (aovs.backend_notice_is_warning || o.verbose)) {

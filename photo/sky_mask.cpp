@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "cv_bridge.h"
+#include "photo/sky_matte.h"
 
 namespace mr::photo {
 
@@ -138,8 +139,8 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     is_blue[i] = 2 * blue_count[i] > area;
     // Mostly dusk blue: only from the top border down (a dark blue wall or car rarely is).
     const bool dusk = 2 * dark_count[i] > area;
-    if (is_blue[i] && (dusk ? top[i] && area > 0.01 * w * h
-                            : top[i] || side[i] || area > 0.002 * w * h))
+    if (is_blue[i] &&
+        (dusk ? top[i] && area > 0.01 * w * h : top[i] || side[i] || area > 0.002 * w * h))
       keep[i] = 1, blue_area += area;
   }
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
@@ -275,13 +276,73 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * radius + 1, 2 * radius + 1));
   cv::dilate(binary, grown, disk);
   cv::erode(binary, shrunk, disk);
+  // Issue 11 item 4: in that band the matte is how much of the sky each pixel shows. The mask
+  // stops short of the sky's edge or overshoots it by a pixel or two (its texture test looks
+  // at a window), and the guided filter can only blur such a misplaced edge: a ramp several
+  // pixels wide, off the photo's edge, whose fog mix (photo/sky_matte.h) then lays a band of
+  // sky fog over a surface the photo shows plainly. So where the two sides differ in colour,
+  // each band pixel is unmixed against the colours on both sides of it (the two-colour model
+  // of matting: I = (1 - a) F + a B in scene-linear light, F the nearest surface pixel's colour
+  // beyond the band, B the nearest sky pixel's, both 3x3 means; a = the projection of I - F on
+  // B - F), which puts the matte where the photo's edge is and as wide as it is; where they do
+  // not (a hill fading into haze: the photo has no edge there), the guided filter's smooth
+  // ramp stands, and in between the two are blended by the contrast.
+  const std::size_t npx = std::size_t(photo.width) * photo.height;
+  std::vector<std::uint8_t> pure_sky(npx), pure_surface(npx);
+  for (int y = 0; y < photo.height; ++y)
+    for (int x = 0; x < photo.width; ++x) {
+      const std::size_t i = std::size_t(y) * photo.width + x;
+      pure_sky[i] = shrunk.at<std::uint8_t>(y, x) != 0;
+      pure_surface[i] = grown.at<std::uint8_t>(y, x) == 0;
+    }
+  const std::vector<std::int32_t> near_sky = nearest_source(photo.width, photo.height, pure_sky);
+  const std::vector<std::int32_t> near_surface =
+      nearest_source(photo.width, photo.height, pure_surface);
+  cv::Mat linear(photo.height, photo.width, CV_32FC3), linear_mean;
+  for (int y = 0; y < photo.height; ++y)
+    for (int x = 0; x < photo.width; ++x) {
+      const cv::Vec3f d = full.at<cv::Vec3f>(y, x);
+      linear.at<cv::Vec3f>(y, x) = {std::pow(d[0], 2.2f), std::pow(d[1], 2.2f),
+                                    std::pow(d[2], 2.2f)};
+    }
+  cv::blur(linear, linear_mean, cv::Size(3, 3));
+  // Display-referred distance between the two sides below which the photo shows no edge (about
+  // 8 codes of 255), and above which the unmixed matte is used alone (about 20).
+  constexpr float kNoEdge = 0.03f, kEdge = 0.08f;
+  auto unmixed = [&](int x, int y, float guided) {
+    if (!o.unmix_edges || near_sky.empty() || near_surface.empty()) return guided;
+    const std::size_t i = std::size_t(y) * photo.width + x;
+    const std::int32_t k = near_sky[i], f = near_surface[i];
+    if (k < 0 || f < 0) return guided;
+    const cv::Vec3f B = linear_mean.at<cv::Vec3f>(k / photo.width, k % photo.width);
+    const cv::Vec3f F = linear_mean.at<cv::Vec3f>(f / photo.width, f % photo.width);
+    const cv::Vec3f I = linear.at<cv::Vec3f>(y, x);
+    const cv::Vec3f BF = B - F;
+    const float norm2 = BF.dot(BF);
+    float contrast = 0;
+    for (int c = 0; c < 3; ++c)
+      contrast = std::max(contrast, std::abs(std::pow(std::max(B[c], 0.0f), 1 / 2.2f) -
+                                             std::pow(std::max(F[c], 0.0f), 1 / 2.2f)));
+    const float t = std::clamp((contrast - kNoEdge) / (kEdge - kNoEdge), 0.0f, 1.0f);
+    if (!(t > 0) || !(norm2 > 0)) return guided;
+    const float a = std::clamp((I - F).dot(BF) / norm2, 0.0f, 1.0f);
+    // Trust in the two-colour model: the pixel lies near the line from F to B (the residual,
+    // fading out at half their distance); a pixel off it (a leaf of another colour, a
+    // dark crack beside a pale wall) keeps the guided filter's value.
+    const float norm = std::sqrt(norm2);
+    const cv::Vec3f off = I - F - a * BF;
+    const float residual = std::sqrt(off.dot(off)) / norm;
+    const float model = std::clamp(1.0f - residual / 0.5f, 0.0f, 1.0f);
+    const float wt = t * t * (3 - 2 * t) * model;
+    return wt * a + (1 - wt) * guided;
+  };
   for (int y = 0; y < photo.height; ++y) {
     const float* r = refined.ptr<float>(y);
     const float* so = soft.ptr<float>(y);
     const std::uint8_t* gr = grown.ptr<std::uint8_t>(y);
     const std::uint8_t* sh = shrunk.ptr<std::uint8_t>(y);
     for (int x = 0; x < photo.width; ++x) {
-      const float v = gr[x] != sh[x] ? r[x] : so[x];
+      const float v = gr[x] != sh[x] ? unmixed(x, y, std::clamp(r[x], 0.0f, 1.0f)) : so[x];
       const bool above_horizon = y < horizon_y(x);
       const bool is_sky = v >= 0.5f && above_horizon;
       out.sky[std::size_t(y) * photo.width + x] = is_sky;

@@ -8,8 +8,10 @@
 // are refined with a guided filter (cv::ximgproc::guidedFilter, guide = the display-referred
 // photo) and clipped to the horizon again. Never throws for any image content.
 //
-// Issue 11 item 4: the mask also comes as a soft matte (alpha): the guided filter's output where
-// it decides (a band along the mask's edges), so the sky's edge is as soft as the photo's; and
+// Issue 11 item 4: the mask also comes as a soft matte (alpha): in a band along the mask's edges
+// the guided filter's output, and where the two sides differ in colour each pixel unmixed
+// against them (SkyMaskOptions::unmix_edges), so the sky's edge is where and as soft as the
+// photo's; and
 // sky seen through foliage (small sky-coloured gaps enclosed by textured structure, whose colour
 // matches the open sky's) is sky, so that no billboard fills it and sunlight can pass.
 #pragma once
@@ -35,6 +37,10 @@ struct SkyMaskOptions {
   double max_gap_fraction = 3e-3;
   double gap_max_sigma = 3.0;
   double gap_min_luma = 0.8;
+  /// Along the mask's edges, unmix each pixel against the colours on both sides (the two-colour
+  /// matting model) where the sides differ, so the matte sits on the photo's edge and is as wide
+  /// as it (issue 11 item 4); false: the guided filter's output alone.
+  bool unmix_edges = true;
 };
 
 struct SkyMask {

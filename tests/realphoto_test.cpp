@@ -443,8 +443,7 @@ FogLayers fog_gallery_look(const Image& photo, const SceneEstimate& est, double 
 // whole haze layer, is opaque.
 cv::Mat calm_sea_display() {
   cv::Mat m(kH, kW, CV_32FC3);
-  const cv::Vec3f top(0.62f, 0.63f, 0.64f), horizon(0.70f, 0.70f, 0.71f),
-      near(0.42f, 0.43f, 0.45f);
+  const cv::Vec3f top(0.62f, 0.63f, 0.64f), horizon(0.70f, 0.70f, 0.71f), near(0.42f, 0.43f, 0.45f);
   for (int y = 0; y < kH; ++y)
     for (int x = 0; x < kW; ++x)
       m.at<cv::Vec3f>(y, x) =
@@ -503,8 +502,8 @@ TEST(RealPhoto, SkyMeetsCalmSeaWithNoCreatedEdge) {
     EXPECT_LE(fa, 2e-4);  // the issue's target: 0.02 % of the pixels
   }
   // The haze look is the case that failed: a seam along the horizon without the fold.
-  const double seam = created_edge_fraction(
-      photo, fog_gallery_look(photo, before, 2000, 1500).composite);
+  const double seam =
+      created_edge_fraction(photo, fog_gallery_look(photo, before, 2000, 1500).composite);
   EXPECT_GT(seam, 2e-4);
 }
 
@@ -635,8 +634,8 @@ TEST(RealPhoto, DuskSkyIsSkyWindowsAreNot) {
     }
   for (int wy = 0; wy < 220; wy += 45)  // the first row of windows touches the top border
     for (int wx = x0 + 12; wx + 28 < kW; wx += 44)
-      cv::rectangle(m, cv::Point(wx, wy), cv::Point(wx + 27, wy + 30),
-                    cv::Scalar(0.12, 0.14, 0.18), cv::FILLED);
+      cv::rectangle(m, cv::Point(wx, wy), cv::Point(wx + 27, wy + 30), cv::Scalar(0.12, 0.14, 0.18),
+                    cv::FILLED);
   const Image photo = to_photo(m);
   dump("dusk_photo", photo);
   const std::array<PixelPoint, 2> horizon{PixelPoint{0, kHorizonRow},
@@ -691,6 +690,179 @@ TEST(RealPhoto, HighlightOnAFaceIsNotSkyUnderAGreyBackdrop) {
               mask.gap_pixels);
   EXPECT_EQ(taken, 0u);
   EXPECT_EQ(mask.gap_pixels, 0u);
+}
+
+// Issue 11 item 4, the sky matte in the fog (photo/sky_matte.h): a pixel on the sky's edge gets
+// the matte's mix of the surface's fog and the sky's. A row of surface (x < 24), an 8 px ramp
+// and sky (x >= 32), all looking up through haze in a layer with a top (the sky's path through
+// it is finite): pixels with alpha 0 or 1 are bit-identical to the fog without a matte, which
+// matches the closed forms T = exp(-sigma d) for the surface and
+// T = exp(-sigma (top - camera height) / dir.y) for the sky; mixed pixels hold exactly the mix.
+TEST(RealPhoto, SkyMatteMixesTheFogOfBothSides) {
+  constexpr int w = 64, h = 16;
+  const Camera camera = Camera::from_horizontal_fov(w, h, 40);
+  FogScene s;
+  s.pose.position_m = {0, 1.6, 0};
+  s.pose.pitch_deg = 25;  // every ray goes up: the sky's path ends at the layer's top
+  const float sigma = float(extinction_from_visibility(2000));
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  s.medium.layer_top_m = 1500;
+  s.lighting.sky_radiance = Rgb{0.7f, 0.75f, 0.8f};
+  s.render.backend = Backend::cpu;
+  constexpr float kSurfaceM = 80;
+  const float surface[3] = {0.06f, 0.05f, 0.03f}, sky[3] = {0.2f, 0.35f, 0.8f};
+  Image photo(w, h, 3), distance(w, h, 1), alpha(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float a = std::clamp((float(x) - 23.5f) / 8.0f, 0.0f, 1.0f);
+      alpha.at(x, y, 0) = a;
+      distance.at(x, y, 0) = a < 0.5f ? kSurfaceM : std::numeric_limits<float>::infinity();
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = (1 - a) * surface[c] + a * sky[c];
+    }
+  const FogLayers plain = fog(photo, distance, camera, s);
+  const FogLayers matted = fog(photo, distance, alpha, camera, s);
+  double worst_closed_form = 0, worst_mix = 0;
+  for (int y = 0; y < h; ++y) {
+    const Vec3 d = s.pose.ray_direction(camera, 32, y);
+    ASSERT_GT(d.y, 0);
+    const double t_sky = std::exp(-double(sigma) * (1500 - 1.6) / d.y);
+    const double t_surface = std::exp(-double(sigma) * kSurfaceM);
+    for (int c = 0; c < 3; ++c) {
+      worst_closed_form =
+          std::max({worst_closed_form, std::abs(plain.transmittance.at(23, y, c) - t_surface),
+                    std::abs(plain.transmittance.at(32, y, c) - t_sky)});
+    }
+    for (int x = 0; x < w; ++x) {
+      const float a = alpha.at(x, y, 0);
+      for (int c = 0; c < 3; ++c) {
+        if (a <= 0 || a >= 1) {
+          ASSERT_EQ(matted.transmittance.at(x, y, c), plain.transmittance.at(x, y, c));
+          ASSERT_EQ(matted.inscatter.at(x, y, c), plain.inscatter.at(x, y, c));
+          ASSERT_EQ(matted.composite.at(x, y, c), plain.composite.at(x, y, c));
+          continue;
+        }
+        const double t =
+            (1 - a) * plain.transmittance.at(23, y, c) + a * plain.transmittance.at(32, y, c);
+        const double r = (1 - a) * plain.inscatter.at(23, y, c) + a * plain.inscatter.at(32, y, c);
+        worst_mix =
+            std::max({worst_mix, std::abs(matted.transmittance.at(x, y, c) - t),
+                      std::abs(matted.inscatter.at(x, y, c) - r),
+                      std::abs(matted.composite.at(x, y, c) - (photo.at(x, y, c) * t + r))});
+      }
+    }
+  }
+  std::printf("sky matte: closed forms off by %.2e, the mix by %.2e\n", worst_closed_form,
+              worst_mix);
+  EXPECT_LT(worst_closed_form, 1e-5);
+  EXPECT_LT(worst_mix, 1e-6);
+  // The fogged edge is not sharpened: its largest one-pixel luma step, relative to the mean
+  // step over the ramp (total rise / 9 steps), is within 1.3 x the photo's (the photo's own
+  // ratio is not 1: a linear-light ramp is not linear in display luma; the cross term
+  // a (1 - a) (I_surface - I_sky) (T_surface - T_sky) bends the fogged one a little more).
+  // Without the matte the whole rise is one step, which this bound must catch.
+  auto sharpness = [&](const Image& img) {
+    const cv::Mat l = display_luma(img);
+    float largest = 0;
+    for (int x = 23; x < 32; ++x)
+      largest = std::max(largest, std::abs(l.at<float>(8, x + 1) - l.at<float>(8, x)));
+    return largest / (std::abs(l.at<float>(8, 32) - l.at<float>(8, 23)) / 9.0f);
+  };
+  const float with = sharpness(matted.composite), without = sharpness(plain.composite);
+  const float in_photo = sharpness(photo);
+  std::printf(
+      "sky matte: largest step / mean step, photo %.3f, fog with matte %.3f, without %.3f\n",
+      in_photo, with, without);
+  EXPECT_LE(with, 1.3f * in_photo);
+  EXPECT_GT(without, 1.3f * in_photo);
+  // A matte of another size is refused, naming both.
+  EXPECT_THROW(fog(photo, distance, Image(w - 1, h, 1), camera, s), Error);
+}
+
+// A near building with a crisp, anti-aliased roof line against a deep blue sky (the tuning
+// photo "palace": the fog's edge, a one-pixel step between the surface's fog and the sky's,
+// was sharper than the photo's, and its flanks counted as created edges). Through the estimate
+// and haze (the gallery's look: 2 km visibility, 1.5 km top): with the estimate's matte the
+// created-edge pixels stay within the issue's 0.02 %.
+cv::Mat roofline_display(cv::Mat* sky_coverage = nullptr) {
+  cv::Mat m(kH, kW, CV_32FC3);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const float t = float(y) / kH;
+      m.at<cv::Vec3f>(y, x) = mix(cv::Vec3f(0.08f, 0.32f, 0.78f), cv::Vec3f(0.3f, 0.5f, 0.85f), t);
+    }
+  cv::Mat wall(kH, kW, CV_32F, cv::Scalar(0));
+  std::vector<cv::Point> poly{{0, 479},   {0, 300},   {180, 250}, {180, 150}, {230, 150},
+                              {230, 110}, {280, 110}, {280, 150}, {400, 170}, {470, 90},
+                              {560, 70},  {639, 80},  {639, 479}};
+  // Sub-pixel vertices (shift 3: 1/8 px) and anti-aliasing: a crisp edge one pixel wide.
+  for (auto& p : poly) p *= 8;
+  cv::fillPoly(wall, std::vector<std::vector<cv::Point>>{poly}, cv::Scalar(1), cv::LINE_AA, 3);
+  cv::GaussianBlur(wall, wall, cv::Size(0, 0), 0.6);  // the lens
+  if (sky_coverage) *sky_coverage = 1 - wall;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      // Stone with a little large-scale shading, not flat.
+      const cv::Vec3f stone(0.86f - 0.1f * float(y) / kH, 0.76f,
+                            0.45f + 0.04f * std::sin(x / 40.0f));
+      m.at<cv::Vec3f>(y, x) = mix(m.at<cv::Vec3f>(y, x), stone, wall.at<float>(y, x));
+    }
+  return m;
+}
+
+TEST(RealPhoto, HazeEdgeAgainstTheSkyIsAsSoftAsThePhotos) {
+  cv::Mat coverage;
+  const Image photo = to_photo(roofline_display(&coverage));
+  dump("roofline_photo", photo);
+  // The matte sits on the photo's edge: against the true sky coverage of each pixel (known
+  // here), along the roof line (pixels where either is fractional), the unmixed matte is off by
+  // at most 0.1 on average; the guided filter alone (the matte before) was several times
+  // farther off, a ramp beside the edge.
+  const std::array<PixelPoint, 2> horizon{PixelPoint{0, kHorizonRow},
+                                          PixelPoint{kW - 1, kHorizonRow}};
+  photo::SkyMaskOptions guided_only;
+  guided_only.unmix_edges = false;
+  const photo::SkyMask unmixed = photo::estimate_sky_mask(photo.view(), horizon),
+                       guided = photo::estimate_sky_mask(photo.view(), horizon, guided_only);
+  double err_unmixed = 0, err_guided = 0;
+  std::size_t band = 0;
+  for (int y = 0; y < 230; ++y)
+    for (int x = 2; x < kW - 2; ++x) {
+      const std::size_t i = std::size_t(y) * kW + x;
+      const float truth = coverage.at<float>(y, x);
+      const bool fractional = (truth > 0.01f && truth < 0.99f) ||
+                              (unmixed.alpha[i] > 0 && unmixed.alpha[i] < 1) ||
+                              (guided.alpha[i] > 0 && guided.alpha[i] < 1);
+      if (!fractional) continue;
+      ++band;
+      err_unmixed += std::abs(unmixed.alpha[i] - truth);
+      err_guided += std::abs(guided.alpha[i] - truth);
+    }
+  ASSERT_GT(band, std::size_t(kW));
+  err_unmixed /= double(band), err_guided /= double(band);
+  std::printf(
+      "roof line: matte vs true coverage over %zu edge pixels, mean error unmixed %.3f, "
+      "guided filter alone %.3f\n",
+      band, err_unmixed, err_guided);
+  EXPECT_LE(err_unmixed, 0.1);
+  EXPECT_GT(err_guided, 2 * err_unmixed);
+  const SceneEstimate est = estimate_scene(photo, kCamera, level_horizon());
+  dump("roofline_depth", est.geometry.distance_m);
+  ASSERT_GT(est.geometry.sky_pixels, std::size_t(kW) * 50);  // the sky is found
+  FogScene s = est.scene;
+  const float sigma = float(extinction_from_visibility(2000));
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  s.medium.layer_top_m = 1500;
+  s.render.backend = Backend::cpu;
+  const Image without = fog(photo, est.geometry.distance_m, kCamera, s).composite;
+  const Image with =
+      fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, kCamera, s).composite;
+  dump("roofline_haze_without_matte", without);
+  dump("roofline_haze_with_matte", with);
+  const double fb = created_edge_fraction(photo, without, "roofline_edges_without_matte"),
+               fa = created_edge_fraction(photo, with, "roofline_edges_with_matte");
+  std::printf("roof line, haze: created-edge pixels without the matte %.4f %%, with it %.4f %%\n",
+              100 * fb, 100 * fa);
+  EXPECT_LE(fa, 2e-4);
 }
 
 }  // namespace

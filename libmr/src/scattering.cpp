@@ -18,6 +18,7 @@
 #include "photo/composite.h"
 #include "photo/illumination.h"
 #include "photo/lamps.h"
+#include "photo/sky_matte.h"
 #include "render/blockers.h"
 #include "render/depth_downsample.h"
 #include "render/embree_scene.h"
@@ -295,6 +296,12 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
 
 FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
               const FogScene& scene, ScatteringLayers* layers_out, const CancelToken* cancel) {
+  return fog(photo, distance_m, Image(), camera, scene, layers_out, cancel);
+}
+
+FogLayers fog(const Image& photo, const Image& distance_m, const Image& sky_alpha,
+              const Camera& camera, const FogScene& scene, ScatteringLayers* layers_out,
+              const CancelToken* cancel) {
   if (photo.empty() || photo.channels() < 3)
     throw Error(ErrorCode::invalid_argument, "fog: photo must have at least 3 channels, has " +
                                                  std::to_string(photo.channels()));
@@ -302,7 +309,18 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
     throw Error(ErrorCode::size_mismatch,
                 "fog: depth map is " + size_text(distance_m.width(), distance_m.height()) +
                     ", photo is " + size_text(photo.width(), photo.height()));
+  if (!sky_alpha.empty() && (sky_alpha.channels() != 1 || sky_alpha.width() != photo.width() ||
+                             sky_alpha.height() != photo.height()))
+    throw Error(ErrorCode::size_mismatch, "fog: the sky matte is " +
+                                              size_text(sky_alpha.width(), sky_alpha.height()) +
+                                              " with " + std::to_string(sky_alpha.channels()) +
+                                              " channel(s), expected 1 channel at the photo's " +
+                                              size_text(photo.width(), photo.height()));
   ScatteringLayers layers = render_scattering(photo, distance_m, camera, scene, cancel);
+  // Issue 11 item 4: a pixel on the sky's edge gets the matte mix of the surface's fog and the
+  // sky's (photo/sky_matte.h), so the fogged edge is as soft as the photo's.
+  if (!sky_alpha.empty())
+    photo::apply_sky_matte(sky_alpha.view(), layers.transmittance.view(), layers.inscatter.view());
   FogLayers out;
   out.airlight = layers.sky_radiance;
   out.composite =

@@ -111,13 +111,16 @@ struct GeometryEstimate {
   /// the sky's edge, as soft as the photo's edge there; 0 at and below the horizon); a pixel is
   /// sky (distance +inf) where alpha >= 0.5; a pixel with 0 < alpha < 0.5 lies on its surface's
   /// inverse distance scaled by (1 - 2 alpha), so its fog runs continuously from the surface's
-  /// to the sky's as alpha rises. depth_confidence: how far each pixel's distance is trusted, in
-  /// [0, 1] (1: sky, annotated planes, hints and rooms, the ground plane from 4 degrees below
-  /// the horizon, 0 at the horizon and linear in between; 0.3: structures standing on the
-  /// ground; 0.05: the far billboard; a blurred sky edge scales it by (1 - 2 alpha)); the
-  /// refinement keeps a pixel's own value with weight smoothstep(0.5, 1, confidence) and takes
-  /// the photo-guided smooth value otherwise, so where the depth is uncertain the fog varies
-  /// smoothly instead of jumping.
+  /// to the sky's as alpha rises; given to mr::fog (mr/scattering.h, its sky_alpha argument; mr
+  /// fog --depth auto does), every fractional pixel's fog becomes the matte's mix of the
+  /// surface's and the sky's. Along edges where sky and surface differ in colour the matte is
+  /// the photo's own mix of the two colours (photo/sky_mask.h). depth_confidence: how far each
+  /// pixel's distance is trusted, in [0, 1] (1: sky, annotated planes, hints and rooms, the
+  /// ground plane from 4 degrees below the horizon, 0 at the horizon and linear in between; 0.3:
+  /// structures standing on the ground; 0.05: the far billboard; a blurred sky edge scales it
+  /// by (1 - 2 alpha)); the refinement keeps a pixel's own value with weight
+  /// smoothstep(0.5, 1, confidence) and takes the photo-guided smooth value otherwise, so where
+  /// the depth is uncertain the fog varies smoothly instead of jumping.
   Image sky_alpha, depth_confidence;
   /// Sky pixels found as sky seen through foliage (enclosed gaps; photo/sky_mask.h).
   std::size_t sky_gap_pixels = 0;

@@ -25,9 +25,9 @@ struct ScatteringLayers {
                          ///< for sky in unbounded fog)
   Rgb sky_radiance{};    ///< the sky radiance used (given or estimated from the photo)
   struct Timings {
-    double mesh_s = 0;      ///< depth -> occluder mesh
-    double bvh_s = 0;       ///< Embree scene build
-    double scatter_s = 0;   ///< marching (including the sparse-grid pass)
+    double mesh_s = 0;     ///< depth -> occluder mesh
+    double bvh_s = 0;      ///< Embree scene build
+    double scatter_s = 0;  ///< marching (including the sparse-grid pass)
     double total_s = 0;
     std::size_t exact_pixels = 0;         ///< pixels marched exactly
     std::size_t interpolated_pixels = 0;  ///< pixels filled by gradient interpolation
@@ -70,6 +70,17 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
 /// it was).
 FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
               const FogScene& scene, ScatteringLayers* layers_out = nullptr,
+              const CancelToken* cancel = nullptr);
+/// fog() with a soft sky matte (issue 11 item 4), e.g. GeometryEstimate::sky_alpha: one channel
+/// at the photo's size in [0, 1], 1 = sky (an empty image: as fog() above). A pixel with a
+/// fractional matte shows partly a surface and partly the sky; its T and R become the matte's
+/// mix of those of the nearest pixel that is all surface (alpha 0) and of the nearest that is
+/// all sky (alpha 1), the two fogs it shows, so the fogged edge is as soft as the photo's edge
+/// instead of a one-pixel step between the depth's two sides. Pixels with alpha 0 or 1 are
+/// exactly as fog() above renders them. Throws as fog() above, and mr::Error(size_mismatch)
+/// for a non-empty matte of another size or channel count.
+FogLayers fog(const Image& photo, const Image& distance_m, const Image& sky_alpha,
+              const Camera& camera, const FogScene& scene, ScatteringLayers* layers_out = nullptr,
               const CancelToken* cancel = nullptr);
 
 /// Checks every field of a scene and throws mr::Error(invalid_argument) naming the first bad

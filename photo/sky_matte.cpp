@@ -1,0 +1,102 @@
+#include "photo/sky_matte.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "mr/error.h"
+
+namespace mr::photo {
+
+// An L2 distance transform with per-pixel labels.
+std::vector<std::int32_t> nearest_source(int w, int h, const std::vector<std::uint8_t>& is_source) {
+  cv::Mat src(h, w, CV_8U);  // 0 at the sources: distanceTransform measures to its zeros
+  bool any = false;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool s = is_source[std::size_t(y) * w + x] != 0;
+      src.at<std::uint8_t>(y, x) = s ? 0 : 1;
+      any |= s;
+    }
+  if (!any) return {};
+  cv::Mat dist, labels;
+  cv::distanceTransform(src, dist, labels, cv::DIST_L2, cv::DIST_MASK_5, cv::DIST_LABEL_PIXEL);
+  // Each source pixel carries its own label: map labels back to pixel indices.
+  std::vector<std::int32_t> index_of_label;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (src.at<std::uint8_t>(y, x) == 0) {
+        const int l = labels.at<int>(y, x);
+        if (l >= int(index_of_label.size())) index_of_label.resize(std::size_t(l) + 1, -1);
+        index_of_label[std::size_t(l)] = std::int32_t(std::size_t(y) * w + x);
+      }
+  std::vector<std::int32_t> out(std::size_t(w) * h, -1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int l = labels.at<int>(y, x);
+      if (l >= 0 && l < int(index_of_label.size())) out[std::size_t(y) * w + x] = index_of_label[l];
+    }
+  return out;
+}
+
+std::size_t apply_sky_matte(ConstImageView sky_alpha, ImageView transmittance,
+                            ImageView inscatter) {
+  const int w = sky_alpha.width, h = sky_alpha.height;
+  if (sky_alpha.channels != 1 || transmittance.channels != 3 || inscatter.channels != 3)
+    throw Error(ErrorCode::invalid_argument,
+                "apply_sky_matte: expected a 1-channel matte and 3-channel T and R, found " +
+                    std::to_string(sky_alpha.channels) + ", " +
+                    std::to_string(transmittance.channels) + " and " +
+                    std::to_string(inscatter.channels));
+  if (transmittance.width != w || transmittance.height != h || inscatter.width != w ||
+      inscatter.height != h)
+    throw Error(ErrorCode::size_mismatch, "apply_sky_matte: the sky matte is " + std::to_string(w) +
+                                              "x" + std::to_string(h) + ", the fog layers " +
+                                              std::to_string(transmittance.width) + "x" +
+                                              std::to_string(transmittance.height));
+  const std::size_t n = std::size_t(w) * h;
+  std::vector<std::uint8_t> sky(n, 0), surface(n, 0);
+  bool mixed_any = false;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float a = sky_alpha.pixel(x, y)[0];
+      const std::size_t i = std::size_t(y) * w + x;
+      sky[i] = a >= 1.0f;
+      surface[i] = a <= 0.0f;
+      mixed_any |= a > 0.0f && a < 1.0f;
+    }
+  if (!mixed_any) return 0;
+  const std::vector<std::int32_t> near_sky = nearest_source(w, h, sky);
+  const std::vector<std::int32_t> near_surface = nearest_source(w, h, surface);
+  if (near_sky.empty() || near_surface.empty()) return 0;
+  // The sources are read from copies: a mixed pixel's new value must not feed another's.
+  std::vector<float> t_src(n * 3), r_src(n * 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) {
+        t_src[(std::size_t(y) * w + x) * 3 + c] = transmittance.pixel(x, y)[c];
+        r_src[(std::size_t(y) * w + x) * 3 + c] = inscatter.pixel(x, y)[c];
+      }
+  std::size_t mixed = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float a = sky_alpha.pixel(x, y)[0];
+      if (!(a > 0.0f && a < 1.0f)) continue;
+      const std::size_t i = std::size_t(y) * w + x;
+      const std::int32_t k = near_sky[i], s = near_surface[i];
+      if (k < 0 || s < 0) continue;
+      float* t = transmittance.pixel(x, y);
+      float* r = inscatter.pixel(x, y);
+      for (int c = 0; c < 3; ++c) {
+        t[c] = (1 - a) * t_src[std::size_t(s) * 3 + c] + a * t_src[std::size_t(k) * 3 + c];
+        r[c] = (1 - a) * r_src[std::size_t(s) * 3 + c] + a * r_src[std::size_t(k) * 3 + c];
+      }
+      ++mixed;
+    }
+  return mixed;
+}
+
+}  // namespace mr::photo
