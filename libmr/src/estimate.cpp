@@ -15,6 +15,7 @@
 #include "cv_bridge.h"
 #include "mr/cancel.h"
 #include "mr/error.h"
+#include "mr/fog.h"
 #include "mr/scene_json.h"
 #include "photo/airlight.h"
 #include "photo/geometry.h"
@@ -778,8 +779,7 @@ double default_layer_top_m(const Medium& medium) {
     throw Error(ErrorCode::invalid_argument,
                 "default_layer_top_m: medium.sigma_t_per_m must be positive, found a mean of " +
                     fmt("%g", sigma));
-  // Koschmieder's visibility (2 % contrast), as mr::extinction_from_visibility.
-  const double visibility_m = 3.912 / sigma;
+  const double visibility_m = visibility_from_extinction(sigma);
   return std::clamp(0.5 * visibility_m, 30.0, 2000.0);
 }
 
