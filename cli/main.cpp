@@ -35,7 +35,9 @@ timespec g_first_time{};
   _exit(128 + signal);
 }
 
-extern "C" void on_alarm(int) { end_now(SIGTERM); }
+extern "C" void on_alarm(int) {
+  end_now(SIGTERM);
+}
 
 extern "C" void on_signal(int signal, siginfo_t* info, void*) {
   // First Ctrl-C: finish the files in flight (their outputs are written atomically), start no
@@ -47,8 +49,8 @@ extern "C" void on_signal(int signal, siginfo_t* info, void*) {
   clock_gettime(CLOCK_MONOTONIC, &now);
   const bool from_process = info != nullptr && info->si_code == SI_USER;
   if (g_signals > 0) {
-    const long elapsed_ns = (now.tv_sec - g_first_time.tv_sec) * 1'000'000'000L +
-                            (now.tv_nsec - g_first_time.tv_nsec);
+    const long elapsed_ns =
+        (now.tv_sec - g_first_time.tv_sec) * 1'000'000'000L + (now.tv_nsec - g_first_time.tv_nsec);
     if (from_process && g_first_from_process && info->si_pid == g_first_sender &&
         elapsed_ns < kSameRequestNs)
       return;
@@ -79,7 +81,8 @@ void install_signal_handlers() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"mr: physically based fog for photographs (libmr " + std::string(mr::version()) + ")"};
+  CLI::App app{"mr: physically based fog for photographs (libmr " + std::string(mr::version()) +
+               ")"};
   app.set_version_flag("--version", std::string("mr ") + mr::version());
   app.require_subcommand(1);
   mr::cli::FogCommandOptions fog_options;

@@ -1269,8 +1269,8 @@ bool MainWindow::exportImage(const QString& path, const ExportSettings& settings
       QtConcurrent::run(&pool_, [doc, scene, color, path, settings, cancelled]() -> QString {
         try {
           mr::ScatteringLayers aovs;
-          const mr::FogLayers layers =
-              mr::fog(doc->photo, doc->distance_m, doc->camera, scene, &aovs, cancelled.get());
+          const mr::FogLayers layers = mr::fog(doc->photo, doc->distance_m, doc->sky_alpha,
+                                               doc->camera, scene, &aovs, cancelled.get());
           if (cancelled->requested()) return QStringLiteral("cancelled");
           mr::report_progress(cancelled.get(), kWritingStage, 0, 1);
           if (settings.aovs) {

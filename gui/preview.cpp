@@ -88,6 +88,7 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
       doc->scene.lighting.sun = est.scene.lighting.sun;
       doc->scene.lighting.sky_radiance = est.scene.lighting.sky_radiance;
       doc->distance_m = std::move(est.geometry.distance_m);
+      doc->sky_alpha = std::move(est.geometry.sky_alpha);
       for (const std::string& note : est.notes) doc->notes << QString::fromStdString(note);
     } catch (const mr::Error& e) {
       throw mr::Error(e.code(), photo_path.string() + ": estimating the geometry: " + e.what());
@@ -104,12 +105,13 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
 }
 
 std::shared_ptr<const Document> with_distance(const Document& document, mr::Image distance_m,
-                                              const QString& depth_source) {
+                                              mr::Image sky_alpha, const QString& depth_source) {
   auto doc = std::make_shared<Document>();
   doc->photo_path = document.photo_path;
   doc->photo = document.photo;
   doc->camera = document.camera;
   doc->distance_m = std::move(distance_m);
+  doc->sky_alpha = std::move(sky_alpha);
   doc->depth_estimated = true;
   doc->depth_source = depth_source;
   doc->scene = document.scene;
@@ -174,6 +176,7 @@ std::shared_ptr<EstimateResult> run_estimate(const std::shared_ptr<const Documen
   }
   if (document->depth_estimated)
     result->document = with_distance(*document, result->estimate.geometry.distance_m,
+                                     result->estimate.geometry.sky_alpha,
                                      QStringLiteral("estimated from the annotations"));
   result->seconds = seconds_since(start);
   return result;
@@ -191,6 +194,8 @@ std::shared_ptr<const PreviewInputs> preview_inputs(const Document& document, do
   auto inputs = std::make_shared<PreviewInputs>();
   inputs->photo = downscale_area(document.photo, size.width(), size.height());
   inputs->distance_m = downscale_nearest(document.distance_m, size.width(), size.height());
+  if (!document.sky_alpha.empty())
+    inputs->sky_alpha = downscale_area(document.sky_alpha, size.width(), size.height());
   inputs->camera = scale_camera(document.camera, size.width(), size.height());
   inputs->photo_image = to_display(inputs->photo, color);
   inputs->depth = depth_colormap(inputs->distance_m);
@@ -229,13 +234,14 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
       preview_inputs(*request.document, request.max_pixels, color);
   result->photo = inputs->photo;
   result->distance_m = inputs->distance_m;
+  result->sky_alpha = inputs->sky_alpha;
   result->camera = inputs->camera;
   result->scene = request.scene;
   result->scene.render.quality = request.quality;
   const auto render_start = std::chrono::steady_clock::now();
   mr::ScatteringLayers aovs;
-  result->layers = mr::fog(result->photo, result->distance_m, result->camera, result->scene, &aovs,
-                           request.cancel.get());
+  result->layers = mr::fog(result->photo, result->distance_m, result->sky_alpha, result->camera,
+                           result->scene, &aovs, request.cancel.get());
   result->render_s = seconds_since(render_start);
   result->backend = aovs.backend;
   result->backend_notice = aovs.backend_notice;

@@ -19,6 +19,7 @@ namespace mrstudio {
 /// scaled) and their display images.
 struct PreviewInputs {
   mr::Image photo, distance_m;
+  mr::Image sky_alpha;  ///< the document's sky matte at this size (area average); may be empty
   mr::Camera camera;
   QImage photo_image, depth;  ///< 8-bit sRGB photo; depth colour map
 };
@@ -28,6 +29,9 @@ struct Document {
   mr::Image photo;  ///< scene-linear RGB (3 channels)
   mr::Camera camera;
   mr::Image distance_m;  ///< 1 channel, metres along the ray, +inf = sky
+  /// The estimate's soft sky matte (1 channel, 1 = sky; GeometryEstimate::sky_alpha), given to
+  /// mr::fog so that the fogged sky edge is as soft as the photo's. Empty with a depth file.
+  mr::Image sky_alpha;
   bool depth_estimated = false;
   QString depth_source;  ///< the depth file, or "estimated (...)"
   mr::FogScene scene;    ///< starting scene: estimated pose / sun / sky, default medium
@@ -51,9 +55,10 @@ std::shared_ptr<const Document> load_document(const QString& path, const mr::Col
                                               const mr::Annotations* annotations = nullptr,
                                               const mr::CancelToken* progress = nullptr);
 
-/// A copy of `document` with another distance map (an estimate from edited annotations).
+/// A copy of `document` with another distance map and sky matte (an estimate from edited
+/// annotations).
 std::shared_ptr<const Document> with_distance(const Document& document, mr::Image distance_m,
-                                              const QString& depth_source);
+                                              mr::Image sky_alpha, const QString& depth_source);
 
 /// A re-estimate of the scene from edited annotations (run on a worker thread).
 struct EstimateResult {
@@ -95,8 +100,9 @@ struct PreviewRequest {
 struct PreviewResult {
   int generation = 0;
   mr::Quality quality = mr::Quality::draft;
-  // What was rendered, exactly: mr::fog(photo, distance_m, camera, scene) gives `layers`.
-  mr::Image photo, distance_m;
+  // What was rendered, exactly: mr::fog(photo, distance_m, sky_alpha, camera, scene) gives
+  // `layers`.
+  mr::Image photo, distance_m, sky_alpha;
   mr::Camera camera;
   mr::FogScene scene;
   mr::FogLayers layers;

@@ -27,7 +27,9 @@ namespace {
 
 const std::string kMr = MR_CLI_PATH;
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+std::string q(const fs::path& p) {
+  return "'" + p.string() + "'";
+}
 
 test::CommandResult mr_cmd(const std::string& args) {
   return test::run("timeout 120 " + kMr + " " + args + " 2>&1");
@@ -47,7 +49,9 @@ void write_depth(const fs::path& path, int w, int h, float distance_m = 20.0f) {
   write_raw(path, d);
 }
 
-void write_photo(const fs::path& path, int w, int h) { write_image(path, test::make_test_photo(w, h)); }
+void write_photo(const fs::path& path, int w, int h) {
+  write_image(path, test::make_test_photo(w, h));
+}
 
 bool contains(const std::string& text, const std::string& what) {
   return text.find(what) != std::string::npos;
@@ -85,10 +89,10 @@ TEST_F(CliReliability, AbsurdFiniteDepthsRender) {
   Image d(48, 32, 1, {"Z"});
   for (int y = 0; y < 32; ++y)
     for (int x = 0; x < 48; ++x) d.at(x, y, 0) = 10.0f + float(y);
-  d.at(3, 3, 0) = 1e20f;   // absurd
-  d.at(4, 3, 0) = 1e10f;   // Blender's background
-  d.at(5, 3, 0) = 65504;   // a saturated half
-  d.at(6, 3, 0) = 3e38f;   // near FLT_MAX
+  d.at(3, 3, 0) = 1e20f;  // absurd
+  d.at(4, 3, 0) = 1e10f;  // Blender's background
+  d.at(5, 3, 0) = 65504;  // a saturated half
+  d.at(6, 3, 0) = 3e38f;  // near FLT_MAX
   write_raw(in / "p_depth.exr", d);
   const std::string sun = " --sun-elevation 20 --sun-azimuth 30 --layer 0,30 --quality draft ";
   auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + sun + "--aovs --format exr");
@@ -117,7 +121,7 @@ TEST_F(CliReliability, AbsurdFiniteDepthsRender) {
 // Defect: a wrong-size depth map was noticed only after the photo was decoded; huge images were
 // decoded before anything was checked, and the error did not name the file.
 TEST_F(CliReliability, SizesAreCheckedFromHeadersFirst) {
-  write_photo(in / "big.png", 1200, 900);   // 1.08 MP
+  write_photo(in / "big.png", 1200, 900);  // 1.08 MP
   write_depth(in / "big_depth.exr", 1200, 900);
   write_photo(in / "odd.png", 48, 32);
   write_depth(in / "odd_depth.exr", 24, 16);
@@ -130,7 +134,8 @@ TEST_F(CliReliability, SizesAreCheckedFromHeadersFirst) {
                                      ": depth map is 24x16, photo " + (in / "odd.png").string() +
                                      " is 48x32"))
       << r.output;
-  r = mr_cmd("fog " + q(in / "big.png") + " -o " + q(out) + " --max-megapixels 2 -q --quality draft");
+  r = mr_cmd("fog " + q(in / "big.png") + " -o " + q(out) +
+             " --max-megapixels 2 -q --quality draft");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   r = mr_cmd("fog " + q(in / "big.png") + " -o " + q(out) + " --max-megapixels -1");
   EXPECT_EQ(r.exit_code, 2) << r.output;
@@ -202,8 +207,9 @@ TEST_F(CliReliability, DeeplyNestedDocumentsAreUsageErrors) {
   test::write_bytes(dir / "deep.json", deep);
   auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --scene " + q(dir / "deep.json"));
   EXPECT_EQ(r.exit_code, 2) << r.output.substr(0, 2000);
-  EXPECT_TRUE(contains(r.output, "deep.json: /0/0/0/0/0/0/0/0/...: arrays and objects nested more "
-                                 "than 256 levels deep"))
+  EXPECT_TRUE(contains(r.output,
+                       "deep.json: /0/0/0/0/0/0/0/0/...: arrays and objects nested more "
+                       "than 256 levels deep"))
       << r.output.substr(0, 2000);
   r = mr_cmd("estimate " + q(in / "p.png") + " --annotations " + q(dir / "deep.json") + " -o " +
              q(dir / "s.json"));
@@ -231,7 +237,8 @@ TEST_F(CliReliability, OutputNameCollisionsFailThosePhotos) {
                     " --quality draft -j " + j);
     EXPECT_EQ(r.exit_code, 1) << r.output;
     EXPECT_TRUE(contains(r.output, "ERROR: " + (in / "d1" / "x.png").string() + ": output " +
-                                       (out / "x_fog.png").string() + " would also be written for " +
+                                       (out / "x_fog.png").string() +
+                                       " would also be written for " +
                                        (in / "d2" / "x.png").string()))
         << r.output;
     EXPECT_TRUE(contains(r.output, "ERROR: " + (in / "d2" / "x.png").string() + ": output"))
@@ -297,7 +304,8 @@ TEST_F(CliReliability, OutputsAreOnlyRegularFiles) {
   }
   // A pattern that expands onto a FIFO, too.
   ASSERT_EQ(::mkfifo((in / "p.scene.json").c_str(), 0600), 0);
-  auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --save-scene '{dir}/{stem}.scene.json'");
+  auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) +
+                  " --save-scene '{dir}/{stem}.scene.json'");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(contains(r.output, "p.scene.json: is a FIFO")) << r.output;
   struct stat st {};
@@ -324,7 +332,8 @@ TEST_F(CliReliability, DepthMapsAreNotReplacedUnasked) {
   auto r = mr_cmd("estimate " + q(in / "p.png") + " -o " + q(dir / "s.json") + " --depth-out " +
                   q(in / "p_depth.exr") + " -q");
   EXPECT_EQ(r.exit_code, 2) << r.output;
-  EXPECT_TRUE(contains(r.output, "p_depth.exr: exists (a depth map mr fog reads); pass --overwrite"))
+  EXPECT_TRUE(
+      contains(r.output, "p_depth.exr: exists (a depth map mr fog reads); pass --overwrite"))
       << r.output;
   EXPECT_EQ(test::file_checksum(in / "p_depth.exr"), before);
   r = mr_cmd("estimate " + q(in / "p.png") + " -o " + q(dir / "s.json") + " --depth-out " +
@@ -335,7 +344,8 @@ TEST_F(CliReliability, DepthMapsAreNotReplacedUnasked) {
   write_image(in / "regions.png", test::make_test_photo(64, 48));
   const auto target_depth = test::file_checksum(in / "p_depth.exr");
   r = mr_cmd("material --sample " + q(in / "sample.png") + " --target " + q(in / "p.png") +
-             " --regions " + q(in / "regions.png") + " -o " + q(in / "p_depth.exr") + " --overwrite");
+             " --regions " + q(in / "regions.png") + " -o " + q(in / "p_depth.exr") +
+             " --overwrite");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(contains(r.output, "p_depth.exr: is an input file; refusing to overwrite it"))
       << r.output;
@@ -381,7 +391,8 @@ TEST_F(CliReliability, UnusableFolderEntriesAreNamed) {
        {(in / "x.jpg").string() + ": a folder, not a photo; skipped",
         (in / "loop1.png").string() + ": a symbolic link loop, not a photo; skipped",
         (in / "loop2.png").string() + ": a symbolic link loop, not a photo; skipped",
-        (in / "dangling.png").string() + ": a dangling symbolic link (to gone.png), not a photo; skipped"})
+        (in / "dangling.png").string() +
+            ": a dangling symbolic link (to gone.png), not a photo; skipped"})
     EXPECT_TRUE(contains(r.output, "WARNING: " + line)) << line << "\n" << r.output;
   EXPECT_TRUE(fs::exists(out / "good_fog.png"));
   // Named explicitly, a loop is an error that says so (not "no such file").
@@ -563,7 +574,8 @@ TEST_F(CliReliability, SigtermEndsTheRun) {
   const auto r = signal_when({"fog", in.string(), "-o", out.string(), "-j", "1", "-v",
                               "--sun-elevation", "20", "--sun-azimuth", "30", "--layer", "0,30"},
                              "a.png: rendering", SIGTERM);
-  EXPECT_TRUE(r.exit_code == 130 || r.exit_code == 128 + SIGTERM) << r.exit_code << "\n" << r.output;
+  EXPECT_TRUE(r.exit_code == 130 || r.exit_code == 128 + SIGTERM) << r.exit_code << "\n"
+                                                                  << r.output;
   EXPECT_FALSE(fs::exists(out / "c_fog.png")) << r.output;
 }
 

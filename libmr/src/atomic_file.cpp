@@ -136,8 +136,8 @@ void AtomicFile::commit(bool overwrite) {
   sync_file(temp_);
   std::filesystem::rename(temp_, final_, ec);
   if (ec)
-    throw Error(ErrorCode::io, final_.string() + ": cannot move the finished file into place: " +
-                                   ec.message());
+    throw Error(ErrorCode::io,
+                final_.string() + ": cannot move the finished file into place: " + ec.message());
   committed_ = true;
   unregister_temporary(slot_);
   slot_ = -1;

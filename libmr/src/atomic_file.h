@@ -22,8 +22,8 @@ void check_output_target(const std::filesystem::path& path);
 /// A temporary path beside `final_path` (same folder, so rename is atomic; same extension, so
 /// format-sniffing writers agree): ".<stem>.mr-tmp-<pid>-<n><ext>", the name `mr` recognises to
 /// remove the leftovers of a killed run. `final_path` must not be anything but a regular file
-/// (check_output_target, here and again before the rename). The temporary file is removed on destruction unless commit()
-/// renamed it into place.
+/// (check_output_target, here and again before the rename). The temporary file is removed on
+/// destruction unless commit() renamed it into place.
 class AtomicFile {
  public:
   explicit AtomicFile(std::filesystem::path final_path);

@@ -16,9 +16,9 @@ namespace {
 void check_rgb(const Rgb& v, const char* name) {
   for (float c : v)
     if (!std::isfinite(c) || c < 0)
-      throw Error(ErrorCode::invalid_argument, std::string(name) + " (" + std::to_string(v[0]) + "," +
-                                                   std::to_string(v[1]) + "," + std::to_string(v[2]) +
-                                                   ") must be finite and >= 0");
+      throw Error(ErrorCode::invalid_argument,
+                  std::string(name) + " (" + std::to_string(v[0]) + "," + std::to_string(v[1]) +
+                      "," + std::to_string(v[2]) + ") must be finite and >= 0");
 }
 
 }  // namespace
@@ -35,8 +35,8 @@ double extinction_from_visibility(double visibility_m) {
 
 double visibility_from_extinction(double sigma_t_per_m) {
   if (!std::isfinite(sigma_t_per_m) || !(sigma_t_per_m > 0))
-    throw Error(ErrorCode::invalid_argument, "extinction " + std::to_string(sigma_t_per_m) +
-                                                 " 1/m must be positive and finite");
+    throw Error(ErrorCode::invalid_argument,
+                "extinction " + std::to_string(sigma_t_per_m) + " 1/m must be positive and finite");
   return kKoschmiederContrast / sigma_t_per_m;
 }
 
@@ -57,8 +57,8 @@ Rgb exposure_relative_sun_irradiance(const Image& photo, const Image& distance_m
 
 FogLayers fog(const Image& photo, const Image& distance_m, const FogParams& params) {
   if (photo.empty() || photo.channels() < 3)
-    throw Error(ErrorCode::invalid_argument,
-                "fog: photo must have at least 3 channels, has " + std::to_string(photo.channels()));
+    throw Error(ErrorCode::invalid_argument, "fog: photo must have at least 3 channels, has " +
+                                                 std::to_string(photo.channels()));
   if (distance_m.channels() != 1)
     throw Error(ErrorCode::invalid_argument, "fog: distance map must have 1 channel, has " +
                                                  std::to_string(distance_m.channels()));
@@ -81,7 +81,8 @@ FogLayers fog(const Image& photo, const Image& distance_m, const FogParams& para
   render::render_homogeneous_sky(distance_m.view(),
                                  {params.sigma_t_per_m, {1.0f, 1.0f, 1.0f}, out.airlight},
                                  out.transmittance.view(), out.inscatter.view());
-  out.composite = Image::uninitialized(photo.width(), photo.height(), photo.channels(), photo.channel_names());
+  out.composite =
+      Image::uninitialized(photo.width(), photo.height(), photo.channels(), photo.channel_names());
   out.composite.metadata() = photo.metadata();
   photo::composite(photo.view(), out.transmittance.view(), out.inscatter.view(),
                    out.composite.view());

@@ -49,7 +49,8 @@ FogLayers fog(const Image& photo, const Image& distance_m, const FogParams& para
 /// daylight that lights it, so the colour's CIE u'v' offset from D65 is kept within the daylight
 /// locus from 4000 K (0.043) to 10000 K (0.029) and 0.01 across it, compressed smoothly above half
 /// those limits (a neutral prior), and its CIELAB chroma (at Y = 1) at most 33.6, the Planckian
-/// 4000 K's; its luminance unchanged (photo/airlight.h gives the sources). Throws mr::Error(invalid_argument) on an empty image.
+/// 4000 K's; its luminance unchanged (photo/airlight.h gives the sources). Throws
+/// mr::Error(invalid_argument) on an empty image.
 Rgb estimate_airlight(const Image& photo);
 
 /// A sun irradiance that matches the photo's exposure, for a sun placed without a given

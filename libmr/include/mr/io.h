@@ -90,9 +90,9 @@ void write_image(const std::filesystem::path& path, const Image& image,
 /// One layer of a multi-layer EXR. Channels are named "<layer>.<channel>", or just "<channel>"
 /// when `name` is empty (the main R,G,B layer).
 struct ExrLayer {
-  std::string name;       ///< "", "transmittance", "inscatter", "depth", ...
-  const Image* image;     ///< its channel_names() give the channel part ("R","G","B" / "Z")
-  bool is_data = false;   ///< data layers (depth) are never colour-converted
+  std::string name;      ///< "", "transmittance", "inscatter", "depth", ...
+  const Image* image;    ///< its channel_names() give the channel part ("R","G","B" / "Z")
+  bool is_data = false;  ///< data layers (depth) are never colour-converted
 };
 
 /// Writes the layers into one OpenEXR file that oiiotool, Nuke and Blender read as layers
