@@ -39,7 +39,9 @@ using detail::to_oiio;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-bool is_integer(PixelType t) { return t == PixelType::uint8 || t == PixelType::uint16; }
+bool is_integer(PixelType t) {
+  return t == PixelType::uint8 || t == PixelType::uint16;
+}
 
 int depth_channel(const OIIO::ImageSpec& spec) {
   for (const char* name : {"Z", "depth.Z", "Y", "depth.Y", "R"})
@@ -51,11 +53,11 @@ int depth_channel(const OIIO::ImageSpec& spec) {
 // One strip of rows in flight. Its buffers keep their capacity from photo to photo.
 struct Strip {
   int y0 = 0, rows = 0;
-  std::vector<unsigned char> photo_codes;  // decoded photo, 8/16-bit codes, n channels
+  std::vector<unsigned char> photo_codes;   // decoded photo, 8/16-bit codes, n channels
   std::vector<unsigned char> depth_values;  // decoded depth channel: float or 8/16-bit codes
   std::vector<float> pixels;                // linear photo, then the composite, n channels
   std::vector<float> distance_m, transmittance, inscatter;  // one row
-  std::vector<unsigned char> out_codes;     // encoded composite (integer outputs)
+  std::vector<unsigned char> out_codes;                     // encoded composite (integer outputs)
   detail::DepthCounts counts;
 };
 
@@ -126,9 +128,12 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
     if (!spec.channelformats.empty()) return decline("per-channel pixel types");
     const int orientation = spec.get_int_attribute("Orientation", 1);
     if (orientation >= 2 && orientation <= 8) return decline("EXIF orientation turns the photo");
-    if (spec.format == OIIO::TypeDesc::UINT8) photo_bits = 8;
-    else if (spec.format == OIIO::TypeDesc::UINT16) photo_bits = 16;
-    else return decline("not an 8/16-bit photo");
+    if (spec.format == OIIO::TypeDesc::UINT8)
+      photo_bits = 8;
+    else if (spec.format == OIIO::TypeDesc::UINT16)
+      photo_bits = 16;
+    else
+      return decline("not an 8/16-bit photo");
     from = req.input_colorspace;
     if (from.empty()) {
       const std::string tag = spec.get_string_attribute("oiio:ColorSpace");
@@ -153,12 +158,17 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   if (d_orientation >= 2 && d_orientation <= 8) return decline("depth map has an orientation");
   OIIO::TypeDesc depth_type;
   std::size_t depth_bytes = 0;
-  if (dspec.format == OIIO::TypeDesc::UINT8) depth_type = OIIO::TypeDesc::UINT8, depth_bytes = 1;
-  else if (dspec.format == OIIO::TypeDesc::UINT16) depth_type = OIIO::TypeDesc::UINT16, depth_bytes = 2;
+  if (dspec.format == OIIO::TypeDesc::UINT8)
+    depth_type = OIIO::TypeDesc::UINT8, depth_bytes = 1;
+  else if (dspec.format == OIIO::TypeDesc::UINT16)
+    depth_type = OIIO::TypeDesc::UINT16, depth_bytes = 2;
   else if (dspec.format == OIIO::TypeDesc::FLOAT || dspec.format == OIIO::TypeDesc::HALF)
     depth_type = OIIO::TypeDesc::FLOAT, depth_bytes = 4;
-  else return decline("depth map of an unusual pixel type");
+  else
+    return decline("depth map of an unusual pixel type");
   const int depth_c = depth_channel(dspec);
+  // Stored as read (float, 8 or 16-bit): the native read, as for the photo below.
+  const bool depth_native = dspec.format == depth_type;
   const DepthOptions& depth_options = req.depth_options;
   if (!(depth_options.scale > 0) || !std::isfinite(depth_options.scale) ||
       !std::isfinite(depth_options.doffs_px) ||
@@ -188,13 +198,14 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   if (!config.has_colorspace(to)) return decline("unknown output colour space");
   {
     std::error_code ec;
-    const auto folder = out_path.parent_path().empty() ? std::filesystem::path(".")
-                                                       : out_path.parent_path();
+    const auto folder =
+        out_path.parent_path().empty() ? std::filesystem::path(".") : out_path.parent_path();
     if (!std::filesystem::is_directory(folder, ec)) return decline("no output folder");
     if (!wo.overwrite && std::filesystem::exists(out_path, ec)) return decline("output exists");
   }
 
-  const Camera camera = req.camera ? req.camera(w, h, metadata) : Camera::from_metadata(w, h, metadata);
+  const Camera camera =
+      req.camera ? req.camera(w, h, metadata) : Camera::from_metadata(w, h, metadata);
   if (camera.width != w || camera.height != h)
     throw Error(ErrorCode::size_mismatch, req.photo.string() + ": camera is " +
                                               std::to_string(camera.width) + "x" +
@@ -211,8 +222,8 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                            medium.sigma_t_per_m[2]};
   // Homogeneous fog without a layer: the unit optical depth along any ray is its length, which
   // is what RayDensity::optical_depth(0, d) returns for it, bit for bit (k = 1, a = 0).
-  const bool unbounded_homogeneous = !medium.height_fog && medium.layer_bottom_m == -kInf &&
-                                     medium.layer_top_m == kInf;
+  const bool unbounded_homogeneous =
+      !medium.height_fog && medium.layer_bottom_m == -kInf && medium.layer_top_m == kInf;
   const auto [forward, right, up] = scene.pose.axes();
   const render::Vec3d origin{scene.pose.position_m.x, scene.pose.position_m.y,
                              scene.pose.position_m.z};
@@ -302,10 +313,11 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
             s.y0 = next_row;
             s.rows = std::min(strip_rows, h - next_row);
             next_row += s.rows;
-            if (in && (!in->read_scanlines(0, 0, s.y0, s.y0 + s.rows, 0, 0, n,
-                                           photo_bits == 8 ? OIIO::TypeDesc::UINT8
-                                                           : OIIO::TypeDesc::UINT16,
-                                           s.photo_codes.data()) ||
+            // The photo's own type (photo_bits is its format), so the native read gives the
+            // same bytes as read_scanlines without the temporary buffer read_scanlines
+            // allocates per call (fresh pages, hence page faults, per strip: issue 12).
+            if (in && (!in->read_native_scanlines(0, 0, s.y0, s.y0 + s.rows, 0, 0, n,
+                                                  s.photo_codes.data()) ||
                        in->has_error()))
               throw decode_error(req.photo, *in);
             return &s;
@@ -314,10 +326,13 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
           tbb::make_filter<Strip*, Strip*>(
               tbb::filter_mode::serial_in_order,
               [&](Strip* s) {
-                if (!depth_in->read_scanlines(0, 0, s->y0, s->y0 + s->rows, 0, depth_c,
-                                              depth_c + 1, depth_type, s->depth_values.data()) ||
-                    depth_in->has_error())
-                  throw decode_error(req.depth, *depth_in);
+                const bool ok =
+                    depth_native
+                        ? depth_in->read_native_scanlines(0, 0, s->y0, s->y0 + s->rows, 0, depth_c,
+                                                          depth_c + 1, s->depth_values.data())
+                        : depth_in->read_scanlines(0, 0, s->y0, s->y0 + s->rows, 0, depth_c,
+                                                   depth_c + 1, depth_type, s->depth_values.data());
+                if (!ok || depth_in->has_error()) throw decode_error(req.depth, *depth_in);
                 return s;
               }) &
           // Linearise, fog, composite, encode: strips in parallel.
@@ -328,8 +343,8 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                                      lin_px = std::ptrdiff_t(n * sizeof(float));
                 if (in)
                   config.convert_pixels(s->photo_codes.data(), photo_bits, in_px, in_px * w,
-                                        s->pixels.data(), 32, lin_px, lin_px * w, w, s->rows,
-                                        from, colorspace::scene_linear);
+                                        s->pixels.data(), 32, lin_px, lin_px * w, w, s->rows, from,
+                                        colorspace::scene_linear);
                 const std::size_t count = std::size_t(w) * std::size_t(s->rows);
                 if (in && n > 3) {  // alpha: normalised codes, as read_image
                   const auto* c8 = s->photo_codes.data();
@@ -343,7 +358,8 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                 s->counts = {};
                 const auto* depth_f = reinterpret_cast<const float*>(s->depth_values.data());
                 const auto* depth_8 = s->depth_values.data();
-                const auto* depth_16 = reinterpret_cast<const std::uint16_t*>(s->depth_values.data());
+                const auto* depth_16 =
+                    reinterpret_cast<const std::uint16_t*>(s->depth_values.data());
                 float* dist = s->distance_m.data();
                 float* t_row = s->transmittance.data();
                 float* r_row = s->inscatter.data();
@@ -355,9 +371,9 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                     const double stored = depth_bytes == 4   ? double(depth_f[base + x])
                                           : depth_bytes == 2 ? double(depth_16[base + x])
                                                              : double(depth_8[base + x]);
-                    dist[x] = detail::stored_depth_to_distance(
-                        stored * depth_options.scale, depth_options, camera, focal_baseline, x, y,
-                        s->counts);
+                    dist[x] = detail::stored_depth_to_distance(stored * depth_options.scale,
+                                                               depth_options, camera,
+                                                               focal_baseline, x, y, s->counts);
                   }
                   for (int x = 0; x < w; ++x) {
                     // The core's sky-only pixel: od = sigma * RayDensity(0, d), T = exp(-od),
@@ -368,7 +384,8 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                             ? d
                             : render::RayDensity(medium, origin, ray(x, y)).optical_depth(0, d);
                     double od[3], inscatter[3];
-                    for (int c = 0; c < 3; ++c) od[c] = render::scaled_optical_depth(sigma[c], unit);
+                    for (int c = 0; c < 3; ++c)
+                      od[c] = render::scaled_optical_depth(sigma[c], unit);
                     render::sky_only_inscatter(od, medium.albedo, sky, inscatter);
                     double tau = 0;
                     for (int c = 0; c < 3; ++c) {
@@ -383,8 +400,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                   const ConstImageView photo_row =
                       image ? ConstImageView{image->pixel(0, y), w, 1, n, std::ptrdiff_t(w) * n}
                             : ConstImageView(composite);
-                  photo::composite(photo_row,
-                                   ConstImageView{t_row, w, 1, 3, std::ptrdiff_t(w) * 3},
+                  photo::composite(photo_row, ConstImageView{t_row, w, 1, 3, std::ptrdiff_t(w) * 3},
                                    ConstImageView{r_row, w, 1, 3, std::ptrdiff_t(w) * 3},
                                    composite);
                 }
@@ -400,27 +416,30 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                       const std::size_t k = i * n + c;
                       const double v =
                           std::lround(std::clamp(double(s->pixels[k]), 0.0, 1.0) * out_max_code);
-                      if (out_bits == 8) s->out_codes[k] = static_cast<unsigned char>(v);
-                      else c16[k] = static_cast<std::uint16_t>(v);
+                      if (out_bits == 8)
+                        s->out_codes[k] = static_cast<unsigned char>(v);
+                      else
+                        c16[k] = static_cast<std::uint16_t>(v);
                     }
                 } else {
-                  config.convert_pixels(s->pixels.data(), 32, lin_px, lin_px * w,
-                                        s->pixels.data(), 32, lin_px, lin_px * w, w, s->rows,
+                  config.convert_pixels(s->pixels.data(), 32, lin_px, lin_px * w, s->pixels.data(),
+                                        32, lin_px, lin_px * w, w, s->rows,
                                         colorspace::scene_linear, to);
                 }
                 return s;
               }) &
           // Encode in order.
           tbb::make_filter<Strip*, void>(tbb::filter_mode::serial_in_order, [&](Strip* s) {
-            const bool ok =
-                is_integer(out_type)
-                    ? out->write_scanlines(s->y0, s->y0 + s->rows, 0,
-                                           out_bits == 8 ? OIIO::TypeDesc::UINT8
-                                                         : OIIO::TypeDesc::UINT16,
-                                           s->out_codes.data())
-                    : out->write_scanlines(s->y0, s->y0 + s->rows, 0, OIIO::TypeDesc::FLOAT,
-                                           s->pixels.data());
-            if (!ok) throw Error(ErrorCode::io, out_path.string() + ": writing failed: " + out->geterror());
+            const bool ok = is_integer(out_type)
+                                ? out->write_scanlines(s->y0, s->y0 + s->rows, 0,
+                                                       out_bits == 8 ? OIIO::TypeDesc::UINT8
+                                                                     : OIIO::TypeDesc::UINT16,
+                                                       s->out_codes.data())
+                                : out->write_scanlines(s->y0, s->y0 + s->rows, 0,
+                                                       OIIO::TypeDesc::FLOAT, s->pixels.data());
+            if (!ok)
+              throw Error(ErrorCode::io,
+                          out_path.string() + ": writing failed: " + out->geterror());
             result.no_surface_pixels += s->counts.no_surface;
             result.invalid_pixels += s->counts.invalid;
             result.sky_threshold_pixels += s->counts.sky_threshold;
