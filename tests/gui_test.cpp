@@ -205,6 +205,15 @@ RunSummary checkRun(const std::vector<ShownProgress>& run, const QString& verb) 
   return summary;
 }
 
+// Sun, shafts and wisps over `scene`: a normal pass long enough (about a second on leuven) to
+// be caught running.
+mr::FogScene with_sun_shafts_and_wisps(mr::FogScene scene) {
+  scene.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-60, 25), {3, 3, 3}, 0.27};
+  scene.medium.layer_top_m = 40;
+  scene.medium.noise.amplitude = 0.3;
+  return scene;
+}
+
 }  // namespace
 
 class GuiTest : public QObject {
@@ -932,11 +941,7 @@ void GuiTest::exportDialogAndCancel() {
   // nothing (the times are printed, not asserted: tests/cancel_test.cpp checks that a cancelled
   // render stops before finishing, bench/bench_cancel.cpp measures how fast). A sunlit scene with
   // shafts and wisps, so that a full export takes long enough to cancel.
-  mr::FogScene heavy = w.fogPanel()->scene();
-  heavy.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-60, 25), {3, 3, 3}, 0.27};
-  heavy.medium.layer_top_m = 40;
-  heavy.medium.noise.amplitude = 0.3;
-  w.fogPanel()->setScene(heavy);
+  w.fogPanel()->setScene(with_sun_shafts_and_wisps(w.fogPanel()->scene()));
   QElapsedTimer export_clock;
   export_clock.start();
   QVERIFY(w.exportImage(dir.filePath("full.exr"), {}, true));
@@ -1193,11 +1198,7 @@ void GuiTest::newEditCancelsTheRunningRender() {
   QVERIFY(QTest::qWaitForWindowExposed(&w));
   openAndSettle(w, kLeuven);
   // Sun, shafts and wisps: a normal pass of ~1 s, long enough to be caught running.
-  mr::FogScene heavy = w.fogPanel()->scene();
-  heavy.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-60, 25), {3, 3, 3}, 0.27};
-  heavy.medium.layer_top_m = 40;
-  heavy.medium.noise.amplitude = 0.3;
-  w.fogPanel()->setScene(heavy);
+  w.fogPanel()->setScene(with_sun_shafts_and_wisps(w.fogPanel()->scene()));
   QSlider* slider = w.fogPanel()->visibilitySlider();
   const int cancelled_before = w.cancelledRenders();
   std::vector<int> shown;  // qualities of the passes shown after the second edit
@@ -1785,11 +1786,7 @@ void GuiTest::statusBarShowsProgress() {
   // A preview: sun, shafts and wisps (a normal pass of about a second, as in
   // newEditCancelsTheRunningRender).
   runs.assign(1, {});
-  mr::FogScene heavy = w.fogPanel()->scene();
-  heavy.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-60, 25), {3, 3, 3}, 0.27};
-  heavy.medium.layer_top_m = 40;
-  heavy.medium.noise.amplitude = 0.3;
-  w.fogPanel()->setScene(heavy);
+  w.fogPanel()->setScene(with_sun_shafts_and_wisps(w.fogPanel()->scene()));
   QSlider* slider = w.fogPanel()->visibilitySlider();
   slider->setValue(slider->value() - slider->pageStep());
   QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
