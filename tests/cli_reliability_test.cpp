@@ -27,9 +27,7 @@ namespace {
 
 const std::string kMr = MR_CLI_PATH;
 
-std::string q(const fs::path& p) {
-  return "'" + p.string() + "'";
-}
+using test::shell_quoted;
 
 test::CommandResult mr_cmd(const std::string& args) {
   return test::run("timeout 120 " + kMr + " " + args + " 2>&1");
@@ -95,7 +93,8 @@ TEST_F(CliReliability, AbsurdFiniteDepthsRender) {
   d.at(6, 3, 0) = 3e38f;  // near FLT_MAX
   write_raw(in / "p_depth.exr", d);
   const std::string sun = " --sun-elevation 20 --sun-azimuth 30 --layer 0,30 --quality draft ";
-  auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + sun + "--aovs --format exr");
+  auto r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) + sun +
+                  "--aovs --format exr");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   ReadOptions raw;
   raw.to_scene_linear = false;
@@ -104,7 +103,7 @@ TEST_F(CliReliability, AbsurdFiniteDepthsRender) {
   const int z = exr.channel_index("depth.Z");
   for (int x : {3, 4, 5, 6}) EXPECT_TRUE(std::isinf(exr.at(x, 3, z))) << x;  // sky by default
   // No sky threshold: clamped to the far limit, with a warning; still renders.
-  r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + sun +
+  r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) + sun +
              "--aovs --format exr --overwrite --sky-depth inf");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_TRUE(contains(r.output, "p_depth.exr: 3 pixels are farther than 10,000 km: clamped"))
@@ -113,7 +112,7 @@ TEST_F(CliReliability, AbsurdFiniteDepthsRender) {
   EXPECT_EQ(clamped.at(3, 3, z), 1e7f);
   EXPECT_EQ(clamped.at(4, 3, z), 1e10f > 1e7f ? 1e7f : 1e10f);
   EXPECT_EQ(clamped.at(5, 3, z), 65504.0f);
-  r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --sky-depth 0");
+  r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) + " --sky-depth 0");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(contains(r.output, "--sky-depth")) << r.output;
 }
@@ -125,7 +124,8 @@ TEST_F(CliReliability, SizesAreCheckedFromHeadersFirst) {
   write_depth(in / "big_depth.exr", 1200, 900);
   write_photo(in / "odd.png", 48, 32);
   write_depth(in / "odd_depth.exr", 24, 16);
-  auto r = mr_cmd("fog " + q(in) + " -o " + q(out) + " --max-megapixels 1 -j 1");
+  auto r =
+      mr_cmd("fog " + shell_quoted(in) + " -o " + shell_quoted(out) + " --max-megapixels 1 -j 1");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "ERROR: " + (in / "big.png").string() +
                                      ": 1200x900 is 1.1 megapixels, more than the limit of 1.0"))
@@ -134,10 +134,11 @@ TEST_F(CliReliability, SizesAreCheckedFromHeadersFirst) {
                                      ": depth map is 24x16, photo " + (in / "odd.png").string() +
                                      " is 48x32"))
       << r.output;
-  r = mr_cmd("fog " + q(in / "big.png") + " -o " + q(out) +
+  r = mr_cmd("fog " + shell_quoted(in / "big.png") + " -o " + shell_quoted(out) +
              " --max-megapixels 2 -q --quality draft");
   EXPECT_EQ(r.exit_code, 0) << r.output;
-  r = mr_cmd("fog " + q(in / "big.png") + " -o " + q(out) + " --max-megapixels -1");
+  r = mr_cmd("fog " + shell_quoted(in / "big.png") + " -o " + shell_quoted(out) +
+             " --max-megapixels -1");
   EXPECT_EQ(r.exit_code, 2) << r.output;
 }
 
@@ -147,11 +148,13 @@ TEST_F(CliReliability, SizesAreCheckedFromHeadersFirst) {
 // device ... (render.backend 'vulkan' forces it)" although nothing forced Vulkan.
 TEST_F(CliReliability, DefaultBackendIsSilentAndVerboseSaysWhy) {
   photo_with_depth(in, "p");
-  auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --quality draft");
+  auto r =
+      mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) + " --quality draft");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_FALSE(contains(r.output, "WARNING: vulkan")) << r.output;
   EXPECT_FALSE(contains(r.output, "forces it")) << r.output;
-  r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --quality draft --overwrite -v");
+  r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) +
+             " --quality draft --overwrite -v");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_FALSE(contains(r.output, "WARNING: vulkan")) << r.output;
   EXPECT_TRUE(contains(r.output, "note: " + (in / "p.png").string() + ": rendering")) << r.output;
@@ -171,9 +174,10 @@ TEST_F(CliReliability, MaterialErrorIsTheLastLine) {
   w.pixel_type = PixelType::uint8;
   w.colorspace = colorspace::raw;
   write_image(in / "regions.png", mask, w);
-  const std::string common = "material --sample " + q(in / "sample.png") + " --target " +
-                             q(in / "target.png") + " --regions " + q(in / "regions.png");
-  auto r = mr_cmd(common + " -o " + q(dir / "out.png"));
+  const std::string common = "material --sample " + shell_quoted(in / "sample.png") + " --target " +
+                             shell_quoted(in / "target.png") + " --regions " +
+                             shell_quoted(in / "regions.png");
+  auto r = mr_cmd(common + " -o " + shell_quoted(dir / "out.png"));
   EXPECT_NE(r.exit_code, 0) << r.output;
   EXPECT_TRUE(last_line(r.output).starts_with("ERROR: ")) << r.output;
   EXPECT_TRUE(contains(last_line(r.output), "target_depth.exr")) << r.output;
@@ -181,7 +185,7 @@ TEST_F(CliReliability, MaterialErrorIsTheLastLine) {
   // A failure after the report has started (the synthetic sample has no usable segment): the
   // report (stdout) first, the error last, once.
   write_depth(in / "target_depth.exr", 64, 48);
-  r = mr_cmd(common + " -o " + q(dir / "out.png"));
+  r = mr_cmd(common + " -o " + shell_quoted(dir / "out.png"));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "sample ")) << r.output;  // the report came
   EXPECT_TRUE(last_line(r.output).starts_with("ERROR: ")) << r.output;
@@ -191,7 +195,7 @@ TEST_F(CliReliability, MaterialErrorIsTheLastLine) {
     ++errors;
   EXPECT_EQ(errors, 1u) << r.output;
   // A bad option too: one line, the error.
-  r = mr_cmd(common + " -o " + q(dir / "out.png") + " --max-candidates 1000");
+  r = mr_cmd(common + " -o " + shell_quoted(dir / "out.png") + " --max-candidates 1000");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(last_line(r.output).starts_with("ERROR: ")) << r.output;
   EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
@@ -205,19 +209,21 @@ TEST_F(CliReliability, DeeplyNestedDocumentsAreUsageErrors) {
   photo_with_depth(in, "p");
   const std::string deep = std::string(100000, '[') + std::string(100000, ']');
   test::write_bytes(dir / "deep.json", deep);
-  auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --scene " + q(dir / "deep.json"));
+  auto r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) + " --scene " +
+                  shell_quoted(dir / "deep.json"));
   EXPECT_EQ(r.exit_code, 2) << r.output.substr(0, 2000);
   EXPECT_TRUE(contains(r.output,
                        "deep.json: /0/0/0/0/0/0/0/0/...: arrays and objects nested more "
                        "than 256 levels deep"))
       << r.output.substr(0, 2000);
-  r = mr_cmd("estimate " + q(in / "p.png") + " --annotations " + q(dir / "deep.json") + " -o " +
-             q(dir / "s.json"));
+  r = mr_cmd("estimate " + shell_quoted(in / "p.png") + " --annotations " +
+             shell_quoted(dir / "deep.json") + " -o " + shell_quoted(dir / "s.json"));
   EXPECT_EQ(r.exit_code, 2) << r.output.substr(0, 2000);
   EXPECT_TRUE(contains(r.output, "nested more than 256 levels deep")) << r.output.substr(0, 2000);
   // A NUL byte after a valid scene.
   test::write_bytes(dir / "nul.json", scene_to_json(FogScene{}) + std::string(4, '\0'));
-  r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --scene " + q(dir / "nul.json"));
+  r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) + " --scene " +
+             shell_quoted(dir / "nul.json"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(contains(r.output, "nul.json: line ")) << r.output;
   EXPECT_TRUE(contains(r.output, "NUL byte")) << r.output;
@@ -233,8 +239,8 @@ TEST_F(CliReliability, OutputNameCollisionsFailThosePhotos) {
   photo_with_depth(in / "d2", "y");
   for (const char* j : {"1", "2"}) {
     fs::remove_all(out);
-    auto r = mr_cmd("fog " + q(in / "d1") + " " + q(in / "d2") + " -o " + q(out) +
-                    " --quality draft -j " + j);
+    auto r = mr_cmd("fog " + shell_quoted(in / "d1") + " " + shell_quoted(in / "d2") + " -o " +
+                    shell_quoted(out) + " --quality draft -j " + j);
     EXPECT_EQ(r.exit_code, 1) << r.output;
     EXPECT_TRUE(contains(r.output, "ERROR: " + (in / "d1" / "x.png").string() + ": output " +
                                        (out / "x_fog.png").string() +
@@ -249,7 +255,8 @@ TEST_F(CliReliability, OutputNameCollisionsFailThosePhotos) {
   }
   // x.png and x.jpg with one --format.
   write_photo(in / "d1" / "x.jpg", 48, 32);
-  auto r = mr_cmd("fog " + q(in / "d1") + " -o " + q(out / "f") + " --format tif --quality draft");
+  auto r = mr_cmd("fog " + shell_quoted(in / "d1") + " -o " + shell_quoted(out / "f") +
+                  " --format tif --quality draft");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "x_fog.tif would also be written for")) << r.output;
   EXPECT_FALSE(fs::exists(out / "f" / "x_fog.tif"));
@@ -261,7 +268,8 @@ TEST_F(CliReliability, AnInputIsNeverAnOutput) {
   photo_with_depth(in, "c");
   photo_with_depth(in, "c_fog");  // the user's own photo, not ours
   const auto before = test::file_checksum(in / "c_fog.png");
-  auto r = mr_cmd("fog " + q(in) + " -o " + q(in) + " --overwrite --quality draft");
+  auto r = mr_cmd("fog " + shell_quoted(in) + " -o " + shell_quoted(in) +
+                  " --overwrite --quality draft");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "ERROR: " + (in / "c.png").string() + ": output " +
                                      (in / "c_fog.png").string() + " is an input of this run"))
@@ -270,7 +278,7 @@ TEST_F(CliReliability, AnInputIsNeverAnOutput) {
   EXPECT_TRUE(fs::exists(in / "c_fog_fog.png"));  // the user's photo was fogged as a photo
   // Our own outputs are recognised (the Software tag) and not taken for photos on a resumed run.
   EXPECT_EQ(probe_image(in / "c_fog_fog.png").software, "mr fog (libmr)");
-  r = mr_cmd("fog " + q(in) + " -o " + q(in) + " --quality draft");
+  r = mr_cmd("fog " + shell_quoted(in) + " -o " + shell_quoted(in) + " --quality draft");
   EXPECT_EQ(r.exit_code, 1) << r.output;  // c.png still fails: its output name is taken
   EXPECT_TRUE(contains(r.output, "0 done, 1 skipped")) << r.output;
   EXPECT_FALSE(fs::exists(in / "c_fog_fog_fog.png"));
@@ -279,7 +287,8 @@ TEST_F(CliReliability, AnInputIsNeverAnOutput) {
   photo_with_depth(dir / "h", "h");
   fs::create_hard_link(dir / "h" / "h.png", out / "h_fog.png");
   const auto h_before = test::file_checksum(dir / "h" / "h.png");
-  r = mr_cmd("fog " + q(dir / "h" / "h.png") + " -o " + q(out) + " --overwrite --quality draft");
+  r = mr_cmd("fog " + shell_quoted(dir / "h" / "h.png") + " -o " + shell_quoted(out) +
+             " --overwrite --quality draft");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "is an input of this run (" + (dir / "h" / "h.png").string()))
       << r.output;
@@ -294,17 +303,18 @@ TEST_F(CliReliability, OutputsAreOnlyRegularFiles) {
   fs::create_symlink(dir / "real.json", dir / "link.json");
   test::write_bytes(dir / "real.json", "keep");
   for (const fs::path& target : {dir / "fifo.json", dir / "link.json", fs::path("/dev/null")}) {
-    auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --save-scene " + q(target));
+    auto r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) +
+                    " --save-scene " + shell_quoted(target));
     EXPECT_EQ(r.exit_code, 2) << r.output;
     EXPECT_TRUE(contains(r.output, "ERROR: " + target.string() + ": is a ")) << r.output;
     EXPECT_TRUE(contains(r.output, "outputs are only written as regular files")) << r.output;
-    r = mr_cmd("estimate " + q(in / "p.png") + " -o " + q(target) + " -q");
+    r = mr_cmd("estimate " + shell_quoted(in / "p.png") + " -o " + shell_quoted(target) + " -q");
     EXPECT_EQ(r.exit_code, 2) << r.output;
     EXPECT_TRUE(contains(r.output, target.string() + ": is a ")) << r.output;
   }
   // A pattern that expands onto a FIFO, too.
   ASSERT_EQ(::mkfifo((in / "p.scene.json").c_str(), 0600), 0);
-  auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) +
+  auto r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) +
                   " --save-scene '{dir}/{stem}.scene.json'");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(contains(r.output, "p.scene.json: is a FIFO")) << r.output;
@@ -319,7 +329,7 @@ TEST_F(CliReliability, OutputsAreOnlyRegularFiles) {
   // An output image whose name is taken by a FIFO fails that photo, before rendering.
   fs::create_directories(out);
   ASSERT_EQ(::mkfifo((out / "p_fog.png").c_str(), 0600), 0);
-  r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " --overwrite");
+  r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) + " --overwrite");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "p_fog.png: is a FIFO")) << r.output;
 }
@@ -329,23 +339,23 @@ TEST_F(CliReliability, OutputsAreOnlyRegularFiles) {
 TEST_F(CliReliability, DepthMapsAreNotReplacedUnasked) {
   photo_with_depth(in, "p", 64, 48);
   const auto before = test::file_checksum(in / "p_depth.exr");
-  auto r = mr_cmd("estimate " + q(in / "p.png") + " -o " + q(dir / "s.json") + " --depth-out " +
-                  q(in / "p_depth.exr") + " -q");
+  auto r = mr_cmd("estimate " + shell_quoted(in / "p.png") + " -o " + shell_quoted(dir / "s.json") +
+                  " --depth-out " + shell_quoted(in / "p_depth.exr") + " -q");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(
       contains(r.output, "p_depth.exr: exists (a depth map mr fog reads); pass --overwrite"))
       << r.output;
   EXPECT_EQ(test::file_checksum(in / "p_depth.exr"), before);
-  r = mr_cmd("estimate " + q(in / "p.png") + " -o " + q(dir / "s.json") + " --depth-out " +
-             q(in / "p_depth.exr") + " -q --overwrite");
+  r = mr_cmd("estimate " + shell_quoted(in / "p.png") + " -o " + shell_quoted(dir / "s.json") +
+             " --depth-out " + shell_quoted(in / "p_depth.exr") + " -q --overwrite");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   // mr material: the target's depth map (found beside it) is an input, even with --overwrite.
   photo_with_depth(in, "sample", 64, 48);
   write_image(in / "regions.png", test::make_test_photo(64, 48));
   const auto target_depth = test::file_checksum(in / "p_depth.exr");
-  r = mr_cmd("material --sample " + q(in / "sample.png") + " --target " + q(in / "p.png") +
-             " --regions " + q(in / "regions.png") + " -o " + q(in / "p_depth.exr") +
-             " --overwrite");
+  r = mr_cmd("material --sample " + shell_quoted(in / "sample.png") + " --target " +
+             shell_quoted(in / "p.png") + " --regions " + shell_quoted(in / "regions.png") +
+             " -o " + shell_quoted(in / "p_depth.exr") + " --overwrite");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(contains(r.output, "p_depth.exr: is an input file; refusing to overwrite it"))
       << r.output;
@@ -359,20 +369,21 @@ TEST_F(CliReliability, NonRegularInputsAreClearErrors) {
   photo_with_depth(in, "p");
   ASSERT_EQ(::mkfifo((dir / "pipe.png").c_str(), 0600), 0);
   ASSERT_EQ(::mkfifo((dir / "pipe.exr").c_str(), 0600), 0);
-  auto r = mr_cmd("fog " + q(dir / "pipe.png") + " -o " + q(out));
+  auto r = mr_cmd("fog " + shell_quoted(dir / "pipe.png") + " -o " + shell_quoted(out));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "ERROR: " + (dir / "pipe.png").string() + ": is a FIFO"))
       << r.output;
-  r = mr_cmd("fog " + q(in / "p.png") + " --depth " + q(dir / "pipe.exr") + " -o " + q(out));
+  r = mr_cmd("fog " + shell_quoted(in / "p.png") + " --depth " + shell_quoted(dir / "pipe.exr") +
+             " -o " + shell_quoted(out));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "pipe.exr: is a FIFO")) << r.output;
-  r = mr_cmd("fog " + q(in / "p.png") + " --depth /dev/zero -o " + q(out));
+  r = mr_cmd("fog " + shell_quoted(in / "p.png") + " --depth /dev/zero -o " + shell_quoted(out));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "/dev/zero: is a character device")) << r.output;
-  r = mr_cmd("fog " + q(in / "p.png") + " --scene /dev/zero -o " + q(out));
+  r = mr_cmd("fog " + shell_quoted(in / "p.png") + " --scene /dev/zero -o " + shell_quoted(out));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_TRUE(contains(r.output, "/dev/zero: is a character device")) << r.output;
-  r = mr_cmd("estimate /dev/urandom -o " + q(dir / "s.json"));
+  r = mr_cmd("estimate /dev/urandom -o " + shell_quoted(dir / "s.json"));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "/dev/urandom: is a character device")) << r.output;
 }
@@ -385,7 +396,7 @@ TEST_F(CliReliability, UnusableFolderEntriesAreNamed) {
   fs::create_symlink("loop2.png", in / "loop1.png");
   fs::create_symlink("loop1.png", in / "loop2.png");
   fs::create_symlink("gone.png", in / "dangling.png");
-  auto r = mr_cmd("fog " + q(in) + " -o " + q(out) + " --quality draft");
+  auto r = mr_cmd("fog " + shell_quoted(in) + " -o " + shell_quoted(out) + " --quality draft");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   for (const std::string& line :
        {(in / "x.jpg").string() + ": a folder, not a photo; skipped",
@@ -396,7 +407,7 @@ TEST_F(CliReliability, UnusableFolderEntriesAreNamed) {
     EXPECT_TRUE(contains(r.output, "WARNING: " + line)) << line << "\n" << r.output;
   EXPECT_TRUE(fs::exists(out / "good_fog.png"));
   // Named explicitly, a loop is an error that says so (not "no such file").
-  r = mr_cmd("fog " + q(in / "loop1.png") + " -o " + q(out));
+  r = mr_cmd("fog " + shell_quoted(in / "loop1.png") + " -o " + shell_quoted(out));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "loop1.png: a symbolic link loop")) << r.output;
 }
@@ -405,21 +416,23 @@ TEST_F(CliReliability, UnusableFolderEntriesAreNamed) {
 TEST_F(CliReliability, ThreadCountIsBounded) {
   photo_with_depth(in, "p");
   for (const std::string& command :
-       {"fog " + q(in / "p.png"), "material --sample " + q(in / "p.png") + " --target " +
-                                      q(in / "p.png") + " --regions " + q(in / "p.png") + " -o " +
-                                      q(dir / "m.png")}) {
+       {"fog " + shell_quoted(in / "p.png"), "material --sample " + shell_quoted(in / "p.png") +
+                                                 " --target " + shell_quoted(in / "p.png") +
+                                                 " --regions " + shell_quoted(in / "p.png") +
+                                                 " -o " + shell_quoted(dir / "m.png")}) {
     auto r = mr_cmd(command + " -j 100000");
     EXPECT_EQ(r.exit_code, 2) << r.output;
     EXPECT_TRUE(contains(r.output, "threads")) << r.output;
   }
-  auto r = mr_cmd("fog " + q(in / "p.png") + " -o " + q(out) + " -j 256 --quality draft");
+  auto r = mr_cmd("fog " + shell_quoted(in / "p.png") + " -o " + shell_quoted(out) +
+                  " -j 256 --quality draft");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   // Under a tight address-space limit the failure to start threads is an error, not an abort.
   // Not in AddressSanitizer builds: ASan reserves terabytes of shadow memory at start-up and
   // cannot run under `ulimit -v` at all.
 #if !defined(__SANITIZE_ADDRESS__)
-  r = test::run("(ulimit -v 1200000; timeout 120 " + kMr + " fog " + q(in / "p.png") + " -o " +
-                q(dir / "lim") + " -j 256 --quality draft) 2>&1");
+  r = test::run("(ulimit -v 1200000; timeout 120 " + kMr + " fog " + shell_quoted(in / "p.png") +
+                " -o " + shell_quoted(dir / "lim") + " -j 256 --quality draft) 2>&1");
   EXPECT_TRUE(r.exit_code == 0 || r.exit_code == 1) << r.exit_code << "\n" << r.output;
   if (r.exit_code == 1) {
     EXPECT_TRUE(contains(r.output, "ERROR: ")) << r.output;
@@ -445,7 +458,7 @@ TEST_F(CliReliability, StaleTemporariesOfDeadRunsAreRemoved) {
                                          ".notes.txt", "x.mr-tmp-" + dead + "-0.png"};
   for (const auto& name : stale) test::write_bytes(out / name, "partial");
   for (const auto& name : kept) test::write_bytes(out / name, "keep");
-  auto r = mr_cmd("fog " + q(in) + " -o " + q(out) + " --quality draft -v");
+  auto r = mr_cmd("fog " + shell_quoted(in) + " -o " + shell_quoted(out) + " --quality draft -v");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   for (const auto& name : stale) {
     EXPECT_FALSE(fs::exists(out / name)) << name;

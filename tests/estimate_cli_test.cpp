@@ -20,9 +20,7 @@ namespace {
 
 const std::string kMr = MR_CLI_PATH;
 
-std::string q(const fs::path& p) {
-  return "'" + p.string() + "'";
-}
+using test::shell_quoted;
 
 class EstimateCli : public ::testing::Test {
  protected:
@@ -38,9 +36,10 @@ class EstimateCli : public ::testing::Test {
 };
 
 TEST_F(EstimateCli, WritesSceneDepthAndOverlay) {
-  const auto r = test::run(kMr + " estimate " + q(dir / "photo.png") + " --annotations " +
-                           q(dir / "a.json") + " --fov 50 -o " + q(dir / "scene.json") +
-                           " --depth-out " + q(dir / "d.exr") + " --overlay " + q(dir / "o.png"));
+  const auto r = test::run(
+      kMr + " estimate " + shell_quoted(dir / "photo.png") + " --annotations " +
+      shell_quoted(dir / "a.json") + " --fov 50 -o " + shell_quoted(dir / "scene.json") +
+      " --depth-out " + shell_quoted(dir / "d.exr") + " --overlay " + shell_quoted(dir / "o.png"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("horizon: annotated"), std::string::npos) << r.output;
 
@@ -77,7 +76,8 @@ TEST_F(EstimateCli, WritesSceneDepthAndOverlay) {
 }
 
 TEST_F(EstimateCli, WithoutAnnotationsFallsBackToLevelCamera) {
-  const auto r = test::run(kMr + " estimate " + q(dir / "photo.png") + " -o " + q(dir / "s.json"));
+  const auto r = test::run(kMr + " estimate " + shell_quoted(dir / "photo.png") + " -o " +
+                           shell_quoted(dir / "s.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("not annotated"), std::string::npos) << r.output;
   const FogScene scene = load_scene(dir / "s.json");
@@ -89,8 +89,8 @@ TEST_F(EstimateCli, BadAnnotationsAreUsageErrorsNamingFileAndPointer) {
   test::write_bytes(
       dir / "bad.json",
       R"({"format": "libmr-annotations", "version": 1, "planes": [{"polygon": [[1, 2], [3, 4]]}]})");
-  auto r = test::run(kMr + " estimate " + q(dir / "photo.png") + " --annotations " +
-                     q(dir / "bad.json") + " -o " + q(dir / "s.json"));
+  auto r = test::run(kMr + " estimate " + shell_quoted(dir / "photo.png") + " --annotations " +
+                     shell_quoted(dir / "bad.json") + " -o " + shell_quoted(dir / "s.json"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("ERROR: " + (dir / "bad.json").string() + ": /planes/0/polygon"),
             std::string::npos)
@@ -99,8 +99,8 @@ TEST_F(EstimateCli, BadAnnotationsAreUsageErrorsNamingFileAndPointer) {
   Annotations a = annotations;
   a.planes[0].polygon = {{60, 5}, {100, 5}, {100, 20}};
   save_annotations(dir / "above.json", a);
-  r = test::run(kMr + " estimate " + q(dir / "photo.png") + " --annotations " +
-                q(dir / "above.json") + " -o " + q(dir / "s.json"));
+  r = test::run(kMr + " estimate " + shell_quoted(dir / "photo.png") + " --annotations " +
+                shell_quoted(dir / "above.json") + " -o " + shell_quoted(dir / "s.json"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("above.json: /planes/0/polygon: lies entirely on or above the horizon"),
             std::string::npos)
@@ -110,7 +110,8 @@ TEST_F(EstimateCli, BadAnnotationsAreUsageErrorsNamingFileAndPointer) {
 
 TEST_F(EstimateCli, UnreadablePhotoFails) {
   test::write_bytes(dir / "broken.jpg", "not a jpeg");
-  const auto r = test::run(kMr + " estimate " + q(dir / "broken.jpg") + " -o " + q(dir / "s.json"));
+  const auto r = test::run(kMr + " estimate " + shell_quoted(dir / "broken.jpg") + " -o " +
+                           shell_quoted(dir / "s.json"));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("ERROR: "), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("broken.jpg"), std::string::npos) << r.output;
@@ -118,7 +119,7 @@ TEST_F(EstimateCli, UnreadablePhotoFails) {
 }
 
 TEST_F(EstimateCli, MissingOutputIsUsageError) {
-  const auto r = test::run(kMr + " estimate " + q(dir / "photo.png"));
+  const auto r = test::run(kMr + " estimate " + shell_quoted(dir / "photo.png"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
 }
 
@@ -131,9 +132,10 @@ TEST_F(EstimateCli, FogSavesOneEstimatedScenePerPhoto) {
   write_image(in / "b.png", test::make_test_photo(120, 90));
   save_annotations(in / "a.json", annotations);
   const std::string pattern = (dir / "scenes" / "{stem}.scene.json").string();
-  const auto r = test::run(
-      kMr + " fog " + q(in) + " --depth auto --annotations '{dir}/{stem}.json' --fov 50 " +
-      "--quality draft -q -o " + q(dir / "out") + " --save-scene '" + pattern + "'");
+  const auto r = test::run(kMr + " fog " + shell_quoted(in) +
+                           " --depth auto --annotations '{dir}/{stem}.json' --fov 50 " +
+                           "--quality draft -q -o " + shell_quoted(dir / "out") +
+                           " --save-scene '" + pattern + "'");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   ASSERT_TRUE(fs::exists(dir / "scenes" / "a.scene.json")) << r.output;
   ASSERT_TRUE(fs::exists(dir / "scenes" / "b.scene.json")) << r.output;
@@ -156,8 +158,9 @@ TEST_F(EstimateCli, FogSavesOneEstimatedScenePerPhoto) {
 
   // A pattern that gives one file for two photos is a usage error; nothing is written.
   const auto clash =
-      test::run(kMr + " fog " + q(in) + " --depth auto --quality draft -o " + q(dir / "out2") +
-                " --save-scene '" + (dir / "scenes" / "same.json").string() + "{ext}'");
+      test::run(kMr + " fog " + shell_quoted(in) + " --depth auto --quality draft -o " +
+                shell_quoted(dir / "out2") + " --save-scene '" +
+                (dir / "scenes" / "same.json").string() + "{ext}'");
   EXPECT_EQ(clash.exit_code, 2) << clash.output;
   EXPECT_NE(clash.output.find("for both"), std::string::npos) << clash.output;
   EXPECT_FALSE(fs::exists(dir / "out2"));
@@ -171,9 +174,10 @@ TEST_F(EstimateCli, EstimatedPhotosFogLiesInALayerWithATop) {
   auto top = [&](const std::string& options, int* exit_code = nullptr) {
     const fs::path scene = dir / "c.top.json";  // per photo: the scene it was rendered with
     fs::remove(scene);
-    const auto r = test::run(kMr + " fog " + q(dir / "c.png") +
-                             " --depth auto --quality draft -q --overwrite -o " + q(dir / "o") +
-                             " --save-scene '{dir}/{stem}.top.json' " + options);
+    const auto r =
+        test::run(kMr + " fog " + shell_quoted(dir / "c.png") +
+                  " --depth auto --quality draft -q --overwrite -o " + shell_quoted(dir / "o") +
+                  " --save-scene '{dir}/{stem}.top.json' " + options);
     if (exit_code) *exit_code = r.exit_code;
     if (r.exit_code != 0) return std::nan("");
     return load_scene(scene).medium.layer_top_m;
@@ -230,8 +234,9 @@ TEST_F(EstimateCli, SceneCarriesTheVanishingPointFocalLengthToFog) {
   pose.roll_deg = 4;
   pose.yaw_deg = 30;
   write_image(dir / "grid.png", grid_photo(truth, pose));
-  auto r = test::run(kMr + " estimate " + q(dir / "grid.png") + " -o " + q(dir / "grid.json") +
-                     " --depth-out " + q(dir / "grid_depth.exr"));
+  auto r = test::run(kMr + " estimate " + shell_quoted(dir / "grid.png") + " -o " +
+                     shell_quoted(dir / "grid.json") + " --depth-out " +
+                     shell_quoted(dir / "grid_depth.exr"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   ASSERT_NE(r.output.find("vanishing points"), std::string::npos) << r.output;
   const FogScene scene = load_scene(dir / "grid.json");
@@ -246,18 +251,19 @@ TEST_F(EstimateCli, SceneCarriesTheVanishingPointFocalLengthToFog) {
 
   char focal[64];
   std::snprintf(focal, sizeof focal, "%.17g", f);
-  const std::string common = kMr + " fog " + q(dir / "grid.png") + " --depth " +
-                             q(dir / "grid_depth.exr") + " --scene " + q(dir / "grid.json") +
+  const std::string common = kMr + " fog " + shell_quoted(dir / "grid.png") + " --depth " +
+                             shell_quoted(dir / "grid_depth.exr") + " --scene " +
+                             shell_quoted(dir / "grid.json") +
                              " --quality draft --seed 3 -q --visibility 60m --height-fog 0,3 ";
   // (Height fog makes the image depend on each pixel's ray direction, hence on the focal length;
   // homogeneous fog under a uniform sky would depend on the distance map only.)
-  r = test::run(common + "-o " + q(dir / "from_scene") + " --save-scene '" +
+  r = test::run(common + "-o " + shell_quoted(dir / "from_scene") + " --save-scene '" +
                 (dir / "saved" / "{stem}.json").string() + "'");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = test::run(common + "-o " + q(dir / "explicit") + " --focal-px " + focal + " --save-scene " +
-                q(dir / "explicit.json"));
+  r = test::run(common + "-o " + shell_quoted(dir / "explicit") + " --focal-px " + focal +
+                " --save-scene " + shell_quoted(dir / "explicit.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = test::run(common + "-o " + q(dir / "default") + " --fov 60");
+  r = test::run(common + "-o " + shell_quoted(dir / "default") + " --fov 60");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   if (const char* out = std::getenv("MR_TEST_OUT")) {  // to look at
     fs::copy_file(dir / "grid.png", fs::path(out) / "grid.png",
@@ -294,9 +300,9 @@ TEST_F(EstimateCli, SceneCarriesTheVanishingPointFocalLengthToFog) {
       for (int k = 0; k < 3; ++k) rotated.at(x, y, k) = photo.at(y, 359 - x, k);
   fs::create_directories(dir / "rot");
   write_image(dir / "rot" / "tall.png", rotated);
-  r = test::run(kMr + " fog " + q(dir / "rot" / "tall.png") + " --depth auto --scene " +
-                q(dir / "grid.json") + " --quality draft -o " + q(dir / "rot_out") +
-                " --save-scene " + q(dir / "kept.json"));
+  r = test::run(kMr + " fog " + shell_quoted(dir / "rot" / "tall.png") + " --depth auto --scene " +
+                shell_quoted(dir / "grid.json") + " --quality draft -o " +
+                shell_quoted(dir / "rot_out") + " --save-scene " + shell_quoted(dir / "kept.json"));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("recorded for a 480x360 image, this one is 360x480"), std::string::npos)
       << r.output;
@@ -307,8 +313,9 @@ TEST_F(EstimateCli, SceneCarriesTheVanishingPointFocalLengthToFog) {
   ASSERT_TRUE(kept.camera);
   EXPECT_EQ(kept.camera->focal_px, f);
   EXPECT_FALSE(load_scene(dir / "explicit.json").camera);
-  r = test::run(kMr + " fog " + q(dir / "rot" / "tall.png") + " --depth auto --scene " +
-                q(dir / "grid.json") + " --fov 50 --quality draft -q -o " + q(dir / "rot_out"));
+  r = test::run(kMr + " fog " + shell_quoted(dir / "rot" / "tall.png") + " --depth auto --scene " +
+                shell_quoted(dir / "grid.json") + " --fov 50 --quality draft -q -o " +
+                shell_quoted(dir / "rot_out"));
   EXPECT_EQ(r.exit_code, 0) << r.output;
 }
 
@@ -321,8 +328,9 @@ TEST_F(EstimateCli, AnnotatedBlockersReachTheScene) {
   b.polygons.push_back({{{10, 0, -20}, {10, 0, 12}, {10, 25, 12}, {10, 25, -20}}});
   annotations.blockers = b;
   save_annotations(dir / "b.json", annotations);
-  auto r = test::run(kMr + " estimate " + q(dir / "photo.png") + " --annotations " +
-                     q(dir / "b.json") + " --fov 50 -o " + q(dir / "scene.json"));
+  auto r =
+      test::run(kMr + " estimate " + shell_quoted(dir / "photo.png") + " --annotations " +
+                shell_quoted(dir / "b.json") + " --fov 50 -o " + shell_quoted(dir / "scene.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("blockers: annotated (a skyline of 2 points, 1 polygon(s)"),
             std::string::npos)
@@ -333,9 +341,10 @@ TEST_F(EstimateCli, AnnotatedBlockersReachTheScene) {
   got.blockers = load_scene(dir / "scene.json").blockers;
   EXPECT_EQ(scene_to_json(got), scene_to_json(want));
 
-  r = test::run(kMr + " fog " + q(dir / "photo.png") + " --depth auto --annotations " +
-                q(dir / "b.json") + " --fov 50 --quality draft --out-dir " + q(dir / "out") +
-                " --save-scene " + q(dir / "{stem}.scene.json"));  // per photo: as rendered
+  r = test::run(kMr + " fog " + shell_quoted(dir / "photo.png") + " --depth auto --annotations " +
+                shell_quoted(dir / "b.json") + " --fov 50 --quality draft --out-dir " +
+                shell_quoted(dir / "out") + " --save-scene " +
+                shell_quoted(dir / "{stem}.scene.json"));  // per photo: as rendered
   ASSERT_EQ(r.exit_code, 0) << r.output;
   got.blockers = load_scene(dir / "photo.scene.json").blockers;
   EXPECT_EQ(scene_to_json(got), scene_to_json(want));

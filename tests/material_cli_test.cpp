@@ -20,14 +20,11 @@ namespace {
 const std::string kMr = MR_CLI_PATH;
 const fs::path kSamples = fs::path(MR_SOURCE_DIR) / "sample_photos";
 
-std::string q(const fs::path& p) {
-  return "'" + p.string() + "'";
-}
+using test::shell_quoted;
 
 // A sample photo and its depth map at a third of their size.
 void write_reduced(const std::string& stem, const fs::path& dir) {
-  test::write_every_third_pixel(kSamples / (stem + ".jpg"), kSamples / (stem + "_depth.exr"),
-                                dir / (stem + ".png"), dir / (stem + "_depth.exr"));
+  test::write_reduced_sample(kSamples, stem, dir);
 }
 
 class MaterialCli : public ::testing::Test {
@@ -61,8 +58,8 @@ class MaterialCli : public ::testing::Test {
     return path;
   }
   std::string base() const {
-    return kMr + " material --sample " + q(dir_->path() / "building.png") +
-           " --sample-fov 50 --target " + q(dir_->path() / "leuven.png") + " --fov 60";
+    return kMr + " material --sample " + shell_quoted(dir_->path() / "building.png") +
+           " --sample-fov 50 --target " + shell_quoted(dir_->path() / "leuven.png") + " --fov 60";
   }
   static test::ScratchDir* dir_;
   fs::path work;
@@ -79,8 +76,9 @@ std::map<std::string, std::uint64_t> checksums(const fs::path& dir) {
 TEST_F(MaterialCli, MaskRegionsWriteImageAndJsonInputsUntouched) {
   const fs::path mask = write_mask();
   const auto before = checksums(dir_->path());
-  const auto r = test::run(base() + " --regions " + q(mask) + " -o " + q(work / "out.png") +
-                           " --materials-json " + q(work / "chosen.json") + " --seed 3");
+  const auto r = test::run(base() + " --regions " + shell_quoted(mask) + " -o " +
+                           shell_quoted(work / "out.png") + " --materials-json " +
+                           shell_quoted(work / "chosen.json") + " --seed 3");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("leuven_depth.exr"), std::string::npos)
       << r.output;  // found by convention
@@ -103,7 +101,8 @@ TEST_F(MaterialCli, MaskRegionsWriteImageAndJsonInputsUntouched) {
     for (int x = 50; x < 190; ++x) changed += std::abs(out.at(x, y, 1) - photo.at(x, y, 1));
   EXPECT_GT(changed / (30 * 140), 0.005);
   // An existing output is not replaced without --overwrite.
-  const auto again = test::run(base() + " --regions " + q(mask) + " -o " + q(work / "out.png"));
+  const auto again = test::run(base() + " --regions " + shell_quoted(mask) + " -o " +
+                               shell_quoted(work / "out.png"));
   EXPECT_EQ(again.exit_code, 2) << again.output;
   EXPECT_NE(again.output.find("--overwrite"), std::string::npos) << again.output;
 }
@@ -112,8 +111,8 @@ TEST_F(MaterialCli, AnnotationRegionsAndFogInOneRun) {
   Annotations a;
   a.planes.push_back({{{40, 145}, {200, 145}, {200, 180}, {40, 180}}, std::nullopt});
   save_annotations(work / "regions.json", a);
-  const auto r = test::run(base() + " --regions " + q(work / "regions.json") + " -o " +
-                           q(work / "fog.png") + " --visibility 40m -q");
+  const auto r = test::run(base() + " --regions " + shell_quoted(work / "regions.json") + " -o " +
+                           shell_quoted(work / "fog.png") + " --visibility 40m -q");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   // Fog lifts the far street: the top of the frame (sky and far houses) grows brighter/greyer.
   const Image out = read_image(work / "fog.png");
@@ -141,10 +140,11 @@ TEST_F(MaterialCli, SceneTargetFromADistanceMapAlone) {
   o.colorspace = colorspace::raw;
   o.pixel_type = PixelType::uint8;
   write_image(work / "wall_mask.png", mask, o);
-  const std::string cmd = kMr + " material --sample " + q(dir_->path() / "building.png") +
-                          " --sample-fov 50 --target-depth " + q(work / "wall_depth.exr") +
-                          " --fov 60 --regions " + q(work / "wall_mask.png");
-  auto r = test::run(cmd + " -o " + q(work / "wall.exr"));
+  const std::string cmd =
+      kMr + " material --sample " + shell_quoted(dir_->path() / "building.png") +
+      " --sample-fov 50 --target-depth " + shell_quoted(work / "wall_depth.exr") +
+      " --fov 60 --regions " + shell_quoted(work / "wall_mask.png");
+  auto r = test::run(cmd + " -o " + shell_quoted(work / "wall.exr"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("3D scene"), std::string::npos) << r.output;
   const Image out = read_image(work / "wall.exr");
@@ -152,15 +152,17 @@ TEST_F(MaterialCli, SceneTargetFromADistanceMapAlone) {
   EXPECT_EQ(out.at(5, 5, 1), 0.0f);     // outside the region: black
   EXPECT_GT(out.at(45, 30, 1), 0.01f);  // the region: lit by the default light
   // Neither a photo nor a distance map: a usage error.
-  r = test::run(kMr + " material --sample " + q(dir_->path() / "building.png") + " --regions " +
-                q(work / "wall_mask.png") + " -o " + q(work / "none.exr"));
+  r = test::run(kMr + " material --sample " + shell_quoted(dir_->path() / "building.png") +
+                " --regions " + shell_quoted(work / "wall_mask.png") + " -o " +
+                shell_quoted(work / "none.exr"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--target-depth"), std::string::npos) << r.output;
 }
 
 TEST_F(MaterialCli, BadInputsGiveMessages) {
   // Wrong-size mask.
-  auto r = test::run(base() + " --regions " + q(write_mask(100, 80)) + " -o " + q(work / "a.png"));
+  auto r = test::run(base() + " --regions " + shell_quoted(write_mask(100, 80)) + " -o " +
+                     shell_quoted(work / "a.png"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("region mask is 100x80, the photo is 250x187"), std::string::npos)
       << r.output;
@@ -169,7 +171,8 @@ TEST_F(MaterialCli, BadInputsGiveMessages) {
   o.colorspace = colorspace::raw;
   o.pixel_type = PixelType::uint8;
   write_image(work / "empty.png", Image(250, 187, 1), o);
-  r = test::run(base() + " --regions " + q(work / "empty.png") + " -o " + q(work / "a.png"));
+  r = test::run(base() + " --regions " + shell_quoted(work / "empty.png") + " -o " +
+                shell_quoted(work / "a.png"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("no region"), std::string::npos) << r.output;
   // A sample with no usable segment (all black).
@@ -181,27 +184,28 @@ TEST_F(MaterialCli, BadInputsGiveMessages) {
   wd.pixel_type = PixelType::float32;
   wd.colorspace = colorspace::raw;
   write_image(work / "black_depth.exr", depth, wd);
-  r = test::run(kMr + " material --sample " + q(work / "black.png") + " --target " +
-                q(dir_->path() / "leuven.png") + " --regions " + q(write_mask()) + " -o " +
-                q(work / "a.png"));
+  r = test::run(kMr + " material --sample " + shell_quoted(work / "black.png") + " --target " +
+                shell_quoted(dir_->path() / "leuven.png") + " --regions " +
+                shell_quoted(write_mask()) + " -o " + shell_quoted(work / "a.png"));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("no usable segment"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("black.png"), std::string::npos) << r.output;
   // Missing sample; output onto an input; unwritable format.
-  r = test::run(kMr + " material --sample " + q(work / "missing.jpg") + " --target " +
-                q(dir_->path() / "leuven.png") + " --regions " + q(write_mask()) + " -o " +
-                q(work / "a.png"));
+  r = test::run(kMr + " material --sample " + shell_quoted(work / "missing.jpg") + " --target " +
+                shell_quoted(dir_->path() / "leuven.png") + " --regions " +
+                shell_quoted(write_mask()) + " -o " + shell_quoted(work / "a.png"));
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("missing.jpg"), std::string::npos) << r.output;
-  r = test::run(base() + " --regions " + q(write_mask()) + " -o " + q(dir_->path() / "leuven.png") +
-                " --overwrite");
+  r = test::run(base() + " --regions " + shell_quoted(write_mask()) + " -o " +
+                shell_quoted(dir_->path() / "leuven.png") + " --overwrite");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("is an input file"), std::string::npos) << r.output;
-  r = test::run(base() + " --regions " + q(write_mask()) + " -o " + q(work / "a.notaformat"));
+  r = test::run(base() + " --regions " + shell_quoted(write_mask()) + " -o " +
+                shell_quoted(work / "a.notaformat"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_FALSE(fs::exists(work / "a.png"));  // nothing written by any failed run
   // Missing required option.
-  r = test::run(kMr + " material --sample " + q(work / "black.png"));
+  r = test::run(kMr + " material --sample " + shell_quoted(work / "black.png"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
 }
 

@@ -19,14 +19,11 @@ namespace {
 const std::string kMr = MR_CLI_PATH;
 const fs::path kSamples = fs::path(MR_SOURCE_DIR) / "sample_photos";
 
-std::string q(const fs::path& p) {
-  return "'" + p.string() + "'";
-}
+using test::shell_quoted;
 
 // A sample photo and its depth map at a third of their size.
 void write_reduced(const std::string& stem, const fs::path& dir) {
-  test::write_every_third_pixel(kSamples / (stem + ".jpg"), kSamples / (stem + "_depth.exr"),
-                                dir / (stem + ".png"), dir / (stem + "_depth.exr"));
+  test::write_reduced_sample(kSamples, stem, dir);
 }
 
 class ProgressCli : public ::testing::Test {
@@ -58,19 +55,21 @@ class ProgressCli : public ::testing::Test {
                     "_" + name);
   }
   static std::string fog_sun() {
-    return kMr + " fog " + q(dir() / "leuven.png") + " --fov 60 --sun-elevation 30 " +
+    return kMr + " fog " + shell_quoted(dir() / "leuven.png") + " --fov 60 --sun-elevation 30 " +
            "--sun-azimuth 120 --layer 0,40 --overwrite";
   }
   static std::string fog_sky() {  // sky light only: the streamed path
-    return kMr + " fog " + q(dir() / "leuven.png") + " --fov 60 --airlight 0.7 --overwrite";
+    return kMr + " fog " + shell_quoted(dir() / "leuven.png") +
+           " --fov 60 --airlight 0.7 --overwrite";
   }
   static std::string estimate(const fs::path& scene) {
-    return kMr + " estimate " + q(dir() / "leuven.png") + " -o " + q(scene);
+    return kMr + " estimate " + shell_quoted(dir() / "leuven.png") + " -o " + shell_quoted(scene);
   }
   static std::string material(const fs::path& output) {
-    return kMr + " material --sample " + q(dir() / "building.png") + " --sample-fov 50 --target " +
-           q(dir() / "leuven.png") + " --fov 60 --regions " + q(dir() / "mask.png") + " -o " +
-           q(output);
+    return kMr + " material --sample " + shell_quoted(dir() / "building.png") +
+           " --sample-fov 50 --target " + shell_quoted(dir() / "leuven.png") +
+           " --fov 60 --regions " + shell_quoted(dir() / "mask.png") + " -o " +
+           shell_quoted(output);
   }
 
  private:
@@ -88,20 +87,22 @@ void expect_no_progress(const test::CommandResult& r, const std::string& what) {
 
 TEST_F(ProgressCli, PipesGetNoProgressBytes) {
   // stderr into the pipe too (2>&1): exactly what a log file would get.
-  expect_no_progress(test::run(fog_sun() + " -o " + q(out("sun")) + " 2>&1"), "fog, sun");
-  expect_no_progress(test::run(fog_sky() + " -o " + q(out("sky")) + " 2>&1"), "fog, sky only");
+  expect_no_progress(test::run(fog_sun() + " -o " + shell_quoted(out("sun")) + " 2>&1"),
+                     "fog, sun");
+  expect_no_progress(test::run(fog_sky() + " -o " + shell_quoted(out("sky")) + " 2>&1"),
+                     "fog, sky only");
   expect_no_progress(test::run(estimate(out("scene.json")) + " 2>&1"), "estimate");
   expect_no_progress(test::run(material(out("material.png")) + " 2>&1"), "material");
 }
 
 TEST_F(ProgressCli, VerboseInAPipePrintsStagesAsLines) {
   const std::string leuven = (dir() / "leuven.png").string();
-  auto r = test::run(fog_sun() + " -o " + q(out("sun")) + " -v 2>&1");
+  auto r = test::run(fog_sun() + " -o " + shell_quoted(out("sun")) + " -v 2>&1");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("note: " + leuven + ": occluders\n"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("note: " + leuven + ": render\n"), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find('\r'), std::string::npos) << r.output;
-  r = test::run(fog_sky() + " -o " + q(out("sky")) + " -v 2>&1");
+  r = test::run(fog_sky() + " -o " + shell_quoted(out("sky")) + " -v 2>&1");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("note: " + leuven + ": render\n"), std::string::npos) << r.output;
   r = test::run(estimate(out("scene.json")) + " -v 2>&1");
@@ -117,7 +118,7 @@ TEST_F(ProgressCli, VerboseInAPipePrintsStagesAsLines) {
   EXPECT_NE(r.output.find("note: " + leuven + ": fit\n"), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find('\r'), std::string::npos) << r.output;
   // --quiet wins over -v.
-  r = test::run(fog_sun() + " -o " + q(out("quiet")) + " -v -q 2>&1");
+  r = test::run(fog_sun() + " -o " + shell_quoted(out("quiet")) + " -v -q 2>&1");
   EXPECT_EQ(r.output.find("note:"), std::string::npos) << r.output;
 }
 
@@ -125,9 +126,9 @@ TEST_F(ProgressCli, TerminalGetsABarWithTheStageAndFraction) {
   if (test::run("script --version").exit_code != 0) GTEST_SKIP() << "no util-linux script";
   // `script` runs the command on a pseudo-terminal and copies what it shows to stdout.
   auto on_tty = [](const std::string& command) {
-    return test::run("script -qfec " + q(command) + " /dev/null");
+    return test::run("script -qfec " + shell_quoted(command) + " /dev/null");
   };
-  auto r = on_tty(fog_sun() + " -o " + q(out("sun")));
+  auto r = on_tty(fog_sun() + " -o " + shell_quoted(out("sun")));
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("\r\033[K["), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("leuven.png: render "), std::string::npos) << r.output;
@@ -137,7 +138,7 @@ TEST_F(ProgressCli, TerminalGetsABarWithTheStageAndFraction) {
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find(": horizon 0%"), std::string::npos) << r.output;
   // --quiet: no bar on a terminal either.
-  r = on_tty(fog_sun() + " -o " + q(out("quiet")) + " -q");
+  r = on_tty(fog_sun() + " -o " + shell_quoted(out("quiet")) + " -q");
   EXPECT_EQ(r.output.find("\033[K"), std::string::npos) << r.output;
 }
 

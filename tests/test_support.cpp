@@ -28,8 +28,10 @@ ScratchDir::ScratchDir() {
 ScratchDir::~ScratchDir() {
   std::error_code ec;
   // Read-only subfolders made by tests must be writable again to be removed.
-  for (auto it = fs::recursive_directory_iterator(path_, ec); it != fs::recursive_directory_iterator(); ++it)
-    if (it->is_directory(ec)) fs::permissions(it->path(), fs::perms::owner_all, fs::perm_options::add, ec);
+  for (auto it = fs::recursive_directory_iterator(path_, ec);
+       it != fs::recursive_directory_iterator(); ++it)
+    if (it->is_directory(ec))
+      fs::permissions(it->path(), fs::perms::owner_all, fs::perm_options::add, ec);
   fs::remove_all(path_, ec);
 }
 
@@ -65,7 +67,8 @@ CommandResult run(const std::string& command_line) {
   FILE* pipe = ::popen((command_line + " 2>&1").c_str(), "r");
   if (!pipe) throw std::runtime_error("popen failed: " + command_line);
   std::array<char, 4096> buf;
-  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe)) result.output.append(buf.data(), n);
+  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe))
+    result.output.append(buf.data(), n);
   const int status = ::pclose(pipe);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return result;
@@ -114,6 +117,16 @@ void write_every_third_pixel(const std::filesystem::path& photo_in,
   wd.pixel_type = PixelType::float32;
   wd.colorspace = colorspace::raw;
   write_image(depth_out, d, wd);
+}
+
+void write_reduced_sample(const std::filesystem::path& samples, const std::string& stem,
+                          const std::filesystem::path& dir) {
+  write_every_third_pixel(samples / (stem + ".jpg"), samples / (stem + "_depth.exr"),
+                          dir / (stem + ".png"), dir / (stem + "_depth.exr"));
+}
+
+std::string shell_quoted(const std::filesystem::path& p) {
+  return "'" + p.string() + "'";
 }
 
 }  // namespace mr::test

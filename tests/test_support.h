@@ -47,4 +47,12 @@ void write_every_third_pixel(const std::filesystem::path& photo, const std::file
                              const std::filesystem::path& photo_out,
                              const std::filesystem::path& depth_out);
 
+/// write_every_third_pixel of the sample `<samples>/<stem>.jpg` and its `<stem>_depth.exr`, as
+/// `<dir>/<stem>.png` and `<dir>/<stem>_depth.exr` (where `mr fog` finds a photo's depth).
+void write_reduced_sample(const std::filesystem::path& samples, const std::string& stem,
+                          const std::filesystem::path& dir);
+
+/// `p` in single quotes, for the command lines the CLI tests run through the shell.
+std::string shell_quoted(const std::filesystem::path& p);
+
 }  // namespace mr::test
