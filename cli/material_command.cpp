@@ -6,11 +6,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <numbers>
 #include <vector>
 
-#include <unistd.h>
 
 #include "batch.h"
 #include "mr/material.h"
@@ -170,31 +168,6 @@ LoadedPhoto load_scene_target(const std::string& depth_path, const std::string& 
     p.light_note = "default light at sky radiance 1 (sun behind-left of the camera, 45 deg up)";
   }
   return p;
-}
-
-void write_text_atomically(const fs::path& path, const std::string& text) {
-  // Beside the final file, renamed over it when complete (as mr::write_image does), named as
-  // libmr names its temporaries so that a killed run's leftover is recognised and removed.
-  check_output_path(path);
-  const fs::path temp = path.parent_path() / ("." + path.stem().string() + ".mr-tmp-" +
-                                              std::to_string(::getpid()) + "-0" +
-                                              path.extension().string());
-  {
-    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
-    out << text;
-    out.close();
-    if (!out) {
-      std::error_code ec;
-      fs::remove(temp, ec);
-      throw Error(ErrorCode::io, path.string() + ": cannot write");
-    }
-  }
-  std::error_code ec;
-  fs::rename(temp, path, ec);
-  if (ec) {
-    fs::remove(temp, ec);
-    throw Error(ErrorCode::io, path.string() + ": cannot write: " + ec.message());
-  }
 }
 
 }  // namespace
@@ -379,7 +352,7 @@ int run_material_command(const MaterialCommandOptions& o) {
     write_image(o.output, out, write);
     result.image = Image();
     if (!o.materials_json.empty())
-      write_text_atomically(o.materials_json, material_result_to_json(result));
+      mr::write_text_file(o.materials_json, material_result_to_json(result));
   } catch (const Error& e) {
     return fail(1, e.what());
   }

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 
 #include <OpenImageIO/imageio.h>
 
@@ -466,6 +467,37 @@ TEST(Io, ParsesPixelTypes) {
   EXPECT_FALSE(is_readable_image_extension("a.txt"));
   EXPECT_TRUE(is_readable_image_extension("a.pfm"));
   EXPECT_FALSE(is_writable_image_extension("a.pfm"));  // OIIO 2.4 has no PFM writer
+}
+
+
+TEST(IoErrors, TextFilesAreWrittenAtomicallyAndOnlyAsRegularFiles) {
+  test::ScratchDir dir;
+  write_text_file(dir / "a.json", "{\"x\": 1}\n");
+  EXPECT_EQ(test::read_bytes(dir / "a.json"), "{\"x\": 1}\n");
+  write_text_file(dir / "a.json", "{}");  // replaced
+  EXPECT_EQ(test::read_bytes(dir / "a.json"), "{}");
+  EXPECT_THROW(write_text_file(dir / "a.json", "new", /*overwrite=*/false), Error);
+  EXPECT_EQ(test::read_bytes(dir / "a.json"), "{}");
+  try {
+    write_text_file(dir / "no/such/folder/b.json", "{}");
+    ADD_FAILURE() << "a missing folder must be an error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::io);
+    EXPECT_NE(std::string(e.what()).find("b.json"), std::string::npos) << e.what();
+  }
+  // A FIFO or a symbolic link at the target is refused, not replaced by a regular file.
+  ASSERT_EQ(::mkfifo((dir / "pipe.json").c_str(), 0600), 0);
+  EXPECT_THROW(write_text_file(dir / "pipe.json", "{}"), Error);
+  std::filesystem::create_symlink(dir / "a.json", dir / "link.json");
+  EXPECT_THROW(write_text_file(dir / "link.json", "{}"), Error);
+  EXPECT_TRUE(std::filesystem::is_fifo(dir / "pipe.json"));
+  EXPECT_TRUE(std::filesystem::is_symlink(dir / "link.json"));
+  std::size_t entries = 0;  // no temporary left behind
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) {
+    ++entries;
+    EXPECT_EQ(entry.path().filename().string().find(".mr-tmp-"), std::string::npos);
+  }
+  EXPECT_EQ(entries, 3u);
 }
 
 }  // namespace

@@ -4,10 +4,8 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <initializer_list>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -441,16 +439,7 @@ Annotations load_annotations(const fs::path& path) {
 
 void save_annotations(const fs::path& path, const Annotations& annotations) {
   const std::string text = annotations_to_json(annotations);
-  const std::string name = path.string();
-  detail::AtomicFile file(path);
-  {
-    std::ofstream out(file.temp_path(), std::ios::binary | std::ios::trunc);
-    if (!out) throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(errno));
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    out.close();
-    if (!out) throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(errno));
-  }
-  file.commit();
+  detail::write_text_atomically(path, text);
 }
 
 }  // namespace mr

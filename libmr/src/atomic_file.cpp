@@ -9,9 +9,11 @@
 #include <cerrno>
 #include <climits>
 #include <cstring>
+#include <fstream>
 #include <system_error>
 
 #include "mr/error.h"
+#include "mr/io.h"
 
 namespace mr::detail {
 
@@ -143,4 +145,35 @@ void AtomicFile::commit(bool overwrite) {
   slot_ = -1;
 }
 
+void write_text_atomically(const std::filesystem::path& path, std::string_view text,
+                           bool overwrite) {
+  const std::string name = path.string();
+  AtomicFile file(path);  // removes its temporary file unless committed
+  {
+    std::ofstream out(file.temp_path(), std::ios::binary | std::ios::trunc);
+    if (!out) {
+      const int err = errno;
+      std::error_code ec;
+      const std::filesystem::path folder =
+          path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path();
+      if (!std::filesystem::is_directory(folder, ec))
+        throw Error(ErrorCode::io,
+                    name + ": cannot write: folder " + folder.string() + " does not exist");
+      throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(err));
+    }
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.close();
+    if (!out) throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(errno));
+  }
+  file.commit(overwrite);
+}
+
 }  // namespace mr::detail
+
+namespace mr {
+
+void write_text_file(const std::filesystem::path& path, std::string_view text, bool overwrite) {
+  detail::write_text_atomically(path, text, overwrite);
+}
+
+}  // namespace mr

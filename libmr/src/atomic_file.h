@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 namespace mr::detail {
 
@@ -43,6 +44,12 @@ class AtomicFile {
   bool committed_ = false;
   int slot_ = -1;  // in the registry remove_temporaries_now() reads
 };
+
+/// Writes `text` to `path` through an AtomicFile (temporary beside it, fsync, rename).
+/// Throws mr::Error(io) naming `path` (a missing folder is said as such); nothing is left
+/// behind on failure.
+void write_text_atomically(const std::filesystem::path& path, std::string_view text,
+                           bool overwrite = true);
 
 /// Unlinks the temporary files of every AtomicFile alive now (uncommitted outputs being
 /// written). Async-signal-safe: for a handler that ends the process at once.

@@ -5,12 +5,10 @@
 #include <algorithm>
 #include <array>
 #include <cctype>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <initializer_list>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -701,24 +699,7 @@ FogScene load_scene(const fs::path& path) {
 
 void save_scene(const fs::path& path, const FogScene& scene) {
   const std::string text = scene_to_json(scene);  // throws before anything touches the disk
-  const std::string name = path.string();
-  detail::AtomicFile file(path);  // removes its temporary file unless committed
-  {
-    std::ofstream out(file.temp_path(), std::ios::binary | std::ios::trunc);
-    if (!out) {
-      const int err = errno;
-      std::error_code ec;
-      const fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();
-      if (!fs::is_directory(folder, ec))
-        throw Error(ErrorCode::io,
-                    name + ": cannot write: folder " + folder.string() + " does not exist");
-      throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(err));
-    }
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    out.close();
-    if (!out) throw Error(ErrorCode::io, name + ": cannot write: " + std::strerror(errno));
-  }
-  file.commit();
+  detail::write_text_atomically(path, text);
 }
 
 namespace detail {

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <span>
 #include <string>
+#include <string_view>
 
 #include "mr/color.h"
 #include "mr/image.h"
@@ -106,6 +107,14 @@ void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLaye
 /// symbolic link, a FIFO, a device, a folder). A missing path is fine. Every writer of libmr
 /// checks this; front ends call it to refuse a target before any work.
 void check_output_path(const std::filesystem::path& path);
+
+/// Writes `text` (a JSON document, a report) to `path` as libmr writes its images: into a
+/// hidden temporary beside it, synced, then renamed into place, so no reader sees a partial
+/// file and an interrupted run leaves nothing (remove_unfinished_outputs() knows it). `path`
+/// must not be anything but a regular file (check_output_path). With overwrite == false an
+/// existing file is an error and is left alone. Throws mr::Error(io) naming `path`.
+void write_text_file(const std::filesystem::path& path, std::string_view text,
+                     bool overwrite = true);
 
 /// Removes the hidden temporary files of the outputs libmr is writing right now (every writer
 /// writes a temporary beside its output and renames it into place when complete), leaving
