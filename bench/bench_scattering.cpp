@@ -160,8 +160,8 @@ void BM_Stages(benchmark::State& state) {
     mr::render::MeshOptions mesh_options;
     if (state.range(3) != 0)
       mesh_options.planar_merge_tolerance = mr::render::kCpuPlanarMergeTolerance;
-    mr::render::TriangleMesh mesh =
-        mr::render::reconstruct_occluder_mesh(in.depth.view(), in.camera, s.pose, mesh_options);
+    mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
+        in.depth.view(), in.camera, s.pose, mesh_options, normals.view());
     mesh_s = since(t);
     t = Clock::now();
     mr::render::append_blockers(mesh, in.depth.view(), normals.view(), in.camera, s.pose,
