@@ -24,8 +24,11 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <map>
+#include <string>
 #include <tuple>
 
 #include "leuven_scene.h"
@@ -143,6 +146,9 @@ void BM_Stages(benchmark::State& state) {
   mr::Image sun_visibility = mr::Image::uninitialized(width, height, 1);
   mr::Image optical_depth = mr::Image::uninitialized(width, height, 3);
   double normals_s = 0, mesh_s = 0, blockers_s = 0, bvh_s = 0, cpu_s = 0;
+  // Process CPU time (all threads) of the geometry (normals, mesh, blockers, BVH) and of the
+  // render: comparable across runs on a machine other work shares, where wall times are not.
+  double geometry_cpu_s = 0, render_cpu_s = 0;
   std::size_t triangles = 0;
   mr::render::CoreOutputs out;
   for (auto _ : state) {
@@ -154,8 +160,8 @@ void BM_Stages(benchmark::State& state) {
     mr::render::MeshOptions mesh_options;
     if (state.range(3) != 0)
       mesh_options.planar_merge_tolerance = mr::render::kCpuPlanarMergeTolerance;
-    mr::render::TriangleMesh mesh =
-        mr::render::reconstruct_occluder_mesh(in.depth.view(), in.camera, s.pose, mesh_options);
+    mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
+        in.depth.view(), in.camera, s.pose, mesh_options, normals.view());
     mesh_s = since(t);
     t = Clock::now();
     mr::render::append_blockers(mesh, in.depth.view(), normals.view(), in.camera, s.pose,
@@ -165,6 +171,8 @@ void BM_Stages(benchmark::State& state) {
     t = Clock::now();
     const mr::render::OccluderScene occluders(std::move(mesh));
     bvh_s = since(t);
+    const double cpu1 = process_cpu_s();
+    geometry_cpu_s = cpu1 - cpu0;
     mr::render::CoreInputs core_in;
     core_in.camera = &in.camera;
     core_in.scene = &s;
@@ -176,7 +184,23 @@ void BM_Stages(benchmark::State& state) {
     out = mr::render::CoreOutputs{transmittance.view(), inscatter.view(), sun_visibility.view(),
                                   optical_depth.view()};
     mr::render::render_scattering_cpu(core_in, out);
-    cpu_s = process_cpu_s() - cpu0;
+    const double cpu2 = process_cpu_s();
+    cpu_s = cpu2 - cpu0;
+    render_cpu_s = cpu2 - cpu1;
+  }
+  // MR_BENCH_DUMP=<prefix>: the last render's R, T and sun visibility as raw floats
+  // (<prefix>.R.f32, ...), to compare two builds' outputs pixel by pixel.
+  if (const char* prefix = std::getenv("MR_BENCH_DUMP")) {
+    auto dump = [&](const mr::Image& image, const char* name) {
+      const std::string path = std::string(prefix) + "." + name + ".f32";
+      if (std::FILE* f = std::fopen(path.c_str(), "wb")) {
+        std::fwrite(image.data(), sizeof(float), image.pixels().size(), f);
+        std::fclose(f);
+      }
+    };
+    dump(inscatter, "R");
+    dump(transmittance, "T");
+    dump(sun_visibility, "S");
   }
   state.counters["normals_ms"] = normals_s * 1e3;
   state.counters["mesh_ms"] = mesh_s * 1e3;
@@ -186,6 +210,8 @@ void BM_Stages(benchmark::State& state) {
   state.counters["interp_ms"] = out.interpolation_s * 1e3;
   state.counters["surface_ms"] = out.surface_s * 1e3;
   state.counters["cpu_ms"] = cpu_s * 1e3;
+  state.counters["geometry_cpu_ms"] = geometry_cpu_s * 1e3;
+  state.counters["render_cpu_ms"] = render_cpu_s * 1e3;
   state.counters["Mtriangles"] = double(triangles) / 1e6;
   state.counters["Mrays"] = double(out.shadow_rays) / 1e6;
 }

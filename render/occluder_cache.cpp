@@ -132,7 +132,12 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
     mesh =
         reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, *r.pose, r.mesh_options);
   } else {
-    mesh = reconstruct_occluder_mesh(r.distance_m, *r.camera, *r.pose, r.mesh_options);
+    // Normals as estimate_normals computed them above (the same discontinuity ratio).
+    mesh = reconstruct_occluder_mesh(
+        r.distance_m, *r.camera, *r.pose, r.mesh_options,
+        r.mesh_options.discontinuity_ratio == MeshOptions{}.discontinuity_ratio
+            ? ConstImageView(geometry->normals.view())
+            : ConstImageView{});
   }
   geometry->completed_blockers =
       append_blockers(mesh, r.distance_m, geometry->normals.view(), *r.camera, *r.pose, *r.blockers)

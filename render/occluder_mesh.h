@@ -124,7 +124,12 @@ Image estimate_normals(ConstImageView distance_m, const Camera& camera, const Ca
 /// Throws mr::Error(invalid_argument) for a depth map with other than 1 channel or bad options,
 /// mr::Error(size_mismatch) when its size differs from the camera's (the message names both
 /// sizes), and mr::Error(invalid_argument) if the mesh would exceed 2^32 - 1 vertices.
+///
+/// `normals`: estimate_normals(distance_m, camera, pose, options.discontinuity_ratio) when the
+/// caller has them already (the same values the mesh would compute; saves recomputing them), or
+/// an empty view. Throws mr::Error(size_mismatch) unless they are 3 channels of the map's size.
 TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& camera,
-                                       const CameraPose& pose, const MeshOptions& options = {});
+                                       const CameraPose& pose, const MeshOptions& options = {},
+                                       ConstImageView normals = {});
 
 }  // namespace mr::render

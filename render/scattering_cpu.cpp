@@ -184,7 +184,8 @@ class Core {
     }
 
     // Segment boundaries: uniform in transmittance, plus equiangular ones around each lamp.
-    std::vector<double> bounds;
+    thread_local std::vector<double> bounds;  // no allocation per march
+    bounds.clear();
     bounds.reserve(std::size_t(steps + plan_.lamp_steps * scene_.lighting.lamps.size() + 2));
     bounds.push_back(0);
     bounds.push_back(length);
@@ -199,7 +200,8 @@ class Core {
     } else {
       for (int i = 1; i < steps; ++i) bounds.push_back(length * i / steps);
     }
-    std::vector<LampOnRay> lamp_rays;
+    thread_local std::vector<LampOnRay> lamp_rays;
+    lamp_rays.clear();
     lamp_rays.reserve(scene_.lighting.lamps.size());
     for (const Lamp& lamp : scene_.lighting.lamps) {
       const Vec3d p = vec(lamp.position_m);
@@ -426,8 +428,8 @@ class Core {
       const double t_lo = std::max(0.0, (distance - change) * (1 - 2e-3) - 1e-3);
       const double t_hi = distance * (1 + 1e-4) + 1e-4;
       rays_.local() += 1;
-      const double hit = in_.occluders->intersect_distance(f3(origin_), f3(w), float(t_lo),
-                                                            float(t_hi));
+      const double hit =
+          in_.occluders->intersect_distance(f3(origin_), f3(w), float(t_lo), float(t_hi));
       if (std::isfinite(hit)) t_surface = std::min(hit, distance);
     }
     return add(add(origin_, w, t_surface), n, 1e-3 + 1e-3 * distance);
@@ -650,13 +652,63 @@ class Core {
   mutable tbb::combinable<std::size_t> rays_{[] { return std::size_t(0); }};
 };
 
-// Per-pixel state of the gradient-accelerated pass.
+// Per-pixel state of the gradient-accelerated pass. The exact grid samples keep their whole
+// PixelSample (pass 2 interpolates from them); every pixel keeps only what pass 3 reads: R goes
+// straight into the output image (as float, what pass 3 wrote before), AO and the surface's sun
+// visibility in doubles, the camera's optical depth only when noise keeps pass 3 from its closed
+// form. A full-frame PixelSample array (88 bytes a pixel, 182 MB at 1080p, zeroed by the kernel
+// on every render) was a tenth of the render's CPU time in page faults.
 struct Sparse {
   int width = 0, height = 0;
-  std::vector<PixelSample> samples;  // valid where `have` is set
-  std::vector<unsigned char> have;
-  PixelSample& at(int x, int y) { return samples[std::size_t(y) * width + x]; }
-  bool has(int x, int y) const { return have[std::size_t(y) * width + x] != 0; }
+  ImageView inscatter;               // the output R (3 channels)
+  std::vector<double> ao, sun_disk;  // per pixel
+  std::vector<double> camera_od;     // 3 per pixel, only when keep_camera_od
+  bool keep_camera_od = false;
+  std::vector<PixelSample> grid;           // the grid samples, row-major over gx x gy (when kept)
+  std::vector<int> grid_column, grid_row;  // a pixel column's (row's) index in gx (gy), or -1
+  std::size_t columns = 0;                 // gx.size()
+
+  void init(int w, int h, ImageView r, bool keep_od, const std::vector<int>& gx,
+            const std::vector<int>& gy, bool keep_grid) {
+    width = w;
+    height = h;
+    inscatter = r;
+    keep_camera_od = keep_od;
+    columns = gx.size();
+    ao.resize(std::size_t(w) * h);
+    sun_disk.resize(std::size_t(w) * h);
+    if (keep_od) camera_od.resize(3 * std::size_t(w) * h);
+    grid_column.assign(std::size_t(w), -1);
+    grid_row.assign(std::size_t(h), -1);
+    for (std::size_t i = 0; i < gx.size(); ++i) grid_column[std::size_t(gx[i])] = int(i);
+    for (std::size_t j = 0; j < gy.size(); ++j) grid_row[std::size_t(gy[j])] = int(j);
+    if (keep_grid) grid.resize(gx.size() * gy.size());
+  }
+  // Whether pixel (x, y) is a grid sample.
+  bool has(int x, int y) const {
+    return grid_column[std::size_t(x)] >= 0 && grid_row[std::size_t(y)] >= 0;
+  }
+  const PixelSample& grid_at(std::size_t i, std::size_t j) const { return grid[j * columns + i]; }
+  PixelSample& grid_at(std::size_t i, std::size_t j) { return grid[j * columns + i]; }
+  void set(int x, int y, const PixelSample& s) {
+    const std::size_t idx = std::size_t(y) * width + x;
+    for (int c = 0; c < 3; ++c) inscatter.at(x, y, c) = float(s.inscatter[c]);
+    if (keep_camera_od)
+      for (int c = 0; c < 3; ++c) camera_od[3 * idx + c] = s.camera_od[c];
+    ao[idx] = s.ao;
+    sun_disk[idx] = s.sun_disk;
+  }
+  // What pass 3 reads of pixel (x, y) (R as stored; the camera's optical depth 0 unless kept).
+  PixelSample at(int x, int y) const {
+    const std::size_t idx = std::size_t(y) * width + x;
+    PixelSample s;
+    for (int c = 0; c < 3; ++c) s.inscatter[c] = inscatter.at(x, y, c);
+    if (keep_camera_od)
+      for (int c = 0; c < 3; ++c) s.camera_od[c] = camera_od[3 * idx + c];
+    s.ao = ao[idx];
+    s.sun_disk = sun_disk[idx];
+    return s;
+  }
 };
 
 bool depth_continuous(double a, double b) {
@@ -703,20 +755,6 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   auto throw_if_stopped = [&] { throw_if_cancelled(in.cancel, "render_scattering (cpu)"); };
   throw_if_stopped();
 
-  Sparse sparse;
-  sparse.width = w;
-  sparse.height = h;
-  sparse.samples.resize(std::size_t(w) * h);
-  sparse.have.assign(std::size_t(w) * h, 0);
-
-  auto exact = [&](int x, int y, int steps) {
-    PixelSample s = core.march(x, y, steps);
-    if (core.needs_ao()) s.ao = core.ambient_occlusion_at(x, y);
-    s.sun_disk = core.sun_disk_visibility(x, y);
-    sparse.at(x, y) = s;
-    sparse.have[std::size_t(y) * w + x] = 1;
-  };
-
   // Pass 1: exact samples on the sparse grid (and the last row / column, so every pixel lies in
   // a cell with four samples).
   std::vector<int> gx, gy;
@@ -724,6 +762,18 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   if (gx.back() != w - 1) gx.push_back(w - 1);
   for (int y = 0; y < h; y += g) gy.push_back(y);
   if (gy.back() != h - 1) gy.push_back(h - 1);
+
+  const bool closed_form_camera = !core.has_noise();
+  Sparse sparse;
+  sparse.init(w, h, out.inscatter, !closed_form_camera, gx, gy, g > 1);
+
+  auto exact = [&](int x, int y, int steps) {
+    PixelSample s = core.march(x, y, steps);
+    if (core.needs_ao()) s.ao = core.ambient_occlusion_at(x, y);
+    s.sun_disk = core.sun_disk_visibility(x, y);
+    sparse.set(x, y, s);
+    return s;
+  };
   // Progress (mr/cancel.h): one "render" stage in units of work weighted by their measured cost
   // (1280x720 street with sun, grid step 3: pass 1 0.75 s for 103k samples, pass 2 0.12 s for
   // 102k cells, pass 3 0.12 s for 0.9 MP): a sample 8, a cell 1, a row of pass 3 w / 8.
@@ -737,8 +787,10 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                     [&](const tbb::blocked_range2d<std::size_t>& r) {
                       for (std::size_t j = r.rows().begin(); j < r.rows().end(); ++j) {
                         if (stop()) return;
-                        for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i)
-                          exact(gx[i], gy[j], plan.steps);
+                        for (std::size_t i = r.cols().begin(); i < r.cols().end(); ++i) {
+                          const PixelSample s = exact(gx[i], gy[j], plan.steps);
+                          if (g > 1) sparse.grid_at(i, j) = s;
+                        }
                         progress.add(r.cols().size() * kSampleWork);
                       }
                     });
@@ -749,7 +801,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
 
   // Pass 2: every other pixel from its cell's four samples with their gradients, where all
   // four are depth-continuous with it and agree on the sun's shadowing; else exactly.
-  std::vector<unsigned char> interpolated(std::size_t(w) * h, 0);
+  tbb::combinable<std::size_t> interpolated{[] { return std::size_t(0); }};
   tbb::combinable<std::size_t> exact_more{[] { return std::size_t(0); }};
   if (g > 1) {
     auto d = [&](int x, int y) { return double(in.distance_m.at(x, y, 0)); };
@@ -757,7 +809,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     // are continuous with it, one-sided where one is, else flat).
     auto gradient = [&](std::size_t i, std::size_t j, bool along_x, int c) {
       const int x = gx[i], y = gy[j];
-      const PixelSample& s = sparse.at(x, y);
+      const PixelSample& s = sparse.grid_at(i, j);
       auto value = [&](const PixelSample& p) {
         return c < 3 ? p.inscatter[c] : (c < 6 ? p.camera_od[c - 3] : p.ao);
       };
@@ -770,7 +822,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         const int nx = along_x ? gx[k + side] : x, ny = along_x ? y : gy[k + side];
         if (!depth_continuous(d(nx, ny), d(x, y))) continue;
         const double dist = along_x ? nx - x : ny - y;
-        slope_sum += (value(sparse.at(nx, ny)) - value(s)) / dist;
+        const PixelSample& neighbour =
+            along_x ? sparse.grid_at(k + side, j) : sparse.grid_at(i, k + side);
+        slope_sum += (value(neighbour) - value(s)) / dist;
         ++slopes;
       }
       return slopes ? slope_sum / slopes : 0.0;
@@ -802,7 +856,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
               double shaft_min = 1, shaft_max = 0;
               for (int k = 0; k < 4; ++k) {
                 const auto [ci, cj] = corners[k];
-                const PixelSample& s = sparse.at(gx[ci], gy[cj]);
+                const PixelSample& s = sparse.grid_at(ci, cj);
                 for (int c = 0; c < kValues; ++c) {
                   value[k][c] = c < 3 ? s.inscatter[c] : (c < 6 ? s.camera_od[c - 3] : s.ao);
                   grad_x[k][c] = sample_gradients[cj * gx.size() + ci][c];
@@ -822,15 +876,15 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
               }
               const bool shadow_edge =
                   shaft_max - shaft_min > 0.2 || lum_max > 1.25 * lum_min + 1e-12;
-              const double disk0 = sparse.at(x0, y0).sun_disk;
-              const bool sun_disk_agrees = disk0 >= 0 && sparse.at(x1, y0).sun_disk == disk0 &&
-                                           sparse.at(x0, y1).sun_disk == disk0 &&
-                                           sparse.at(x1, y1).sun_disk == disk0;
+              const double disk0 = sparse.grid_at(i, j).sun_disk;
+              const bool sun_disk_agrees = disk0 >= 0 &&
+                                           sparse.grid_at(i + 1, j).sun_disk == disk0 &&
+                                           sparse.grid_at(i, j + 1).sun_disk == disk0 &&
+                                           sparse.grid_at(i + 1, j + 1).sun_disk == disk0;
               for (int y = y0; y <= y1; ++y)
                 for (int x = x0; x <= x1; ++x) {
                   if (sparse.has(x, y)) continue;
                   // Cells share edges: the first cell to reach a pixel decides it.
-                  const std::size_t idx = std::size_t(y) * w + x;
                   if ((x == x1 && i + 2 < gx.size()) || (y == y1 && j + 2 < gy.size())) continue;
                   bool ok = !shadow_edge;
                   for (int k = 0; k < 4 && ok; ++k)
@@ -845,7 +899,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                   const double fx = double(x - x0) / (x1 - x0), fy = double(y - y0) / (y1 - y0);
                   const double wts[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
                                          fx * fy};
-                  PixelSample& p = sparse.at(x, y);
+                  PixelSample p;
                   double acc[kValues] = {};
                   for (int k = 0; k < 4; ++k) {
                     const double dx = x - gx[corners[k].first], dy = y - gy[corners[k].second];
@@ -861,8 +915,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                   // only where all four agree (a shadow narrower than the grid spacing that falls
                   // between samples is lost: the price of the acceleration), else traced.
                   p.sun_disk = -1;
-                  if (sun_disk_agrees) p.sun_disk = sparse.at(x0, y0).sun_disk;
-                  interpolated[idx] = 1;
+                  if (sun_disk_agrees) p.sun_disk = disk0;
+                  sparse.set(x, y, p);
+                  ++interpolated.local();
                 }
             }
             progress.add(r.cols().size() * kCellWork);
@@ -891,7 +946,6 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     });
     throw_if_stopped();
   }
-  const bool closed_form_camera = !core.has_noise();
   tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y < rows.end(); ++y) {
       if (stop()) return;
@@ -909,8 +963,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         }
         core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible);
         for (int c = 0; c < 3; ++c) {
-          out.transmittance.at(x, y, c) = float(std::exp(-od[c]) * S[c]);
-          out.inscatter.at(x, y, c) = float(s.inscatter[c]);
+          out.transmittance.at(x, y, c) = float(std::exp(-od[c]) * S[c]);  // R: pass 1 or 2
           out.optical_depth.at(x, y, c) = float(od[c]);
         }
         out.sun_visibility.at(x, y, 0) = sun_visible;
@@ -919,8 +972,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     }
   });
   throw_if_stopped();
-  std::size_t interpolated_count = 0;
-  for (unsigned char v : interpolated) interpolated_count += v;
+  const std::size_t interpolated_count = interpolated.combine(std::plus<>());
   out.surface_s = seconds_since(pass_start);
   out.exact_pixels = exact_count;
   out.interpolated_pixels = interpolated_count;

@@ -37,7 +37,9 @@ MarchPlan march_plan(const RenderSettings& settings);
 /// triangulation of their boundary. The surface moves by at most 4e-4 of its distance, under the
 /// mesh's own centre tolerance (1e-3) and the shadow rays' offset from it (1e-3 of the distance);
 /// at 1080p on sample_photos/leuven it took 4.1 M triangles to 2.8 M, and R changed by < 1e-7
-/// on average (relative). The Vulkan backend keeps the full mesh.
+/// on average (relative). The Vulkan backend keeps the full mesh, and so, by default, does the
+/// CPU backend since the merge measured a net loss there (libmr/src/scattering.cpp); this is the
+/// tolerance for callers that decimate (tests, the BM_Stages merge row).
 inline constexpr double kCpuPlanarMergeTolerance = 2e-4;
 
 struct CoreInputs {

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <limits>
 #include <random>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -744,6 +745,28 @@ TEST(OccluderMesh, RejectsBadInput) {
   sky.at(3, 4, 0) = std::numeric_limits<float>::quiet_NaN();
   sky.at(5, 4, 0) = -1.0f;
   EXPECT_EQ(reconstruct_occluder_mesh(sky.view(), camera, pose).triangle_count(), 0u);
+}
+
+// The mesh built from the caller's normals (estimate_normals, as the CPU core's geometry cache
+// passes them) is the mesh built alone, bit for bit; normals of another size are a clear error.
+TEST(OccluderMesh, KnownNormalsGiveTheSameMesh) {
+  const Rendered r = make_box_scene();
+  const Image normals = estimate_normals(r.distance_m.view(), r.camera, r.pose);
+  const TriangleMesh own = reconstruct_occluder_mesh(r.distance_m.view(), r.camera, r.pose);
+  const TriangleMesh given =
+      reconstruct_occluder_mesh(r.distance_m.view(), r.camera, r.pose, {}, normals.view());
+  ASSERT_GT(own.triangle_count(), 0u);
+  EXPECT_EQ(own.positions, given.positions);
+  EXPECT_EQ(own.indices, given.indices);
+  EXPECT_EQ(own.surface_triangle_count, given.surface_triangle_count);
+  const Image small = Image::uninitialized(r.camera.width - 1, r.camera.height, 3);
+  try {
+    reconstruct_occluder_mesh(r.distance_m.view(), r.camera, r.pose, {}, small.view());
+    FAIL() << "no error for normals of the wrong size";
+  } catch (const mr::Error& e) {
+    EXPECT_EQ(e.code(), mr::ErrorCode::size_mismatch);
+    EXPECT_NE(std::string(e.what()).find("normals"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

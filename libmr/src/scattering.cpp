@@ -187,12 +187,10 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
       int mesh_step = render::march_plan(scene.render).mesh_step;
       if (w / mesh_step < 16 || h / mesh_step < 16) mesh_step = 1;
       request.mesh_step = mesh_step;
-      // Only the full-resolution mesh is decimated: on draft's coarse one the merged
-      // triangles' edges cross the fine pixels' rays in places where Embree's fast edge test
-      // lets some through, and 16 of 7680 flat ground pixels shadowed themselves
-      // (Scattering.FlatSunlitGroundSurfaceTermAtEveryPreset).
-      if (mesh_step == 1)
-        request.mesh_options.planar_merge_tolerance = render::kCpuPlanarMergeTolerance;
+      // The mesh is not decimated (MeshOptions::planar_merge_tolerance stays 0): at 1080p on
+      // sample_photos/leuven the merge cost more in the mesh stage than it saved in the BVH
+      // build, and its long merged triangles made every shadow ray dearer (render CPU 6.6 ->
+      // 8.1 s, mesh + BVH CPU 2.9 -> 3.5 s), fresh or reused (issue 12 item 4).
       request.cancel = cancel;
       render::OccluderGeometryTimings gt;
       cpu_geometry = render::occluder_geometry(request, &gt);
