@@ -33,16 +33,16 @@ double luminance(const T* rgb) {
 
 }  // namespace
 
-bool PhotoFallback::wanted(const FogScene& scene, ConstImageView distance_m,
-                           ConstImageView normals, ConstImageView photo, bool casts_shadows) {
-  return casts_shadows && scene.lighting.sun && normals.data != nullptr &&
-         photo.data != nullptr && photo.channels >= 3 && photo.width == distance_m.width &&
+bool PhotoFallback::wanted(const FogScene& scene, ConstImageView distance_m, ConstImageView normals,
+                           ConstImageView photo, bool casts_shadows) {
+  return casts_shadows && scene.lighting.sun && normals.data != nullptr && photo.data != nullptr &&
+         photo.channels >= 3 && photo.width == distance_m.width &&
          photo.height == distance_m.height;
 }
 
-PhotoFallback::PhotoFallback(const Camera& camera, const FogScene& scene,
-                             ConstImageView distance_m, ConstImageView normals,
-                             ConstImageView photo, const std::array<float, 3>& sky_radiance)
+PhotoFallback::PhotoFallback(const Camera& camera, const FogScene& scene, ConstImageView distance_m,
+                             ConstImageView normals, ConstImageView photo,
+                             const std::array<float, 3>& sky_radiance)
     : camera_(camera),
       scene_(scene),
       distance_m_(distance_m),

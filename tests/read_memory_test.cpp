@@ -65,10 +65,11 @@ TEST(ReadMemory, BigPhotosDecodeIntoTheirFloatImagePlusAStrip) {
     ASSERT_GT(r.before_kib, 0) << name << ": " << r.output;
     ASSERT_EQ(r.image_bytes, 4000.0 * 3000 * 3 * 4) << name << ": " << r.output;
     const double added = double(r.peak_kib - r.before_kib) * 1024;
-    std::printf("[ Memory   ] %s: peak %.1f MiB, %.1f MiB before decoding, added %.3fx the "
-                "%.1f MiB float image\n",
-                name, r.peak_kib / 1024.0, r.before_kib / 1024.0, added / r.image_bytes,
-                r.image_bytes / 1048576.0);
+    std::printf(
+        "[ Memory   ] %s: peak %.1f MiB, %.1f MiB before decoding, added %.3fx the "
+        "%.1f MiB float image\n",
+        name, r.peak_kib / 1024.0, r.before_kib / 1024.0, added / r.image_bytes,
+        r.image_bytes / 1048576.0);
     EXPECT_LT(added, 1.10 * r.image_bytes) << name;
     EXPECT_GT(added, 0.9 * r.image_bytes) << name;  // the image itself is resident
   }

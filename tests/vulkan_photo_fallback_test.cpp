@@ -65,10 +65,11 @@ TEST_F(VulkanPhotoFallback, MatchesTheCpuCoreAndTheExactGeometry) {
     const vktest::Errors e = vktest::compare(gpu, cpu);
     const vktest::Errors e0 = vktest::compare(gpu_mesh_only, cpu_mesh_only);
     vktest::maybe_write_images(std::string("photo_fallback_") + name, gpu, cpu);
-    std::printf("[ Fallback ] %s, GPU vs CPU with the photo: T mean %.4f %% p99 %.4f %% | R mean "
-                "%.4f %% p99 %.4f %% (without it: T mean %.4f %% p99 %.4f %%)\n",
-                name, 100 * e.mean_t, 100 * e.p99_t, 100 * e.mean_r, 100 * e.p99_r,
-                100 * e0.mean_t, 100 * e0.p99_t);
+    std::printf(
+        "[ Fallback ] %s, GPU vs CPU with the photo: T mean %.4f %% p99 %.4f %% | R mean "
+        "%.4f %% p99 %.4f %% (without it: T mean %.4f %% p99 %.4f %%)\n",
+        name, 100 * e.mean_t, 100 * e.p99_t, 100 * e.mean_r, 100 * e.p99_r, 100 * e0.mean_t,
+        100 * e0.p99_t);
     EXPECT_LT(e.mean_t, 0.01) << name;
     EXPECT_LT(e.mean_r, 0.01) << name;
     EXPECT_LT(e.p99_t, 0.05) << name;
@@ -94,7 +95,8 @@ TEST_F(VulkanPhotoFallback, MatchesTheCpuCoreAndTheExactGeometry) {
 
     // Against the exact geometry, as the CPU core's test measures it.
     auto misplaced = [&](int x, int y) {
-      return ref.sun_visibility.at(x, y, 0) >= 0.5f && gpu_mesh_only.sun_visibility.at(x, y, 0) < 0.5f;
+      return ref.sun_visibility.at(x, y, 0) >= 0.5f &&
+             gpu_mesh_only.sun_visibility.at(x, y, 0) < 0.5f;
     };
     auto error = [&](const ScatteringLayers& l, const std::function<bool(int, int)>& only,
                      bool normalise_by_only) {
@@ -106,11 +108,12 @@ TEST_F(VulkanPhotoFallback, MatchesTheCpuCoreAndTheExactGeometry) {
     const double target_after = error(gpu, misplaced, false);
     const double shaded_before = error(gpu_mesh_only, shaded, true);
     const double shaded_after = error(gpu, shaded, true);
-    std::printf("[ Fallback ] %s, Vulkan: %d pixels changed (CPU %d, both %d, T there within "
-                "%.2e); composite error from T %.5f -> %.5f; on surfaces the shadow maps shade but "
-                "the sun lights %.5f -> %.5f; relative error on shaded surfaces %.5f -> %.5f\n",
-                name, gpu_changed, cpu_changed, both, worst_both, before, after, target_before,
-                target_after, shaded_before, shaded_after);
+    std::printf(
+        "[ Fallback ] %s, Vulkan: %d pixels changed (CPU %d, both %d, T there within "
+        "%.2e); composite error from T %.5f -> %.5f; on surfaces the shadow maps shade but "
+        "the sun lights %.5f -> %.5f; relative error on shaded surfaces %.5f -> %.5f\n",
+        name, gpu_changed, cpu_changed, both, worst_both, before, after, target_before,
+        target_after, shaded_before, shaded_after);
     EXPECT_GT(gpu_changed, 0) << name;
     EXPECT_GT(both, 0) << name;
     EXPECT_LT(worst_both, 0.01) << name;  // the backends' T bar, on the switched pixels alone

@@ -255,12 +255,13 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
     const OIIO::TypeDesc code_type = bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16;
     const std::size_t row_codes = std::size_t(spec.width) * std::size_t(n) * bytes;
     constexpr std::size_t kStripBytes = std::size_t(4) << 20;
-    const int strip_rows = spec.tile_width > 0
-                               ? spec.height
-                               : int(std::clamp<std::size_t>(kStripBytes / row_codes, 16,
-                                                             std::size_t(spec.height)));
+    const int strip_rows =
+        spec.tile_width > 0
+            ? spec.height
+            : int(std::clamp<std::size_t>(kStripBytes / row_codes, 16, std::size_t(spec.height)));
     std::vector<unsigned char> codes(std::size_t(strip_rows) * row_codes);
-    const std::ptrdiff_t in_px = std::ptrdiff_t(n * bytes), out_px = std::ptrdiff_t(n * sizeof(float));
+    const std::ptrdiff_t in_px = std::ptrdiff_t(n * bytes),
+                         out_px = std::ptrdiff_t(n * sizeof(float));
     for (int y0 = 0; y0 < spec.height; y0 += strip_rows) {
       const int rows = std::min(strip_rows, spec.height - y0);
       if (strip_rows == spec.height) {
