@@ -14,6 +14,7 @@
 
 #include "render/embree_scene.h"
 #include "render/medium.h"
+#include "render/photo_fallback.h"
 #include "shaders/scattering_params.h"  // kEdgeBisections, kShaftRefinement (shared with the GPU)
 
 namespace mr::render {
@@ -491,66 +492,6 @@ class Core {
     return double(seen) / count;
   }
 
-  // Whether the photo shows a sun-facing surface pixel that the mesh calls (partly) shadowed as
-  // sunlit (issue 13, section 3). The model predicts the contrast between the sunlit and the
-  // shadowed parts of one surface, k = (E cos + pi L_sky AO) / (pi L_sky AO). The pixel's
-  // neighbours within 3 pixels that lie on its plane and face the same way give the photo's two
-  // levels: the median of those the mesh calls fully sunlit and of those it calls fully
-  // shadowed. The pixel counts as sunlit when it is at least sqrt(k) times brighter than the
-  // shadowed level (so inside a real shadow, where the mesh's edge may have put a few sunlit
-  // neighbours that the photo shows dark, it stays shadowed) and no more than sqrt(k) times
-  // darker than the sunlit level. Each level needs 3 neighbours; with neither (deep inside a
-  // shadow there are no sunlit ones: the shadowed level decides) the mesh decides, as it does
-  // where lit and shadowed would look alike (k < 1.25).
-  bool photo_shows_sunlit(int x, int y, double ao, const std::vector<float>& disk) const {
-    if (in_.photo.data == nullptr || !scene_.lighting.sun) return false;
-    const double distance = in_.distance_m.at(x, y, 0);
-    const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
-    const double cos_i = dot(n, sun_dir_);
-    if (!std::isfinite(distance) || cos_i <= 0) return false;
-    auto luminance = [](const float* rgb) {
-      return 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
-    };
-    const double e = luminance(scene_.lighting.sun->irradiance.data()) * cos_i;
-    const double amb = kPi * luminance(in_.sky_radiance.data()) * ao;
-    const double k = amb > 0 ? std::min(100.0, (e + amb) / amb) : 100.0;
-    if (k < 1.25) return false;
-    const Vec3d xp = add(origin_, ray(x, y), distance);
-    constexpr int kRadius = 3;
-    constexpr int kMax = (2 * kRadius + 1) * (2 * kRadius + 1);
-    double lit[kMax], dark[kMax];
-    int n_lit = 0, n_dark = 0;
-    const int w = in_.distance_m.width, h = in_.distance_m.height;
-    for (int j = std::max(0, y - kRadius); j <= std::min(h - 1, y + kRadius); ++j)
-      for (int i = std::max(0, x - kRadius); i <= std::min(w - 1, x + kRadius); ++i) {
-        if (i == x && j == y) continue;
-        const float v = disk[std::size_t(j) * w + i];
-        if (v != 1.0f && v != 0.0f) continue;
-        const double dn = in_.distance_m.at(i, j, 0);
-        if (!std::isfinite(dn)) continue;
-        const Vec3d nn = {in_.normals.at(i, j, 0), in_.normals.at(i, j, 1),
-                          in_.normals.at(i, j, 2)};
-        if (dot(nn, n) < 0.9) continue;
-        const Vec3d xn = add(origin_, ray(i, j), dn);
-        if (std::fabs(dot(sub(xn, xp), n)) > 0.02 * distance) continue;
-        (v == 1.0f ? lit[n_lit++] : dark[n_dark++]) = luminance(in_.photo.pixel(i, j));
-      }
-    auto median = [](double* v, int count) {
-      std::nth_element(v, v + count / 2, v + count);
-      return v[count / 2];
-    };
-    const double here = luminance(in_.photo.pixel(x, y));
-    const double root_k = std::sqrt(k);
-    if (n_lit < 3 && n_dark < 3) return false;
-    if (n_dark >= 3 && !(here >= root_k * median(dark, n_dark))) return false;
-    if (n_lit >= 3 && !(here >= median(lit, n_lit) / root_k)) return false;
-    return here > 0;
-  }
-  bool photo_fallback() const {
-    return in_.photo.data != nullptr && scene_.lighting.sun && in_.occluders &&
-           in_.normals.data != nullptr;
-  }
-
   // T's surface factor S (DESIGN.md section 3) at a surface pixel; writes the sun visibility.
   // known_sun_disk: the pixel's sun_disk_visibility when already known (interpolation), else -1.
   void surface_term(int x, int y, double ao, double known_sun_disk, double S[3],
@@ -931,10 +872,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
 
   // Pass 3: per pixel, the transmittance map T = tau(camera, surface) * S(surface) and the AOVs.
   // With the photo, every surface pixel's sun visibility first (the photo fallback compares a
-  // pixel with its neighbours', see Core::photo_shows_sunlit).
-  const bool photo_fallback = core.photo_fallback();
+  // pixel with its neighbours', see render/photo_fallback.h; the Vulkan backend asks the same).
+  const bool photo_fallback = PhotoFallback::wanted(*in.scene, in.distance_m, in.normals,
+                                                    in.photo, in.occluders != nullptr);
+  std::optional<PhotoFallback> fallback;
   std::vector<float> disk;
   if (photo_fallback) {
+    fallback.emplace(*in.camera, *in.scene, in.distance_m, in.normals, in.photo, in.sky_radiance);
     disk.assign(std::size_t(w) * h, -1.0f);
     tbb::parallel_for(0, h, [&](int y) {
       if (stop()) return;
@@ -958,7 +902,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         double sun_disk = s.sun_disk;
         if (photo_fallback) {
           sun_disk = disk[std::size_t(y) * w + x];
-          if (sun_disk >= 0 && sun_disk < 1 && core.photo_shows_sunlit(x, y, s.ao, disk))
+          if (sun_disk >= 0 && sun_disk < 1 && fallback->shows_sunlit(x, y, s.ao, disk.data()))
             sun_disk = 1;
         }
         core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible);

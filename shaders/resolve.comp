@@ -14,6 +14,10 @@ layout(std430, set = 0, binding = 7) writeonly buffer ROut { float out_inscatter
 layout(std430, set = 0, binding = 8) writeonly buffer VOut { float out_sun_visibility[]; };
 layout(std430, set = 0, binding = 9) writeonly buffer OdOut { float out_optical_depth[]; };
 layout(std430, set = 0, binding = 10) buffer Counters { uint exact_count; uint interpolated_count; };
+// With kFlagPhotoFallback: per pixel, T as it would be with the sun seen at the surface (rgb)
+// and the AO (w); the host's photo fallback (render/photo_fallback.h) takes it where the photo
+// shows a pixel the shadow maps shade as sunlit, as the CPU core does.
+layout(std430, set = 0, binding = 12) writeonly buffer SunlitOut { vec4 out_sunlit[]; };
 
 shared uint wg_exact, wg_interpolated;
 
@@ -61,10 +65,13 @@ float gradient(int i, int j, bool along_x, int c) {
   return slopes > 0 ? slope_sum / float(slopes) : 0.0;
 }
 
-// T's surface factor S (DESIGN.md section 3) at a surface pixel; also the sun visibility.
+// T's surface factor S (DESIGN.md section 3) at a surface pixel; also the sun visibility, and
+// S_sun_seen: S with the sun's disk fully seen (the photo fallback's value).
 // known_sun_disk: the pixel's sun_disk_visibility when already known (interpolation), else -1.
-void surface_term(int x, int y, float ao, float known_sun_disk, out vec3 S, out float sun_visibility) {
+void surface_term(int x, int y, float ao, float known_sun_disk, out vec3 S, out vec3 S_sun_seen,
+                  out float sun_visibility) {
   S = vec3(1.0);
+  S_sun_seen = vec3(1.0);
   sun_visibility = 1.0;
   const float distance = depth_at(x, y);
   const bool sun = has_flag(kFlagSun);
@@ -77,15 +84,19 @@ void surface_term(int x, int y, float ao, float known_sun_disk, out vec3 S, out 
   const vec3 x0 = P.origin.xyz + ray_dir(x, y) * distance;
   const float offset = 1e-3 + 1e-3 * distance;  // off the surface for shadow lookups
   vec3 direct = vec3(0.0), direct_fogged = vec3(0.0);
+  vec3 sun_seen = vec3(0.0), sun_seen_fogged = vec3(0.0);  // the sun's share with visible = 1
   if (sun) {
     const float cos_i = dot(n, P.sun_dir.xyz);
     float visible = 0.0;
     if (cos_i > 0.0) visible = known_sun_disk >= 0.0 ? known_sun_disk : sun_disk_visibility(x, y);
     sun_visibility = visible;
     const float od_sun = lpa ? optical_depth(ray_density(x0, P.sun_dir.xyz), 0.0, INF) : 0.0;
-    const vec3 e = P.sun_irradiance.xyz * max(0.0, cos_i) * visible;
+    const vec3 e_seen = P.sun_irradiance.xyz * max(0.0, cos_i);
+    const vec3 e = e_seen * visible;
     direct += e;
     direct_fogged += e * exp(-sigma * od_sun);
+    sun_seen = e_seen - e;
+    sun_seen_fogged = (e_seen - e) * exp(-sigma * od_sun);
   }
   for (int l = 0; l < n_lamps; ++l) {
     const GpuLamp lamp = lamps[l];
@@ -106,6 +117,10 @@ void surface_term(int x, int y, float ao, float known_sun_disk, out vec3 S, out 
   const vec3 ambient = kPi * P.sky.xyz * ao;
   const vec3 total = direct + ambient;
   for (int c = 0; c < 3; ++c) S[c] = total[c] > 0.0 ? (direct_fogged[c] + ambient[c]) / total[c] : 1.0;
+  const vec3 total_seen = total + sun_seen;
+  for (int c = 0; c < 3; ++c)
+    S_sun_seen[c] = total_seen[c] > 0.0 ? (direct_fogged[c] + sun_seen_fogged[c] + ambient[c]) / total_seen[c]
+                                        : 1.0;
 }
 
 void main() {
@@ -191,9 +206,9 @@ void main() {
     }
     vec3 od = s.camera_od;
     if (!has_flag(kFlagNoise)) od = camera_optical_depth(x, y);
-    vec3 S;
+    vec3 S, S_sun_seen;
     float sun_visible;
-    surface_term(x, y, s.ao, sun_disk, S, sun_visible);
+    surface_term(x, y, s.ao, sun_disk, S, S_sun_seen, sun_visible);
     const vec3 T = exp(-od) * S;
     const int o = (id.y * P.tile.z + id.x);
     for (int c = 0; c < 3; ++c) {
@@ -202,6 +217,7 @@ void main() {
       out_optical_depth[3 * o + c] = od[c];
     }
     out_sun_visibility[o] = sun_visible;
+    if (has_flag(kFlagPhotoFallback)) out_sunlit[o] = vec4(exp(-od) * S_sun_seen, s.ao);
   }
   barrier();
   if (gl_LocalInvocationIndex == 0u) {

@@ -49,6 +49,7 @@ MR_CONST kFlagNoise = 8;                // noise modulates the view ray's densit
 MR_CONST kFlagConstantSource = 16;      // sky light only: every pixel in closed form
 MR_CONST kFlagNeedsAo = 32;             // ambient occlusion at exact samples
 MR_CONST kFlagNormals = 64;             // the normals buffer is valid
+MR_CONST kFlagPhotoFallback = 128;      // write each pixel's "sun seen" T and AO (binding 12)
 
 // ShadowLayer.origin.w: how a shadow-map layer measures depth.
 MR_CONST kLayerSun = 0;   // orthographic: depth = dot(x, axis.xyz) (axis = -direction to sun)

@@ -25,6 +25,7 @@
 #include <string>
 
 #include "mc_reference.h"
+#include "photo_fallback_scene.h"
 #include "mr/io.h"
 #include "mr/scattering.h"
 #include "test_support.h"
@@ -551,21 +552,7 @@ TEST(McReference, CoreMatchesReferenceWithAmbientLightOnly) {
 namespace mr {
 namespace {
 
-// The composite's error from T alone, sum |I (T - T_ref)| / sum I T_ref over surface pixels,
-// where `only` (if given) says which pixels count.
-double composite_error_from_t(const Image& photo, const Image& t, const Image& t_ref,
-                              const Image& distance, const std::function<bool(int, int)>& only) {
-  double err = 0, total = 0;
-  for (int y = 0; y < photo.height(); ++y)
-    for (int x = 0; x < photo.width(); ++x) {
-      if (!std::isfinite(distance.at(x, y, 0)) || (only && !only(x, y))) continue;
-      for (int c = 0; c < 3; ++c) {
-        err += std::fabs(photo.at(x, y, c) * (t.at(x, y, c) - t_ref.at(x, y, c)));
-        total += photo.at(x, y, c) * t_ref.at(x, y, c);
-      }
-    }
-  return total > 0 ? err / total : 0;
-}
+using test::composite_error_from_t;
 
 // Ground and two boxes under a sun from the front-right, 25 degrees up, in a 6 m fog layer; the
 // photo is what that geometry looks like (albedo times the exact sun and sky light). Where the
@@ -576,35 +563,12 @@ double composite_error_from_t(const Image& photo, const Image& t, const Image& t
 // drops by 10 %, its part on those surfaces by 40 %, and on the surfaces the reference shades
 // the relative error grows by less than 0.2 % (a dark surface taken for sunlit).
 TEST(McReference, SurfaceTermFallsBackToTheLightPathWhereThePhotoShowsSun) {
-  const Camera cam = Camera::from_horizontal_fov(96, 64, 60);
-  FogScene s;
-  s.pose.position_m = {0, 1.6, 0};
-  s.pose.pitch_deg = -7;
-  const float sigma = float(3.912 / 60.0);
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.albedo = {0.9f, 0.9f, 0.9f};
-  s.medium.layer_top_m = 6.0;
-  s.lighting.sun = Sun{direction_from_azimuth_elevation(35, 25), {3, 3, 3}, 0.27};
-  s.lighting.sky_radiance = Rgb{0.2f, 0.2f, 0.2f};
-  mcref::Geometry g;
-  g.ground = true;
-  g.boxes.push_back({{0.5, 0, 9}, {3.0, 3.0, 11.5}});
-  g.boxes.push_back({{-6.0, 0, 15}, {-2.0, 4.0, 19}});
-  g.boxes.push_back({{-1.0, 0, 6}, {-0.6, 5.0, 6.4}});  // a thin post
-  const Image distance = mcref::distance_map(cam, s.pose, g);
-  const mcref::SurfaceResult ref =
-      mcref::surface_reference(distance, cam, s, g, kSlowBuild ? 128 : 512);
-  // The photo: a smooth albedo (0.3..0.7) times the light the exact geometry receives.
-  const Image pattern = test::make_test_photo(cam.width, cam.height);
-  Image photo(cam.width, cam.height, 3);
-  for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x)
-      for (int c = 0; c < 3; ++c) {
-        const double albedo = 0.3 + 0.4 * pattern.at(x, y, c);
-        photo.at(x, y, c) = std::isfinite(distance.at(x, y, 0))
-                                ? float(albedo * (ref.direct.at(x, y, c) + ref.ambient.at(x, y, c)))
-                                : 1.0f;
-      }
+  test::PhotoFallbackScene f = test::photo_fallback_scene(kSlowBuild ? 128 : 512);
+  const Camera& cam = f.camera;
+  FogScene& s = f.scene;
+  const Image& distance = f.distance;
+  const mcref::SurfaceResult& ref = f.reference;
+  const Image& photo = f.photo;
   auto shaded = [&](int x, int y) { return ref.sun_visibility.at(x, y, 0) < 0.5f; };
   for (const Quality q : {Quality::normal, Quality::final}) {
     s.render.quality = q;
@@ -621,17 +585,7 @@ TEST(McReference, SurfaceTermFallsBackToTheLightPathWhereThePhotoShowsSun) {
       return ref.sun_visibility.at(x, y, 0) >= 0.5f && mesh_only.sun_visibility.at(x, y, 0) < 0.5f;
     };
     auto share = [&](const Image& t) {
-      double err = 0, total = 0;
-      for (int y = 0; y < cam.height; ++y)
-        for (int x = 0; x < cam.width; ++x) {
-          if (!std::isfinite(distance.at(x, y, 0))) continue;
-          for (int c = 0; c < 3; ++c) {
-            total += photo.at(x, y, c) * ref.transmittance.at(x, y, c);
-            if (misplaced(x, y))
-              err += std::fabs(photo.at(x, y, c) * (t.at(x, y, c) - ref.transmittance.at(x, y, c)));
-          }
-        }
-      return err / total;
+      return composite_error_from_t(photo, t, ref.transmittance, distance, misplaced, false);
     };
     const double target_before = share(mesh_only.transmittance);
     const double target_after = share(with_photo.transmittance);

@@ -247,22 +247,45 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
   const int n = spec.nchannels;
   if (options.to_scene_linear && is_integer(stored) && n >= 3) {
     // Integer codes go through OCIO's lookup table straight into floats: no pow per value.
+    // Scanline files are read strip by strip into the float image (issue 13: a 12000 x 12000
+    // PNG or JPEG peaked at 1.25x its float image with a whole-frame copy of its codes, now
+    // at the float image plus one strip); tiled ones whole.
     const int bits = stored == PixelType::uint8 ? 8 : 16;
     const std::size_t bytes = std::size_t(bits / 8);
-    std::vector<unsigned char> codes(image.pixels().size() * bytes);
-    read_pixels(bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16, codes.data());
-    const std::ptrdiff_t in_px = std::ptrdiff_t(n * bytes), out_px = std::ptrdiff_t(n * sizeof(float));
-    config.convert_pixels(codes.data(), bits, in_px, in_px * spec.width, image.data(), 32, out_px,
-                          out_px * spec.width, spec.width, spec.height, from, colorspace::scene_linear);
-    if (n > 3) {  // alpha and other extra channels: normalised codes
-      const double scale = 1.0 / (bits == 8 ? 255.0 : 65535.0);
-      const auto* c8 = codes.data();
-      const auto* c16 = reinterpret_cast<const std::uint16_t*>(codes.data());
-      for (std::size_t i = 0; i < image.pixel_count(); ++i)
-        for (int c = 3; c < n; ++c) {
-          const std::size_t k = i * n + c;
-          image.pixels()[k] = float((bits == 8 ? c8[k] : c16[k]) * scale);
-        }
+    const OIIO::TypeDesc code_type = bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16;
+    const std::size_t row_codes = std::size_t(spec.width) * std::size_t(n) * bytes;
+    constexpr std::size_t kStripBytes = std::size_t(4) << 20;
+    const int strip_rows =
+        spec.tile_width > 0
+            ? spec.height
+            : int(std::clamp<std::size_t>(kStripBytes / row_codes, 16, std::size_t(spec.height)));
+    std::vector<unsigned char> codes(std::size_t(strip_rows) * row_codes);
+    const std::ptrdiff_t in_px = std::ptrdiff_t(n * bytes),
+                         out_px = std::ptrdiff_t(n * sizeof(float));
+    for (int y0 = 0; y0 < spec.height; y0 += strip_rows) {
+      const int rows = std::min(strip_rows, spec.height - y0);
+      if (strip_rows == spec.height) {
+        read_pixels(code_type, codes.data());
+      } else if (!in->read_scanlines(0, 0, spec.y + y0, spec.y + y0 + rows, spec.z, 0, n, code_type,
+                                     codes.data()) ||
+                 in->has_error()) {
+        const std::string msg = in->geterror();
+        throw Error(ErrorCode::corrupt_input, path.string() + ": cannot decode pixels (" +
+                                                  (msg.empty() ? "truncated?" : msg) + ")");
+      }
+      float* out = image.data() + std::size_t(y0) * std::size_t(spec.width) * std::size_t(n);
+      config.convert_pixels(codes.data(), bits, in_px, in_px * spec.width, out, 32, out_px,
+                            out_px * spec.width, spec.width, rows, from, colorspace::scene_linear);
+      if (n > 3) {  // alpha and other extra channels: normalised codes
+        const double scale = 1.0 / (bits == 8 ? 255.0 : 65535.0);
+        const auto* c8 = codes.data();
+        const auto* c16 = reinterpret_cast<const std::uint16_t*>(codes.data());
+        for (std::size_t i = 0; i < std::size_t(rows) * std::size_t(spec.width); ++i)
+          for (int c = 3; c < n; ++c) {
+            const std::size_t k = i * n + c;
+            out[k] = float((bits == 8 ? c8[k] : c16[k]) * scale);
+          }
+      }
     }
   } else {
     read_pixels(OIIO::TypeDesc::FLOAT, image.data());

@@ -1,5 +1,7 @@
 #include "render/vulkan/vulkan_backend.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -11,6 +13,7 @@
 #include <optional>
 #include <vector>
 
+#include "render/photo_fallback.h"
 #include "render/vulkan/context.h"
 #include "shaders/scattering_params.h"
 
@@ -38,7 +41,7 @@ const std::uint32_t kLayoutCheckSpv[] =
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-constexpr int kComputeBindings = 12;  // 0..10 storage buffers, 11 the shadow atlas
+constexpr int kComputeBindings = 13;  // 0..10 and 12 storage buffers, 11 the shadow atlas
 constexpr int kMaxLamps = 16;         // shaders/scattering_common.glsl kMaxLamps
 constexpr float kFar = 3.0e38f;       // cleared shadow-map texels: nothing there
 // Shadow maps store each texel's surface depth plus its change across the texel, capped at this
@@ -369,6 +372,9 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
   const int g = constant_source ? 1 : std::max(1, plan.grid_step);
   const bool shadows = mesh && mesh->triangle_count() > 0 && scene.render.volumetric_shadows && lights;
   const bool normals = in.normals.data != nullptr;
+  // The surface term's photo fallback (render/photo_fallback.h, as on the CPU): the shaders
+  // write each pixel's T with the sun seen, the host decides where the photo shows it.
+  const bool photo_fallback = PhotoFallback::wanted(scene, in.distance_m, in.normals, in.photo, shadows);
   const auto limits = ctx.properties.limits;
 
   // ---- parameters -----------------------------------------------------------------------------
@@ -388,6 +394,7 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
   if (medium.noise.amplitude > 0) flags |= gpu::kFlagNoise;
   if (constant_source) flags |= gpu::kFlagConstantSource;
   if (normals) flags |= gpu::kFlagNormals;
+  if (photo_fallback) flags |= gpu::kFlagPhotoFallback;
   p.image = {W, H, g, int(lighting.lamps.size())};
   p.plan = {plan.steps, plan.lamp_steps, plan.sun_surface_rays, plan.ao_rays};
   p.flags = {flags, scene.render.seed, medium.noise.seed, std::uint32_t(std::max(0, medium.noise.octaves))};
@@ -597,6 +604,7 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
   Buffer v_buf(ctx, tile_max * sizeof(float), readback, false);
   Buffer od_buf(ctx, tile_max * 3 * sizeof(float), readback, false);
   Buffer counters_buf(ctx, 4 * sizeof(std::uint32_t), readback, false);
+  Buffer sunlit_buf(ctx, photo_fallback ? tile_max * 4 * sizeof(float) : 16, readback, false);
   Buffer vertex_buf, index_buf;
   std::size_t mesh_bytes = 0;
   if (shadows) {
@@ -609,7 +617,8 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
   const std::size_t scene_bytes = lamps_buf.size + layers_buf.size + mesh_bytes;
   const std::size_t tile_up_bytes = sizeof(gpu::ScatterParams) + depth_buf.size + normals_buf.size;
   Buffer staging_up(ctx, std::max(scene_bytes, tile_up_bytes), VK_BUFFER_USAGE_TRANSFER_SRC_BIT, true);
-  const std::size_t down_bytes = t_buf.size + r_buf.size + v_buf.size + od_buf.size + counters_buf.size;
+  const std::size_t down_bytes =
+      t_buf.size + r_buf.size + v_buf.size + od_buf.size + counters_buf.size + sunlit_buf.size;
   Buffer down(ctx, down_bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
   const std::uint32_t atlas_side = n_layers > 0 ? std::uint32_t(size) : 1u;
   Image2D atlas(ctx, VK_FORMAT_R32_SFLOAT, atlas_side, atlas_side, std::uint32_t(std::max(1, n_layers)),
@@ -636,7 +645,7 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
   };
 
   // Descriptor sets: the compute set (all passes, all tiles) and the shadow-map set.
-  VkDescriptorPoolSize pool_sizes[] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 12},
+  VkDescriptorPoolSize pool_sizes[] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 13},
                                        {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1}};
   VkDescriptorPoolCreateInfo dpci = make<VkDescriptorPoolCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO);
   dpci.maxSets = 2;
@@ -656,8 +665,8 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
     const VkBuffer buffers[11] = {params_buf.handle, lamps_buf.handle, layers_buf.handle, depth_buf.handle,
                                   normals_buf.handle, grid_buf.handle, t_buf.handle, r_buf.handle,
                                   v_buf.handle, od_buf.handle, counters_buf.handle};
-    VkDescriptorBufferInfo infos[12];
-    VkWriteDescriptorSet writes[13];
+    VkDescriptorBufferInfo infos[13];
+    VkWriteDescriptorSet writes[14];
     for (int i = 0; i < 11; ++i) {
       infos[i] = {buffers[i], 0, VK_WHOLE_SIZE};
       writes[i] = make<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
@@ -681,7 +690,14 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
     writes[12].descriptorCount = 1;
     writes[12].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
     writes[12].pBufferInfo = &infos[11];
-    ctx.vk.vkUpdateDescriptorSets(ctx.device, 13, writes, 0, nullptr);
+    infos[12] = {sunlit_buf.handle, 0, VK_WHOLE_SIZE};
+    writes[13] = make<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
+    writes[13].dstSet = sets[0];
+    writes[13].dstBinding = 12;
+    writes[13].descriptorCount = 1;
+    writes[13].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    writes[13].pBufferInfo = &infos[12];
+    ctx.vk.vkUpdateDescriptorSets(ctx.device, 14, writes, 0, nullptr);
   }
 
   // ---- scene upload and shadow maps ---------------------------------------------------------------
@@ -799,6 +815,12 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
   // ---- tiles ------------------------------------------------------------------------------------
   double host_down = 0;
   std::size_t exact = 0, interpolated = 0;
+  struct Shaded {
+    int x, y;
+    std::array<float, 3> t_sun_seen;
+    float ao;
+  };
+  std::vector<Shaded> shaded;  // the photo fallback's candidates
   int tile_index = 0;
   report_progress(in.cancel, "render", 0, std::size_t(tiles_x * tiles_y));  // mr/cancel.h: tiles
   for (int ty = 0; ty < tiles_y; ++ty)
@@ -875,6 +897,7 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
         copy_back(v_buf, px * sizeof(float));
         copy_back(od_buf, px * 3 * sizeof(float));
         copy_back(counters_buf, counters_buf.size);
+        if (photo_fallback) copy_back(sunlit_buf, px * 4 * sizeof(float));
       }
       memory_barrier(ctx, cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
                      VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
@@ -896,6 +919,17 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
       unpack(out.optical_depth, t_buf.size + r_buf.size + v_buf.size, 3);
       std::uint32_t counts[4];
       std::memcpy(counts, src + t_buf.size + r_buf.size + v_buf.size + od_buf.size, sizeof(counts));
+      if (photo_fallback) {
+        // Only pixels the shadow maps shade can change: keep their "sun seen" T and AO.
+        const float* sunlit = reinterpret_cast<const float*>(src + t_buf.size + r_buf.size + v_buf.size +
+                                                             od_buf.size + counters_buf.size);
+        for (int y = y0; y < y1; ++y)
+          for (int x = x0; x < x1; ++x) {
+            if (!(out.sun_visibility.at(x, y, 0) < 1.0f)) continue;
+            const float* v = sunlit + 4 * (std::size_t(y - y0) * cw + std::size_t(x - x0));
+            shaded.push_back({x, y, {v[0], v[1], v[2]}, v[3]});
+          }
+      }
       host_down += seconds_since(t_host);
       // Grid samples inside the tile count as exact pixels (as on the CPU).
       std::size_t grid_in_tile = 0;
@@ -912,6 +946,26 @@ void Backend::Impl::render(const CoreInputs& in, const TriangleMesh* mesh, CoreO
       report_progress(in.cancel, "render", std::size_t(tile_index) + 1,
                       std::size_t(tiles_x * tiles_y));
     }
+  if (photo_fallback) {
+    // After every tile: a pixel's neighbours may lie in another one. The same test as the CPU
+    // core's pass 3, on the sun visibility before any fallback.
+    t_host = Clock::now();
+    const PhotoFallback fallback(cam, scene, in.distance_m, in.normals, in.photo, in.sky_radiance);
+    const std::vector<float> disk = fallback.sun_disk_map(out.sun_visibility);
+    std::vector<unsigned char> sunlit(shaded.size(), 0);
+    tbb::parallel_for(std::size_t(0), shaded.size(), [&](std::size_t k) {
+      const Shaded& p = shaded[k];
+      const float d = disk[std::size_t(p.y) * std::size_t(W) + std::size_t(p.x)];
+      sunlit[k] = d >= 0 && d < 1 && fallback.shows_sunlit(p.x, p.y, p.ao, disk.data());
+    });
+    for (std::size_t k = 0; k < shaded.size(); ++k) {
+      if (!sunlit[k]) continue;
+      const Shaded& p = shaded[k];
+      for (int c = 0; c < 3; ++c) out.transmittance.at(p.x, p.y, c) = p.t_sun_seen[std::size_t(c)];
+      out.sun_visibility.at(p.x, p.y, 0) = 1.0f;
+    }
+    host_down += seconds_since(t_host);
+  }
   out.exact_pixels = exact;
   out.interpolated_pixels = interpolated;
   out.shadow_rays = 0;  // shadow-map lookups are not counted
