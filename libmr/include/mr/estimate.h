@@ -61,6 +61,12 @@ struct EstimateOptions {
   /// returns to its own over the refinement's reach (photo/geometry.h, sky_proximity and
   /// sky_fold), so that the fog, opaque in the sky for haze, is continuous there. false: off.
   bool sky_fold = true;
+  /// Trees and foliage (issue 11 item 3, photo/vegetation.h): sky-coloured pixels above the
+  /// horizon ringed by foliage texture (sky under a canopy, between trunks, through leaves)
+  /// are sky, so the occluder mesh has holes there and the sun passes; a structure that is
+  /// mostly foliage stands where any of its columns (trunks) meets the ground, its canopy at the
+  /// nearest trunk's distance, instead of needing contacts in 30 % of its columns. false: off.
+  bool vegetation = true;
   /// Optional, caller-owned (mr/cancel.h): requested, the estimate stops at its next step with
   /// mr::Error(cancelled); its progress callback hears each step as it starts, in order
   /// "horizon", "sky mask", "depth", "refine" (and "light" for estimate_scene), with done = the
@@ -124,6 +130,10 @@ struct GeometryEstimate {
   Image sky_alpha, depth_confidence;
   /// Sky pixels found as sky seen through foliage (enclosed gaps; photo/sky_mask.h).
   std::size_t sky_gap_pixels = 0;
+  /// With EstimateOptions::vegetation: foliage pixels (photo/vegetation.h), the sky seen through
+  /// them that the sky mask had left out (counted in sky_pixels too), and the pixels of
+  /// structures taken as trees (standing where their trunks meet the ground).
+  std::size_t vegetation_pixels = 0, vegetation_gap_pixels = 0, tree_pixels = 0;
   /// With an interior_box annotation: pixels on the room's floor, walls or ceiling; the
   /// ceiling height (metres above the floor; unset when neither given nor marked); and the
   /// room's edges in the image (floor lines, wall corners up to the ceiling or twice the camera
