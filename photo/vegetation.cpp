@@ -42,6 +42,7 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
   const cv::Mat src = detail::as_mat(photo);
   const int ch = photo.channels;
   cv::Mat luma(h, w, CV_32F), cr(h, w, CV_32F), cg(h, w, CV_32F);
+  cv::Mat foliage_colour(h, w, CV_8U);
   for (int y = 0; y < h; ++y) {
     const float* row = src.ptr<float>(y);
     for (int x = 0; x < w; ++x) {
@@ -52,6 +53,12 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
         c[k] = std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f);
       }
       luma.at<float>(y, x) = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
+      // Foliage and bark: green, yellow, red or brown (blue the weakest channel, a little
+      // saturated), or in shade (dark).
+      foliage_colour.at<std::uint8_t>(y, x) =
+          luma.at<float>(y, x) < o.max_shade_luma ||
+          (c[2] <= std::min(c[0], c[1]) + 0.02f &&
+           std::max({c[0], c[1], c[2]}) - std::min({c[0], c[1], c[2]}) >= o.min_saturation);
       const float s = c[0] + c[1] + c[2] + 1e-4f;
       cr.at<float>(y, x) = c[0] / s;
       cg.at<float>(y, x) = c[1] / s;
@@ -92,16 +99,23 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
     return std::hypot(cr.at<float>(y, x) - sky_r, cg.at<float>(y, x) - sky_g) <= o.gap_max_chroma;
   };
 
+  // Without an open sky there is nothing to see through trees, and a textured close-up or
+  // interior (a coffee cup, a woven cloth) is better left to the structures' usual rule.
+  if (!sky_model) return out;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
       if (sky[i]) continue;
-      if (texture.at<float>(y, x) >= o.min_texture && !sky_coloured(x, y)) {
+      if (texture.at<float>(y, x) >= o.min_texture && foliage_colour.at<std::uint8_t>(y, x) &&
+          !sky_coloured(x, y)) {
         out.vegetation[i] = 1;
         ++out.vegetation_pixels;
       }
     }
-  if (!sky_model) return out;
+  // Only a blue sky: a grey or white one matches too much else (skin, a white wall, a pale
+  // shirt ringed by hair or texture were found as "sky" on portraits).
+  const float sky_b = 1 - sky_r - sky_g;
+  if (!(sky_b >= std::max(sky_r, sky_g) + o.min_sky_blueness)) return out;
 
   // Sky seen through vegetation: smooth sky-coloured pixels above the horizon that the mask left
   // out, in components mostly ringed by vegetation.

@@ -7,11 +7,12 @@
 // become one gap-free far billboard, and the sun behind the trees leaves the whole fog in front
 // of them in shadow: the shafts between trunks that sun + fog are wanted for cannot appear.
 //
-// What is found here, on the display-referred photo (scene-linear ^ (1 / 2.2)):
+// What is found here, on the display-referred photo (scene-linear ^ (1 / 2.2)), only when the
+// sky mask holds an open sky (at least `min_sky_fraction` of the image; else nothing):
 // - vegetation: pixels that are textured at a fine scale (the mean |gradient| of the luma over a
-//   small window at least `min_texture`) and not sky-coloured (foliage green, yellow, red or
-//   brown, bark; a textured patch of the sky's own hue and brightness is a cloud edge, not a
-//   leaf);
+//   small window at least `min_texture`), of foliage colour (blue the weakest channel and a
+//   little saturation: green, yellow, red, brown, bark; or dark: foliage in shade) and not
+//   sky-coloured (a textured patch of the sky's own hue and brightness is a cloud edge);
 // - sky seen through vegetation: pixels above the horizon that the sky mask left out but whose
 //   colour is the open sky's (chromaticity within `gap_max_chroma` of the mask's median sky
 //   chromaticity, luma within [gap_min_luma, gap_max_luma] x its median) and that are smooth,
@@ -19,8 +20,8 @@
 //   ring (`ring_px` wide) is vegetation. Unlike the sky mask's gaps (small, enclosed, blue sky
 //   only) these may be large and open to the side: the sky seen under a canopy between trunks,
 //   the pale sky of an overcast day through branches.
-// Needs an open sky to compare with: without at least `min_sky_fraction` of the image in the
-// sky mask no gap is found (the vegetation still is).
+// Gaps are looked for only under a blue open sky (`min_sky_blueness`): a grey or white sky's
+// colour matched skin and pale walls ringed by hair or texture on the tuning photos.
 #pragma once
 
 #include <array>
@@ -40,6 +41,10 @@ struct VegetationOptions {
   double gap_max_chroma = 0.035;  ///< distance in (r, g) chromaticity (r = R / (R + G + B))
   double gap_min_luma = 0.65, gap_max_luma = 1.6;  ///< x the open sky's median luma
   double gap_max_texture = 0.06;  ///< a gap pixel's own 3x3 mean |gradient| (edges excluded)
+  double max_shade_luma = 0.12;   ///< darker than this counts as foliage colour (shade)
+  double min_saturation = 0.04;   ///< max - min of the display-referred channels
+  /// Gaps only under a blue sky: its chromaticity b = B / (R + G + B) at least this above r, g.
+  double min_sky_blueness = 0.04;
   int ring_px = 3;
   double gap_min_vegetation_ring = 0.5;
   /// A structure of the automatic estimate is a tree when at least this fraction of its pixels
