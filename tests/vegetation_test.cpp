@@ -285,5 +285,33 @@ TEST(Vegetation, NothingOnSmoothSkyAndGround) {
                Error);
 }
 
+// Textured foliage-coloured texture with sky-coloured spots, under a grey sky and with no sky:
+// foliage without an open sky is not looked for (a textured close-up or interior keeps the
+// structures' usual rule), and a grey sky's colour finds no gaps (it matched skin and white
+// walls ringed by hair or texture on portraits).
+TEST(Vegetation, NoSkyNoVegetationGreySkyNoGaps) {
+  const int w = 160, h = 120;
+  Image photo(w, h, 3);
+  std::vector<std::uint8_t> grey_sky(std::size_t(w) * h, 0), no_sky(std::size_t(w) * h, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool top = y < 30;
+      const bool spot = !top && y < 60 && (x / 8 + y / 8) % 3 == 0;  // pale, like the sky
+      const double n = cell_noise(x / 2, y / 2, 5);
+      const float c[3] = {top || spot ? 0.8f : float(0.1 + 0.2 * n),
+                          top || spot ? 0.8f : float(0.25 + 0.4 * n),
+                          top || spot ? 0.82f : float(0.05 + 0.1 * n)};
+      for (int k = 0; k < 3; ++k) photo.at(x, y, k) = std::pow(c[k], 2.2f);
+      grey_sky[std::size_t(y) * w + x] = top;
+    }
+  const std::array<PixelPoint, 2> horizon{PixelPoint{0, 90}, PixelPoint{159, 90}};
+  const photo::Vegetation none = photo::estimate_vegetation(photo.view(), horizon, no_sky);
+  EXPECT_EQ(none.vegetation_pixels, 0u);
+  EXPECT_EQ(none.gap_pixels, 0u);
+  const photo::Vegetation grey = photo::estimate_vegetation(photo.view(), horizon, grey_sky);
+  EXPECT_GT(grey.vegetation_pixels, 3000u);  // the textured green
+  EXPECT_EQ(grey.gap_pixels, 0u);
+}
+
 }  // namespace
 }  // namespace mr
