@@ -421,7 +421,19 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         int valid = 0;
         for (int k = 0; k < width; ++k) valid += fw[k] > 0;
         if (valid == 0 || (!tree[std::size_t(l)] && valid < kMinContactColumns * width)) continue;
-        if (tree[std::size_t(l)]) g.tree_pixels += std::size_t(stats.at<int>(l, cv::CC_STAT_AREA));
+        if (tree[std::size_t(l)]) {
+          // A tree (or a stand of them joined by their canopy) stands at one distance: the
+          // median of its trunks' contacts. Per-column contacts would give its canopy columns
+          // of different depth, seams in haze where the photo has none.
+          g.tree_pixels += std::size_t(stats.at<int>(l, cv::CC_STAT_AREA));
+          window.clear();
+          for (int k = 0; k < width; ++k)
+            if (fw[k] > 0) window.push_back(fw[k]);
+          std::nth_element(window.begin(), window.begin() + std::ptrdiff_t(window.size() / 2),
+                           window.end());
+          std::fill(sm, sm + width, window[window.size() / 2]);
+          continue;
+        }
         for (int k = 0; k < width; ++k) {
           if (!(fw[k] > 0)) continue;
           window.clear();
