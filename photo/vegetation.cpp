@@ -102,6 +102,11 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
   // Without an open sky there is nothing to see through trees, and a textured close-up or
   // interior (a coffee cup, a woven cloth) is better left to the structures' usual rule.
   if (!sky_model) return out;
+  // Only under a blue sky: a grey or white sky's colour matches too much else (skin, a white
+  // wall ringed by hair or texture were found as gaps on a portrait), and a rusty lattice tower
+  // under a grey sky was taken for a tree (its haze got more created edges).
+  const float sky_b = 1 - sky_r - sky_g;
+  if (!(sky_b >= std::max(sky_r, sky_g) + o.min_sky_blueness)) return out;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
@@ -112,10 +117,6 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
         ++out.vegetation_pixels;
       }
     }
-  // Only a blue sky: a grey or white one matches too much else (skin, a white wall, a pale
-  // shirt ringed by hair or texture were found as "sky" on portraits).
-  const float sky_b = 1 - sky_r - sky_g;
-  if (!(sky_b >= std::max(sky_r, sky_g) + o.min_sky_blueness)) return out;
 
   // Sky seen through vegetation: smooth sky-coloured pixels above the horizon that the mask left
   // out, in components mostly ringed by vegetation.

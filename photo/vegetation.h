@@ -8,7 +8,7 @@
 // of them in shadow: the shafts between trunks that sun + fog are wanted for cannot appear.
 //
 // What is found here, on the display-referred photo (scene-linear ^ (1 / 2.2)), only when the
-// sky mask holds an open sky (at least `min_sky_fraction` of the image; else nothing):
+// sky mask holds an open blue sky (at least `min_sky_fraction` of the image; else nothing):
 // - vegetation: pixels that are textured at a fine scale (the mean |gradient| of the luma over a
 //   small window at least `min_texture`), of foliage colour (blue the weakest channel and a
 //   little saturation: green, yellow, red, brown, bark; or dark: foliage in shade) and not
@@ -20,8 +20,10 @@
 //   ring (`ring_px` wide) is vegetation. Unlike the sky mask's gaps (small, enclosed, blue sky
 //   only) these may be large and open to the side: the sky seen under a canopy between trunks,
 //   the pale sky of an overcast day through branches.
-// Gaps are looked for only under a blue open sky (`min_sky_blueness`): a grey or white sky's
-// colour matched skin and pale walls ringed by hair or texture on the tuning photos.
+// Both only under a blue open sky (`min_sky_blueness`): a grey or white sky's colour matched
+// skin and pale walls ringed by hair or texture on the tuning photos, and a rusty lattice tower
+// under a grey sky was taken for a tree (more created edges in haze). Trees under an overcast
+// sky are left to the structures' usual rule.
 #pragma once
 
 #include <array>

@@ -285,10 +285,11 @@ TEST(Vegetation, NothingOnSmoothSkyAndGround) {
                Error);
 }
 
-// Textured foliage-coloured texture with sky-coloured spots, under a grey sky and with no sky:
+// A textured green with pale spots, under a grey sky, a blue sky and with no sky:
 // foliage without an open sky is not looked for (a textured close-up or interior keeps the
 // structures' usual rule), and a grey sky's colour finds no gaps (it matched skin and white
-// walls ringed by hair or texture on portraits).
+// walls ringed by hair or texture on portraits) and no vegetation either (a rusty lattice tower
+// was taken for a tree).
 TEST(Vegetation, NoSkyNoVegetationGreySkyNoGaps) {
   const int w = 160, h = 120;
   Image photo(w, h, 3);
@@ -309,8 +310,19 @@ TEST(Vegetation, NoSkyNoVegetationGreySkyNoGaps) {
   EXPECT_EQ(none.vegetation_pixels, 0u);
   EXPECT_EQ(none.gap_pixels, 0u);
   const photo::Vegetation grey = photo::estimate_vegetation(photo.view(), horizon, grey_sky);
-  EXPECT_GT(grey.vegetation_pixels, 3000u);  // the textured green
+  EXPECT_EQ(grey.vegetation_pixels, 0u);
   EXPECT_EQ(grey.gap_pixels, 0u);
+  // The same under a blue sky: the green is foliage and the pale spots it rings are not the
+  // sky's colour (grey, not blue), so still no gaps.
+  for (int y = 0; y < 30; ++y)
+    for (int x = 0; x < w; ++x) {
+      photo.at(x, y, 0) = std::pow(0.45f, 2.2f);
+      photo.at(x, y, 1) = std::pow(0.62f, 2.2f);
+      photo.at(x, y, 2) = std::pow(0.93f, 2.2f);
+    }
+  const photo::Vegetation blue = photo::estimate_vegetation(photo.view(), horizon, grey_sky);
+  EXPECT_GT(blue.vegetation_pixels, 3000u);
+  EXPECT_EQ(blue.gap_pixels, 0u);
 }
 
 }  // namespace
