@@ -55,10 +55,12 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
       luma.at<float>(y, x) = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
       // Foliage and bark: green, yellow, red or brown (blue the weakest channel, a little
       // saturated), or in shade (dark).
+      const bool coloured =
+          c[2] <= std::min(c[0], c[1]) + 0.02f &&
+          std::max({c[0], c[1], c[2]}) - std::min({c[0], c[1], c[2]}) >= o.min_saturation;
+      // 2: green (leaves in light), 1: other foliage colours and shade.
       foliage_colour.at<std::uint8_t>(y, x) =
-          luma.at<float>(y, x) < o.max_shade_luma ||
-          (c[2] <= std::min(c[0], c[1]) + 0.02f &&
-           std::max({c[0], c[1], c[2]}) - std::min({c[0], c[1], c[2]}) >= o.min_saturation);
+          coloured && c[1] >= c[0] ? 2 : coloured || luma.at<float>(y, x) < o.max_shade_luma ? 1 : 0;
       const float s = c[0] + c[1] + c[2] + 1e-4f;
       cr.at<float>(y, x) = c[0] / s;
       cg.at<float>(y, x) = c[1] / s;
@@ -113,7 +115,7 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
       if (sky[i]) continue;
       if (texture.at<float>(y, x) >= o.min_texture && foliage_colour.at<std::uint8_t>(y, x) &&
           !sky_coloured(x, y)) {
-        out.vegetation[i] = 1;
+        out.vegetation[i] = foliage_colour.at<std::uint8_t>(y, x);
         ++out.vegetation_pixels;
       }
     }
@@ -146,7 +148,7 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
       const int l = int(grown.at<float>(y, x));
       if (l <= 0) continue;
       ++ring[std::size_t(l)];
-      ring_veg[std::size_t(l)] += out.vegetation[i];
+      ring_veg[std::size_t(l)] += out.vegetation[i] != 0;
     }
   std::vector<std::uint8_t> keep(std::size_t(count), 0);
   for (int l = 1; l < count; ++l)

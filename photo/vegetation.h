@@ -50,13 +50,15 @@ struct VegetationOptions {
   int ring_px = 3;
   double gap_min_vegetation_ring = 0.5;
   /// A structure of the automatic estimate is a tree when at least this fraction of its pixels
-  /// is vegetation (used by mr::estimate_geometry).
+  /// is green foliage (used by mr::estimate_geometry; a rusty lattice tower is textured and of
+  /// a foliage colour, but not green).
   double tree_min_fraction = 0.35;
 };
 
 struct Vegetation {
   int width = 0, height = 0;
-  std::vector<std::uint8_t> vegetation;  ///< row-major, 1 = foliage or bark texture
+  /// Row-major: 2 = green foliage (G >= R), 1 = other foliage colours, bark, shade; 0 = none.
+  std::vector<std::uint8_t> vegetation;
   std::vector<std::uint8_t> sky_gap;     ///< row-major, 1 = sky seen through vegetation, not in
                                          ///< the sky mask given
   std::size_t vegetation_pixels = 0, gap_pixels = 0;

@@ -358,7 +358,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       if (options.vegetation)
         for (int y = 0; y < h; ++y)
           for (int x = 0; x < w; ++x)
-            foliage[std::size_t(labels.at<int>(y, x))] += vegetation.vegetation[std::size_t(y) * w + x];
+            foliage[std::size_t(labels.at<int>(y, x))] +=
+                vegetation.vegetation[std::size_t(y) * w + x] == 2;  // green
       std::vector<std::uint8_t> tree(std::size_t(count), 0);
       for (int l = 1; l < count; ++l)
         tree[std::size_t(l)] =
