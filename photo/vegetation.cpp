@@ -148,7 +148,7 @@ Vegetation estimate_vegetation(ConstImageView photo, const std::array<PixelPoint
       const int l = int(grown.at<float>(y, x));
       if (l <= 0) continue;
       ++ring[std::size_t(l)];
-      ring_veg[std::size_t(l)] += out.vegetation[i] != 0;
+      ring_veg[std::size_t(l)] += out.vegetation[i] == 2;  // green: a rusty lattice rings sky too
     }
   std::vector<std::uint8_t> keep(std::size_t(count), 0);
   for (int l = 1; l < count; ++l)

@@ -17,7 +17,7 @@
 //   colour is the open sky's (chromaticity within `gap_max_chroma` of the mask's median sky
 //   chromaticity, luma within [gap_min_luma, gap_max_luma] x its median) and that are smooth,
 //   in 8-connected components of which at least `gap_min_vegetation_ring` of the surrounding
-//   ring (`ring_px` wide) is vegetation. Unlike the sky mask's gaps (small, enclosed, blue sky
+//   ring (`ring_px` wide) is green foliage (a rusty lattice rings sky too). Unlike the sky mask's gaps (small, enclosed, blue sky
 //   only) these may be large and open to the side: the sky seen under a canopy between trunks,
 //   the pale sky of an overcast day through branches.
 // Both only under a blue open sky (`min_sky_blueness`): a grey or white sky's colour matched
