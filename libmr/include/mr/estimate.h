@@ -61,11 +61,12 @@ struct EstimateOptions {
   /// returns to its own over the refinement's reach (photo/geometry.h, sky_proximity and
   /// sky_fold), so that the fog, opaque in the sky for haze, is continuous there. false: off.
   bool sky_fold = true;
-  /// Trees and foliage (issue 11 item 3, photo/vegetation.h): sky-coloured pixels above the
-  /// horizon ringed by foliage texture (sky under a canopy, between trunks, through leaves)
-  /// are sky, so the occluder mesh has holes there and the sun passes; a structure that is
-  /// mostly foliage stands where any of its columns (trunks) meets the ground, its canopy at the
-  /// nearest trunk's distance, instead of needing contacts in 30 % of its columns. false: off.
+  /// Trees and foliage (issue 11 item 3, photo/vegetation.h), under an open blue sky only:
+  /// sky-coloured pixels above the horizon ringed by green foliage (sky under a canopy, between
+  /// trunks, through leaves) are sky, so the occluder mesh has holes there and the sun passes; a
+  /// structure that is mostly green foliage stands at the median ground distance of its trunks'
+  /// feet (any column meeting the ground counts), canopy included, instead of needing contacts
+  /// in 30 % of its columns. false: off (the estimate as before).
   bool vegetation = true;
   /// Optional, caller-owned (mr/cancel.h): requested, the estimate stops at its next step with
   /// mr::Error(cancelled); its progress callback hears each step as it starts, in order
