@@ -23,6 +23,7 @@
 #include "photo/illumination.h"
 #include "photo/lamps.h"
 #include "photo/sky_mask.h"
+#include "photo/vegetation.h"
 
 namespace mr {
 
@@ -284,8 +285,23 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // The automatic sky: carve it out of the planes. What is above the horizon and not sky is
   // structure: standing on the ground where it meets it (ground_contact), else on the far
   // billboard; the ground behind a column's structure takes the structure's distance.
-  const photo::SkyMask mask = photo::estimate_sky_mask(photo->view(), g.horizon);
+  photo::SkyMask mask = photo::estimate_sky_mask(photo->view(), g.horizon);
   g.sky_from_mask = true;
+  // Issue 11 item 3: the sky seen through trees (under a canopy, between trunks, through
+  // leaves) is sky, so the occluder mesh has holes there and sun shafts pass (photo/vegetation.h).
+  const photo::VegetationOptions vegetation_options;
+  photo::Vegetation vegetation;
+  if (options.vegetation) {
+    vegetation = photo::estimate_vegetation(photo->view(), g.horizon, mask.sky, vegetation_options);
+    for (std::size_t i = 0; i < vegetation.sky_gap.size(); ++i)
+      if (vegetation.sky_gap[i] && !mask.sky[i]) {
+        mask.sky[i] = 1;
+        mask.alpha[i] = 1.0f;
+        ++mask.pixels;
+      }
+    g.vegetation_pixels = vegetation.vegetation_pixels;
+    g.vegetation_gap_pixels = vegetation.gap_pixels;
+  }
   steps.start("depth");
   const int w = camera.width, h = camera.height;
   const std::size_t n = std::size_t(w) * h;
@@ -335,6 +351,21 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           if (map.coverage[std::size_t(y) * w + x] == photo::Coverage::sky)
             rises[std::size_t(labels.at<int>(y, x))] = 1;
       rises[0] = 0;  // the background
+      // Trees: structures that are mostly foliage. Their trunks meet the ground in a few of
+      // their columns only (the canopy spans many more), which for other structures means
+      // foreground clutter touching a facade; a tree stands where its trunks do.
+      std::vector<std::size_t> foliage(std::size_t(count), 0);
+      if (options.vegetation)
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x)
+            foliage[std::size_t(labels.at<int>(y, x))] +=
+                vegetation.vegetation[std::size_t(y) * w + x] == 2;  // green
+      std::vector<std::uint8_t> tree(std::size_t(count), 0);
+      for (int l = 1; l < count; ++l)
+        tree[std::size_t(l)] =
+            rises[std::size_t(l)] &&
+            double(foliage[std::size_t(l)]) >=
+                vegetation_options.tree_min_fraction * stats.at<int>(l, cv::CC_STAT_AREA);
       std::vector<std::size_t> offset(std::size_t(count), 0);
       std::size_t total = 0;
       for (int l = 1; l < count; ++l)
@@ -390,7 +421,20 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         double* sm = smooth.data() + offset[l];
         int valid = 0;
         for (int k = 0; k < width; ++k) valid += fw[k] > 0;
-        if (valid == 0 || valid < kMinContactColumns * width) continue;
+        if (valid == 0 || (!tree[std::size_t(l)] && valid < kMinContactColumns * width)) continue;
+        if (tree[std::size_t(l)]) {
+          // A tree (or a stand of them joined by their canopy) stands at one distance: the
+          // median of its trunks' contacts. Per-column contacts would give its canopy columns
+          // of different depth, seams in haze where the photo has none.
+          g.tree_pixels += std::size_t(stats.at<int>(l, cv::CC_STAT_AREA));
+          window.clear();
+          for (int k = 0; k < width; ++k)
+            if (fw[k] > 0) window.push_back(fw[k]);
+          std::nth_element(window.begin(), window.begin() + std::ptrdiff_t(window.size() / 2),
+                           window.end());
+          std::fill(sm, sm + width, window[window.size() / 2]);
+          continue;
+        }
         for (int k = 0; k < width; ++k) {
           if (!(fw[k] > 0)) continue;
           window.clear();
