@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <vector>
 
 #include "cv_bridge.h"
@@ -135,8 +136,8 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     }
   }
   // Which candidate components are sky. Blue ones: touching the top border, or (below) a side
-  // border or large (blue sky seen between branches) with that sky's colour; grey-bright ones:
-  // touching the top border and, when the photo shows blue sky, touching it (clouds do; white
+  // border or large (blue sky seen between branches) when blue sky touches the top; grey-bright
+  // ones: touching the top border and, when the photo shows blue sky, touching it (clouds do; white
   // walls and panels mostly do not), or surrounded by it.
   cv::Mat labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(cand, labels, stats, centroids, 8, CV_32S);
@@ -160,46 +161,16 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     const bool dusk = 2 * dark_count[i] > area;
     if (is_blue[i] && top[i] && (!dusk || area > 0.01 * w * h)) keep[i] = 1, blue_area += area;
   }
-  // Blue not reaching the top border (sky between branches, beside a tree) is sky only when the
-  // open sky at the top is blue and it has that sky's colour (Mahalanobis distance in
-  // display-referred RGB within `detached_max_sigma`): a pale blue flower, sign, shirt or car in
-  // a close-up with no sky above it, or under a sky of another blue, is not.
-  {
-    std::vector<cv::Vec3d> sum(std::size_t(n), cv::Vec3d(0, 0, 0));
-    std::vector<cv::Matx33d> outer(std::size_t(n), cv::Matx33d::zeros());
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x)
-        if (const int lab = labels.at<int>(y, x); lab > 0) {
-          const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
-          const cv::Vec3d v(p[0], p[1], p[2]);
-          sum[lab] += v;
-          if (keep[lab]) outer[lab] += v * v.t();
-        }
-    cv::Vec3d mean(0, 0, 0);
-    cv::Matx33d second = cv::Matx33d::zeros();
-    for (int i = 1; i < n; ++i)
-      if (keep[i]) mean += sum[i], second += outer[i];
-    const double top_area = blue_area;
-    cv::Matx33d inverse = cv::Matx33d::zeros();
-    if (top_area > 0) {
-      mean *= 1.0 / top_area;
-      second *= 1.0 / top_area;
-      cv::Matx33d cov = second - mean * mean.t();
-      for (int k = 0; k < 3; ++k) cov(k, k) += 0.03 * 0.03;  // a floor: a flat sky is not exact
-      inverse = cov.inv(cv::DECOMP_SVD);
-    }
+  // Blue not reaching the top border (sky between branches, beside a tree) is sky only when
+  // blue sky does reach it: a pale blue flower, sign, shirt or car in a close-up with no sky
+  // above it is not. (Its colour is not compared with the top sky's: a clear sky pales by far
+  // more than its own spread from the zenith to the horizon.)
+  if (!o.detached_needs_top_sky || blue_area > 0)
     for (int i = 1; i < n; ++i) {
       const int area = stats.at<int>(i, cv::CC_STAT_AREA);
       if (keep[i] || !is_blue[i] || 2 * dark_count[i] > area) continue;
-      if (!(side[i] || area > 0.002 * w * h)) continue;
-      bool sky_colour = o.detached_max_sigma <= 0;
-      if (!sky_colour && top_area > 0) {
-        const cv::Vec3d d = sum[i] * (1.0 / area) - mean;
-        sky_colour = (d.t() * inverse * d)(0) <= o.detached_max_sigma * o.detached_max_sigma;
-      }
-      if (sky_colour) keep[i] = 1, blue_area += area;
+      if (side[i] || area > 0.002 * w * h) keep[i] = 1, blue_area += area;
     }
-  }
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) sky.at<std::uint8_t>(y, x) = keep[labels.at<int>(y, x)];

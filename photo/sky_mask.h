@@ -4,7 +4,7 @@
 // `max_texture` per pixel) and is blue-ish (B > R, B >= G, not dark) or grey and bright (low
 // saturation, luma at least `bright_fraction` of the above-horizon 95th percentile). The sky is
 // the candidates' 8-connected components that touch the top border (blue ones elsewhere only
-// with the colour of that sky; grey-bright ones also when surrounded by blue sky: clouds), cut
+// when blue sky does; grey-bright ones also when surrounded by blue sky: clouds), cut
 // back to what lies near its smooth core (issue 11: a textured rock face or concrete floor that
 // touches the sky is not sky; SkyMaskOptions::core_texture_factor), with small enclosed holes
 // (birds, specks: below `max_hole_fraction` of the image) filled; at full resolution its edges
@@ -41,10 +41,9 @@ struct SkyMaskOptions {
   double core_texture_factor = 4.0;
   double min_core_texture = 0.003;
   double core_grow = 2.0;
-  /// Blue candidates not touching the top border are sky only with the colour of the blue sky
-  /// that does: mean within this Mahalanobis distance of it. <= 0: off (any blue one touching
-  /// a side border or larger than 0.2 % of the image is sky).
-  double detached_max_sigma = 3.0;
+  /// Blue candidates not touching the top border (touching a side one, or larger than 0.2 % of
+  /// the image) are sky only when blue sky touches the top border. false: always.
+  bool detached_needs_top_sky = true;
   /// Under a blue sky, a grey-bright component not touching the top border (a cloud whose edge
   /// is too steep for the texture test) is sky when at least this fraction of the pixels around
   /// it are within two texture windows of the blue sky. > 1: off.

@@ -194,10 +194,10 @@ TEST(SkyMaskClasses, PaleBlueFlowerInAGreenCloseUpIsNotSky) {
   EXPECT_EQ(mask.pixels, 0u);
 }
 
-// The same colour rule keeps real sky that does not reach the top border: blue sky at the top and
+// The same rule keeps real sky that does not reach the top border: blue sky at the top and
 // a patch of the same sky beside a tree trunk (cut off from the top by the canopy) at the right
 // border. Measured: 100 % of both kept (as before the rule).
-TEST(SkyMaskClasses, DetachedSkyOfTheSkysColourStaysSky) {
+TEST(SkyMaskClasses, DetachedSkyUnderABlueSkyStaysSky) {
   const double horizon = 330;
   cv::Mat img(kH, kW, CV_32FC3);
   const cv::Mat leaves = smooth_noise(9, 1.0);
