@@ -164,13 +164,21 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   // Blue not reaching the top border (sky between branches, beside a tree) is sky only when
   // blue sky does reach it: a pale blue flower, sign, shirt or car in a close-up with no sky
   // above it is not. (Its colour is not compared with the top sky's: a clear sky pales by far
-  // more than its own spread from the zenith to the horizon.)
-  if (!o.detached_needs_top_sky || blue_area > 0)
+  // more than its own spread from the zenith to the horizon.) Nor is a piece of a bluish rock
+  // face: its roughness (below), on average over the piece, is that of a textured surface.
+  if (!o.detached_needs_top_sky || blue_area > 0) {
+    std::vector<double> rough_sum(std::size_t(n), 0.0);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (const int lab = labels.at<int>(y, x); lab > 0)
+          rough_sum[lab] += roughness.at<float>(y, x);
     for (int i = 1; i < n; ++i) {
       const int area = stats.at<int>(i, cv::CC_STAT_AREA);
       if (keep[i] || !is_blue[i] || 2 * dark_count[i] > area) continue;
+      if (o.core_texture_factor > 0 && rough_sum[i] > o.min_core_texture * area) continue;
       if (side[i] || area > 0.002 * w * h) keep[i] = 1, blue_area += area;
     }
+  }
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) sky.at<std::uint8_t>(y, x) = keep[labels.at<int>(y, x)];
@@ -221,8 +229,9 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   // camera's noise and smooth ramps (its gradient, the clouds' soft edges); touching the sky, it
   // joined its component. So the sky keeps only what lies within a bounded distance (`core_grow`
   // texture windows, through the sky) of its core: pixels whose roughness (above) is below a
-  // few times the sky's own noise floor (its 20th percentile), in patches at least a texture
-  // windows across (a rock face's smoothest patches are not a core).
+  // few times the sky's own noise floor (its 5th percentile: a rough face that touches the sky may
+  // be most of it), in patches at least two texture windows across (a rock face's smoothest patches
+  // are not a core).
   if (o.core_texture_factor > 0 && o.core_grow > 0) {
     const cv::Mat& wide = roughness;
     std::vector<float> tex;
@@ -230,7 +239,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       for (int x = 0; x < w; ++x)
         if (sky.at<std::uint8_t>(y, x)) tex.push_back(wide.at<float>(y, x));
     if (!tex.empty()) {
-      const std::size_t q = std::size_t(0.2 * double(tex.size() - 1));
+      const std::size_t q = std::size_t(0.05 * double(tex.size() - 1));
       std::nth_element(tex.begin(), tex.begin() + std::ptrdiff_t(q), tex.end());
       const float limit = std::clamp(float(o.core_texture_factor) * tex[q],
                                      float(o.min_core_texture), float(o.max_texture));

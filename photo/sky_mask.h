@@ -35,7 +35,7 @@ struct SkyMaskOptions {
   /// The sky keeps only what lies within `core_grow` texture windows (through the sky) of its
   /// core: pixels whose roughness over three windows (mean gradient magnitude less the magnitude
   /// of the mean gradient: 0 on a smooth ramp such as a cloud's soft edge) is at most
-  /// `core_texture_factor` x the sky's 20th percentile of it (its noise floor), within
+  /// `core_texture_factor` x the sky's 5th percentile of it (its noise floor), within
   /// [min_core_texture, max_texture], in patches at least two windows across. 0: off (every
   /// candidate that passed `max_texture` counts).
   double core_texture_factor = 4.0;
