@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <vector>
 
 #include "cv_bridge.h"
@@ -82,6 +83,24 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   cv::magnitude(gx, gy, texture);
   if (s < 1) cv::resize(texture, texture, cv::Size(w, h), 0, 0, cv::INTER_AREA);
   const int win = std::max(3, int(std::lround(0.006 * std::hypot(w, h))) | 1);
+  // Roughness over three windows (for the sky's core, below): the mean gradient magnitude less
+  // the magnitude of the mean gradient. A smooth ramp (a cloud's soft edge, the sky's own
+  // gradient) has all its gradients in one direction and no roughness; a rock face's or a
+  // concrete floor's fine texture points every way and is all roughness.
+  cv::Mat roughness;
+  {
+    const cv::Size wide(3 * win, 3 * win);
+    cv::Mat mx = gx, my = gy, mean_x, mean_y, coherent;
+    if (s < 1) {
+      cv::resize(gx, mx, cv::Size(w, h), 0, 0, cv::INTER_AREA);
+      cv::resize(gy, my, cv::Size(w, h), 0, 0, cv::INTER_AREA);
+    }
+    cv::blur(mx, mean_x, wide);
+    cv::blur(my, mean_y, wide);
+    cv::magnitude(mean_x, mean_y, coherent);
+    cv::blur(texture, roughness, wide);
+    roughness = cv::max(roughness - coherent, 0.0);
+  }
   cv::blur(texture, texture, cv::Size(win, win));
 
   // Bright reference: 95th percentile of the luma above the horizon.
@@ -116,9 +135,10 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       if (texture.at<float>(y, x) <= o.max_texture) cand.at<std::uint8_t>(y, x) = 1;
     }
   }
-  // Which candidate components are sky. Blue ones: touching the top or a side border, or
-  // large (blue sky seen between branches); grey-bright ones: touching the top border and, when
-  // the photo shows blue sky, touching it (clouds do; white walls and panels mostly do not).
+  // Which candidate components are sky. Blue ones: touching the top border, or (below) a side
+  // border or large (blue sky seen between branches) when blue sky touches the top; grey-bright
+  // ones: touching the top border and, when the photo shows blue sky, touching it (clouds do; white
+  // walls and panels mostly do not), or surrounded by it.
   cv::Mat labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(cand, labels, stats, centroids, 8, CV_32S);
   std::vector<int> blue_count(std::size_t(n), 0), dark_count(std::size_t(n), 0);
@@ -139,9 +159,25 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     is_blue[i] = 2 * blue_count[i] > area;
     // Mostly dusk blue: only from the top border down (a dark blue wall or car rarely is).
     const bool dusk = 2 * dark_count[i] > area;
-    if (is_blue[i] &&
-        (dusk ? top[i] && area > 0.01 * w * h : top[i] || side[i] || area > 0.002 * w * h))
-      keep[i] = 1, blue_area += area;
+    if (is_blue[i] && top[i] && (!dusk || area > 0.01 * w * h)) keep[i] = 1, blue_area += area;
+  }
+  // Blue not reaching the top border (sky between branches, beside a tree) is sky only when
+  // blue sky does reach it: a pale blue flower, sign, shirt or car in a close-up with no sky
+  // above it is not. (Its colour is not compared with the top sky's: a clear sky pales by far
+  // more than its own spread from the zenith to the horizon.) Nor is a piece of a bluish rock
+  // face: its roughness (below), on average over the piece, is that of a textured surface.
+  if (!o.detached_needs_top_sky || blue_area > 0) {
+    std::vector<double> rough_sum(std::size_t(n), 0.0);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (const int lab = labels.at<int>(y, x); lab > 0)
+          rough_sum[lab] += roughness.at<float>(y, x);
+    for (int i = 1; i < n; ++i) {
+      const int area = stats.at<int>(i, cv::CC_STAT_AREA);
+      if (keep[i] || !is_blue[i] || 2 * dark_count[i] > area) continue;
+      if (o.core_texture_factor > 0 && rough_sum[i] > o.min_core_texture * area) continue;
+      if (side[i] || area > 0.002 * w * h) keep[i] = 1, blue_area += area;
+    }
   }
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
@@ -153,10 +189,76 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
       if (near_blue.at<std::uint8_t>(y, x)) touches_blue[labels.at<int>(y, x)] = 1;
-  for (int i = 1; i < n; ++i)
-    if (!is_blue[i] && top[i] && (!blue_sky || touches_blue[i])) keep[i] = 1;
+  // A cloud cut off from the top by its own edge (steeper than `max_texture`) in a blue sky:
+  // grey-bright components whose surroundings are almost all blue sky, within two texture windows
+  // (the edge band the texture test refused). A white wall or panel stands on something else.
+  std::vector<int> ring(std::size_t(n), 0), ring_sky(std::size_t(n), 0);
+  if (blue_sky) {
+    cv::Mat near_sky;
+    const int r = 2 * win + 2;
+    cv::dilate(sky, near_sky,
+               cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
+    std::vector<int> seen;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const int own = labels.at<int>(y, x);
+        seen.clear();
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int yy = y + dy, xx = x + dx;
+            if (yy < 0 || yy >= h || xx < 0 || xx >= w) continue;
+            const int lab = labels.at<int>(yy, xx);
+            if (lab == 0 || lab == own || is_blue[lab] || keep[lab]) continue;
+            if (std::find(seen.begin(), seen.end(), lab) != seen.end()) continue;
+            seen.push_back(lab);
+            ++ring[lab];
+            ring_sky[lab] += near_sky.at<std::uint8_t>(y, x) != 0;
+          }
+      }
+  }
+  for (int i = 1; i < n; ++i) {
+    if (is_blue[i]) continue;
+    if (top[i] && (!blue_sky || touches_blue[i])) keep[i] = 1;
+    if (!top[i] && blue_sky && ring[i] > 0 && ring_sky[i] >= o.cloud_min_sky_ring * ring[i])
+      keep[i] = 1;
+  }
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) sky.at<std::uint8_t>(y, x) = keep[labels.at<int>(y, x)];
+  // Issue 11: a grey or bluish rock face, a concrete floor or a hazy mountain is below
+  // `max_texture` in most of its pixels, but much rougher than the sky, whose texture is the
+  // camera's noise and smooth ramps (its gradient, the clouds' soft edges); touching the sky, it
+  // joined its component. So the sky keeps only what lies within a bounded distance (`core_grow`
+  // texture windows, through the sky) of its core: pixels whose roughness (above) is below a
+  // few times the sky's own noise floor (its 5th percentile: a rough face that touches the sky may
+  // be most of it), in patches at least two texture windows across (a rock face's smoothest patches
+  // are not a core).
+  if (o.core_texture_factor > 0 && o.core_grow > 0) {
+    const cv::Mat& wide = roughness;
+    std::vector<float> tex;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (sky.at<std::uint8_t>(y, x)) tex.push_back(wide.at<float>(y, x));
+    if (!tex.empty()) {
+      const std::size_t q = std::size_t(0.05 * double(tex.size() - 1));
+      std::nth_element(tex.begin(), tex.begin() + std::ptrdiff_t(q), tex.end());
+      const float limit = std::clamp(float(o.core_texture_factor) * tex[q],
+                                     float(o.min_core_texture), float(o.max_texture));
+      cv::Mat core = sky & (wide <= limit);
+      cv::morphologyEx(
+          core, core, cv::MORPH_OPEN,
+          cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * win + 1, 2 * win + 1)));
+      const cv::Mat step = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
+      const int steps = int(std::lround(o.core_grow * win));
+      cv::Mat grown;
+      for (int i = 0; i < steps; ++i) {
+        cv::dilate(core, grown, step);
+        grown &= sky;
+        if (cv::countNonZero(grown != core) == 0) break;
+        std::swap(core, grown);
+      }
+      sky = core;
+    }
+  }
   // The texture window widens every edge by about its radius: grow the sky back over pixels of
   // sky colour within that distance (the guided filter then places the edge).
   {

@@ -3,7 +3,10 @@
 // is above the horizon, has little texture (mean gradient magnitude over a small window below
 // `max_texture` per pixel) and is blue-ish (B > R, B >= G, not dark) or grey and bright (low
 // saturation, luma at least `bright_fraction` of the above-horizon 95th percentile). The sky is
-// the candidates' 8-connected components that touch the top border, with small enclosed holes
+// the candidates' 8-connected components that touch the top border (blue ones elsewhere only
+// when blue sky does; grey-bright ones also when surrounded by blue sky: clouds), cut
+// back to what lies near its smooth core (issue 11: a textured rock face or concrete floor that
+// touches the sky is not sky; SkyMaskOptions::core_texture_factor), with small enclosed holes
 // (birds, specks: below `max_hole_fraction` of the image) filled; at full resolution its edges
 // are refined with a guided filter (cv::ximgproc::guidedFilter, guide = the display-referred
 // photo) and clipped to the horizon again. Never throws for any image content.
@@ -28,7 +31,23 @@ namespace mr::photo {
 
 struct SkyMaskOptions {
   double working_pixels = 0.5e6;
-  double max_texture = 0.012;       ///< mean |gradient| of the display-referred luma per pixel
+  double max_texture = 0.012;  ///< mean |gradient| of the display-referred luma per pixel
+  /// The sky keeps only what lies within `core_grow` texture windows (through the sky) of its
+  /// core: pixels whose roughness over three windows (mean gradient magnitude less the magnitude
+  /// of the mean gradient: 0 on a smooth ramp such as a cloud's soft edge) is at most
+  /// `core_texture_factor` x the sky's 5th percentile of it (its noise floor), within
+  /// [min_core_texture, max_texture], in patches at least two windows across. 0: off (every
+  /// candidate that passed `max_texture` counts).
+  double core_texture_factor = 4.0;
+  double min_core_texture = 0.003;
+  double core_grow = 2.0;
+  /// Blue candidates not touching the top border (touching a side one, or larger than 0.2 % of
+  /// the image) are sky only when blue sky touches the top border. false: always.
+  bool detached_needs_top_sky = true;
+  /// Under a blue sky, a grey-bright component not touching the top border (a cloud whose edge
+  /// is too steep for the texture test) is sky when at least this fraction of the pixels around
+  /// it are within two texture windows of the blue sky. > 1: off.
+  double cloud_min_sky_ring = 0.9;
   double bright_fraction = 0.6;     ///< grey sky: luma >= this x the bright reference
   double max_hole_fraction = 5e-4;  ///< enclosed non-sky specks filled up to this image fraction
   /// Sky seen through foliage: enclosed sky-coloured components up to this image fraction whose

@@ -1,0 +1,233 @@
+// The automatic sky mask (photo/sky_mask) on synthetic photos of the failure classes found on the
+// gallery's tuning half (issue 11): regions that are not sky must not be taken as sky (a grey,
+// bluish, textured rock face under the sky; a pale blue flower in a green close-up), without
+// losing real sky (soft clouds in a blue sky, blue sky seen beside a tree). Photos are drawn
+// display-referred with OpenCV and converted to scene-linear (^2.2) as the estimator expects;
+// the horizon is given, so that only the mask is under test.
+#include <gtest/gtest.h>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <vector>
+
+#include "mr/image.h"
+#include "photo/sky_mask.h"
+
+namespace mr {
+namespace {
+
+constexpr int kW = 640, kH = 480;
+
+Image to_linear(const cv::Mat& display) {  // CV_32FC3 RGB in [0, 1]
+  Image img(display.cols, display.rows, 3);
+  for (int y = 0; y < display.rows; ++y)
+    for (int x = 0; x < display.cols; ++x)
+      for (int c = 0; c < 3; ++c)
+        img.at(x, y, c) = std::pow(std::clamp(display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f), 2.2f);
+  return img;
+}
+
+// Band-limited luma noise: uniform noise blurred by `sigma_px`, scaled to unit standard
+// deviation. Mean gradient of the result ~ amplitude / sigma_px.
+cv::Mat smooth_noise(unsigned seed, double sigma_px) {
+  cv::Mat n(kH, kW, CV_32F);
+  cv::RNG rng(seed);
+  rng.fill(n, cv::RNG::UNIFORM, -1.0, 1.0);
+  cv::GaussianBlur(n, n, cv::Size(0, 0), sigma_px);
+  cv::Scalar mean, sd;
+  cv::meanStdDev(n, mean, sd);
+  return (n - mean[0]) / sd[0];
+}
+
+// Mean display-referred gradient magnitude per pixel (the mask's texture measure, without its
+// pre-blur) over a region.
+double mean_gradient(const cv::Mat& display, const cv::Mat& region) {
+  cv::Mat grey, gx, gy, mag;
+  cv::cvtColor(display, grey, cv::COLOR_RGB2GRAY);
+  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0 / 8);
+  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8);
+  cv::magnitude(gx, gy, mag);
+  return cv::mean(mag, region)[0];
+}
+
+std::array<PixelPoint, 2> level(double row) {
+  return {PixelPoint{0.0, row}, PixelPoint{kW - 1.0, row}};
+}
+
+double fraction(const std::vector<std::uint8_t>& mask, const cv::Mat& region) {
+  std::size_t in = 0, n = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      if (region.at<std::uint8_t>(y, x)) ++n, in += mask[std::size_t(y) * kW + x] != 0;
+  return n ? double(in) / double(n) : 0.0;
+}
+
+// A blue sky fading to a pale, greyish blue at the horizon (row 330), and above it a mountain
+// whose rock has the colour of the sky low down (a bluish grey: B > R, so the mask's colour test
+// takes it as blue sky) and a fine texture below the mask's `max_texture` (0.012) but several
+// times the sky's. Where its ridge meets the pale sky there is no colour edge, so the rock and
+// the sky were one candidate component: the whole face was sky (fog painted it one flat colour;
+// aitzgorri in the tuning half). Measured with the core test (roughness): the rock 14.9 % sky
+// (2.6 % beyond 16 px of the ridge), the sky 100 %; before it (options off): 99.3 % (100 %).
+TEST(SkyMaskClasses, TexturedRockFaceUnderTheSkyIsNotSky) {
+  const double horizon = 330;
+  cv::Mat img(kH, kW, CV_32FC3), rock(kH, kW, CV_8U, cv::Scalar(0));
+  const cv::Vec3f top(0.45f, 0.62f, 0.90f), low(0.60f, 0.64f, 0.72f);
+  for (int y = 0; y < kH; ++y) {
+    const float t = std::clamp(float(y) / 300.0f, 0.0f, 1.0f);
+    for (int x = 0; x < kW; ++x) img.at<cv::Vec3f>(y, x) = top * (1 - t) + low * t;
+  }
+  // The mountain: a ridge between rows 150 and 220, down to the horizon.
+  std::vector<cv::Point> ridge{{0, int(horizon)}};
+  for (int x = 0; x <= kW; x += 40)
+    ridge.emplace_back(x, int(185 + 35 * std::sin(x * 0.021) + 12 * std::sin(x * 0.09 + 1)));
+  ridge.emplace_back(kW, int(horizon));
+  cv::fillPoly(rock, std::vector<std::vector<cv::Point>>{ridge}, cv::Scalar(1));
+  for (int y = int(horizon) + 1; y < kH; ++y) rock.row(y).setTo(0);  // rock only above
+  const cv::Mat grain = smooth_noise(7, 1.2);
+  // Below the horizon: a green meadow (textured: not sky either way).
+  const cv::Mat grass = smooth_noise(11, 0.8);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      cv::Vec3f& p = img.at<cv::Vec3f>(y, x);
+      if (y >= horizon) {
+        p = cv::Vec3f(0.35f, 0.55f, 0.2f) + cv::Vec3f(1, 1, 1) * (0.08f * grass.at<float>(y, x));
+      } else if (rock.at<std::uint8_t>(y, x)) {
+        p = low + cv::Vec3f(1, 1, 1) * (0.016f * grain.at<float>(y, x));
+      }
+    }
+  const double rock_texture = mean_gradient(img, rock);
+  std::printf("rock face: mean gradient %.4f per pixel\n", rock_texture);
+  ASSERT_GT(rock_texture, 0.006);  // several times the sky's noise ...
+  ASSERT_LT(rock_texture, 0.012);  // ... yet below the mask's max_texture (0.012)
+
+  const Image photo = to_linear(img);
+  const photo::SkyMask mask = photo::estimate_sky_mask(photo.view(), level(horizon));
+  cv::Mat sky_truth(kH, kW, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < int(horizon); ++y)
+    for (int x = 0; x < kW; ++x) sky_truth.at<std::uint8_t>(y, x) = !rock.at<std::uint8_t>(y, x);
+  // The sky away from the ridge by 3 px (the matte's edge band may take a pixel or two). The
+  // rock beyond 16 px from the ridge: where the ridge has no edge the sky still reaches into the
+  // rock by up to `core_grow` texture windows (2 x 5 px here) from its core, plus the texture
+  // window's own reach.
+  cv::Mat inner_rock, inner_sky;
+  cv::erode(rock, inner_rock, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(33, 33)));
+  cv::erode(sky_truth, inner_sky, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(7, 7)));
+  const double rock_as_sky = fraction(mask.sky, rock);
+  const double inner_rock_as_sky = fraction(mask.sky, inner_rock);
+  const double sky_as_sky = fraction(mask.sky, inner_sky);
+  std::printf("rock taken as sky %.4f (beyond 16 px of the ridge %.4f), sky kept %.4f\n",
+              rock_as_sky, inner_rock_as_sky, sky_as_sky);
+  EXPECT_LT(inner_rock_as_sky, 0.05);
+  EXPECT_LT(rock_as_sky, 0.25);
+  EXPECT_GT(sky_as_sky, 0.98);
+}
+
+// Soft white clouds (Gaussian blobs, one with a steeper edge) in a blue gradient sky over a
+// textured ground: the core test must keep them (their interiors are as smooth as the sky; their
+// edges are within reach of it), and the two clouds whose edge is too steep for the texture
+// test must stay sky too (the ring rule). Measured: 96.9 % of the cloud pixels kept (the rest:
+// the steepest rims), 99.5 % of the sky; before (options off): 73.7 %, 95.6 %.
+TEST(SkyMaskClasses, SoftCloudsInABlueSkyStaySky) {
+  const double horizon = 300;
+  cv::Mat img(kH, kW, CV_32FC3);
+  const cv::Mat grass = smooth_noise(3, 0.8);
+  struct Cloud {
+    double x, y, r, steep;
+  };
+  const Cloud clouds[] = {{150, 90, 55, 1}, {420, 140, 70, 1}, {560, 60, 40, 3}, {300, 230, 45, 2}};
+  cv::Mat cloud_px(kH, kW, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      cv::Vec3f& p = img.at<cv::Vec3f>(y, x);
+      if (y >= horizon) {
+        p = cv::Vec3f(0.4f, 0.35f, 0.25f) + cv::Vec3f(1, 1, 1) * (0.1f * grass.at<float>(y, x));
+        continue;
+      }
+      const float t = float(y) / float(horizon);
+      p = cv::Vec3f(0.30f, 0.50f, 0.85f) * (1 - t) + cv::Vec3f(0.62f, 0.72f, 0.88f) * t;
+      float cover = 0;
+      for (const Cloud& c : clouds) {
+        const double d = std::hypot(x - c.x, (y - c.y) * 1.6) / c.r;
+        cover = std::max(cover, float(1 / (1 + std::exp(c.steep * 6 * (d - 1)))));
+      }
+      p = p * (1 - cover) + cv::Vec3f(0.95f, 0.95f, 0.96f) * cover;
+      cloud_px.at<std::uint8_t>(y, x) = cover > 0.2f;
+    }
+  const Image photo = to_linear(img);
+  const photo::SkyMask mask = photo::estimate_sky_mask(photo.view(), level(horizon));
+  cv::Mat sky_truth(kH, kW, CV_8U, cv::Scalar(0));
+  sky_truth.rowRange(0, int(horizon) - 3).setTo(1);
+  const double clouds_kept = fraction(mask.sky, cloud_px);
+  const double sky_kept = fraction(mask.sky, sky_truth);
+  std::printf("clouds kept %.4f, sky kept %.4f\n", clouds_kept, sky_kept);
+  EXPECT_GT(clouds_kept, 0.95);
+  EXPECT_GT(sky_kept, 0.99);
+}
+
+// A close-up: green foliage fills the frame (textured), a pale blue flower (smooth petals) sits
+// above the (fall-back, mid-frame) horizon, one touching the left border. Blue, smooth and large
+// enough, both were sky before (a flat fog-coloured blob in the haze look). With no blue sky at
+// the top border they are not. Measured: 0 sky pixels (before: 9497, both flowers, 3 % of the
+// frame).
+TEST(SkyMaskClasses, PaleBlueFlowerInAGreenCloseUpIsNotSky) {
+  cv::Mat img(kH, kW, CV_32FC3);
+  const cv::Mat leaves = smooth_noise(5, 1.0);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      img.at<cv::Vec3f>(y, x) =
+          cv::Vec3f(0.25f, 0.45f, 0.15f) + cv::Vec3f(1, 1, 1) * (0.12f * leaves.at<float>(y, x));
+  const cv::Vec3f petal(0.68f, 0.76f, 0.95f);
+  cv::circle(img, {260, 140}, 45, cv::Scalar(petal[0], petal[1], petal[2]), cv::FILLED,
+             cv::LINE_AA);
+  cv::ellipse(img, {20, 90}, {40, 30}, 0, 0, 360, cv::Scalar(petal[0], petal[1], petal[2]),
+              cv::FILLED, cv::LINE_AA);
+  const Image photo = to_linear(img);
+  const photo::SkyMask mask = photo::estimate_sky_mask(photo.view(), level(kH / 2.0 - 0.5));
+  std::printf("close-up: %zu sky pixels\n", mask.pixels);
+  EXPECT_EQ(mask.pixels, 0u);
+}
+
+// The same rule keeps real sky that does not reach the top border: blue sky at the top and
+// a patch of the same sky beside a tree trunk (cut off from the top by the canopy) at the right
+// border. Measured: 100 % of both kept (as before the rule).
+TEST(SkyMaskClasses, DetachedSkyUnderABlueSkyStaysSky) {
+  const double horizon = 330;
+  cv::Mat img(kH, kW, CV_32FC3);
+  const cv::Mat leaves = smooth_noise(9, 1.0);
+  cv::Mat open_sky(kH, kW, CV_8U, cv::Scalar(0)), side_sky(kH, kW, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      cv::Vec3f& p = img.at<cv::Vec3f>(y, x);
+      const bool canopy = y >= 100 && y < 160 && x >= 300;  // the canopy's lower edge
+      const bool trunk = x >= 300 && x < 360 && y >= 100;
+      const bool ground = y >= horizon;
+      if (canopy || trunk || ground) {
+        p = cv::Vec3f(0.3f, 0.38f, 0.18f) + cv::Vec3f(1, 1, 1) * (0.12f * leaves.at<float>(y, x));
+      } else {
+        const float t = float(y) / float(horizon);
+        p = cv::Vec3f(0.35f, 0.55f, 0.88f) * (1 - t) + cv::Vec3f(0.55f, 0.68f, 0.90f) * t;
+        (x >= 360 && y >= 160 ? side_sky : open_sky).at<std::uint8_t>(y, x) = 1;
+      }
+    }
+  cv::Mat inner_open, inner_side;
+  const cv::Mat k = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(9, 9));
+  cv::erode(open_sky, inner_open, k);
+  cv::erode(side_sky, inner_side, k);
+  const Image photo = to_linear(img);
+  const photo::SkyMask mask = photo::estimate_sky_mask(photo.view(), level(horizon));
+  const double open_kept = fraction(mask.sky, inner_open);
+  const double side_kept = fraction(mask.sky, inner_side);
+  std::printf("open sky kept %.4f, detached sky kept %.4f\n", open_kept, side_kept);
+  EXPECT_GT(open_kept, 0.99);
+  EXPECT_GT(side_kept, 0.99);
+}
+
+}  // namespace
+}  // namespace mr
