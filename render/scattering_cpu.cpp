@@ -260,10 +260,10 @@ class Core {
         const physics::LampOnRay& lr = lamp_rays[li];
         const double tm = physics::lamp_segment_t(lr, ta, tb);
         const Vec3d xm = add(origin_, w, tm);
-        const Vec3d to_lamp = sub(vec(lamp.position_m), xm);
-        const double r = std::sqrt(dot(to_lamp, to_lamp));
+        const physics::TowardLamp to_lamp = physics::toward_lamp(xm, vec(lamp.position_m));
+        const double r = to_lamp.r;
         if (r < 1e-9) continue;
-        const Vec3d l = to_lamp / r;
+        const Vec3d l = to_lamp.l;
         const double spot = spot_factor(lamp, -l);
         if (spot <= 0) continue;
         if (in_.occluders) {
@@ -423,10 +423,10 @@ class Core {
                                  physics::transmittance(sigma3_, od_sun));
     }
     for (const Lamp& lamp : scene_.lighting.lamps) {
-      const Vec3d to_lamp = sub(vec(lamp.position_m), x0);
-      const double r2 = dot(to_lamp, to_lamp), r = std::sqrt(r2);
+      const physics::TowardLamp to_lamp = physics::toward_lamp(x0, vec(lamp.position_m));
+      const double r2 = to_lamp.r2, r = to_lamp.r;
       if (r < 1e-6) continue;
-      const Vec3d l = to_lamp / r;
+      const Vec3d l = to_lamp.l;
       const double cos_i = dot(n, l);
       if (cos_i <= 0) continue;
       const double spot = spot_factor(lamp, -l);

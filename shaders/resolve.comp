@@ -92,10 +92,10 @@ void surface_term(int x, int y, float ao, float known_sun_disk, out vec3 S, out 
   }
   for (int l = 0; l < n_lamps; ++l) {
     const GpuLamp lamp = lamps[l];
-    const vec3 to_lamp = lamp.position.xyz - x0;
-    const float r2 = dot(to_lamp, to_lamp), r = sqrt(r2);
+    const TowardLamp to_lamp = toward_lamp(x0, lamp.position.xyz);
+    const float r2 = to_lamp.r2, r = to_lamp.r;
     if (r < 1e-6) continue;
-    const vec3 lv = to_lamp / r;
+    const vec3 lv = to_lamp.l;
     const float cos_i = dot(n, lv);
     if (cos_i <= 0.0) continue;
     const float spot = spot_factor(lamp, -lv);

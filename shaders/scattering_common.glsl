@@ -289,10 +289,10 @@ PixelSample march(int x, int y, int steps) {
         const GpuLamp lamp = lamps[l];
         const float tm = lamp_segment_t(b.l_ray[l], ta, tb);
         const vec3 xm = origin + w * tm;
-        const vec3 to_lamp = lamp.position.xyz - xm;
-        const float r = length(to_lamp);
+        const TowardLamp to_lamp = toward_lamp(xm, lamp.position.xyz);
+        const float r = to_lamp.r;
         if (r < 1e-9) continue;
-        const vec3 lv = to_lamp / r;
+        const vec3 lv = to_lamp.l;
         const float spot = spot_factor(lamp, -lv);
         if (spot <= 0.0) continue;
         if (shadows && !lamp_lit(lamp, xm, vec3(0.0), r, 0.0, 1e-3 + 1e-4 * tm)) continue;

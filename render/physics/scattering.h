@@ -21,18 +21,14 @@ MR_PHYSICS_BEGIN
 // reuses its value, which is bit for bit what it would compute.
 
 MR_FN Float3 exp3(Float3 v) {
-  Float3 r = Float3(0.0, 0.0, 0.0);
-  r.x = exp(v.x);
-  r.y = v.y == v.x ? r.x : exp(v.y);
-  r.z = v.z == v.y ? r.y : exp(v.z);
-  return r;
+  const Float x = exp(v.x);
+  const Float y = v.y == v.x ? x : exp(v.y);
+  return Float3(x, y, v.z == v.y ? y : exp(v.z));
 }
 MR_FN Float3 expm1_3(Float3 v) {
-  Float3 r = Float3(0.0, 0.0, 0.0);
-  r.x = expm1_(v.x);
-  r.y = v.y == v.x ? r.x : expm1_(v.y);
-  r.z = v.z == v.y ? r.y : expm1_(v.z);
-  return r;
+  const Float x = expm1_(v.x);
+  const Float y = v.y == v.x ? x : expm1_(v.y);
+  return Float3(x, y, v.z == v.y ? y : expm1_(v.z));
 }
 
 /// exp(-sigma od) per channel, 1 in a channel without extinction even where od = inf (the sun's
@@ -180,6 +176,22 @@ MR_FN Float sun_seen_fraction(Float ta, Float tb, Float tl, Float tr, bool vis_p
 MR_FN Float3 sun_inscatter(Float3 lit_weight, Float g, Float3 w, Float3 sun_dir,
                            Float3 irradiance, Float3 tau_sun) {
   return lit_weight * henyey_greenstein(g, dot(w, sun_dir)) * irradiance * tau_sun;
+}
+
+/// From a point toward a lamp: the unit direction l, the distance r and its square r2 (l is
+/// not finite where r = 0: callers skip r below their threshold first).
+struct TowardLamp {
+  Float3 l;
+  Float r;
+  Float r2;
+};
+MR_FN TowardLamp toward_lamp(Float3 point, Float3 lamp_position) {
+  TowardLamp t;
+  const Float3 d = lamp_position - point;
+  t.r2 = dot(d, d);
+  t.r = sqrt(t.r2);
+  t.l = d / t.r;
+  return t;
 }
 
 /// atan(b) - atan(a), accurate also when the two are close.
