@@ -44,8 +44,7 @@ PhotoFallback::PhotoFallback(const Camera& camera, const FogScene& scene, ConstI
 
 // The cores' ray (the same function, so all find the same neighbours on a plane).
 Vec3d PhotoFallback::ray(int x, int y) const {
-  return physics::camera_ray(forward_, right_, up_, camera_.focal_px, camera_.cx, camera_.cy, x,
-                             y);
+  return physics::camera_ray(forward_, right_, up_, camera_.focal_px, camera_.cx, camera_.cy, x, y);
 }
 
 bool PhotoFallback::faces_sun(int x, int y) const {

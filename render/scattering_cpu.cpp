@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "render/embree_scene.h"
-#include "render/medium.h"
 #include "render/math.h"
+#include "render/medium.h"
 #include "render/photo_fallback.h"
 #include "render/physics/resolve.h"
 #include "render/physics/scattering.h"
@@ -234,8 +234,7 @@ class Core {
       const double modulation = has_noise ? noise_modulation(m.noise, xs) : 1.0;
       const double seg_od_unit = rd.optical_depth(ta, tb) * modulation;
       const Vec3d tau_before = tau;
-      const Vec3d weight =
-          physics::advance_segment(od, tau, sigma3_, albedo_, seg_od_unit);
+      const Vec3d weight = physics::advance_segment(od, tau, sigma3_, albedo_, seg_od_unit);
       if (physics::segment_dark(weight, tau_before)) continue;
 
       if (scene_.lighting.sun) {
@@ -250,7 +249,8 @@ class Core {
         sun_seen_fraction += physics::sun_seen_fraction(ta, tb, tl, tr, vis_prev, vis, vis_next);
         ++sun_samples;
         if (lit_weight.x + lit_weight.y + lit_weight.z > 0) {
-          const double od_sun = light_path ? RayDensity(m, xs, sun_dir_).optical_depth(0, kInf) : 0.0;
+          const double od_sun =
+              light_path ? RayDensity(m, xs, sun_dir_).optical_depth(0, kInf) : 0.0;
           inscatter += physics::sun_inscatter(lit_weight, m.g, w, sun_dir_, sun_irradiance_,
                                               physics::transmittance(sigma3_, od_sun));
         }
@@ -696,7 +696,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                 lum_min = std::min(lum_min, lum);
                 lum_max = std::max(lum_max, lum);
               }
-              const bool shadow_edge = physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max);
+              const bool shadow_edge =
+                  physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max);
               const double disk0 = sparse.grid_at(i, j).sun_disk;
               const bool sun_disk_agrees = disk0 >= 0 &&
                                            sparse.grid_at(i + 1, j).sun_disk == disk0 &&

@@ -28,7 +28,6 @@ constexpr float kPi = 3.14159265358979323846f;
 constexpr double kPiD = 3.14159265358979323846;
 constexpr float kMinRoughness = 0.02f;  // mr::Material's range
 
-
 float clamp_roughness(float r) {
   return std::clamp(r, kMinRoughness, 1.0f);
 }
@@ -346,8 +345,8 @@ SurfaceGeometry surface_geometry_from_depth(const Image& distance_m, const Camer
                 const float r = sun_tan_radius * std::sqrt((i + 0.5f) / sun_rays);
                 const float phi = 2.39996323f * i + 2 * kPi * rotation;
                 s = unit(Vec3f{s[0] + r * (std::cos(phi) * sun_u[0] + std::sin(phi) * sun_v[0]),
-                                s[1] + r * (std::cos(phi) * sun_u[1] + std::sin(phi) * sun_v[1]),
-                                s[2] + r * (std::cos(phi) * sun_u[2] + std::sin(phi) * sun_v[2])});
+                               s[1] + r * (std::cos(phi) * sun_u[1] + std::sin(phi) * sun_v[1]),
+                               s[2] + r * (std::cos(phi) * sun_u[2] + std::sin(phi) * sun_v[2])});
               }
               if (dot(n, s) > 0) dirs[count++] = s;
             }

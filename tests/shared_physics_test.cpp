@@ -5,7 +5,8 @@
 // Tolerances: quadratures 1e-9 relative (Simpson with enough intervals to be exact to ~1e-12
 // on these smooth integrands); identities (telescoping sums, inverses) 1e-12 relative; the
 // lamp's segment integral against quadrature 2e-3 relative with the normal preset's boundaries
-// (its midpoint rule in angle, README "Integration"); statistics of hashed directions within 5 standard errors.
+// (its midpoint rule in angle, README "Integration"); statistics of hashed directions within 5
+// standard errors.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -33,9 +34,9 @@ TEST(SharedPhysics, HenyeyGreensteinIsNormalisedWithMeanCosineG) {
     // Over the sphere: 2 pi integral_{-1}^{1} p(mu) dmu (the forward peak is ~(1 - g)^2 wide:
     // 4e5 intervals resolve it).
     auto integral = [&](auto weight) {
-      return simpson([&](double mu) { return 2 * test::kPi * ph::henyey_greenstein(g, mu) *
-                                             weight(mu); },
-                     -1, 1, 400000);
+      return simpson(
+          [&](double mu) { return 2 * test::kPi * ph::henyey_greenstein(g, mu) * weight(mu); }, -1,
+          1, 400000);
     };
     EXPECT_NEAR(integral([](double) { return 1.0; }), 1.0, g > 0.9 ? 1e-6 : 1e-9) << g;
     EXPECT_NEAR(integral([](double mu) { return mu; }), g, g > 0.9 ? 1e-6 : 1e-9) << g;
@@ -127,10 +128,10 @@ TEST(SharedPhysics, SegmentWeightsTelescopeToTheSkyOnlyClosedForm) {
   Float3 od{0, 0, 0}, tau{1, 1, 1}, sum{0, 0, 0};
   double ta = 0;
   for (int i = 1; i <= steps; ++i) {
-    const double tb = i == steps ? len
-                                 : ph::uniform_boundary(rd, i, steps, sigma_mean,
-                                                        sigma_mean * od_total,
-                                                        -std::expm1(-sigma_mean * od_total), len);
+    const double tb = i == steps
+                          ? len
+                          : ph::uniform_boundary(rd, i, steps, sigma_mean, sigma_mean * od_total,
+                                                 -std::expm1(-sigma_mean * od_total), len);
     ASSERT_GT(tb, ta);
     sum += ph::advance_segment(od, tau, sigma, albedo, ph::optical_depth(rd, ta, tb));
     ta = tb;
@@ -154,13 +155,13 @@ TEST(SharedPhysics, SunLitPiecesAddUpToTheSegment) {
   const Float3 sigma{0.05, 0.05, 0.06}, albedo{0.9, 0.9, 0.9}, tau_before{0.7, 0.7, 0.6};
   const double ta = 10, tb = 18, modulation = 0.8;
   Float3 od{0, 0, 0}, tau = tau_before;
-  const Float3 weight = ph::advance_segment(od, tau, sigma, albedo,
-                                            ph::optical_depth(rd, ta, tb) * modulation);
+  const Float3 weight =
+      ph::advance_segment(od, tau, sigma, albedo, ph::optical_depth(rd, ta, tb) * modulation);
   // Lit throughout, as one piece or as three: the whole weight.
   const Float3 one = ph::sun_lit_weight(rd, ta, tb, ta, tb, true, true, true, modulation, weight,
                                         albedo, tau_before, sigma);
-  const Float3 three = ph::sun_lit_weight(rd, ta, tb, 12, 15, true, true, true, modulation,
-                                          weight, albedo, tau_before, sigma);
+  const Float3 three = ph::sun_lit_weight(rd, ta, tb, 12, 15, true, true, true, modulation, weight,
+                                          albedo, tau_before, sigma);
   // Only the middle piece: exp(-sigma od(ta, 12)) - exp(-sigma od(ta, 15)) of it.
   const Float3 middle = ph::sun_lit_weight(rd, ta, tb, 12, 15, false, true, false, modulation,
                                            weight, albedo, tau_before, sigma);
@@ -199,8 +200,8 @@ TEST(SharedPhysics, LampSegmentsIntegrateTheGlow) {
   std::vector<double> bounds = {0, len};
   const double od_total = ph::optical_depth(rd, 0, len);
   for (int i = 1; i < 32; ++i)
-    bounds.push_back(ph::uniform_boundary(rd, i, 32, 0.05, 0.05 * od_total,
-                                          -std::expm1(-0.05 * od_total), len));
+    bounds.push_back(
+        ph::uniform_boundary(rd, i, 32, 0.05, 0.05 * od_total, -std::expm1(-0.05 * od_total), len));
   for (int i = 1; i < 16; ++i) bounds.push_back(ph::lamp_boundary(lr, i, 16));
   std::sort(bounds.begin(), bounds.end());
   Float3 sum{0, 0, 0};
@@ -211,8 +212,8 @@ TEST(SharedPhysics, LampSegmentsIntegrateTheGlow) {
     ph::advance_segment(od, tau, sigma, albedo, ph::optical_depth(rd, ta, tb));
     const double tm = ph::lamp_segment_t(lr, ta, tb);
     const Float3 l = ph::normalize(lamp - tm * w);
-    sum += ph::lamp_inscatter(lr, rd, ta, tb, tm, 1.0, ph::henyey_greenstein(g, ph::dot(w, l)),
-                              1.0, 0.0, albedo, sigma, tau_before, intensity);
+    sum += ph::lamp_inscatter(lr, rd, ta, tb, tm, 1.0, ph::henyey_greenstein(g, ph::dot(w, l)), 1.0,
+                              0.0, albedo, sigma, tau_before, intensity);
   }
   for (int c = 0; c < 3; ++c)
     EXPECT_NEAR(sum[c], want * intensity[c], 2e-3 * want * intensity[c]) << c;

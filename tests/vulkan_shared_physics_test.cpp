@@ -46,12 +46,12 @@ TEST(SharedPhysicsBackends, MonteCarloSceneOnTheCpuAndVulkanBackends) {
     const vktest::Errors e = vktest::compare(gpu, cpu);
     const test::McComparison ref_cpu = test::compare_with_reference(cpu.inscatter, cs);
     const test::McComparison ref_gpu = test::compare_with_reference(gpu.inscatter, cs);
-    std::printf("[ Shared   ] %s: GPU vs CPU: T mean %.4f %% p99 %.4f %% | R mean %.4f %% p99 "
-                "%.4f %%; against Monte Carlo: CPU %.4f %% (sky %.4f %%), GPU %.4f %% (sky "
-                "%.4f %%)\n",
-                name, 100 * e.mean_t, 100 * e.p99_t, 100 * e.mean_r, 100 * e.p99_r,
-                100 * ref_cpu.mean_rel, 100 * ref_cpu.mean_rel_sky, 100 * ref_gpu.mean_rel,
-                100 * ref_gpu.mean_rel_sky);
+    std::printf(
+        "[ Shared   ] %s: GPU vs CPU: T mean %.4f %% p99 %.4f %% | R mean %.4f %% p99 "
+        "%.4f %%; against Monte Carlo: CPU %.4f %% (sky %.4f %%), GPU %.4f %% (sky "
+        "%.4f %%)\n",
+        name, 100 * e.mean_t, 100 * e.p99_t, 100 * e.mean_r, 100 * e.p99_r, 100 * ref_cpu.mean_rel,
+        100 * ref_cpu.mean_rel_sky, 100 * ref_gpu.mean_rel, 100 * ref_gpu.mean_rel_sky);
     EXPECT_LT(e.mean_t, 0.01) << name;
     EXPECT_LT(e.mean_r, 0.01) << name;
     EXPECT_LT(e.p99_t, 0.05) << name;

@@ -206,18 +206,30 @@ MR_FN uint hash3(int x, int y, int z, uint seed) {
 // improved Perlin noise.
 MR_FN Float noise_grad(int cx, int cy, int cz, Float rx, Float ry, Float rz, uint seed) {
   switch (hash3(cx, cy, cz, seed) % 12u) {
-    case 0u: return rx + ry;
-    case 1u: return -rx + ry;
-    case 2u: return rx - ry;
-    case 3u: return -rx - ry;
-    case 4u: return rx + rz;
-    case 5u: return -rx + rz;
-    case 6u: return rx - rz;
-    case 7u: return -rx - rz;
-    case 8u: return ry + rz;
-    case 9u: return -ry + rz;
-    case 10u: return ry - rz;
-    default: return -ry - rz;
+    case 0u:
+      return rx + ry;
+    case 1u:
+      return -rx + ry;
+    case 2u:
+      return rx - ry;
+    case 3u:
+      return -rx - ry;
+    case 4u:
+      return rx + rz;
+    case 5u:
+      return -rx + rz;
+    case 6u:
+      return rx - rz;
+    case 7u:
+      return -rx - rz;
+    case 8u:
+      return ry + rz;
+    case 9u:
+      return -ry + rz;
+    case 10u:
+      return ry - rz;
+    default:
+      return -ry - rz;
   }
 }
 
@@ -243,8 +255,8 @@ MR_FN Float gradient_noise(Float3 p, uint seed) {
   for (int k = 0; k < 2; ++k)
     for (int j = 0; j < 2; ++j)
       for (int i = 0; i < 2; ++i)
-        c[k * 4 + j * 2 + i] = noise_grad(ix + i, iy + j, iz + k, dx - Float(i), dy - Float(j),
-                                          dz - Float(k), seed);
+        c[k * 4 + j * 2 + i] =
+            noise_grad(ix + i, iy + j, iz + k, dx - Float(i), dy - Float(j), dz - Float(k), seed);
   const Float x00 = lerp_(c[0], c[1], u);
   const Float x10 = lerp_(c[2], c[3], u);
   const Float x01 = lerp_(c[4], c[5], u);

@@ -56,8 +56,8 @@ MR_FN Float spot_cone(Float cos_a, Float cos_inner, Float cos_outer) {
 
 /// The unit view ray through pixel (x, y)'s centre (camera axes in the world, focal length and
 /// principal point in pixels).
-MR_FN Float3 camera_ray(Float3 forward, Float3 right, Float3 up, Float focal_px, Float cx,
-                        Float cy, int x, int y) {
+MR_FN Float3 camera_ray(Float3 forward, Float3 right, Float3 up, Float focal_px, Float cx, Float cy,
+                        int x, int y) {
   const Float a = (Float(x) + 0.5 - cx) / focal_px;
   const Float b = (Float(y) + 0.5 - cy) / focal_px;
   return normalize(forward + a * right + (-b) * up);
@@ -82,8 +82,8 @@ MR_FN Float pixel_jitter(int x, int y, uint seed) {
 /// Boundary i of `steps` segments uniform in transmittance at the mean extinction sigma_mean
 /// (od_mean_total = sigma_mean times the march's unit optical depth, one_minus_tau_end =
 /// -expm1(-od_mean_total)); uniform in distance over len in (almost) clear air.
-MR_FN Float uniform_boundary(RayDensity rd, int i, int steps, Float sigma_mean,
-                             Float od_mean_total, Float one_minus_tau_end, Float len) {
+MR_FN Float uniform_boundary(RayDensity rd, int i, int steps, Float sigma_mean, Float od_mean_total,
+                             Float one_minus_tau_end, Float len) {
   if (od_mean_total > 1e-6) {
     const Float frac = Float(i) / Float(steps);
     return distance_at_optical_depth(rd, -log1p_(-one_minus_tau_end * frac) / sigma_mean);
@@ -127,8 +127,8 @@ MR_FN Float segment_sample_t(Float ta, Float tb, Float jitter, int i) {
 /// depth seg_od_unit (noise included) and returns its scattering weight, the exact integral of
 /// tau sigma_s over it: albedo tau_before (1 - exp(-sigma od_segment)) (expm1: thin segments
 /// keep their precision).
-MR_FN Float3 advance_segment(MR_INOUT(Float3) od, MR_INOUT(Float3) tau, Float3 sigma,
-                             Float3 albedo, Float seg_od_unit) {
+MR_FN Float3 advance_segment(MR_INOUT(Float3) od, MR_INOUT(Float3) tau, Float3 sigma, Float3 albedo,
+                             Float seg_od_unit) {
   const Float3 od_segment = sigma * seg_od_unit;
   const Float3 weight = albedo * tau * -expm1_3(-od_segment);
   od += od_segment;
@@ -145,8 +145,8 @@ MR_FN bool segment_dark(Float3 weight, Float3 tau_before) {
 /// on [ta, tl], of its own on [tl, tr], of the next on [tr, tb] (tl, tr: the bisected crossings
 /// that fall inside it; ta, tb where there are none). `modulation`: the segment's noise factor.
 MR_FN Float3 sun_lit_weight(RayDensity rd, Float ta, Float tb, Float tl, Float tr, bool vis_prev,
-                            bool vis, bool vis_next, Float modulation, Float3 weight,
-                            Float3 albedo, Float3 tau_before, Float3 sigma) {
+                            bool vis, bool vis_next, Float modulation, Float3 weight, Float3 albedo,
+                            Float3 tau_before, Float3 sigma) {
   Float3 lit = Float3(0.0, 0.0, 0.0);
   if (tl == ta && tr == tb) return vis ? weight : lit;
   for (int k = 0; k < 3; ++k) {
@@ -173,8 +173,8 @@ MR_FN Float sun_seen_fraction(Float ta, Float tb, Float tl, Float tr, bool vis_p
 
 /// The sun's in-scatter of a segment: its lit weight times the phase function, the irradiance
 /// above the fog and the transmittance of the sun's path to the sample point.
-MR_FN Float3 sun_inscatter(Float3 lit_weight, Float g, Float3 w, Float3 sun_dir,
-                           Float3 irradiance, Float3 tau_sun) {
+MR_FN Float3 sun_inscatter(Float3 lit_weight, Float g, Float3 w, Float3 sun_dir, Float3 irradiance,
+                           Float3 tau_sun) {
   return lit_weight * henyey_greenstein(g, dot(w, sun_dir)) * irradiance * tau_sun;
 }
 
@@ -213,8 +213,8 @@ MR_FN Float lamp_segment_t(LampOnRay l, Float ta, Float tb) {
 /// dt / r^2 = d(th) / h), the rest of the integrand at tm = lamp_segment_t. `modulation`: the
 /// noise at tm; phase, spot at tm; od_lamp: unit optical depth from tm to the lamp.
 MR_FN Float3 lamp_inscatter(LampOnRay l, RayDensity rd, Float ta, Float tb, Float tm,
-                            Float modulation, Float phase, Float spot, Float od_lamp,
-                            Float3 albedo, Float3 sigma, Float3 tau_before, Float3 intensity) {
+                            Float modulation, Float phase, Float spot, Float od_lamp, Float3 albedo,
+                            Float3 sigma, Float3 tau_before, Float3 intensity) {
   const Float rho = density(rd, tm) * modulation;
   const Float od_to_m = optical_depth(rd, ta, tm) * modulation;
   const Float angle = atan_diff((ta - l.tc) / l.h, (tb - l.tc) / l.h);
