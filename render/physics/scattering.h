@@ -125,14 +125,16 @@ MR_FN Float segment_sample_t(Float ta, Float tb, Float jitter, int i) {
 
 /// Advances the camera's optical depth `od` and transmittance `tau` over a segment of unit optical
 /// depth seg_od_unit (noise included) and returns its scattering weight, the exact integral of
-/// tau sigma_s over it: albedo tau_before (1 - exp(-sigma od_segment)) (expm1: thin segments
-/// keep their precision).
+/// tau sigma_s over it: albedo tau_before (1 - exp(-sigma od_segment)). One expm1 per channel
+/// gives both (thin segments keep their precision; grey fog needs one): tau is carried as the
+/// product of the segments' transmittances, within a few ulps of exp(-od) per segment.
 MR_FN Float3 advance_segment(MR_INOUT(Float3) od, MR_INOUT(Float3) tau, Float3 sigma, Float3 albedo,
                              Float seg_od_unit) {
   const Float3 od_segment = sigma * seg_od_unit;
-  const Float3 weight = albedo * tau * -expm1_3(-od_segment);
+  const Float3 e = expm1_3(-od_segment);  // exp(-od_segment) - 1
+  const Float3 weight = albedo * tau * -e;
   od += od_segment;
-  tau = exp3(-od);
+  tau = tau + tau * e;
   return weight;
 }
 
