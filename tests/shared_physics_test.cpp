@@ -283,6 +283,35 @@ TEST(SharedPhysics, HashAndNoise) {
     EXPECT_GE(ph::noise_modulation({0.7 * i, 1.3, -0.2 * i}, 1.5, 0.25, 3, 9), 0.0);
 }
 
+// Improved Perlin noise's 12 gradients written out as a table (the CPU core's noise before it
+// was shared), independently of physics::noise_grad's bit arithmetic.
+double table_gradient_noise(const Float3& p, std::uint32_t seed) {
+  const double fx = std::floor(p.x), fy = std::floor(p.y), fz = std::floor(p.z);
+  const double dx = p.x - fx, dy = p.y - fy, dz = p.z - fz;
+  auto grad = [&](int cx, int cy, int cz, double rx, double ry, double rz) {
+    const double table[12] = {rx + ry, -rx + ry, rx - ry, -rx - ry, rx + rz, -rx + rz,
+                              rx - rz, -rx - rz, ry + rz, -ry + rz, ry - rz, -ry - rz};
+    return table[ph::hash3(cx, cy, cz, seed) % 12u];
+  };
+  auto fade = [](double t) { return t * t * t * (t * (t * 6 - 15) + 10); };
+  auto lerp = [](double a, double b, double t) { return a + (b - a) * t; };
+  double c[2][2][2];
+  for (int k = 0; k < 2; ++k)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i)
+        c[k][j][i] = grad(int(fx) + i, int(fy) + j, int(fz) + k, dx - i, dy - j, dz - k);
+  const double u = fade(dx), v = fade(dy), w = fade(dz);
+  return lerp(lerp(lerp(c[0][0][0], c[0][0][1], u), lerp(c[0][1][0], c[0][1][1], u), v),
+              lerp(lerp(c[1][0][0], c[1][0][1], u), lerp(c[1][1][0], c[1][1][1], u), v), w);
+}
+
+TEST(SharedPhysics, GradientNoiseIsImprovedPerlinNoise) {
+  for (int i = 0; i < 3000; ++i) {
+    const Float3 p{0.731 * i - 40, 0.173 * i + 0.5, -0.291 * i};
+    EXPECT_EQ(ph::gradient_noise(p, 11), table_gradient_noise(p, 11)) << i;
+  }
+}
+
 TEST(SharedPhysics, AmbientOcclusionRaysAreCosineWeighted) {
   // Over many pixels' streams: E[cos theta] = 2/3, E[cos^2 theta] = 1/2 for cosine weighting.
   const Float3 n = ph::normalize(Float3{0.3, 0.8, -0.52});

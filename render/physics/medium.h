@@ -205,32 +205,11 @@ MR_FN uint hash3(int x, int y, int z, uint seed) {
 // The gradient of a lattice corner dotted with the offset: 12 edge directions of a cube, as in
 // improved Perlin noise.
 MR_FN Float noise_grad(int cx, int cy, int cz, Float rx, Float ry, Float rz, uint seed) {
-  switch (hash3(cx, cy, cz, seed) % 12u) {
-    case 0u:
-      return rx + ry;
-    case 1u:
-      return -rx + ry;
-    case 2u:
-      return rx - ry;
-    case 3u:
-      return -rx - ry;
-    case 4u:
-      return rx + rz;
-    case 5u:
-      return -rx + rz;
-    case 6u:
-      return rx - rz;
-    case 7u:
-      return -rx - rz;
-    case 8u:
-      return ry + rz;
-    case 9u:
-      return -ry + rz;
-    case 10u:
-      return ry - rz;
-    default:
-      return -ry - rz;
-  }
+  // h = 0..3: (+-rx) + (+-ry); 4..7: (+-rx) + (+-rz); 8..11: (+-ry) + (+-rz).
+  const uint h = hash3(cx, cy, cz, seed) % 12u;
+  const Float u = h < 8u ? rx : ry;
+  const Float v = h < 4u ? ry : rz;
+  return ((h & 1u) == 0u ? u : -u) + ((h & 2u) == 0u ? v : -v);
 }
 
 MR_FN Float noise_fade(Float t) {
