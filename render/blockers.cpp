@@ -10,27 +10,16 @@
 #include <vector>
 
 #include "mr/error.h"
+#include "render/math.h"
+#include "render/physics/medium.h"
 
 namespace mr::render {
 
 namespace {
 
-using V = std::array<double, 3>;
+using V = Vec3d;
 
-V vec(const Vec3& v) { return {v.x, v.y, v.z}; }
-double dot(const V& a, const V& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-V add(const V& a, const V& b, double s = 1) {
-  return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]};
-}
-V sub(const V& a, const V& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-V cross(const V& a, const V& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-double norm(const V& a) { return std::sqrt(dot(a, a)); }
-V unit(const V& a) {
-  const double n = norm(a);
-  return n > 0 ? V{a[0] / n, a[1] / n, a[2] / n} : V{0, 0, 0};
-}
+double norm(const V& a) { return length(a); }
 V at_height(const V& p, double y) { return {p[0], y, p[2]}; }
 
 // Vertical structures: normals within ~17 degrees of horizontal.
@@ -464,14 +453,7 @@ class Builder {
       add_triangle(vec(p.corners_m[0]), vec(p.corners_m[k]), vec(p.corners_m[k + 1]));
   }
 
-  static std::uint32_t hash(std::uint32_t x) {
-    x ^= x >> 16;
-    x *= 0x7feb352du;
-    x ^= x >> 15;
-    x *= 0x846ca68bu;
-    x ^= x >> 16;
-    return x;
-  }
+  static std::uint32_t hash(std::uint32_t x) { return physics::hash32(x); }
 
   void canopy(const Blockers::Canopy& c) {
     const int n = int(std::ceil(c.radius_m / c.cell_m));

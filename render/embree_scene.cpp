@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "mr/error.h"
+#include "render/physics/occlusion.h"
 
 namespace mr::render {
 
@@ -262,24 +263,6 @@ float OccluderScene::intersect_distance(const std::array<float, 3>& origin,
   return hit.hit.geomID != RTC_INVALID_GEOMETRY_ID ? hit.ray.tfar : kInfF;
 }
 
-namespace {
-
-/// A 32-bit integer hash with good avalanche (Wellons' "lowbias32"): the RNG of ambient
-/// occlusion, so results depend only on the seed and the ray number.
-inline std::uint32_t hash32(std::uint32_t x) {
-  x ^= x >> 16;
-  x *= 0x7feb352dU;
-  x ^= x >> 15;
-  x *= 0x846ca68bU;
-  x ^= x >> 16;
-  return x;
-}
-inline float unit_float(std::uint32_t bits) {
-  return float(bits >> 8) * (1.0f / 16777216.0f);
-}
-
-}  // namespace
-
 float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& point,
                         const std::array<float, 3>& normal, int ray_count, float max_distance_m,
                         std::uint32_t seed) {
@@ -293,40 +276,31 @@ float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& 
                                  double(normal[2]) * normal[2]);
   if (!(n_len > 0) || !std::isfinite(n_len))
     throw Error(ErrorCode::invalid_argument, "ambient occlusion normal is zero or not finite");
-  const double nx = normal[0] / n_len, ny = normal[1] / n_len, nz = normal[2] / n_len;
-  // Orthonormal basis around the normal (Duff et al. 2017, branchless).
-  const double sign = std::copysign(1.0, nz);
-  const double a = -1.0 / (sign + nz), b = nx * ny * a;
-  const double t1[3] = {1.0 + sign * nx * nx * a, sign * b, -sign * nx};
-  const double t2[3] = {b, sign + ny * ny * a, -ny};
+  const physics::Float3 n{normal[0] / n_len, normal[1] / n_len, normal[2] / n_len};
+  physics::Float3 t1, t2;
+  physics::ao_basis(n, t1, t2);
 
   // Start just off the surface: float positions far from the world origin are coarser.
   const double point_norm = std::sqrt(double(point[0]) * point[0] + double(point[1]) * point[1] +
                                       double(point[2]) * point[2]);
   const float offset_m = float(std::max(1e-4, 1e-4 * point_norm));
-  const float origin[3] = {float(point[0] + offset_m * nx), float(point[1] + offset_m * ny),
-                           float(point[2] + offset_m * nz)};
+  const float origin[3] = {float(point[0] + offset_m * n.x), float(point[1] + offset_m * n.y),
+                           float(point[2] + offset_m * n.z)};
 
-  const std::uint32_t stream = hash32(seed ^ 0x5bd1e995U);
+  const std::uint32_t stream = physics::ao_stream(seed);
   int open = 0;
   for (int first = 0; first < ray_count; first += 8) {
     RayPacket8 packet;
     for (int k = 0; k < 8; ++k) {
       const int index = first + k;
       packet.valid[k] = index < ray_count ? -1 : 0;
-      // Cosine-weighted direction, stratified in u1 (= sin^2 of the polar angle).
-      const std::uint32_t h1 = hash32(stream + 2u * std::uint32_t(index));
-      const std::uint32_t h2 = hash32(h1 ^ 0x68e31da4U);
-      const double u1 = (std::min(index, ray_count - 1) + unit_float(h1)) / ray_count;
-      const double phi = 2.0 * std::numbers::pi * unit_float(h2);
-      const double r = std::sqrt(u1), cos_theta = std::sqrt(std::max(0.0, 1.0 - u1));
-      const double lx = r * std::cos(phi), ly = r * std::sin(phi);
+      const physics::Float3 dir = physics::ao_direction(stream, index, ray_count, n, t1, t2);
       packet.origin_x[k] = origin[0];
       packet.origin_y[k] = origin[1];
       packet.origin_z[k] = origin[2];
-      packet.direction_x[k] = float(lx * t1[0] + ly * t2[0] + cos_theta * nx);
-      packet.direction_y[k] = float(lx * t1[1] + ly * t2[1] + cos_theta * ny);
-      packet.direction_z[k] = float(lx * t1[2] + ly * t2[2] + cos_theta * nz);
+      packet.direction_x[k] = float(dir.x);
+      packet.direction_y[k] = float(dir.y);
+      packet.direction_z[k] = float(dir.z);
       packet.t_near[k] = 0.0f;
       packet.t_far[k] = max_distance_m;
     }

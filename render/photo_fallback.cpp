@@ -4,28 +4,13 @@
 #include <cmath>
 #include <numbers>
 
+#include "render/math.h"
+#include "render/physics/scattering.h"
+
 namespace mr::render {
 
 namespace {
 
-using V3 = std::array<double, 3>;
-
-V3 vec(const Vec3& v) {
-  return {v.x, v.y, v.z};
-}
-double dot(const V3& a, const V3& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-V3 add(const V3& a, const V3& b, double s = 1) {
-  return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]};
-}
-V3 sub(const V3& a, const V3& b) {
-  return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
-}
-V3 normalized(const V3& a) {
-  const double n = std::sqrt(dot(a, a));
-  return {a[0] / n, a[1] / n, a[2] / n};
-}
 template <typename T>
 double luminance(const T* rgb) {
   return 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
@@ -57,17 +42,15 @@ PhotoFallback::PhotoFallback(const Camera& camera, const FogScene& scene, ConstI
   if (scene.lighting.sun) sun_dir_ = normalized(vec(scene.lighting.sun->direction_to_sun));
 }
 
-// As the CPU core's ray (the same arithmetic, so both find the same neighbours on a plane).
-PhotoFallback::V3 PhotoFallback::ray(int x, int y) const {
-  const double a = (x + 0.5 - camera_.cx) / camera_.focal_px,
-               b = (y + 0.5 - camera_.cy) / camera_.focal_px;
-  return normalized(add(add(forward_, right_, a), up_, -b));
+// The cores' ray (the same function, so all find the same neighbours on a plane).
+Vec3d PhotoFallback::ray(int x, int y) const {
+  return physics::camera_ray(forward_, right_, up_, camera_.focal_px, camera_.cx, camera_.cy, x, y);
 }
 
 bool PhotoFallback::faces_sun(int x, int y) const {
   if (!scene_.lighting.sun || normals_.data == nullptr) return false;
   if (!std::isfinite(distance_m_.at(x, y, 0))) return false;
-  const V3 n = {normals_.at(x, y, 0), normals_.at(x, y, 1), normals_.at(x, y, 2)};
+  const Vec3d n = {normals_.at(x, y, 0), normals_.at(x, y, 1), normals_.at(x, y, 2)};
   return dot(n, n) >= 0.5 && dot(n, sun_dir_) > 0;
 }
 
@@ -92,14 +75,14 @@ std::vector<float> PhotoFallback::sun_disk_map(ConstImageView sun_visibility) co
 bool PhotoFallback::shows_sunlit(int x, int y, double ao, const float* sun_disk) const {
   if (photo_.data == nullptr || !scene_.lighting.sun) return false;
   const double distance = distance_m_.at(x, y, 0);
-  const V3 n = {normals_.at(x, y, 0), normals_.at(x, y, 1), normals_.at(x, y, 2)};
+  const Vec3d n = {normals_.at(x, y, 0), normals_.at(x, y, 1), normals_.at(x, y, 2)};
   const double cos_i = dot(n, sun_dir_);
   if (!std::isfinite(distance) || cos_i <= 0) return false;
   const double e = luminance(scene_.lighting.sun->irradiance.data()) * cos_i;
   const double amb = std::numbers::pi * luminance(sky_radiance_.data()) * ao;
   const double k = amb > 0 ? std::min(100.0, (e + amb) / amb) : 100.0;
   if (k < 1.25) return false;
-  const V3 xp = add(origin_, ray(x, y), distance);
+  const Vec3d xp = add(origin_, ray(x, y), distance);
   constexpr int kRadius = 3;
   constexpr int kMax = (2 * kRadius + 1) * (2 * kRadius + 1);
   double lit[kMax], dark[kMax];
@@ -112,9 +95,9 @@ bool PhotoFallback::shows_sunlit(int x, int y, double ao, const float* sun_disk)
       if (v != 1.0f && v != 0.0f) continue;
       const double dn = distance_m_.at(i, j, 0);
       if (!std::isfinite(dn)) continue;
-      const V3 nn = {normals_.at(i, j, 0), normals_.at(i, j, 1), normals_.at(i, j, 2)};
+      const Vec3d nn = {normals_.at(i, j, 0), normals_.at(i, j, 1), normals_.at(i, j, 2)};
       if (dot(nn, n) < 0.9) continue;
-      const V3 xn = add(origin_, ray(i, j), dn);
+      const Vec3d xn = add(origin_, ray(i, j), dn);
       if (std::fabs(dot(sub(xn, xp), n)) > 0.02 * distance) continue;
       (v == 1.0f ? lit[n_lit++] : dark[n_dark++]) = luminance(photo_.pixel(i, j));
     }

@@ -12,6 +12,7 @@
 #include "mr/camera.h"
 #include "mr/image.h"
 #include "mr/scene.h"
+#include "render/math.h"
 
 namespace mr::render {
 
@@ -41,14 +42,13 @@ class PhotoFallback {
   bool shows_sunlit(int x, int y, double ao, const float* sun_disk) const;
 
  private:
-  using V3 = std::array<double, 3>;
-  V3 ray(int x, int y) const;
+  Vec3d ray(int x, int y) const;
 
   const Camera& camera_;
   const FogScene& scene_;
   ConstImageView distance_m_, normals_, photo_;
   std::array<float, 3> sky_radiance_;
-  V3 origin_{}, forward_{}, right_{}, up_{}, sun_dir_{};
+  Vec3d origin_{}, forward_{}, right_{}, up_{}, sun_dir_{};
 };
 
 }  // namespace mr::render

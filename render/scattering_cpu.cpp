@@ -13,8 +13,11 @@
 #include <vector>
 
 #include "render/embree_scene.h"
+#include "render/math.h"
 #include "render/medium.h"
 #include "render/photo_fallback.h"
+#include "render/physics/resolve.h"
+#include "render/physics/scattering.h"
 #include "shaders/scattering_params.h"  // kEdgeBisections, kShaftRefinement (shared with the GPU)
 
 namespace mr::render {
@@ -30,57 +33,20 @@ constexpr double kGoldenAngle = 2.39996322972865332;
 using gpu::kEdgeBisections;
 using gpu::kShaftRefinement;
 
-Vec3d vec(const Vec3& v) {
-  return {v.x, v.y, v.z};
-}
-double dot(const Vec3d& a, const Vec3d& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-Vec3d add(const Vec3d& a, const Vec3d& b, double s = 1) {
-  return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]};
-}
-Vec3d sub(const Vec3d& a, const Vec3d& b) {
-  return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
-}
-Vec3d normalized(const Vec3d& a) {
-  const double n = std::sqrt(dot(a, a));
-  return {a[0] / n, a[1] / n, a[2] / n};
-}
-Vec3d cross(const Vec3d& a, const Vec3d& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-std::array<float, 3> f3(const Vec3d& v) {
-  return {float(v[0]), float(v[1]), float(v[2])};
-}
-
-// Interleaved gradient noise (Jimenez 2014): a per-pixel offset in [0, 1) whose neighbours
-// differ, so stratified jitter turns into fine noise the interpolation and eye average out.
-double fract(double v) {
-  return v - std::floor(v);
-}
-
-double pixel_jitter(int x, int y, std::uint32_t seed) {
-  const double ign = fract(52.9829189 * fract(0.06711056 * x + 0.00583715 * y));
-  const double rot = double((seed * 2654435761u) >> 8) / double(1u << 24);
-  return fract(ign + rot);
-}
+using physics::fract;
+using physics::pixel_jitter;
 
 // The smooth cone falloff of a spot lamp (1 for point lamps).
 double spot_factor(const Lamp& lamp, const Vec3d& from_lamp_unit) {
   if (lamp.outer_angle_deg >= 180.0) return 1.0;
-  const double cos_a = dot(normalized(vec(lamp.spot_direction)), from_lamp_unit);
-  const double cos_in = std::cos(lamp.inner_angle_deg * kDeg),
-               cos_out = std::cos(lamp.outer_angle_deg * kDeg);
-  if (cos_a >= cos_in) return 1.0;
-  if (cos_a <= cos_out) return 0.0;
-  const double t = (cos_a - cos_out) / (cos_in - cos_out);
-  return t * t * (3 - 2 * t);
+  return physics::spot_cone(dot(normalized(vec(lamp.spot_direction)), from_lamp_unit),
+                            std::cos(lamp.inner_angle_deg * kDeg),
+                            std::cos(lamp.outer_angle_deg * kDeg));
 }
 
-// A lamp's closest approach to a view ray: at distance tc along it, h away from it.
-struct LampOnRay {
-  double tc, h;
-};
+Vec3d rgb(const std::array<float, 3>& c) {
+  return {c[0], c[1], c[2]};
+}
 
 struct PixelSample {
   double inscatter[3] = {0, 0, 0};
@@ -95,12 +61,16 @@ class Core {
   Core(const CoreInputs& in, const MarchPlan& plan) : in_(in), plan_(plan), scene_(*in.scene) {
     const Medium& m = scene_.medium;
     for (int c = 0; c < 3; ++c) sigma_[c] = m.sigma_t_per_m[c];
+    sigma3_ = {sigma_[0], sigma_[1], sigma_[2]};
+    albedo_ = rgb(m.albedo);
+    sky_ = rgb(in.sky_radiance);
     sigma_mean_ = (sigma_[0] + sigma_[1] + sigma_[2]) / 3.0;
     sigma_min_ = std::min({sigma_[0], sigma_[1], sigma_[2]});
     grey_ = sigma_[0] == sigma_[1] && sigma_[1] == sigma_[2];
     if (scene_.lighting.sun) {
       const Sun& sun = *scene_.lighting.sun;
       sun_dir_ = normalized(vec(sun.direction_to_sun));
+      sun_irradiance_ = rgb(sun.irradiance);
       // An orthonormal frame around the sun direction for sampling its disk.
       const Vec3d helper = std::fabs(sun_dir_[1]) < 0.9 ? Vec3d{0, 1, 0} : Vec3d{1, 0, 0};
       sun_u_ = normalized(cross(helper, sun_dir_));
@@ -126,18 +96,10 @@ class Core {
 
   std::size_t shadow_rays() const { return rays_.combine(std::plus<>()); }
 
-  // exp(-sigma od) where the sun's path through an unbounded medium has od = inf: a channel
-  // without extinction (sigma 0, clear air) transmits everything, not exp(-0 inf) = NaN.
-  static double clear_air_exp(double sigma, double od) {
-    return sigma > 0 ? std::exp(-sigma * od) : 1.0;
-  }
-
   // CameraPose::ray_direction, with the pose's axes computed once (not 6 trig calls a ray).
   Vec3d ray(int x, int y) const {
     const Camera& cam = *in_.camera;
-    const double a = (x + 0.5 - cam.cx) / cam.focal_px, b = (y + 0.5 - cam.cy) / cam.focal_px;
-    const Vec3d d = add(add(forward_, right_, a), up_, -b);
-    return normalized(d);
+    return physics::camera_ray(forward_, right_, up_, cam.focal_px, cam.cx, cam.cy, x, y);
   }
 
   // Direction of march step i's sample of the sun's disk: stratified in radius over the ray's
@@ -152,16 +114,7 @@ class Core {
 
   // The march's far end: the surface, or for the sky where the fog has (almost) ended.
   double march_length(const RayDensity& rd, double distance) const {
-    if (std::isfinite(distance)) return distance;
-    if (scene_.render.max_distance_m > 0) return scene_.render.max_distance_m;
-    constexpr double kMax = 100e3;
-    if (sigma_min_ <= 0) return kMax;
-    const double od_inf = rd.optical_depth(0, kInf);
-    // Transmittance 1e-4 in the clearest channel, or (fog thinning upward) all but 1e-4 of the
-    // remaining optical depth.
-    const double target = std::isinf(od_inf) ? 9.21 / sigma_min_ : od_inf - 1e-4 / sigma_min_;
-    if (target <= 0) return 0;
-    return std::min(kMax, rd.distance_at_optical_depth(target));
+    return physics::march_length(rd.shared(), distance, scene_.render.max_distance_m, sigma_min_);
   }
 
   // `steps`: view-ray segments (the preset's, or more where a pixel straddles a shaft edge).
@@ -191,28 +144,20 @@ class Core {
     bounds.push_back(0);
     bounds.push_back(length);
     const double od_mean_total = sigma_mean_ * od_unit_total;
-    if (od_mean_total > 1e-6) {
-      const double tau_end = std::exp(-od_mean_total);
-      for (int i = 1; i < steps; ++i) {
-        const double tau = 1.0 - (1.0 - tau_end) * i / steps;
-        const double t = rd.distance_at_optical_depth(-std::log(tau) / sigma_mean_);
-        if (t > 0 && t < length) bounds.push_back(t);
-      }
-    } else {
-      for (int i = 1; i < steps; ++i) bounds.push_back(length * i / steps);
+    const double one_minus_tau_end = -std::expm1(-od_mean_total);
+    for (int i = 1; i < steps; ++i) {
+      const double t = physics::uniform_boundary(rd.shared(), i, steps, sigma_mean_, od_mean_total,
+                                                 one_minus_tau_end, length);
+      if (t > 0 && t < length) bounds.push_back(t);
     }
-    thread_local std::vector<LampOnRay> lamp_rays;
+    thread_local std::vector<physics::LampOnRay> lamp_rays;
     lamp_rays.clear();
     lamp_rays.reserve(scene_.lighting.lamps.size());
     for (const Lamp& lamp : scene_.lighting.lamps) {
-      const Vec3d p = vec(lamp.position_m);
-      const double tc = dot(sub(p, origin_), w);
-      const double h =
-          std::max(1e-6, std::sqrt(std::max(0.0, dot(sub(p, origin_), sub(p, origin_)) - tc * tc)));
-      lamp_rays.push_back({tc, h});
-      const double th_a = std::atan2(-tc, h), th_b = std::atan2(length - tc, h);
+      const physics::LampOnRay lr = physics::lamp_on_ray(vec(lamp.position_m), origin_, w, length);
+      lamp_rays.push_back(lr);
       for (int i = 1; i < plan_.lamp_steps; ++i) {
-        const double t = tc + h * std::tan(th_a + (th_b - th_a) * i / plan_.lamp_steps);
+        const double t = physics::lamp_boundary(lr, i, plan_.lamp_steps);
         if (t > 0 && t < length) bounds.push_back(t);
       }
     }
@@ -232,12 +177,8 @@ class Core {
     sample_t.resize(segments);
     crossing.resize(segments);
     sun_visible.assign(segments, 1);
-    for (std::size_t i = 0; i < segments; ++i) {
-      // Stratified jitter: each segment's own offset (a golden-ratio sequence from the pixel's),
-      // so the offsets' biases cancel along the ray instead of adding up.
-      const double u = fract(jitter + 0.6180339887498949 * double(i));
-      sample_t[i] = bounds[i] + (bounds[i + 1] - bounds[i]) * u;
-    }
+    for (std::size_t i = 0; i < segments; ++i)
+      sample_t[i] = physics::segment_sample_t(bounds[i], bounds[i + 1], jitter, int(i));
     std::size_t rays = 0;
     if (scene_.lighting.sun && in_.occluders) {
       RayPacket8 packet;
@@ -282,89 +223,48 @@ class Core {
       }
     }
 
-    double od[3] = {0, 0, 0};
-    double tau_a[3] = {1, 1, 1};
+    Vec3d od{0, 0, 0}, tau{1, 1, 1}, inscatter{0, 0, 0};
     int sun_samples = 0;
     double sun_seen_fraction = 0;
+    const bool light_path = scene_.render.light_path_attenuation;
     for (std::size_t i = 0; i < segments; ++i) {
       const double ta = bounds[i], tb = bounds[i + 1];
       const double ts = sample_t[i];
       const Vec3d xs = add(origin_, w, ts);
-      const double seg_od_unit =
-          rd.optical_depth(ta, tb) * (has_noise ? noise_modulation(m.noise, xs) : 1.0);
-      double weight[3];
-      const double tau_before[3] = {tau_a[0], tau_a[1], tau_a[2]};
-      // Grey fog (equal sigma_t in all channels, the usual case): one exp for all three.
-      const double tau_grey = grey_ ? std::exp(-(od[0] + sigma_[0] * seg_od_unit)) : 0.0;
-      for (int c = 0; c < 3; ++c) {
-        od[c] += sigma_[c] * seg_od_unit;
-        const double tau_b = grey_ ? tau_grey : std::exp(-od[c]);
-        weight[c] = m.albedo[c] * (tau_a[c] - tau_b);  // integral of tau sigma_s over the segment
-        tau_a[c] = tau_b;
-      }
-      if (weight[0] + weight[1] + weight[2] <= 0 &&
-          tau_before[0] + tau_before[1] + tau_before[2] <= 0)
-        continue;
+      const double modulation = has_noise ? noise_modulation(m.noise, xs) : 1.0;
+      const double seg_od_unit = rd.optical_depth(ta, tb) * modulation;
+      const Vec3d tau_before = tau;
+      const Vec3d weight = physics::advance_segment(od, tau, sigma3_, albedo_, seg_od_unit);
+      if (physics::segment_dark(weight, tau_before)) continue;
 
-      const double source[3] = {in_.sky_radiance[0], in_.sky_radiance[1], in_.sky_radiance[2]};
       if (scene_.lighting.sun) {
-        const Sun& sun = *scene_.lighting.sun;
-        // The segment's lit weight: [ta, tl] is lit as sample i - 1, [tl, tr] as sample i,
-        // [tr, tb] as sample i + 1 (tl, tr: the bisected crossings that fall inside it).
-        const bool vis_prev = i > 0 ? sun_visible[i - 1] : sun_visible[i];
-        const bool vis_next = i + 1 < segments ? sun_visible[i + 1] : sun_visible[i];
-        const double tl = vis_prev != bool(sun_visible[i]) ? std::max(ta, crossing[i - 1]) : ta;
-        const double tr = vis_next != bool(sun_visible[i]) ? std::min(tb, crossing[i]) : tb;
-        double lit_weight[3] = {0, 0, 0};
-        if (tl == ta && tr == tb) {
-          if (sun_visible[i])
-            for (int c = 0; c < 3; ++c) lit_weight[c] = weight[c];
-        } else {
-          const double modulation =
-              seg_od_unit > 0 ? seg_od_unit / std::max(1e-300, rd.optical_depth(ta, tb)) : 0.0;
-          const std::array<std::pair<double, double>, 3> pieces{{{ta, tl}, {tl, tr}, {tr, tb}}};
-          const bool lit[3] = {vis_prev, bool(sun_visible[i]), vis_next};
-          for (int k = 0; k < 3; ++k) {
-            if (!lit[k] || !(pieces[k].second > pieces[k].first)) continue;
-            const double od_p = rd.optical_depth(ta, pieces[k].first) * modulation;
-            const double od_q = rd.optical_depth(ta, pieces[k].second) * modulation;
-            for (int c = 0; c < 3; ++c)
-              lit_weight[c] += m.albedo[c] * tau_before[c] *
-                               (std::exp(-sigma_[c] * od_p) - std::exp(-sigma_[c] * od_q));
-          }
-        }
-        const double length_ab = tb - ta;
-        sun_seen_fraction += length_ab > 0
-                                 ? ((vis_prev ? tl - ta : 0) + (sun_visible[i] ? tr - tl : 0) +
-                                    (vis_next ? tb - tr : 0)) /
-                                       length_ab
-                                 : double(sun_visible[i]);
+        const bool vis = sun_visible[i];
+        const bool vis_prev = i > 0 ? bool(sun_visible[i - 1]) : vis;
+        const bool vis_next = i + 1 < segments ? bool(sun_visible[i + 1]) : vis;
+        const double tl = vis_prev != vis ? std::max(ta, crossing[i - 1]) : ta;
+        const double tr = vis_next != vis ? std::min(tb, crossing[i]) : tb;
+        const Vec3d lit_weight =
+            physics::sun_lit_weight(rd.shared(), ta, tb, tl, tr, vis_prev, vis, vis_next,
+                                    modulation, weight, albedo_, tau_before, sigma3_);
+        sun_seen_fraction += physics::sun_seen_fraction(ta, tb, tl, tr, vis_prev, vis, vis_next);
         ++sun_samples;
-        if (lit_weight[0] + lit_weight[1] + lit_weight[2] > 0) {
-          const double phase = henyey_greenstein(m.g, dot(w, sun_dir_));
-          const double od_sun = scene_.render.light_path_attenuation
-                                    ? RayDensity(m, xs, sun_dir_).optical_depth(0, kInf)
-                                    : 0.0;
-          const double tau_sun_grey = grey_ ? clear_air_exp(sigma_[0], od_sun) : 0.0;
-          for (int c = 0; c < 3; ++c)
-            s.inscatter[c] += lit_weight[c] * phase * sun.irradiance[c] *
-                              (grey_ ? tau_sun_grey : clear_air_exp(sigma_[c], od_sun));
+        if (lit_weight.x + lit_weight.y + lit_weight.z > 0) {
+          const double od_sun =
+              light_path ? RayDensity(m, xs, sun_dir_).optical_depth(0, kInf) : 0.0;
+          inscatter += physics::sun_inscatter(lit_weight, m.g, w, sun_dir_, sun_irradiance_,
+                                              physics::transmittance(sigma3_, od_sun));
         }
       }
-      // Lamps: the 1/r^2 falloff is integrated exactly over the segment (with t = tc + h tan(th),
-      // dt / r^2 = d(th) / h); the rest of the integrand, smooth, is taken at the segment's
-      // midpoint in th (no jitter: lamps light the fog smoothly, and jitter would only add noise).
       for (std::size_t li = 0; li < scene_.lighting.lamps.size(); ++li) {
         const Lamp& lamp = scene_.lighting.lamps[li];
-        const LampOnRay& lr = lamp_rays[li];
-        const double th_a = std::atan((ta - lr.tc) / lr.h), th_b = std::atan((tb - lr.tc) / lr.h);
-        const double tm = std::clamp(lr.tc + lr.h * std::tan(0.5 * (th_a + th_b)), ta, tb);
+        const physics::LampOnRay& lr = lamp_rays[li];
+        const double tm = physics::lamp_segment_t(lr, ta, tb);
         const Vec3d xm = add(origin_, w, tm);
-        const Vec3d to_lamp = sub(vec(lamp.position_m), xm);
-        const double r = std::sqrt(dot(to_lamp, to_lamp));
+        const physics::TowardLamp to_lamp = physics::toward_lamp(xm, vec(lamp.position_m));
+        const double r = to_lamp.r;
         if (r < 1e-9) continue;
-        const Vec3d l = {to_lamp[0] / r, to_lamp[1] / r, to_lamp[2] / r};
-        const double spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
+        const Vec3d l = to_lamp.l;
+        const double spot = spot_factor(lamp, -l);
         if (spot <= 0) continue;
         if (in_.occluders) {
           ++rays;
@@ -372,20 +272,16 @@ class Core {
                                       float(r * (1 - 1e-4))))
             continue;
         }
-        const double modulation = has_noise ? noise_modulation(m.noise, xm) : 1.0;
-        const double rho = rd.density(tm) * modulation;
-        const double od_to_m = rd.optical_depth(ta, tm) * modulation;
-        const double phase = henyey_greenstein(m.g, dot(w, l));
-        const double od_lamp =
-            scene_.render.light_path_attenuation ? RayDensity(m, xm, l).optical_depth(0, r) : 0.0;
-        const double common = (th_b - th_a) / lr.h * phase * spot * rho;
-        for (int c = 0; c < 3; ++c)
-          s.inscatter[c] += m.albedo[c] * sigma_[c] * tau_before[c] *
-                            std::exp(-sigma_[c] * (od_to_m + od_lamp)) * common *
-                            lamp.intensity_per_sr[c];
+        const double lamp_modulation = has_noise ? noise_modulation(m.noise, xm) : 1.0;
+        const double phase = physics::henyey_greenstein(m.g, dot(w, l));
+        const double od_lamp = light_path ? RayDensity(m, xm, l).optical_depth(0, r) : 0.0;
+        inscatter += physics::lamp_inscatter(lr, rd.shared(), ta, tb, tm, lamp_modulation, phase,
+                                             spot, od_lamp, albedo_, sigma3_, tau_before,
+                                             rgb(lamp.intensity_per_sr));
       }
-      for (int c = 0; c < 3; ++c) s.inscatter[c] += weight[c] * source[c];
+      inscatter += weight * sky_;
     }
+    for (int c = 0; c < 3; ++c) s.inscatter[c] = inscatter[c];
     for (int c = 0; c < 3; ++c) s.camera_od[c] = od[c];
     s.shaft = sun_samples ? sun_seen_fraction / sun_samples : 1.0;
     rays_.local() += rays;
@@ -511,52 +407,42 @@ class Core {
       if (!xo_cache) xo_cache = shadow_origin(x, y, distance, n);
       return *xo_cache;
     };
-    double direct[3] = {0, 0, 0}, direct_fogged[3] = {0, 0, 0};
+    Vec3d direct{0, 0, 0}, direct_fogged{0, 0, 0};
     std::size_t rays = 0;
+    const bool light_path = scene_.render.light_path_attenuation;
     if (scene_.lighting.sun) {
-      const Sun& sun = *scene_.lighting.sun;
       const double cos_i = dot(n, sun_dir_);
       double visible = 0;
       if (cos_i > 0) {
         visible = known_sun_disk >= 0 ? known_sun_disk : sun_disk_visibility(x, y);
       }
       *sun_visibility = float(visible);
-      const double od_sun = scene_.render.light_path_attenuation
-                                ? RayDensity(m, x0, sun_dir_).optical_depth(0, kInf)
-                                : 0.0;
-      for (int c = 0; c < 3; ++c) {
-        const double e = sun.irradiance[c] * std::max(0.0, cos_i) * visible;
-        direct[c] += e;
-        direct_fogged[c] += e * clear_air_exp(sigma_[c], od_sun);
-      }
+      const double od_sun = light_path ? RayDensity(m, x0, sun_dir_).optical_depth(0, kInf) : 0.0;
+      physics::add_surface_light(direct, direct_fogged,
+                                 sun_irradiance_ * std::max(0.0, cos_i) * visible,
+                                 physics::transmittance(sigma3_, od_sun));
     }
     for (const Lamp& lamp : scene_.lighting.lamps) {
-      const Vec3d to_lamp = sub(vec(lamp.position_m), x0);
-      const double r2 = dot(to_lamp, to_lamp), r = std::sqrt(r2);
+      const physics::TowardLamp to_lamp = physics::toward_lamp(x0, vec(lamp.position_m));
+      const double r2 = to_lamp.r2, r = to_lamp.r;
       if (r < 1e-6) continue;
-      const Vec3d l = {to_lamp[0] / r, to_lamp[1] / r, to_lamp[2] / r};
+      const Vec3d l = to_lamp.l;
       const double cos_i = dot(n, l);
       if (cos_i <= 0) continue;
-      const double spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
+      const double spot = spot_factor(lamp, -l);
       if (spot <= 0) continue;
       if (in_.occluders) {
         ++rays;
         if (in_.occluders->occluded(f3(xo()), f3(l), 0.0f, float(r * (1 - 1e-4)))) continue;
       }
-      const double od_lamp =
-          scene_.render.light_path_attenuation ? RayDensity(m, x0, l).optical_depth(0, r) : 0.0;
-      for (int c = 0; c < 3; ++c) {
-        const double e = lamp.intensity_per_sr[c] * spot * cos_i / r2;
-        direct[c] += e;
-        direct_fogged[c] += e * std::exp(-sigma_[c] * od_lamp);
-      }
+      const double od_lamp = light_path ? RayDensity(m, x0, l).optical_depth(0, r) : 0.0;
+      physics::add_surface_light(direct, direct_fogged,
+                                 rgb(lamp.intensity_per_sr) * spot * cos_i / r2,
+                                 physics::transmittance(sigma3_, od_lamp));
     }
     rays_.local() += rays;
-    for (int c = 0; c < 3; ++c) {
-      const double ambient = kPi * in_.sky_radiance[c] * ao;
-      const double total = direct[c] + ambient;
-      S[c] = total > 0 ? (direct_fogged[c] + ambient) / total : 1.0;
-    }
+    const Vec3d s = physics::surface_factor(direct, direct_fogged, sky_, ao);
+    for (int c = 0; c < 3; ++c) S[c] = s[c];
   }
 
   // Camera transmittance in closed form (exact unless noise modulates the view ray).
@@ -566,7 +452,7 @@ class Core {
     const double length = march_length(rd, in_.distance_m.at(x, y, 0));
     const double unit =
         rd.optical_depth(0, std::isfinite(in_.distance_m.at(x, y, 0)) ? length : kInf);
-    for (int c = 0; c < 3; ++c) od[c] = scaled_optical_depth(sigma_[c], unit);
+    for (int c = 0; c < 3; ++c) od[c] = physics::scaled_optical_depth(sigma_[c], unit);
   }
 
   bool has_noise() const { return scene_.medium.noise.amplitude > 0; }
@@ -581,6 +467,7 @@ class Core {
   MarchPlan plan_;
   const FogScene& scene_;
   double sigma_[3];
+  Vec3d sigma3_, albedo_, sky_, sun_irradiance_;
   double sigma_mean_ = 0, sigma_min_ = 0;
   bool grey_ = false;
   Vec3d sun_dir_{0, 1, 0}, sun_u_{1, 0, 0}, sun_v_{0, 0, 1};
@@ -652,12 +539,7 @@ struct Sparse {
   }
 };
 
-bool depth_continuous(double a, double b) {
-  // DESIGN.md section 3: interpolate only where the pixel's depth is within d / 10 of the
-  // sample's; sky matches sky only.
-  if (std::isinf(a) || std::isinf(b)) return std::isinf(a) && std::isinf(b);
-  return std::fabs(a - b) <= 0.1 * b;
-}
+using physics::depth_continuous;
 
 }  // namespace
 
@@ -765,12 +647,11 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         const double dist = along_x ? nx - x : ny - y;
         const PixelSample& neighbour =
             along_x ? sparse.grid_at(k + side, j) : sparse.grid_at(i, k + side);
-        slope_sum += (value(neighbour) - value(s)) / dist;
-        ++slopes;
+        physics::add_slope(slope_sum, slopes, value(s), value(neighbour), dist);
       }
-      return slopes ? slope_sum / slopes : 0.0;
+      return physics::mean_slope(slope_sum, slopes);
     };
-    constexpr int kValues = 7;  // R (3), camera optical depth (3), ambient occlusion
+    constexpr int kValues = physics::kResolveValues;  // R (3), camera optical depth (3), AO
     // Every sample's gradients once (cells share corners: four cells would redo them).
     using Gradients = std::array<double, 2 * kValues>;  // d/dx of each value, then d/dy
     std::vector<Gradients> sample_gradients(gx.size() * gy.size());
@@ -816,7 +697,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                 lum_max = std::max(lum_max, lum);
               }
               const bool shadow_edge =
-                  shaft_max - shaft_min > 0.2 || lum_max > 1.25 * lum_min + 1e-12;
+                  physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max);
               const double disk0 = sparse.grid_at(i, j).sun_disk;
               const bool sun_disk_agrees = disk0 >= 0 &&
                                            sparse.grid_at(i + 1, j).sun_disk == disk0 &&
@@ -838,14 +719,14 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                     continue;
                   }
                   const double fx = double(x - x0) / (x1 - x0), fy = double(y - y0) / (y1 - y0);
-                  const double wts[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
-                                         fx * fy};
                   PixelSample p;
                   double acc[kValues] = {};
                   for (int k = 0; k < 4; ++k) {
+                    const double weight = physics::corner_weight(k, fx, fy);
                     const double dx = x - gx[corners[k].first], dy = y - gy[corners[k].second];
                     for (int c = 0; c < kValues; ++c)
-                      acc[c] += wts[k] * (value[k][c] + grad_x[k][c] * dx + grad_y[k][c] * dy);
+                      acc[c] += weight * physics::extrapolate(value[k][c], grad_x[k][c],
+                                                              grad_y[k][c], dx, dy);
                   }
                   for (int c = 0; c < 3; ++c) {
                     p.inscatter[c] = std::max(0.0, acc[c]);

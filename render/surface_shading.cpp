@@ -17,6 +17,8 @@
 #include "mr/error.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
+#include "render/physics/medium.h"
+#include "render/physics/scattering.h"
 
 namespace mr::render {
 
@@ -25,17 +27,6 @@ namespace {
 constexpr float kPi = 3.14159265358979323846f;
 constexpr double kPiD = 3.14159265358979323846;
 constexpr float kMinRoughness = 0.02f;  // mr::Material's range
-
-float dot(const Vec3f& a, const Vec3f& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-Vec3f normalized(const Vec3f& a) {
-  const float n = std::sqrt(dot(a, a));
-  return n > 0 ? Vec3f{a[0] / n, a[1] / n, a[2] / n} : Vec3f{0, 0, 0};
-}
-Vec3f to_f(const Vec3& v) {
-  return {float(v.x), float(v.y), float(v.z)};
-}
 
 float clamp_roughness(float r) {
   return std::clamp(r, kMinRoughness, 1.0f);
@@ -64,7 +55,7 @@ struct LobeSample {
 LobeSample specular_lobe(const Vec3f& n, const Vec3f& l, const Vec3f& v, float roughness) {
   const float nl = dot(n, l), nv = dot(n, v);
   if (nl <= 0 || nv <= 0) return {};
-  const Vec3f h = normalized({l[0] + v[0], l[1] + v[1], l[2] + v[2]});
+  const Vec3f h = unit(Vec3f{l[0] + v[0], l[1] + v[1], l[2] + v[2]});
   const float r = clamp_roughness(roughness);
   const float alpha2 = r * r * r * r;
   const float vh = std::clamp(dot(v, h), 0.0f, 1.0f);
@@ -161,14 +152,10 @@ const AlbedoTable& albedo_table() {
 // Smoothstep between the outer and inner cone, as the scattering core's lamps.
 float spot_factor(const Lamp& lamp, const Vec3f& from_lamp_unit) {
   if (lamp.outer_angle_deg >= 180.0) return 1.0f;
-  const Vec3f axis = normalized(to_f(lamp.spot_direction));
-  const double cos_a = dot(axis, from_lamp_unit);
-  const double cos_in = std::cos(lamp.inner_angle_deg * kPiD / 180),
-               cos_out = std::cos(lamp.outer_angle_deg * kPiD / 180);
-  if (cos_a >= cos_in) return 1.0f;
-  if (cos_a <= cos_out) return 0.0f;
-  const double t = (cos_a - cos_out) / (cos_in - cos_out);
-  return float(t * t * (3 - 2 * t));
+  const Vec3f axis = unit(to_f(lamp.spot_direction));
+  return float(physics::spot_cone(dot(axis, from_lamp_unit),
+                                  std::cos(lamp.inner_angle_deg * kPiD / 180),
+                                  std::cos(lamp.outer_angle_deg * kPiD / 180)));
 }
 
 void add_direct(ShadingTerms& terms, const SurfacePoint& p, const Vec3f& l, const Rgb& irradiance,
@@ -184,21 +171,13 @@ void add_direct(ShadingTerms& terms, const SurfacePoint& p, const Vec3f& l, cons
 }
 
 // A deterministic per-pixel hash for decorrelating the rays of neighbouring pixels.
-std::uint32_t hash32(std::uint32_t x) {
-  x ^= x >> 16;
-  x *= 0x7feb352du;
-  x ^= x >> 15;
-  x *= 0x846ca68bu;
-  x ^= x >> 16;
-  return x;
-}
+using physics::hash32;
 
 // An orthonormal frame (t, b) around unit n.
 void frame(const Vec3f& n, Vec3f& t, Vec3f& b) {
   const Vec3f helper = std::fabs(n[1]) < 0.9f ? Vec3f{0, 1, 0} : Vec3f{1, 0, 0};
-  t = normalized({helper[1] * n[2] - helper[2] * n[1], helper[2] * n[0] - helper[0] * n[2],
-                  helper[0] * n[1] - helper[1] * n[0]});
-  b = {n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]};
+  t = unit(cross(helper, n));
+  b = cross(n, t);
 }
 
 // Traces `dirs` from `origin` to infinity; returns how many escape.
@@ -324,7 +303,7 @@ SurfaceGeometry surface_geometry_from_depth(const Image& distance_m, const Camer
     Vec3f sun_u{}, sun_v{};
     float sun_tan_radius = 0;
     if (lighting.sun) {
-      sun_dir = normalized(to_f(lighting.sun->direction_to_sun));
+      sun_dir = unit(to_f(lighting.sun->direction_to_sun));
       if (dot(*sun_dir, *sun_dir) == 0)
         throw Error(ErrorCode::invalid_argument, "lighting.sun.direction_to_sun is zero");
       frame(*sun_dir, sun_u, sun_v);
@@ -365,9 +344,9 @@ SurfaceGeometry surface_geometry_from_depth(const Image& distance_m, const Camer
                 // Stratified in radius, golden-angle spiral in azimuth, rotated per pixel.
                 const float r = sun_tan_radius * std::sqrt((i + 0.5f) / sun_rays);
                 const float phi = 2.39996323f * i + 2 * kPi * rotation;
-                s = normalized({s[0] + r * (std::cos(phi) * sun_u[0] + std::sin(phi) * sun_v[0]),
-                                s[1] + r * (std::cos(phi) * sun_u[1] + std::sin(phi) * sun_v[1]),
-                                s[2] + r * (std::cos(phi) * sun_u[2] + std::sin(phi) * sun_v[2])});
+                s = unit(Vec3f{s[0] + r * (std::cos(phi) * sun_u[0] + std::sin(phi) * sun_v[0]),
+                               s[1] + r * (std::cos(phi) * sun_u[1] + std::sin(phi) * sun_v[1]),
+                               s[2] + r * (std::cos(phi) * sun_u[2] + std::sin(phi) * sun_v[2])});
               }
               if (dot(n, s) > 0) dirs[count++] = s;
             }
@@ -430,7 +409,7 @@ ShadingTerms shading_terms(const SurfacePoint& p, const Lighting& lighting, floa
     const Sun& sun = *lighting.sun;
     const Rgb e = {sun.irradiance[0] * p.sun_visibility, sun.irradiance[1] * p.sun_visibility,
                    sun.irradiance[2] * p.sun_visibility};
-    add_direct(terms, p, normalized(to_f(sun.direction_to_sun)), e, roughness);
+    add_direct(terms, p, unit(to_f(sun.direction_to_sun)), e, roughness);
   }
   if (lighting.sky_radiance && p.sky_visibility > 0) {
     const float nv = dot(p.normal, p.view);
@@ -450,7 +429,7 @@ ShadingTerms shading_terms(const SurfacePoint& p, const Lighting& lighting, floa
                            float(lamp.position_m.z) - p.position_m[2]};
     const float r2 = dot(to_lamp, to_lamp);
     if (!(r2 > 1e-12f)) continue;
-    const Vec3f l = normalized(to_lamp);
+    const Vec3f l = unit(to_lamp);
     const float spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
     if (spot <= 0) continue;
     const Rgb e = {lamp.intensity_per_sr[0] * spot / r2, lamp.intensity_per_sr[1] * spot / r2,

@@ -10,10 +10,9 @@
 #include "mr/image.h"
 #include "mr/material.h"
 #include "mr/scene.h"
+#include "render/math.h"
 
 namespace mr::render {
-
-using Vec3f = std::array<float, 3>;
 
 /// GGX normal distribution D(h) for alpha = roughness^2 (integrates to 1 against n.h over the
 /// hemisphere).

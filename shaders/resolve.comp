@@ -6,6 +6,7 @@
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "scattering_common.glsl"
+#include "render/physics/resolve.h"
 
 layout(local_size_x = kWorkgroupSize, local_size_y = kWorkgroupSize) in;
 
@@ -38,11 +39,6 @@ float sample_sun_disk(int i, int j) {
   return grid_samples[kSampleVec4s * ((j - P.grid.y) * P.grid.z + (i - P.grid.x)) + 2].x;
 }
 
-bool depth_continuous(float a, float b) {
-  if (is_sky(a) || is_sky(b)) return is_sky(a) && is_sky(b);
-  return abs(a - b) <= 0.1 * b;
-}
-
 // Gradient of grid sample (i, j)'s value c along one grid axis (central where both grid
 // neighbours are continuous with it, one-sided where one is, else flat).
 float gradient(int i, int j, bool along_x, int c) {
@@ -58,11 +54,9 @@ float gradient(int i, int j, bool along_x, int c) {
     const int ni = along_x ? i + side : i, nj = along_x ? j : j + side;
     const int nx = grid_x(ni), ny = grid_y(nj);
     if (!depth_continuous(depth_at(nx, ny), d)) continue;
-    const float dist = along_x ? float(nx - x) : float(ny - y);
-    slope_sum += (sample_value(ni, nj, c) - v) / dist;
-    ++slopes;
+    add_slope(slope_sum, slopes, v, sample_value(ni, nj, c), along_x ? float(nx - x) : float(ny - y));
   }
-  return slopes > 0 ? slope_sum / float(slopes) : 0.0;
+  return mean_slope(slope_sum, slopes);
 }
 
 // T's surface factor S (DESIGN.md section 3) at a surface pixel; also the sun visibility, and
@@ -91,36 +85,28 @@ void surface_term(int x, int y, float ao, float known_sun_disk, out vec3 S, out 
     if (cos_i > 0.0) visible = known_sun_disk >= 0.0 ? known_sun_disk : sun_disk_visibility(x, y);
     sun_visibility = visible;
     const float od_sun = lpa ? optical_depth(ray_density(x0, P.sun_dir.xyz), 0.0, INF) : 0.0;
+    const vec3 tau_sun = transmittance(sigma, od_sun);
     const vec3 e_seen = P.sun_irradiance.xyz * max(0.0, cos_i);
-    const vec3 e = e_seen * visible;
-    direct += e;
-    direct_fogged += e * exp(-sigma * od_sun);
-    sun_seen = e_seen - e;
-    sun_seen_fogged = (e_seen - e) * exp(-sigma * od_sun);
+    add_surface_light(direct, direct_fogged, e_seen * visible, tau_sun);
+    add_surface_light(sun_seen, sun_seen_fogged, e_seen - e_seen * visible, tau_sun);
   }
   for (int l = 0; l < n_lamps; ++l) {
     const GpuLamp lamp = lamps[l];
-    const vec3 to_lamp = lamp.position.xyz - x0;
-    const float r2 = dot(to_lamp, to_lamp), r = sqrt(r2);
+    const TowardLamp to_lamp = toward_lamp(x0, lamp.position.xyz);
+    const float r2 = to_lamp.r2, r = to_lamp.r;
     if (r < 1e-6) continue;
-    const vec3 lv = to_lamp / r;
+    const vec3 lv = to_lamp.l;
     const float cos_i = dot(n, lv);
     if (cos_i <= 0.0) continue;
     const float spot = spot_factor(lamp, -lv);
     if (spot <= 0.0) continue;
     if (shadows && !lamp_lit(lamp, x0, n, r, offset, 0.0)) continue;
     const float od_lamp = lpa ? optical_depth(ray_density(x0, lv), 0.0, r) : 0.0;
-    const vec3 e = lamp.intensity.xyz * spot * cos_i / r2;
-    direct += e;
-    direct_fogged += e * exp(-sigma * od_lamp);
+    add_surface_light(direct, direct_fogged, lamp.intensity.xyz * spot * cos_i / r2,
+                      transmittance(sigma, od_lamp));
   }
-  const vec3 ambient = kPi * P.sky.xyz * ao;
-  const vec3 total = direct + ambient;
-  for (int c = 0; c < 3; ++c) S[c] = total[c] > 0.0 ? (direct_fogged[c] + ambient[c]) / total[c] : 1.0;
-  const vec3 total_seen = total + sun_seen;
-  for (int c = 0; c < 3; ++c)
-    S_sun_seen[c] = total_seen[c] > 0.0 ? (direct_fogged[c] + sun_seen_fogged[c] + ambient[c]) / total_seen[c]
-                                        : 1.0;
+  S = surface_factor(direct, direct_fogged, P.sky.xyz, ao);
+  S_sun_seen = surface_factor(direct + sun_seen, direct_fogged + sun_seen_fogged, P.sky.xyz, ao);
 }
 
 void main() {
@@ -168,7 +154,7 @@ void main() {
         lum_min = min(lum_min, lum);
         lum_max = max(lum_max, lum);
       }
-      const bool shadow_edge = shaft_max - shaft_min > 0.2 || lum_max > 1.25 * lum_min + 1e-12;
+      const bool shadow_edge = cell_has_edge(shaft_min, shaft_max, lum_min, lum_max);
       if (shadow_edge) ok = false;
       if (!ok) {
         exact = true;
@@ -178,14 +164,14 @@ void main() {
       } else {
         const int x0 = grid_x(i), x1 = grid_x(i + 1), y0 = grid_y(j), y1 = grid_y(j + 1);
         const float fx = float(x - x0) / float(x1 - x0), fy = float(y - y0) / float(y1 - y0);
-        const float wts[4] = float[4]((1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy);
-        float acc[7] = float[7](0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        float acc[kResolveValues] = float[kResolveValues](0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         for (int k = 0; k < 4; ++k) {
+          const float weight = corner_weight(k, fx, fy);
           const float dx = float(x - grid_x(corner[k].x)), dy = float(y - grid_y(corner[k].y));
-          for (int c = 0; c < 7; ++c)
-            acc[c] += wts[k] * (sample_value(corner[k].x, corner[k].y, c) +
-                                gradient(corner[k].x, corner[k].y, true, c) * dx +
-                                gradient(corner[k].x, corner[k].y, false, c) * dy);
+          for (int c = 0; c < kResolveValues; ++c)
+            acc[c] += weight * extrapolate(sample_value(corner[k].x, corner[k].y, c),
+                                           gradient(corner[k].x, corner[k].y, true, c),
+                                           gradient(corner[k].x, corner[k].y, false, c), dx, dy);
         }
         s.inscatter = max(vec3(0.0), vec3(acc[0], acc[1], acc[2]));
         s.camera_od = max(vec3(0.0), vec3(acc[3], acc[4], acc[5]));

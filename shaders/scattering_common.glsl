@@ -1,20 +1,24 @@
-// The single-scattering physics of render/scattering_cpu.cpp and render/medium.cpp, in GLSL,
-// for the Vulkan compute backend (render/vulkan/). Every function below mirrors the CPU function
-// of the same name; keep them in step (the tests in tests/vulkan_scattering_test.cpp compare the
-// two backends on the CPU core's test scenes).
+// The Vulkan compute backend's side of the scattering core (render/vulkan/): its buffers, and
+// the march, surface term and ambient occlusion put together from the shared physics
+// (render/physics/*.h, the same source the CPU core compiles; kept in step by construction, the
+// tests in tests/vulkan_scattering_test.cpp compare the two backends on the CPU core's scenes).
 //
-// Differences from the CPU reference, all deliberate and measured in the tests / README:
-// - float instead of double; expm1 / log1p / atan differences are evaluated in forms that keep
-//   their relative precision (GPU exp/log are only accurate to ~2^-21 in absolute terms near 1);
+// What differs from the CPU reference, deliberately (measured in the tests / README):
+// - float instead of double (render/physics/types.h evaluates expm1 / log1p in forms that keep
+//   their relative precision);
 // - shadows are looked up in shadow maps of the occluder mesh (sun: cascaded orthographic maps;
 //   lamps: six cube faces) instead of traced with Embree; the sun is a point light for shadowing
-//   (the CPU samples its 0.27 degree disk), so penumbrae are hard.
+//   (the CPU samples its 0.27 degree disk), so penumbrae are hard;
+// - the march runs one segment ahead instead of taking a ray's sun samples first; ambient
+//   occlusion rays are marched in screen space.
 #extension GL_GOOGLE_include_directive : require
 
 #include "scattering_params.h"
+#include "render/physics/medium.h"
+#include "render/physics/occlusion.h"
+#include "render/physics/scattering.h"
 
-#define INF uintBitsToFloat(0x7F800000u)
-const float kPi = 3.14159265358979323846;
+#define INF MR_INF
 
 layout(std430, set = 0, binding = 0) readonly buffer ParamsBuffer { ScatterParams P; };
 layout(std430, set = 0, binding = 1) readonly buffer LampBuffer { GpuLamp lamps[]; };
@@ -26,216 +30,22 @@ layout(set = 0, binding = 11) uniform sampler2DArray shadow_atlas;
 
 bool has_flag(int f) { return (P.flags.x & uint(f)) != 0u; }
 
-// ---- numerics -------------------------------------------------------------------------------
-
-float expm1_(float x) {
-  if (abs(x) < 0.3)
-    return x * (1.0 + x * (1.0 / 2.0 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (1.0 / 120.0 +
-           x * (1.0 / 720.0 + x * (1.0 / 5040.0 + x * (1.0 / 40320.0))))))));
-  return exp(x) - 1.0;
-}
-vec3 expm1_3(vec3 x) { return vec3(expm1_(x.x), expm1_(x.y), expm1_(x.z)); }
-
-float log1p_(float x) {
-  if (abs(x) < 0.3) {
-    const float s = x / (2.0 + x), s2 = s * s;  // log1p = 2 atanh(s)
-    return 2.0 * s * (1.0 + s2 * (1.0 / 3.0 + s2 * (1.0 / 5.0 + s2 * (1.0 / 7.0 + s2 * (1.0 / 9.0 +
-           s2 * (1.0 / 11.0 + s2 * (1.0 / 13.0)))))));
-  }
-  return log(1.0 + x);
-}
-
-// atan(b) - atan(a), accurate when the two are close.
-float atan_diff(float a, float b) {
-  const float den = 1.0 + a * b;
-  if (den > 0.5) return atan((b - a) / den);
-  return atan(b) - atan(a);
-}
-
-bool is_sky(float d) { return isinf(d) || isnan(d) || d > 3.0e38; }
-
-// ---- the medium (render/medium.cpp) ----------------------------------------------------------
-
-struct RayDensity {
-  float t_enter, t_exit, k, a;
-  bool empty;
-};
-
-float exp_integral(float a, float len) {
-  if (len <= 0.0) return 0.0;
-  if (isinf(len)) return a > 0.0 ? 1.0 / a : INF;
-  const float x = a * len;
-  if (abs(x) < 1e-7) return len * (1.0 - 0.5 * x);
-  return -expm1_(-x) / a;
-}
-
-RayDensity ray_density(vec3 o, vec3 w) {
-  RayDensity r;
-  r.empty = true;
-  r.t_enter = 0.0;
-  r.t_exit = 0.0;
-  r.k = 0.0;
-  r.a = 0.0;
-  float t0 = 0.0, t1 = INF;
-  const float bottom = P.layer.x, top = P.layer.y;
-  if (w.y == 0.0) {
-    if (o.y < bottom || o.y > top) return r;
-  } else {
-    float ta = (bottom - o.y) / w.y, tb = (top - o.y) / w.y;
-    if (ta > tb) {
-      const float tmp = ta;
-      ta = tb;
-      tb = tmp;
-    }
-    t0 = max(t0, ta);
-    t1 = min(t1, tb);
-    if (!(t1 > t0)) return r;
-  }
-  r.empty = false;
-  r.t_enter = t0;
-  r.t_exit = t1;
-  if (P.layer.w > 0.0) {
-    const float h = P.layer.w;
-    r.a = w.y / h;
-    r.k = exp(-(o.y + t0 * w.y - P.layer.z) / h);
-  } else {
-    r.a = 0.0;
-    r.k = 1.0;
-  }
-  return r;
-}
-
-float integral_from_enter(RayDensity r, float t) {
-  return r.k * exp_integral(r.a, min(t, r.t_exit) - r.t_enter);
-}
-
-float optical_depth(RayDensity r, float t0, float t1) {
-  if (r.empty || !(t1 > t0)) return 0.0;
-  t0 = max(t0, r.t_enter);
-  t1 = min(t1, r.t_exit);
-  if (!(t1 > t0)) return 0.0;
-  if (isinf(t1)) {
-    const float tail = r.k * exp_integral(r.a, INF);
-    if (isinf(tail)) return INF;
-    return tail - integral_from_enter(r, t0);
-  }
-  if (r.a == 0.0) return r.k * (t1 - t0);
-  return integral_from_enter(r, t1) - integral_from_enter(r, t0);
-}
-
-float distance_at_optical_depth(RayDensity r, float target) {
-  if (r.empty) return INF;
-  if (target <= 0.0) return 0.0;
-  const float x = target / r.k;
-  float s;
-  if (abs(r.a) < 1e-12) {
-    s = x;
-  } else {
-    const float ax = r.a * x;
-    if (1.0 - ax <= 0.0) return INF;
-    s = -log1p_(-ax) / r.a;
-  }
-  const float t = r.t_enter + s;
-  return t > r.t_exit ? INF : t;
-}
-
-float density(RayDensity r, float t) {
-  if (r.empty || t < r.t_enter || t > r.t_exit) return 0.0;
-  return r.k * exp(-r.a * (t - r.t_enter));
-}
-
-uint hash3(int x, int y, int z, uint seed) {
-  uint h = seed * 0x9E3779B9u;
-  uint v[3] = uint[3](uint(x), uint(y), uint(z));
-  for (int i = 0; i < 3; ++i) {
-    h ^= v[i] + 0x7F4A7C15u + (h << 6) + (h >> 2);
-    h *= 0x85EBCA6Bu;
-    h ^= h >> 13;
-  }
-  return h;
-}
-
-float noise_grad(int cx, int cy, int cz, float rx, float ry, float rz, uint seed) {
-  switch (hash3(cx, cy, cz, seed) % 12u) {
-    case 0u: return rx + ry;
-    case 1u: return -rx + ry;
-    case 2u: return rx - ry;
-    case 3u: return -rx - ry;
-    case 4u: return rx + rz;
-    case 5u: return -rx + rz;
-    case 6u: return rx - rz;
-    case 7u: return -rx - rz;
-    case 8u: return ry + rz;
-    case 9u: return -ry + rz;
-    case 10u: return ry - rz;
-    default: return -ry - rz;
-  }
-}
-
-float fade(float t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }
-
-float gradient_noise(vec3 p, uint seed) {
-  const vec3 f = floor(p);
-  const ivec3 i = ivec3(f);
-  const vec3 d = p - f;
-  const float u = fade(d.x), v = fade(d.y), w = fade(d.z);
-  float c[8];
-  for (int k = 0; k < 2; ++k)
-    for (int j = 0; j < 2; ++j)
-      for (int l = 0; l < 2; ++l)
-        c[k * 4 + j * 2 + l] =
-            noise_grad(i.x + l, i.y + j, i.z + k, d.x - float(l), d.y - float(j), d.z - float(k), seed);
-  const float x00 = mix(c[0], c[1], u), x10 = mix(c[2], c[3], u);
-  const float x01 = mix(c[4], c[5], u), x11 = mix(c[6], c[7], u);
-  return mix(mix(x00, x10, v), mix(x01, x11, v), w);
-}
+MediumShape medium_shape() { return MediumShape(P.layer.x, P.layer.y, P.layer.z, P.layer.w); }
+RayDensity ray_density(vec3 o, vec3 w) { return ray_density(medium_shape(), o, w); }
 
 float noise_modulation(vec3 x) {
-  if (P.noise.x <= 0.0) return 1.0;
-  float sum = 0.0, amp = 1.0, norm = 0.0, freq = P.noise.y;
-  const int octaves = int(P.flags.w);
-  for (int o = 0; o < octaves; ++o) {
-    sum += amp * gradient_noise(x * freq, P.flags.z + 101u * uint(o));
-    norm += amp;
-    amp *= 0.5;
-    freq *= 2.0;
-  }
-  return max(0.0, 1.0 + P.noise.x * clamp(sum / norm, -1.0, 1.0));
+  return noise_modulation(x, P.noise.x, P.noise.y, int(P.flags.w), P.flags.z);
 }
 
-float henyey_greenstein(float g, float cos_theta) {
-  const float denom = 1.0 + g * g - 2.0 * g * cos_theta;
-  return (1.0 - g * g) / (4.0 * kPi * denom * sqrt(denom));
-}
-
-// ---- camera, jitter, lamps (render/scattering_cpu.cpp) ---------------------------------------
+// ---- camera, lamps ----------------------------------------------------------------------------
 
 vec3 ray_dir(int x, int y) {
-  const float u = (float(x) + 0.5 - P.camera.y) / P.camera.x;
-  const float v = (float(y) + 0.5 - P.camera.z) / P.camera.x;
-  return normalize(u * P.right.xyz - v * P.up.xyz + P.forward.xyz);
-}
-
-// Interleaved gradient noise, as pixel_jitter on the CPU. fract(a x + b y) is formed in 32-bit
-// fixed point (exact for integer pixels), so it keeps the CPU's double precision.
-float pixel_jitter(int x, int y, uint seed) {
-  const uint a = 288240406u;  // round(0.06711056 * 2^32)
-  const uint b = 25070697u;   // round(0.00583715 * 2^32)
-  const uint frac32 = a * uint(x) + b * uint(y);
-  const float f = float(frac32 >> 8) * (1.0 / 16777216.0);
-  const float ign = fract(52.9829189 * f);
-  const float rot = float((seed * 2654435761u) >> 8) / 16777216.0;
-  return fract(ign + rot);
+  return camera_ray(P.forward.xyz, P.right.xyz, P.up.xyz, P.camera.x, P.camera.y, P.camera.z, x, y);
 }
 
 float spot_factor(GpuLamp lamp, vec3 from_lamp_unit) {
   if (lamp.spot.w == 0.0) return 1.0;
-  const float cos_a = dot(lamp.spot.xyz, from_lamp_unit);
-  const float cos_in = lamp.cone.x, cos_out = lamp.cone.y;
-  if (cos_a >= cos_in) return 1.0;
-  if (cos_a <= cos_out) return 0.0;
-  const float t = (cos_a - cos_out) / (cos_in - cos_out);
-  return t * t * (3.0 - 2.0 * t);
+  return spot_cone(dot(lamp.spot.xyz, from_lamp_unit), lamp.cone.x, lamp.cone.y);
 }
 
 // ---- shadow maps ------------------------------------------------------------------------------
@@ -301,15 +111,7 @@ vec3 normal_at(int x, int y) {
 }
 
 float march_length(RayDensity rd, float distance) {
-  if (!is_sky(distance)) return distance;
-  if (P.misc.x > 0.0) return P.misc.x;
-  const float kMax = 100e3;
-  const float sigma_min = P.sky.w;
-  if (sigma_min <= 0.0) return kMax;
-  const float od_inf = optical_depth(rd, 0.0, INF);
-  const float target = isinf(od_inf) ? 9.21 / sigma_min : od_inf - 1e-4 / sigma_min;
-  if (target <= 0.0) return 0.0;
-  return min(kMax, distance_at_optical_depth(rd, target));
+  return march_length(rd, distance, P.misc.x, P.sky.w);
 }
 
 struct PixelSample {
@@ -331,23 +133,14 @@ struct MarchSetup {
 };
 
 float uniform_boundary(MarchSetup m, int i) {
-  if (m.od_mean_total > 1e-6) {
-    const float frac = float(i) / float(m.steps);
-    const float neg_log_tau = -log1p_(-m.one_minus_tau_end * frac);
-    return distance_at_optical_depth(m.rd, neg_log_tau / P.sigma.w);
-  }
-  return m.len * float(i) / float(m.steps);
-}
-
-float lamp_boundary(float tc, float h, float th_a, float th_b, int i) {
-  return tc + h * tan(th_a + (th_b - th_a) * float(i) / float(P.plan.y));
+  return uniform_boundary(m.rd, i, m.steps, P.sigma.w, m.od_mean_total, m.one_minus_tau_end, m.len);
 }
 
 // The segment boundaries in order: the sorted, de-duplicated union of the uniform sequence and
 // every lamp's equiangular one (the CPU sorts them all; here they are merged as they go).
 struct Boundaries {
   int n_lamps;
-  float l_tc[kMaxLamps], l_h[kMaxLamps], l_tha[kMaxLamps], l_thb[kMaxLamps];
+  LampOnRay l_ray[kMaxLamps];
   int l_next[kMaxLamps];
   float l_val[kMaxLamps];
   int u_next;
@@ -376,7 +169,7 @@ float next_boundary(MarchSetup m, inout Boundaries b, float ta) {
         b.l_val[l] = INF;
         break;
       }
-      const float t = lamp_boundary(b.l_tc[l], b.l_h[l], b.l_tha[l], b.l_thb[l], b.l_next[l]);
+      const float t = lamp_boundary(b.l_ray[l], b.l_next[l], P.plan.y);
       b.l_val[l] = (t > 0.0 && t < m.len) ? t : (t >= m.len ? INF : -INF);
       if (b.l_val[l] == INF) b.l_next[l] = P.plan.y;
     }
@@ -411,9 +204,8 @@ PixelSample march(int x, int y, int steps) {
   const bool noise = has_flag(kFlagNoise);
 
   if (has_flag(kFlagConstantSource) || m.len <= 0.0) {
-    const float od_exact = optical_depth(m.rd, 0.0, distance);
-    s.camera_od = sigma * od_exact;
-    s.inscatter = albedo * P.sky.xyz * -expm1_3(-s.camera_od);
+    s.camera_od = scaled_optical_depth(sigma, optical_depth(m.rd, 0.0, distance));
+    s.inscatter = sky_only_inscatter(s.camera_od, albedo * P.sky.xyz);
     return s;
   }
 
@@ -423,13 +215,7 @@ PixelSample march(int x, int y, int steps) {
   b.n_lamps = min(P.image.w, kMaxLamps);
   // Lamps' closest approach to the ray and their equiangular sequences.
   for (int l = 0; l < b.n_lamps; ++l) {
-    const vec3 rel = lamps[l].position.xyz - origin;
-    const float tc = dot(rel, w);
-    const float h = max(1e-6, length(rel - tc * w));  // = sqrt(|rel|^2 - tc^2), without cancellation
-    b.l_tc[l] = tc;
-    b.l_h[l] = h;
-    b.l_tha[l] = atan(-tc, h);
-    b.l_thb[l] = atan(m.len - tc, h);
+    b.l_ray[l] = lamp_on_ray(lamps[l].position.xyz, origin, w, m.len);
     b.l_next[l] = 0;
     b.l_val[l] = -INF;
   }
@@ -437,9 +223,9 @@ PixelSample march(int x, int y, int steps) {
   b.u_val = -INF;
 
   const float jitter = pixel_jitter(x, y, P.flags.y);
-  vec3 od = vec3(0.0), tau_a = vec3(1.0);
+  vec3 od = vec3(0.0), tau = vec3(1.0);
   int sun_samples = 0;
-  float sun_seen_fraction = 0.0;
+  float sun_seen = 0.0;
   const bool sun = has_flag(kFlagSun), shadows = has_flag(kFlagShadows);
   const bool sun_shadows = sun && shadows;
   const bool lpa = has_flag(kFlagLightPathAttenuation);
@@ -453,8 +239,7 @@ PixelSample march(int x, int y, int steps) {
   float ta = 0.0;
   float tb = next_boundary(m, b, ta);
   if (!(tb > ta)) return s;  // an empty march
-  // Stratified jitter: each segment's own offset (a golden-ratio sequence from the pixel's).
-  float ts = ta + (tb - ta) * fract(jitter);
+  float ts = segment_sample_t(ta, tb, jitter, 0);
   bool vis = !sun_shadows || sun_lit_on_ray(origin, w, ts);
   bool vis_prev = vis;
   float crossing_prev = ta;  // visibility change between samples i - 1 and i (where vis_prev != vis)
@@ -465,7 +250,7 @@ PixelSample march(int x, int y, int steps) {
     bool vis_n = vis;
     float crossing = tb;
     if (has_next) {
-      ts_n = tb + (tn - tb) * fract(jitter + 0.6180339887498949 * float(i + 1));
+      ts_n = segment_sample_t(tb, tn, jitter, i + 1);
       vis_n = !sun_shadows || sun_lit_on_ray(origin, w, ts_n);
       if (vis_n != vis) {
         // Shaft edge: bisect between the two samples for the crossing (to 1/64 of the gap).
@@ -484,66 +269,38 @@ PixelSample march(int x, int y, int steps) {
     const vec3 xs = origin + w * ts;
     const float modulation = noise ? noise_modulation(xs) : 1.0;
     const float seg_od_unit = optical_depth(m.rd, ta, tb) * modulation;
-    const vec3 tau_before = tau_a;
-    od += sigma * seg_od_unit;
-    const vec3 tau_b = exp(-od);
-    const vec3 weight = albedo * tau_a * -expm1_3(-sigma * seg_od_unit);
-    tau_a = tau_b;
-    if (!(weight.x + weight.y + weight.z <= 0.0 && tau_before.x + tau_before.y + tau_before.z <= 0.0)) {
+    const vec3 tau_before = tau;
+    const vec3 weight = advance_segment(od, tau, sigma, albedo, seg_od_unit);
+    if (!segment_dark(weight, tau_before)) {
       if (sun) {
-        // The segment's lit weight: [ta, tl] is lit as sample i - 1, [tl, tr] as sample i,
-        // [tr, tb] as sample i + 1 (tl, tr: the bisected crossings that fall inside it).
         const float tl = vis_prev != vis ? max(ta, crossing_prev) : ta;
         const float tr = vis_n != vis ? min(tb, crossing) : tb;
-        vec3 lit_weight = vec3(0.0);
-        if (tl == ta && tr == tb) {
-          if (vis) lit_weight = weight;
-        } else {
-          const float piece_t[4] = float[4](ta, tl, tr, tb);
-          const bool piece_lit[3] = bool[3](vis_prev, vis, vis_n);
-          for (int k = 0; k < 3; ++k) {
-            const float p = piece_t[k], q = piece_t[k + 1];
-            if (!piece_lit[k] || !(q > p)) continue;
-            // exp(-sigma od(ta, p)) - exp(-sigma od(ta, q)), without the cancellation.
-            const float od_p = optical_depth(m.rd, ta, p) * modulation;
-            const float od_pq = optical_depth(m.rd, p, q) * modulation;
-            lit_weight += albedo * tau_before * exp(-sigma * od_p) * -expm1_3(-sigma * od_pq);
-          }
-        }
-        const float length_ab = tb - ta;
-        sun_seen_fraction += length_ab > 0.0
-                                 ? ((vis_prev ? tl - ta : 0.0) + (vis ? tr - tl : 0.0) +
-                                    (vis_n ? tb - tr : 0.0)) / length_ab
-                                 : (vis ? 1.0 : 0.0);
+        const vec3 lit_weight = sun_lit_weight(m.rd, ta, tb, tl, tr, vis_prev, vis, vis_n,
+                                               modulation, weight, albedo, tau_before, sigma);
+        sun_seen += sun_seen_fraction(ta, tb, tl, tr, vis_prev, vis, vis_n);
         ++sun_samples;
         if (lit_weight.x + lit_weight.y + lit_weight.z > 0.0) {
-          const float phase = henyey_greenstein(g, dot(w, P.sun_dir.xyz));
           const float od_sun = lpa ? optical_depth(ray_density(xs, P.sun_dir.xyz), 0.0, INF) : 0.0;
-          s.inscatter += lit_weight * phase * P.sun_irradiance.xyz * exp(-sigma * od_sun);
+          s.inscatter += sun_inscatter(lit_weight, g, w, P.sun_dir.xyz, P.sun_irradiance.xyz,
+                                       transmittance(sigma, od_sun));
         }
       }
       for (int l = 0; l < n_lamps; ++l) {
         const GpuLamp lamp = lamps[l];
-        const float h = b.l_h[l], tc = b.l_tc[l];
-        const float A = (ta - tc) / h, B = (tb - tc) / h;
-        const float th_a = atan(A), th_b = atan(B);
-        const float tm = clamp(tc + h * tan(0.5 * (th_a + th_b)), ta, tb);
+        const float tm = lamp_segment_t(b.l_ray[l], ta, tb);
         const vec3 xm = origin + w * tm;
-        const vec3 to_lamp = lamp.position.xyz - xm;
-        const float r = length(to_lamp);
+        const TowardLamp to_lamp = toward_lamp(xm, lamp.position.xyz);
+        const float r = to_lamp.r;
         if (r < 1e-9) continue;
-        const vec3 lv = to_lamp / r;
+        const vec3 lv = to_lamp.l;
         const float spot = spot_factor(lamp, -lv);
         if (spot <= 0.0) continue;
         if (shadows && !lamp_lit(lamp, xm, vec3(0.0), r, 0.0, 1e-3 + 1e-4 * tm)) continue;
         const float lamp_modulation = noise ? noise_modulation(xm) : 1.0;
-        const float rho = density(m.rd, tm) * lamp_modulation;
-        const float od_to_m = optical_depth(m.rd, ta, tm) * lamp_modulation;
         const float phase = henyey_greenstein(g, dot(w, lv));
         const float od_lamp = lpa ? optical_depth(ray_density(xm, lv), 0.0, r) : 0.0;
-        const float common_ = atan_diff(A, B) / h * phase * spot * rho;
-        s.inscatter += albedo * sigma * tau_before * exp(-sigma * (od_to_m + od_lamp)) * common_ *
-                       lamp.intensity.xyz;
+        s.inscatter += lamp_inscatter(b.l_ray[l], m.rd, ta, tb, tm, lamp_modulation, phase, spot,
+                                      od_lamp, albedo, sigma, tau_before, lamp.intensity.xyz);
       }
       s.inscatter += weight * P.sky.xyz;
     }
@@ -556,7 +313,7 @@ PixelSample march(int x, int y, int steps) {
     vis = vis_n;
   }
   s.camera_od = od;
-  s.shaft = sun_samples > 0 ? sun_seen_fraction / float(sun_samples) : 1.0;
+  s.shaft = sun_samples > 0 ? sun_seen / float(sun_samples) : 1.0;
   return s;
 }
 
@@ -579,7 +336,7 @@ vec3 camera_optical_depth(int x, int y) {
   const RayDensity rd = ray_density(P.origin.xyz, w);
   const float d = depth_at(x, y);
   const float len = march_length(rd, d);
-  return P.sigma.xyz * optical_depth(rd, 0.0, is_sky(d) ? INF : len);
+  return scaled_optical_depth(P.sigma.xyz, optical_depth(rd, 0.0, is_sky(d) ? INF : len));
 }
 
 // ---- ambient occlusion ------------------------------------------------------------------------
@@ -590,16 +347,6 @@ vec3 camera_optical_depth(int x, int y) {
 // the pixel it passes over; passing behind a silhouette is not a hit (the mesh breaks at depth
 // discontinuities). Rays that leave the image or the
 // uploaded region, or pass behind the camera, meet no geometry (the mesh lies inside the view).
-
-uint hash32(uint x) {
-  x ^= x >> 16;
-  x *= 0x7feb352du;
-  x ^= x >> 15;
-  x *= 0x846ca68bu;
-  x ^= x >> 16;
-  return x;
-}
-float unit_float(uint bits) { return float(bits >> 8) * (1.0 / 16777216.0); }
 
 const int kAoMaxSteps = 96;
 
@@ -665,21 +412,12 @@ float ambient_occlusion_at(int x, int y) {
   const float t_far = max(1.0, 0.25 * distance);
   const uint seed = P.flags.y ^ uint(x * 7919 + y * 104729);
   n = normalize(n);
-  const float sign_ = n.z >= 0.0 ? 1.0 : -1.0;
-  const float a = -1.0 / (sign_ + n.z), b = n.x * n.y * a;
-  const vec3 t1 = vec3(1.0 + sign_ * n.x * n.x * a, sign_ * b, -sign_ * n.x);
-  const vec3 t2 = vec3(b, sign_ + n.y * n.y * a, -n.y);
+  vec3 t1, t2;
+  ao_basis(n, t1, t2);
   const vec3 origin = x0 + n * max(1e-4, 1e-4 * length(x0));
-  const uint stream = hash32(seed ^ 0x5bd1e995u);
+  const uint stream = ao_stream(seed);
   int open = 0;
-  for (int index = 0; index < ray_count; ++index) {
-    const uint h1 = hash32(stream + 2u * uint(index));
-    const uint h2 = hash32(h1 ^ 0x68e31da4u);
-    const float u1 = (float(index) + unit_float(h1)) / float(ray_count);
-    const float phi = 2.0 * kPi * unit_float(h2);
-    const float r = sqrt(u1), cos_theta = sqrt(max(0.0, 1.0 - u1));
-    const vec3 dir = r * cos(phi) * t1 + r * sin(phi) * t2 + cos_theta * n;
-    if (!screen_space_occluded(origin, dir, t_far)) ++open;
-  }
+  for (int index = 0; index < ray_count; ++index)
+    if (!screen_space_occluded(origin, ao_direction(stream, index, ray_count, n, t1, t2), t_far)) ++open;
   return float(open) / float(ray_count);
 }
