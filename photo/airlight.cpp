@@ -7,7 +7,7 @@
 #include <numeric>
 #include <vector>
 
-#include "cv_bridge.h"
+#include "core/cv_bridge.h"
 
 namespace mr::photo {
 

@@ -10,7 +10,7 @@
 #include <numbers>
 #include <string>
 
-#include "cv_bridge.h"
+#include "core/cv_bridge.h"
 #include "mr/error.h"
 
 namespace mr::photo {

@@ -10,7 +10,7 @@
 #include <random>
 #include <string>
 
-#include "cv_bridge.h"
+#include "core/cv_bridge.h"
 #include "mr/error.h"
 #include "photo/geometry.h"
 

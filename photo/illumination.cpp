@@ -11,6 +11,7 @@
 #include <string>
 
 #include "mr/error.h"
+#include "photo/ceres_options.h"
 
 namespace mr::photo {
 namespace {
@@ -200,16 +201,12 @@ SunFit fit_sun_direction(const std::vector<ShadowPair>& pairs, const Camera& cam
           stage == 0 ? nullptr : new ceres::CauchyLoss(chord_scale), l);
     }
     problem.SetManifold(l, new ceres::SphereManifold<3>());
-    ceres::Solver::Options solver_options;
-    solver_options.linear_solver_type = ceres::DENSE_QR;
-    solver_options.max_num_iterations = 100;
-    solver_options.function_tolerance = 1e-12;
-    solver_options.gradient_tolerance = 1e-14;
-    solver_options.parameter_tolerance = 1e-12;
-    solver_options.logging_type = ceres::SILENT;
-    solver_options.minimizer_progress_to_stdout = false;
     ceres::Solver::Summary summary;
-    ceres::Solve(solver_options, &problem, &summary);
+    ceres::Solve(solver_options({.max_iterations = 100,
+                                 .function_tolerance = 1e-12,
+                                 .gradient_tolerance = 1e-14,
+                                 .parameter_tolerance = 1e-12}),
+                 &problem, &summary);
     iterations += int(summary.iterations.size());
     if (!summary.IsSolutionUsable())
       throw Error(ErrorCode::internal, "sun fit: Ceres failed: " + summary.message);
@@ -235,15 +232,13 @@ SunFit fit_sun_direction(const std::vector<ShadowPair>& pairs, const Camera& cam
           new ceres::CauchyLoss(options.robust_scale_px), casters[i].data(), l);
     }
     problem.SetManifold(l, new ceres::SphereManifold<3>());
-    ceres::Solver::Options solver_options;
-    solver_options.linear_solver_type = ceres::DENSE_SCHUR;
-    solver_options.max_num_iterations = 200;
-    solver_options.function_tolerance = 1e-12;
-    solver_options.gradient_tolerance = 1e-14;
-    solver_options.parameter_tolerance = 1e-12;
-    solver_options.logging_type = ceres::SILENT;
     ceres::Solver::Summary summary;
-    ceres::Solve(solver_options, &problem, &summary);
+    ceres::Solve(solver_options({.max_iterations = 200,
+                                 .function_tolerance = 1e-12,
+                                 .gradient_tolerance = 1e-14,
+                                 .parameter_tolerance = 1e-12,
+                                 .linear_solver = ceres::DENSE_SCHUR}),
+                 &problem, &summary);
     iterations += int(summary.iterations.size());
     if (summary.IsSolutionUsable()) {
       converged = converged && summary.termination_type == ceres::CONVERGENCE;

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "mr/error.h"
+#include "photo/ceres_options.h"
 #include "photo/geometry.h"
 #include "photo/illumination.h"
 #include "render/depth_downsample.h"
@@ -463,14 +464,10 @@ LampFit fit_lamps(const Image& photo, const Image& distance_m, const Camera& cam
         }
       }
     }
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = 200;
-    so.function_tolerance = 1e-14;
-    so.gradient_tolerance = 1e-14;
-    so.parameter_tolerance = 1e-12;
-    so.num_threads = 1;
-    so.logging_type = ceres::SILENT;
+    const ceres::Solver::Options so = solver_options({.max_iterations = 200,
+                                                      .function_tolerance = 1e-14,
+                                                      .gradient_tolerance = 1e-14,
+                                                      .parameter_tolerance = 1e-12});
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);
     fit.iterations += int(summary.iterations.size());

@@ -9,7 +9,7 @@
 #include <cstdlib>
 #include <vector>
 
-#include "cv_bridge.h"
+#include "core/cv_bridge.h"
 #include "photo/sky_matte.h"
 
 namespace mr::photo {

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <string>
 
-#include "cv_bridge.h"
+#include "core/cv_bridge.h"
 #include "mr/error.h"
 
 namespace mr::photo {

@@ -7,6 +7,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 
 #include "render/occluder_mesh.h"
@@ -92,6 +93,41 @@ class OccluderScene {
   RTCScene extra_scene_ = nullptr;  // the triangles after them, if any (extrusions, blockers)
   bool native_ray8_ = false;
 };
+
+/// One shadow ray for occluded_rays: from `origin` along `direction` (need not be unit length),
+/// over t_near <= t <= t_far in units of the direction's length.
+struct ShadowRay {
+  std::array<float, 3> origin{}, direction{};
+  float t_near = 0.0f;
+  float t_far = std::numeric_limits<float>::infinity();
+};
+
+/// The shadow-packet loop on the occluder scene: traces `count` rays eight at a time
+/// (OccluderScene::occluded8). `make_ray(i)` returns ray i (a ShadowRay); `blocked(i, bool)` is
+/// told, in order, whether ray i hit the scene. Lanes past `count` are not traced.
+template <class MakeRay, class Blocked>
+void occluded_rays(const OccluderScene& scene, std::size_t count, MakeRay&& make_ray, Blocked&& blocked) {
+  RayPacket8 packet;
+  bool hit[8];
+  for (std::size_t first = 0; first < count; first += 8) {
+    for (int k = 0; k < 8; ++k) {
+      const std::size_t i = first + std::size_t(k);
+      packet.valid[k] = i < count ? -1 : 0;
+      if (i >= count) continue;
+      const ShadowRay ray = make_ray(i);
+      packet.origin_x[k] = ray.origin[0];
+      packet.origin_y[k] = ray.origin[1];
+      packet.origin_z[k] = ray.origin[2];
+      packet.direction_x[k] = ray.direction[0];
+      packet.direction_y[k] = ray.direction[1];
+      packet.direction_z[k] = ray.direction[2];
+      packet.t_near[k] = ray.t_near;
+      packet.t_far[k] = ray.t_far;
+    }
+    scene.occluded8(packet, hit);
+    for (int k = 0; k < 8 && first + std::size_t(k) < count; ++k) blocked(first + std::size_t(k), hit[k]);
+  }
+}
 
 /// Ambient occlusion at a surface point: the fraction of `ray_count` cosine-weighted rays over the
 /// hemisphere around `normal` that travel `max_distance_m` without hitting the scene (1 = fully

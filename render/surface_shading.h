@@ -8,7 +8,7 @@
 #include <span>
 #include "mr/camera.h"
 #include "mr/image.h"
-#include "mr/material.h"
+#include "mr/material_model.h"
 #include "mr/scene.h"
 #include "render/math.h"
 

@@ -9,7 +9,7 @@
 #include <random>
 #include <vector>
 
-#include "color_tables.h"
+#include "libmr/src/color_tables.h"
 #include "mr/color.h"
 #include "mr/error.h"
 #include "test_support.h"

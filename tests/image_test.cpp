@@ -3,10 +3,10 @@
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
 
-#include "cv_bridge.h"
+#include "core/cv_bridge.h"
 #include "mr/error.h"
 #include "mr/image.h"
-#include "oiio_bridge.h"
+#include "core/oiio_bridge.h"
 #include "test_support.h"
 
 namespace mr {

@@ -13,7 +13,7 @@
 #include "mr/depth.h"
 #include "mr/error.h"
 #include "mr/io.h"
-#include "oiio_bridge.h"
+#include "core/oiio_bridge.h"
 #include "test_support.h"
 
 namespace fs = std::filesystem;

@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "mr/error.h"
-#include "oiio_bridge.h"
+#include "core/oiio_bridge.h"
 
 namespace mr {
 

@@ -12,7 +12,7 @@
 #include <optional>
 #include <vector>
 
-#include "cv_bridge.h"
+#include "core/cv_bridge.h"
 #include "mr/cancel.h"
 #include "mr/error.h"
 #include "mr/fog.h"

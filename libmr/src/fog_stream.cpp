@@ -23,7 +23,7 @@
 #include "depth_convert.h"
 #include "mr/error.h"
 #include "mr/scattering.h"
-#include "oiio_bridge.h"
+#include "core/oiio_bridge.h"
 #include "oiio_formats.h"
 #include "photo/composite.h"
 #include "render/medium.h"

@@ -16,7 +16,7 @@
 
 #include "atomic_file.h"
 #include "mr/error.h"
-#include "oiio_bridge.h"
+#include "core/oiio_bridge.h"
 #include "oiio_formats.h"
 
 namespace mr {

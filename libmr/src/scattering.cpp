@@ -1,14 +1,11 @@
-// The scattering core's public entry points: validation, the occluder geometry, backend
-// dispatch (one place decides which backend runs), and the composite.
+// The scattering core's public entry points: validation, the lights estimated from the photo
+// (photo/), the render (render/backend.h: backend choice, fall-back, occluder geometry), and the
+// composite.
 #include "mr/scattering.h"
-
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <memory>
-#include <optional>
 #include <string>
 
 #include "mr/cancel.h"
@@ -19,13 +16,7 @@
 #include "photo/illumination.h"
 #include "photo/lamps.h"
 #include "photo/sky_matte.h"
-#include "render/blockers.h"
-#include "render/depth_downsample.h"
-#include "render/embree_scene.h"
-#include "render/occluder_cache.h"
-#include "render/occluder_mesh.h"
-#include "render/scattering_cpu.h"
-#include "render/vulkan/vulkan_backend.h"
+#include "render/backend.h"
 
 namespace mr {
 
@@ -140,154 +131,34 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
   out.sun_visibility = Image::uninitialized(w, h, 1, {"Y"});
   out.optical_depth = Image::uninitialized(w, h, 3);
 
-  tbb::task_arena arena(scene.render.threads > 0 ? scene.render.threads
-                                                 : tbb::task_arena::automatic);
-  arena.execute([&] {
-    const bool lights = scene.lighting.sun || !scene.lighting.lamps.empty();
-    Image normals;
-    std::optional<render::OccluderScene> occluders;
-    // Backend dispatch: the one place that decides which backend runs. automatic: Vulkan on a
-    // GPU, else (no loader, no device, only a software device, out of memory) the CPU, with a
-    // one-line notice.
-    render::vulkan::Backend* gpu = nullptr;
-#if defined(__SANITIZE_ADDRESS__)
-    // Mesa's Vulkan drivers leak under LeakSanitizer (even a bare device probe, from a driver the
-    // loader has unloaded, so no suppression can name it): sanitizer builds probe only when asked.
-    constexpr bool kProbeAutomatically = false;
-#else
-    constexpr bool kProbeAutomatically = true;
-#endif
-    if (scene.render.backend == Backend::automatic && !kProbeAutomatically) {
-      out.backend_notice = "vulkan: not probed in sanitizer builds; the CPU backend renders";
-    } else if (scene.render.backend != Backend::cpu) {
-      try {
-        gpu = scene.render.backend == Backend::vulkan ? &render::vulkan::Backend::shared()
-                                                      : &render::vulkan::Backend::shared_hardware();
-      } catch (const render::vulkan::Unavailable& e) {
-        if (scene.render.backend == Backend::vulkan)
-          throw Error(ErrorCode::invalid_argument,
-                      std::string("render.backend is 'vulkan' but ") + e.what());
-        // No usable hardware GPU: the CPU is the expected choice here, not a problem (a note
-        // for verbose front ends; backend_notice_is_warning stays false).
-        out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
-        if (std::string(e.what()).find("software device") != std::string::npos)
-          out.backend_notice += " (render.backend 'vulkan' forces it)";
-      }
-    }
-    render::TriangleMesh occluder_mesh;  // the Vulkan backend rasterizes it into shadow maps
-    // The CPU backend's normals, mesh and BVH, reused across renders of one photo (issue 12).
-    std::shared_ptr<const render::OccluderGeometry> cpu_geometry;
-    if (lights) report_progress(cancel, "occluders", 0, 2);  // normals + mesh, BVH; "render"
-    if (lights && !gpu && scene.render.volumetric_shadows) {
-      render::OccluderGeometryRequest request;
-      request.distance_m = distance_m.view();
-      request.camera = &camera;
-      request.pose = &scene.pose;
-      request.blockers = &scene.blockers;
-      int mesh_step = render::march_plan(scene.render).mesh_step;
-      if (w / mesh_step < 16 || h / mesh_step < 16) mesh_step = 1;
-      request.mesh_step = mesh_step;
-      // The mesh is not decimated (MeshOptions::planar_merge_tolerance stays 0): at 1080p on
-      // sample_photos/leuven the merge cost more in the mesh stage than it saved in the BVH
-      // build, and its long merged triangles made every shadow ray dearer (render CPU 6.6 ->
-      // 8.1 s, mesh + BVH CPU 2.9 -> 3.5 s), fresh or reused (issue 12 item 4).
-      request.cancel = cancel;
-      render::OccluderGeometryTimings gt;
-      cpu_geometry = render::occluder_geometry(request, &gt);
-      out.timings.mesh_s = gt.mesh_s;
-      out.timings.bvh_s = gt.bvh_s;
-      out.completed_blockers = cpu_geometry->completed_blockers;
-      report_progress(cancel, "occluders", 2, 2);
-    } else if (lights) {
-      auto t = Clock::now();
-      normals = render::estimate_normals(distance_m.view(), camera, scene.pose);
-      throw_if_cancelled(cancel, kWhat);
-      if (scene.render.volumetric_shadows) {
-        // The preset's mesh resolution (a coarse mesh builds and traces faster), unless the
-        // image is too small to coarsen.
-        // The Vulkan backend rasterizes the mesh into shadow maps (cheap at any resolution):
-        // from the coarse draft mesh, whose surface lies up to a fine pixel's depth step in
-        // front of the ground, 23 % of a flat sunlit ground shadowed itself (issue 13).
-        int mesh_step = gpu ? 1 : render::march_plan(scene.render).mesh_step;
-        if (w / mesh_step < 16 || h / mesh_step < 16) mesh_step = 1;
-        render::TriangleMesh mesh;
-        if (mesh_step > 1) {
-          const render::DownsampledDistance coarse =
-              render::downsample_distance_nearest(distance_m.view(), camera, mesh_step);
-          mesh = render::reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera,
-                                                   scene.pose);
-        } else {
-          mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose);
-        }
-        // What the photo does not show: structures cut by the frame, the scene's skyline,
-        // polygons and canopy (the same mesh feeds both backends).
-        const render::BlockerReport blockers = render::append_blockers(
-            mesh, distance_m.view(), normals.view(), camera, scene.pose, scene.blockers);
-        out.completed_blockers = blockers.completed;
-        out.timings.mesh_s = seconds_since(t);
-        occluder_mesh = std::move(mesh);
-        throw_if_cancelled(cancel, kWhat);
-        report_progress(cancel, "occluders", 1, 2);
-      } else {
-        out.timings.mesh_s = seconds_since(t);
-      }
-    }
-    render::CoreInputs in;
-    in.camera = &camera;
-    in.scene = &scene;
-    in.distance_m = distance_m.view();
-    if (!normals.empty()) in.normals = normals.view();
-    if (cpu_geometry) in.normals = cpu_geometry->normals.view();
-    // The photo lets the surface term tell a misplaced mesh shadow from a real one (issue 13).
-    if (photo.channels() >= 3 && photo.width() == w && photo.height() == h) in.photo = photo.view();
-    in.sky_radiance = out.sky_radiance;
-    in.cancel = cancel;
-    render::CoreOutputs core{out.transmittance.view(), out.inscatter.view(),
-                             out.sun_visibility.view(), out.optical_depth.view()};
-    auto t = Clock::now();
-    auto run_cpu = [&] {
-      t = Clock::now();
-      if (cpu_geometry) {
-        in.occluders = cpu_geometry->occluders ? &*cpu_geometry->occluders : nullptr;
-        render::render_scattering_cpu(in, core);
-        out.backend = "cpu";
-        return;
-      }
-      if (occluder_mesh.triangle_count() > 0) occluders.emplace(std::move(occluder_mesh));
-      out.timings.bvh_s = seconds_since(t);
-      throw_if_cancelled(cancel, kWhat);
-      report_progress(cancel, "occluders", 2, 2);
-      in.occluders = occluders ? &*occluders : nullptr;
-      t = Clock::now();
-      render::render_scattering_cpu(in, core);
-      out.backend = "cpu";
-    };
-    if (gpu) {
-      try {
-        render::vulkan::BackendTimings bt;
-        gpu->render(in, &occluder_mesh, core, {}, &bt);
-        out.backend = "vulkan: " + gpu->device().name;
-        out.timings.upload_s = bt.gpu_upload_s + bt.host_upload_s;
-        out.timings.shadow_maps_s = bt.gpu_shadow_maps_s;
-        out.timings.gpu_scatter_s = bt.gpu_scatter_s;
-        out.timings.download_s = bt.gpu_download_s + bt.host_download_s;
-        out.timings.tiles = bt.tiles;
-      } catch (const render::vulkan::Unavailable& e) {  // e.g. out of device memory
-        if (scene.render.backend == Backend::vulkan)
-          throw Error(ErrorCode::invalid_argument,
-                      std::string("render.backend is 'vulkan' but ") + e.what());
-        out.backend_notice = std::string(e.what()) + "; the CPU backend renders";
-        out.backend_notice_is_warning = true;  // a GPU was there and failed
-        run_cpu();
-      }
-    } else {
-      run_cpu();
-    }
-    out.timings.scatter_s = seconds_since(t);
-    out.timings.exact_pixels = core.exact_pixels;
-    out.timings.interpolated_pixels = core.interpolated_pixels;
-    out.timings.shadow_rays = core.shadow_rays;
-  });
+  render::CoreInputs in;
+  in.camera = &camera;
+  in.scene = &scene;
+  in.distance_m = distance_m.view();
+  // The photo lets the surface term tell a misplaced mesh shadow from a real one (issue 13).
+  if (photo.channels() >= 3 && photo.width() == w && photo.height() == h) in.photo = photo.view();
+  in.sky_radiance = out.sky_radiance;
+  in.cancel = cancel;
+  render::CoreOutputs core{out.transmittance.view(), out.inscatter.view(),
+                           out.sun_visibility.view(), out.optical_depth.view()};
+  // Backend choice, fall-back, occluder geometry: render/backend.h.
+  render::FrameResult frame = render::render_frame(in, core);
+  out.backend = std::move(frame.backend);
+  out.backend_notice = std::move(frame.notice);
+  out.backend_notice_is_warning = frame.notice_is_warning;
+  out.completed_blockers = std::move(frame.completed_blockers);
+  const render::FrameTimings& t = frame.timings;
+  out.timings.mesh_s = t.mesh_s;
+  out.timings.bvh_s = t.bvh_s;
+  out.timings.scatter_s = t.scatter_s;
+  out.timings.exact_pixels = t.exact_pixels;
+  out.timings.interpolated_pixels = t.interpolated_pixels;
+  out.timings.shadow_rays = t.shadow_rays;
+  out.timings.upload_s = t.upload_s;
+  out.timings.shadow_maps_s = t.shadow_maps_s;
+  out.timings.gpu_scatter_s = t.gpu_scatter_s;
+  out.timings.download_s = t.download_s;
+  out.timings.tiles = t.tiles;
   out.timings.total_s = seconds_since(start);
   return out;
 }

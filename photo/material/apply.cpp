@@ -7,7 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
-#include "cv_bridge.h"
+#include "core/cv_bridge.h"
 #include "mr/error.h"
 
 namespace mr::photo {

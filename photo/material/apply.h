@@ -22,7 +22,7 @@
 #include <cstdint>
 #include <span>
 #include "mr/image.h"
-#include "mr/material.h"
+#include "mr/material_model.h"
 #include "mr/scene.h"
 #include "render/surface_shading.h"
 

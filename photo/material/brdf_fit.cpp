@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "mr/error.h"
+#include "photo/ceres_options.h"
 
 namespace mr::photo {
 
@@ -188,16 +189,12 @@ BrdfFit fit_brdf(const Image& radiance, const render::SurfaceGeometry& geometry,
     problem.SetParameterLowerBound(&p.roughness, 0, kMinRoughness);
     problem.SetParameterUpperBound(&p.roughness, 0, 1.0);
     if (hold_roughness) problem.SetParameterBlockConstant(&p.roughness);
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = hold_roughness ? 20 : 200;
     // Parameters to ~1e-8 relative: far below what the bounds of issue 7 ask (0.03 / 0.05 /
     // 0.1); tighter settings only added iterations.
-    so.function_tolerance = 1e-10;
-    so.gradient_tolerance = 1e-10;
-    so.parameter_tolerance = 1e-8;
-    so.num_threads = 1;
-    so.logging_type = ceres::SILENT;
+    const ceres::Solver::Options so = solver_options({.max_iterations = hold_roughness ? 20 : 200,
+                                                      .function_tolerance = 1e-10,
+                                                      .gradient_tolerance = 1e-10,
+                                                      .parameter_tolerance = 1e-8});
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);
     best.iterations += int(summary.iterations.size());

@@ -4,7 +4,7 @@
 #include <cstdint>
 #include <span>
 #include "mr/image.h"
-#include "mr/material.h"
+#include "mr/material_model.h"
 #include "render/surface_shading.h"
 
 namespace mr::photo {

@@ -7,7 +7,7 @@
 #include <span>
 #include <utility>
 #include <vector>
-#include "mr/material.h"
+#include "mr/material_model.h"
 #include "photo/material/style.h"
 
 namespace mr::photo {

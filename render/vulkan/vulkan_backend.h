@@ -1,5 +1,6 @@
-// Private to libmr: the scattering core on Vulkan compute (DESIGN.md sections 2, 3, 7). It
-// reproduces render_scattering_cpu (render/scattering_cpu.h) on a GPU: the same march, closed
+// Private to libmr: the scattering core on Vulkan compute (DESIGN.md sections 2, 3, 7), one of
+// the backends behind render/backend.h. It reproduces the CPU backend (render/cpu_backend.h,
+// render_scattering_cpu) on a GPU: the same march, closed
 // forms and gradient acceleration (shaders/scattering_common.glsl), with volumetric shadows from
 // shadow maps of the occluder mesh instead of Embree rays (see README "Vulkan backend").
 //
@@ -12,18 +13,16 @@
 #include <string>
 #include <vector>
 
-#include "mr/error.h"
+#include "render/backend.h"
 #include "render/occluder_mesh.h"
-#include "render/scattering_cpu.h"
 
 namespace mr::render::vulkan {
 
 /// No usable Vulkan here: no loader, no driver or device, a device without what the backend
 /// needs, or out of (device) memory. The dispatcher falls back to the CPU on it (backend auto).
-class Unavailable : public Error {
+class Unavailable : public BackendUnavailable {
  public:
-  explicit Unavailable(const std::string& message)
-      : Error(ErrorCode::invalid_argument, "vulkan: " + message) {}
+  explicit Unavailable(const std::string& message) : BackendUnavailable("vulkan: " + message) {}
 };
 
 struct BackendOptions {
@@ -52,7 +51,7 @@ struct DeviceInfo {
   bool cpu_implementation = false;  ///< a software rasterizer (lavapipe / SwiftShader)
 };
 
-class Backend {
+class Backend final : public ScatteringBackend {
  public:
   /// The process-wide backend, created on first use (instance, device, pipelines). Throws
   /// Unavailable (the same message again on later calls) when there is no usable device.
@@ -65,11 +64,21 @@ class Backend {
   /// device and its pipelines); a later shared() may still create that device.
   static Backend& shared_hardware();
 
-  ~Backend();
+  ~Backend() override;
   Backend(const Backend&) = delete;
   Backend& operator=(const Backend&) = delete;
 
   const DeviceInfo& device() const;
+
+  // ScatteringBackend: "vulkan: <device name>"; the normals and the full-resolution occluder
+  // mesh (rasterized into shadow maps, cheap at any resolution: from the coarse draft mesh, whose
+  // surface lies up to a fine pixel's depth step in front of the ground, 23 % of a flat sunlit
+  // ground shadowed itself, issue 13); render() below with the default options.
+  std::string name() const override;
+  void prepare_occluders(const CoreInputs& in, Occluders& occluders,
+                         FrameTimings& timings) override;
+  void render(const CoreInputs& in, Occluders& occluders, CoreOutputs& out,
+              FrameTimings& timings) override;
 
   /// Renders every pixel of `out` like render_scattering_cpu(in, out). `mesh`: the occluder mesh
   /// (nullptr or empty: nothing casts shadows; in.occluders is ignored). Thread-safe (renders

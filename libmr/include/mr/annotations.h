@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "mr/export.h"
 #include "mr/scene.h"
 
 namespace mr {
@@ -24,7 +25,7 @@ namespace mr {
 /// A point in the photo, in pixels (x right, y down; (0, 0) = centre of the top-left pixel).
 using PixelPoint = std::array<double, 2>;
 
-struct Annotations {
+struct MR_API Annotations {
   /// Two points on the horizon line (the image of the plane through the camera parallel to the
   /// ground). Gives the camera's pitch and roll. nullopt: estimated automatically.
   std::optional<std::array<PixelPoint, 2>> horizon;
@@ -119,24 +120,24 @@ inline constexpr int kAnnotationsFormatVersion = 1;
 /// -5: must be in [0, 10000]").
 /// Throws mr::Error(invalid_argument) "source: /json/pointer: problem", e.g.
 ///   "a.json: /planes/2/polygon: expected at least 3 points, found 2".
-void validate_annotations(const Annotations& annotations,
+MR_API void validate_annotations(const Annotations& annotations,
                           const std::string& source_name = "<annotations>");
 
 /// Parses and validates a document. Unknown and duplicate keys are errors; so is a missing or
 /// wrong "format" / "version". Throws mr::Error(invalid_argument) naming the source and the JSON
 /// pointer of the offending value ("a.json: /horizon/1/0: expected a number, found null").
-Annotations annotations_from_json(const std::string& text,
+MR_API Annotations annotations_from_json(const std::string& text,
                                   const std::string& source_name = "<annotations>");
 
 /// Writes a document of kAnnotationsFormatVersion (pretty-printed, only the keys that are set;
 /// doubles with enough digits to read back bit for bit). Validates first (invalid_argument).
-std::string annotations_to_json(const Annotations& annotations);
+MR_API std::string annotations_to_json(const Annotations& annotations);
 
 /// Reads and parses a file. Throws mr::Error: io (cannot read), invalid_argument (content).
-Annotations load_annotations(const std::filesystem::path& path);
+MR_API Annotations load_annotations(const std::filesystem::path& path);
 
 /// Writes annotations_to_json atomically (temporary file + rename). Throws mr::Error:
 /// invalid_argument (nothing written), io.
-void save_annotations(const std::filesystem::path& path, const Annotations& annotations);
+MR_API void save_annotations(const std::filesystem::path& path, const Annotations& annotations);
 
 }  // namespace mr

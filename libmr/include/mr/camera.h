@@ -3,13 +3,14 @@
 
 #include <array>
 
+#include "mr/export.h"
 #include "mr/metadata.h"
 
 namespace mr {
 
 /// A pinhole camera looking down +z (x right, y down in the image), in pixel units.
 /// Pixel (x, y) covers [x, x+1) x [y, y+1); its centre ray passes through (x+0.5, y+0.5).
-struct Camera {
+struct MR_API Camera {
   int width = 0, height = 0;
   double focal_px = 0;  ///< focal length in pixels
   double cx = 0, cy = 0;  ///< principal point in pixels

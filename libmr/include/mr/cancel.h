@@ -11,12 +11,14 @@
 #include <string>
 #include <string_view>
 
+#include "mr/export.h"
+
 namespace mr {
 
 /// Where a long call stands: the stage it is in and how much of that stage is done, in the
 /// stage's own units (image rows of a render, tiles on the GPU, strips of a streamed photo,
 /// estimation steps, fitted segments). Within a stage `done` only grows, up to `total`.
-struct Progress {
+struct MR_API Progress {
   std::string_view stage;  ///< "render", "stream", "horizon", "sky mask", ... (valid in the call)
   std::size_t done = 0;
   std::size_t total = 0;  ///< > 0
@@ -50,7 +52,7 @@ using ProgressCallback = std::function<void(const Progress&)>;
 ///    cancellation); to stop the call it calls request() on the token.
 /// Reporting costs the call a relaxed atomic load per row without a callback, and a clock read
 /// per row with one: a render's result never depends on it.
-class CancelToken {
+class MR_API CancelToken {
  public:
   CancelToken() = default;
   CancelToken(const CancelToken&) = delete;
@@ -86,7 +88,7 @@ class CancelToken {
 
 /// Throws mr::Error(ErrorCode::cancelled, "<what>: cancelled") when `token` is non-null and
 /// requested; else does nothing.
-void throw_if_cancelled(const CancelToken* token, const char* what);
+MR_API void throw_if_cancelled(const CancelToken* token, const char* what);
 
 /// token->report(...) when `token` is non-null and carries a progress callback.
 inline void report_progress(const CancelToken* token, std::string_view stage, std::size_t done,
@@ -97,7 +99,7 @@ inline void report_progress(const CancelToken* token, std::string_view stage, st
 /// A stage's shared counter for parallel loops: each worker add()s the units it finished and
 /// the new total is reported (throttled by the token). Without a token or callback add() is
 /// a branch.
-class ProgressCounter {
+class MR_API ProgressCounter {
  public:
   /// Reports (stage, 0, total) at once.
   ProgressCounter(const CancelToken* token, std::string_view stage, std::size_t total) noexcept

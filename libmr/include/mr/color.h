@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "mr/export.h"
 #include "mr/image.h"
 
 namespace mr {
@@ -34,12 +35,12 @@ inline constexpr const char* srgb_rolloff = "srgb_rolloff";
 /// exactly as they were: every value <= 0.8 (sRGB code 231 of 255) passes unchanged; the
 /// photo's own highlights above it are compressed, white (1.0) to 0.9 (code 243).
 inline constexpr double kHighlightRolloffKnee = 0.8;
-double highlight_rolloff(double x, double knee = kHighlightRolloffKnee);
+MR_API double highlight_rolloff(double x, double knee = kHighlightRolloffKnee);
 /// Its inverse (for x < 1): x above the knee from f = knee + (1 - knee) u / (1 + u).
-double highlight_rolloff_inverse(double y, double knee = kHighlightRolloffKnee);
+MR_API double highlight_rolloff_inverse(double y, double knee = kHighlightRolloffKnee);
 
 /// An OpenColorIO config. Cheap to copy (shared, immutable). Thread-safe.
-class ColorConfig {
+class MR_API ColorConfig {
  public:
   /// libmr's shipped config (libmr/data/config.ocio, embedded in the library).
   static ColorConfig builtin();

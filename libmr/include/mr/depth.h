@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "mr/camera.h"
+#include "mr/export.h"
 #include "mr/image.h"
 
 namespace mr {
@@ -28,7 +29,7 @@ inline constexpr double kDefaultSkyDepthM = 65504.0;
 /// clamped to it (read_depth, and render_scattering for maps that do not come from a file).
 inline constexpr double kMaxSurfaceDistanceM = 1e7;
 
-struct DepthOptions {
+struct MR_API DepthOptions {
   DepthKind kind = DepthKind::distance;
   /// Multiplies the stored values first. Integer files (8/16-bit PNG/TIFF) are read as their
   /// raw integer values (0..65535), so e.g. 0.001 turns millimetres into metres; for
@@ -44,7 +45,7 @@ struct DepthOptions {
 
 /// A metric distance map: one channel ("Z"), metres along each pixel's ray.
 /// Pixels with no surface (sky) hold +infinity.
-struct DepthMap {
+struct MR_API DepthMap {
   Image distance_m;
   std::size_t no_surface_pixels = 0;  ///< pixels whose stored value was NaN, inf, 0 or < 0
   /// Of those, the pixels whose stored value was NaN or negative: not one of the sky encodings
@@ -64,11 +65,11 @@ struct DepthMap {
 /// the usual case for EXR/PFM/PNG depth, are taken as stored). Throws mr::Error: io / corrupt_input naming the file;
 /// size_mismatch naming both sizes if it differs from the camera's; invalid_argument for
 /// absurd options (scale <= 0, disparity without baseline).
-DepthMap read_depth(const std::filesystem::path& path, const Camera& camera,
+MR_API DepthMap read_depth(const std::filesystem::path& path, const Camera& camera,
                     const DepthOptions& options = {});
 
 /// Converts stored values (already multiplied by scale) in place; exposed for tests and for
 /// depth that does not come from a file.
-DepthMap depth_to_distance(Image stored, const Camera& camera, const DepthOptions& options);
+MR_API DepthMap depth_to_distance(Image stored, const Camera& camera, const DepthOptions& options);
 
 }  // namespace mr

@@ -14,6 +14,7 @@
 #include <optional>
 
 #include "mr/camera.h"
+#include "mr/export.h"
 #include "mr/image.h"
 
 namespace mr {
@@ -29,7 +30,7 @@ enum class RelativeDepthKind {
   depth,
 };
 
-struct DepthFitOptions {
+struct MR_API DepthFitOptions {
   RelativeDepthKind kind = RelativeDepthKind::inverse_depth;
   /// When set, the relative map is planar (z-depth-like, as monocular networks output: the
   /// fit is done on z = distance / camera.z_to_distance) and the result is converted back to
@@ -51,7 +52,7 @@ struct DepthFitOptions {
   int max_iterations = 100;
 };
 
-struct DepthFit {
+struct MR_API DepthFit {
   /// One channel "Z": metres along each pixel's ray. +inf where the fitted depth is not
   /// positive (inverse depth: s r + t <= 0, i.e. beyond infinity: sky).
   Image distance_m;
@@ -75,7 +76,7 @@ struct DepthFit {
 /// options.min_reference_pixels references, relative values that do not vary over them,
 /// absurd options, or a fit with scale <= 0 (the map's convention is the other one, or the
 /// reference contradicts it) -- each message says which.
-DepthFit fit_relative_depth(const Image& relative, const Image& reference_distance_m,
+MR_API DepthFit fit_relative_depth(const Image& relative, const Image& reference_distance_m,
                             const DepthFitOptions& options = {});
 
 }  // namespace mr

@@ -24,11 +24,12 @@
 #include "mr/camera.h"
 #include "mr/depth_fit.h"
 #include "mr/estimate.h"
+#include "mr/export.h"
 #include "mr/image.h"
 
 namespace mr {
 
-struct DepthNetworkOptions {
+struct MR_API DepthNetworkOptions {
   /// The network's input size in pixels (the photo is resized to it, aspect ratio not kept, as
   /// MiDaS' and DPT's reference ONNX runners do).
   int input_width = 256, input_height = 256;
@@ -51,7 +52,7 @@ struct DepthNetworkOptions {
 /// mean / std, and laid out as NCHW float [1, 3, H, W]. The output map is resized back to the
 /// photo's size with OpenImageIO (no cv::dnn::blobFromImage: all resizing is OIIO's).
 /// Runs on OpenCV's CPU backend. Not thread-safe: one run() at a time per object.
-class DepthNetwork {
+class MR_API DepthNetwork {
  public:
   /// Throws mr::Error naming the file: io (missing, not a regular file, unreadable),
   /// corrupt_input (not an ONNX model OpenCV can load; it does not accept a [1, 3, H, W] input
@@ -76,7 +77,7 @@ class DepthNetwork {
   std::unique_ptr<Impl> impl_;
 };
 
-struct NetworkDepthOptions {
+struct MR_API NetworkDepthOptions {
   /// The fit's options; its kind is taken from the network's options and its camera is the
   /// photo's (the network's map is planar, z-like).
   DepthFitOptions fit;
@@ -85,7 +86,7 @@ struct NetworkDepthOptions {
   double max_reference_distance_m = 150.0;
 };
 
-struct NetworkDepth {
+struct MR_API NetworkDepth {
   Image relative;               ///< the network's map at the photo's size
   Image reference_distance_m;   ///< the ground-plane references used (+inf elsewhere)
   DepthFit fit;                 ///< fit.distance_m: the metric map (metres along the ray)
@@ -96,7 +97,7 @@ struct NetworkDepth {
 /// i.e. whose distance is the ray's intersection with y = 0 at the pose's camera height, up to
 /// max_reference_distance_m). Throws what run() and fit_relative_depth throw (too few ground
 /// pixels, a fit with scale <= 0, ...); size_mismatch when photo, camera and geometry differ in size.
-NetworkDepth estimate_network_depth(const DepthNetwork& network, const Image& photo,
+MR_API NetworkDepth estimate_network_depth(const DepthNetwork& network, const Image& photo,
                                     const Camera& camera, const GeometryEstimate& geometry,
                                     const NetworkDepthOptions& options = {});
 

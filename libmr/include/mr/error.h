@@ -4,6 +4,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "mr/export.h"
+
 namespace mr {
 
 /// What kind of failure an mr::Error reports; front ends map these to messages and exit codes.
@@ -18,12 +20,12 @@ enum class ErrorCode {
 };
 
 /// Human-readable name of a code ("io", "invalid_argument", ...).
-const char* to_string(ErrorCode code) noexcept;
+MR_API const char* to_string(ErrorCode code) noexcept;
 
 /// Thrown by every libmr function that fails. what() is a one-line message that names the
 /// file or parameter concerned and says what was found, e.g.
 /// "photo.jpg: depth map is 640x480, photo is 1280x960".
-class Error : public std::runtime_error {
+class MR_API Error : public std::runtime_error {
  public:
   Error(ErrorCode code, const std::string& message) : std::runtime_error(message), code_(code) {}
   ErrorCode code() const noexcept { return code_; }

@@ -17,12 +17,13 @@
 #include "mr/annotations.h"
 #include "mr/camera.h"
 #include "mr/cancel.h"
+#include "mr/export.h"
 #include "mr/image.h"
 #include "mr/scene.h"
 
 namespace mr {
 
-struct EstimateOptions {
+struct MR_API EstimateOptions {
   /// Camera height when the annotations give neither camera_height_m nor known_length.
   double default_camera_height_m = 1.6;
   /// With a photo: find the horizon (when not annotated) and the sky automatically.
@@ -88,9 +89,9 @@ enum class EstimateSource {
   horizontal_vp_level,       ///< through one horizontal vanishing point, roll assumed 0
   interior_box,              ///< camera height from the interior box's ceiling height and point
 };
-const char* to_string(EstimateSource source) noexcept;
+MR_API const char* to_string(EstimateSource source) noexcept;
 
-struct GeometryEstimate {
+struct MR_API GeometryEstimate {
   /// Position (0, h, 0) with h the camera height; yaw 0 (the photo's own heading); pitch and
   /// roll from the horizon.
   CameraPose pose;
@@ -149,7 +150,7 @@ struct GeometryEstimate {
 /// `camera_height_m` above the ground. Exact (no fitting). Throws mr::Error(invalid_argument)
 /// naming "/horizon" for points that are not finite, less than 1 px apart, more than one image
 /// size outside the image, or on a line more than 45 degrees from level.
-CameraPose pose_from_horizon(const Camera& camera, const std::array<PixelPoint, 2>& horizon,
+MR_API CameraPose pose_from_horizon(const Camera& camera, const std::array<PixelPoint, 2>& horizon,
                              double camera_height_m);
 
 /// The geometry of the annotated photo: pose from the horizon (else a level camera: horizon
@@ -160,7 +161,7 @@ CameraPose pose_from_horizon(const Camera& camera, const std::array<PixelPoint, 
 /// covers which).
 /// Throws mr::Error(invalid_argument) "/json/pointer: problem" for annotations that do not
 /// fit this camera (a plane or known length on or above the horizon, ...) or are invalid.
-GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
+MR_API GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& annotations,
                                    const EstimateOptions& options = {});
 
 /// The same with the photo (scene-linear, the camera's size; size_mismatch otherwise) and, when
@@ -172,19 +173,19 @@ GeometryEstimate estimate_geometry(const Camera& camera, const Annotations& anno
 /// (EstimateOptions::ground_contact; docs/annotations.md gives the rules), else on the far
 /// billboard (billboard_depression_deg), and so are ground pixels beneath them that would lie
 /// behind them. With an interior_box the room covers every pixel: no sky mask, no billboards.
-GeometryEstimate estimate_geometry(const Image& photo, const Camera& camera,
+MR_API GeometryEstimate estimate_geometry(const Image& photo, const Camera& camera,
                                    const Annotations& annotations,
                                    const EstimateOptions& options = {});
 
 /// The sun as fitted to the annotations' shadow pairs.
-struct SunEstimate {
+struct MR_API SunEstimate {
   Vec3 direction_to_sun;
   double azimuth_deg = 0, elevation_deg = 0;
   double rms_residual_deg = 0;    ///< angular residual of the pairs (RMS)
   double median_residual_px = 0;  ///< reprojection residual of the marks (median over pairs)
 };
 
-struct SceneEstimate {
+struct MR_API SceneEstimate {
   GeometryEstimate geometry;
   std::optional<SunEstimate> sun;  ///< with shadow pairs
   /// The scene for mr::fog: geometry.pose; the sun when fitted (its irradiance from the sun/sky
@@ -206,7 +207,7 @@ struct SceneEstimate {
 /// the lamps (throws mr::Error(invalid_argument) "/lamps, /lamp_patches: lamp <i>: ..." for a
 /// lamp outside the image, in the sky or behind the camera, or contradictory shading). `photo` is
 /// scene-linear RGB of the camera's size (size_mismatch otherwise).
-SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
+MR_API SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                              const Annotations& annotations, const EstimateOptions& options = {});
 
 /// The fog layer's top (metres above the ground, y = 0) for automatic fog when the scene gives
@@ -216,10 +217,10 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
 /// (the boundary layer). `mr fog --depth auto` uses it (--layer-top auto, the default) when the
 /// photo's geometry is estimated and neither --layer, --height-fog nor the scene file gives the
 /// fog a top. Throws mr::Error(invalid_argument) for a medium without positive extinction.
-double default_layer_top_m(const Medium& medium);
+MR_API double default_layer_top_m(const Medium& medium);
 
 /// The camera of a photo for estimation (issue 4 item 1), principal point at the centre.
-struct PhotoCamera {
+struct MR_API PhotoCamera {
   Camera camera;
   /// Where the focal length came from: "exif" (35 mm equivalent focal length),
   /// "vanishing points" (two or three orthogonal ones, f = sqrt(-(v1 - c) . (v2 - c))), or
@@ -233,7 +234,7 @@ struct PhotoCamera {
 /// from the photo's orthogonal vanishing points when confident (>= 0.3) and the horizontal
 /// field of view it implies is within [20, 120] degrees; else `fallback_fov_deg` across.
 /// Throws mr::Error(invalid_argument) for an empty photo or a fallback outside (0, 180).
-PhotoCamera camera_for_photo(const Image& photo, double fallback_fov_deg = 60.0);
+MR_API PhotoCamera camera_for_photo(const Image& photo, double fallback_fov_deg = 60.0);
 
 /// A picture for a person to check the estimate with: the photo (scene-linear, RGB) with the
 /// depth colour-mapped over it (log distance, near = red to far = blue, half blended), the sky
@@ -242,7 +243,7 @@ PhotoCamera camera_for_photo(const Image& photo, double fallback_fov_deg = 60.0)
 /// toward the sun's azimuth at the top when the sun was fitted; lamps as orange circles, their
 /// patches as orange polygons; the interior box's edges in white with its floor points as white
 /// circles. Scene-linear RGB, the photo's size.
-Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
+MR_API Image render_estimate_overlay(const Image& photo, const SceneEstimate& estimate,
                               const Annotations& annotations);
 
 }  // namespace mr

@@ -23,6 +23,7 @@
 #include "mr/cancel.h"
 #include "mr/color.h"
 #include "mr/depth.h"
+#include "mr/export.h"
 #include "mr/image.h"
 #include "mr/io.h"
 #include "mr/metadata.h"
@@ -32,10 +33,10 @@ namespace mr {
 
 /// True if `scene` is lit by the sky alone with a closed form at every pixel: no sun, no lamps,
 /// no noise. (Its sky radiance may still be unset: see StreamFogRequest.)
-bool is_sky_only(const FogScene& scene);
+MR_API bool is_sky_only(const FogScene& scene);
 
 /// One photo for FogStreamer.
-struct StreamFogRequest {
+struct MR_API StreamFogRequest {
   std::filesystem::path photo;   ///< 8/16-bit photo (JPEG, PNG, TIFF, ...)
   /// Optional: the photo already decoded by read_image (scene-linear, upright, with its
   /// metadata), e.g. because its sky radiance was estimated from it. Then only the depth map,
@@ -63,7 +64,7 @@ struct StreamFogRequest {
   int strip_rows = 0;
 };
 
-struct StreamFogResult {
+struct MR_API StreamFogResult {
   /// false: this request cannot stream (see `reason`); nothing was read beyond headers and
   /// nothing was written. Callers then take the full-frame path (read_image, mr::fog, ...),
   /// which also produces the proper errors for bad inputs and options.
@@ -83,7 +84,7 @@ struct StreamFogResult {
 /// to the next (no fresh large allocations, hence no page faults, per photo in a batch). One
 /// call at a time per FogStreamer; use one per concurrent photo. The strips of one photo are
 /// fogged in parallel in the calling thread's TBB arena.
-class FogStreamer {
+class MR_API FogStreamer {
  public:
   FogStreamer();
   ~FogStreamer();

@@ -7,12 +7,13 @@
 #include <string>
 #include <vector>
 
+#include "mr/export.h"
 #include "mr/metadata.h"
 
 namespace mr {
 
 /// A rectangle of pixels: origin (x, y) and size.
-struct Rect {
+struct MR_API Rect {
   int x = 0, y = 0, width = 0, height = 0;
 };
 
@@ -20,7 +21,7 @@ struct Rect {
 /// consecutive pixels `channels` floats apart and rows `row_stride` floats apart. Cheap to copy.
 /// The viewed memory must outlive the view.
 template <class T>
-struct BasicImageView {
+struct MR_API BasicImageView {
   T* data = nullptr;
   int width = 0;
   int height = 0;
@@ -43,7 +44,7 @@ using ConstImageView = BasicImageView<const float>;
 /// contiguous, top row first), channel names and metadata. Colour images hold scene-linear
 /// values unless their metadata says otherwise. Copying copies the pixels (use view() for a
 /// cheap handle); moving is free.
-class Image {
+class MR_API Image {
  public:
   Image() = default;
   /// Zero-filled image. Channel names default to R,G,B,A for 1..4 channels ("Y" for 1).
@@ -100,6 +101,6 @@ class Image {
 };
 
 /// Copies a view into a new owned image (no metadata).
-Image to_image(ConstImageView view);
+MR_API Image to_image(ConstImageView view);
 
 }  // namespace mr

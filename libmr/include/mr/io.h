@@ -8,6 +8,7 @@
 #include <string_view>
 
 #include "mr/color.h"
+#include "mr/export.h"
 #include "mr/image.h"
 
 namespace mr {
@@ -17,11 +18,11 @@ enum class PixelType { automatic, uint8, uint16, half, float32 };
 
 /// Parses "8", "16", "half", "float" (also "uint8", "uint16", "32", "f16", "f32").
 /// Throws mr::Error(invalid_argument) otherwise.
-PixelType parse_pixel_type(const std::string& text);
-const char* to_string(PixelType type) noexcept;
+MR_API PixelType parse_pixel_type(const std::string& text);
+MR_API const char* to_string(PixelType type) noexcept;
 
 /// What a file holds, without decoding the pixels.
-struct ImageFileInfo {
+struct MR_API ImageFileInfo {
   int width = 0, height = 0, channels = 0;
   PixelType pixel_type = PixelType::float32;  ///< as stored (integer types other than 8/16 map
                                               ///< to float32)
@@ -36,9 +37,9 @@ struct ImageFileInfo {
 
 /// Reads the header of an image file. Throws mr::Error(io) naming the file if it cannot be
 /// opened, is not a regular file (a FIFO, a device, a folder) or is not an image.
-ImageFileInfo probe_image(const std::filesystem::path& path);
+MR_API ImageFileInfo probe_image(const std::filesystem::path& path);
 
-struct ReadOptions {
+struct MR_API ReadOptions {
   /// Colour space of the file's pixels. Empty: the file's own tag (oiio:ColorSpace) if the
   /// config knows it, else sRGB for 8/16-bit integer files and scene_linear for float files.
   std::string colorspace;
@@ -60,17 +61,17 @@ struct ReadOptions {
 /// (250 megapixels: 3 GB of float RGB, ~10 GB once rendered). Checked from the file's header,
 /// before any pixel is decoded; larger files fail with corrupt_input naming the file and size.
 inline constexpr std::uint64_t kDefaultMaxDecodedPixels = 250'000'000;
-std::uint64_t max_decoded_pixels() noexcept;
+MR_API std::uint64_t max_decoded_pixels() noexcept;
 /// Process-wide (the CLI's --max-megapixels); 0 restores the default. Thread-safe.
-void set_max_decoded_pixels(std::uint64_t pixels) noexcept;
+MR_API void set_max_decoded_pixels(std::uint64_t pixels) noexcept;
 
 /// Reads a whole image (first subimage, all channels) as float32 with its metadata, turned
 /// upright by its EXIF Orientation (ReadOptions::apply_orientation).
 /// Throws mr::Error: io (missing, unreadable, not an image), corrupt_input (truncated,
 /// non-finite pixels), color. The message names the file.
-Image read_image(const std::filesystem::path& path, const ReadOptions& options = {});
+MR_API Image read_image(const std::filesystem::path& path, const ReadOptions& options = {});
 
-struct WriteOptions {
+struct MR_API WriteOptions {
   /// Stored pixel type. automatic: float32 for EXR/HDR/PFM, uint16 for TIFF, else uint8.
   PixelType pixel_type = PixelType::automatic;
   /// Colour space to encode into. Empty: sRGB for integer pixel types, scene_linear for float.
@@ -85,12 +86,12 @@ struct WriteOptions {
 /// from the extension, metadata (EXIF, ...) carried over. Atomic: the pixels go to a temporary
 /// file in the same folder which is renamed over `path` only when complete; on any failure the
 /// temporary file is removed and `path` is untouched. Throws mr::Error(io | invalid_argument).
-void write_image(const std::filesystem::path& path, const Image& image,
+MR_API void write_image(const std::filesystem::path& path, const Image& image,
                  const WriteOptions& options = {});
 
 /// One layer of a multi-layer EXR. Channels are named "<layer>.<channel>", or just "<channel>"
 /// when `name` is empty (the main R,G,B layer).
-struct ExrLayer {
+struct MR_API ExrLayer {
   std::string name;      ///< "", "transmittance", "inscatter", "depth", ...
   const Image* image;    ///< its channel_names() give the channel part ("R","G","B" / "Z")
   bool is_data = false;  ///< data layers (depth) are never colour-converted
@@ -99,32 +100,32 @@ struct ExrLayer {
 /// Writes the layers into one OpenEXR file that oiiotool, Nuke and Blender read as layers
 /// (e.g. R,G,B + transmittance.R/G/B + inscatter.R/G/B + depth.Z). All layers must have the
 /// same size. Colour layers are written in scene-linear. Atomic like write_image.
-void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLayer> layers,
+MR_API void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLayer> layers,
                       const Metadata& metadata, PixelType pixel_type = PixelType::half);
 
 /// Throws mr::Error(io) "<path>: is a FIFO (named pipe); outputs are only written as regular
 /// files ..." when `path` exists and is not a regular file (not following symbolic links: a
 /// symbolic link, a FIFO, a device, a folder). A missing path is fine. Every writer of libmr
 /// checks this; front ends call it to refuse a target before any work.
-void check_output_path(const std::filesystem::path& path);
+MR_API void check_output_path(const std::filesystem::path& path);
 
 /// Writes `text` (a JSON document, a report) to `path` as libmr writes its images: into a
 /// hidden temporary beside it, synced, then renamed into place, so no reader sees a partial
 /// file and an interrupted run leaves nothing (remove_unfinished_outputs() knows it). `path`
 /// must not be anything but a regular file (check_output_path). With overwrite == false an
 /// existing file is an error and is left alone. Throws mr::Error(io) naming `path`.
-void write_text_file(const std::filesystem::path& path, std::string_view text,
+MR_API void write_text_file(const std::filesystem::path& path, std::string_view text,
                      bool overwrite = true);
 
 /// Removes the hidden temporary files of the outputs libmr is writing right now (every writer
 /// writes a temporary beside its output and renames it into place when complete), leaving
 /// finished outputs and inputs alone. Async-signal-safe (only unlink(2)): meant for a signal
 /// handler that ends the process at once, so that no partial file is left behind.
-void remove_unfinished_outputs() noexcept;
+MR_API void remove_unfinished_outputs() noexcept;
 
 /// True if `path` has an extension OpenImageIO can write.
-bool is_writable_image_extension(const std::filesystem::path& path);
+MR_API bool is_writable_image_extension(const std::filesystem::path& path);
 /// True if `path` has an extension OpenImageIO can read.
-bool is_readable_image_extension(const std::filesystem::path& path);
+MR_API bool is_readable_image_extension(const std::filesystem::path& path);
 
 }  // namespace mr

@@ -3,33 +3,22 @@
 // inverse rendering, an assignment of candidates to the target's regions is chosen by Tabu search
 // on a style objective, and the regions are re-rendered under the photo's lighting.
 #pragma once
+
 #include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
 #include "mr/camera.h"
 #include "mr/cancel.h"
+#include "mr/export.h"
 #include "mr/image.h"
+#include "mr/material_model.h"
 #include "mr/scene.h"
 
 namespace mr {
 
-/// A surface's reflectance: Lambert diffuse plus a GGX microfacet specular lobe with Smith
-/// (height-correlated) masking-shadowing and Schlick's Fresnel,
-///   f_r(l, v) = diffuse_albedo / pi + D(h) G2(l, v) F(v.h) / (4 |n.l| |n.v|),
-///   F(u) = F0 + (1 - F0) (1 - u)^5, F0 = specular_albedo, GGX alpha = roughness^2.
-struct Material {
-  Rgb diffuse_albedo{0.5f, 0.5f, 0.5f};  ///< in [0, 1] per channel
-  float specular_albedo = 0.04f;          ///< F0: reflectance at normal incidence, in [0, 1]
-  float roughness = 0.5f;                 ///< perceptual roughness in [0.02, 1]
-};
-
-/// Throws mr::Error(invalid_argument) naming `what` and the field for values outside the ranges
-/// above or not finite.
-void validate_material(const Material& material, const std::string& what = "material");
-
 /// A material fitted to one segment of the sample image.
-struct MaterialCandidate {
+struct MR_API MaterialCandidate {
   Material material;
   int segment = -1;          ///< the segment's label in MaterialCandidates::segment_labels
   int pixel_count = 0;       ///< pixels the fit used
@@ -37,7 +26,7 @@ struct MaterialCandidate {
 };
 
 /// What the sample image offered.
-struct MaterialCandidates {
+struct MR_API MaterialCandidates {
   std::vector<MaterialCandidate> candidates;  ///< distinct, well-fitted; at least one
   Image segment_labels;  ///< 1 channel, the sample's size: segment id per pixel, -1 = unused
   std::vector<std::string> notes;  ///< one line per decision, for a person to read
@@ -46,7 +35,7 @@ struct MaterialCandidates {
   std::vector<std::string> warnings;
 };
 
-struct MaterialTransferOptions {
+struct MR_API MaterialTransferOptions {
   int max_candidates = 8;            ///< keep at most this many candidates (1..64)
   double superpixel_size_px = 0;     ///< segmentation scale; 0 = from the sample's size
   /// Candidates fitting worse are dropped. When no segment fits this well (common for real
@@ -70,7 +59,7 @@ struct MaterialTransferOptions {
 /// A photo (or sample) with what shading it needs: scene-linear RGB, the distance map (metres
 /// along each pixel's ray; 0 or +inf = sky), the camera and the scene (pose and lighting; the
 /// medium is ignored). Views: the images must outlive the call.
-struct ShadedPhoto {
+struct MR_API ShadedPhoto {
   const Image* photo = nullptr;
   const Image* distance_m = nullptr;
   Camera camera;
@@ -86,10 +75,10 @@ struct ShadedPhoto {
 /// usable segment (too small, all sky, flat black, non-finite pixels everywhere, no fit at all;
 /// the message says what was tried and what to do) and
 /// mr::Error(size_mismatch) when the distance map or camera differ from the photo's size.
-MaterialCandidates extract_material_candidates(const ShadedPhoto& sample,
+MR_API MaterialCandidates extract_material_candidates(const ShadedPhoto& sample,
                                                const MaterialTransferOptions& options = {});
 
-struct MaterialTransferResult {
+struct MR_API MaterialTransferResult {
   Image image;  ///< the target photo with its regions re-materialed, scene-linear RGB
   MaterialCandidates candidates;
   std::vector<int> assignment;  ///< candidate index per region (region r = label r + 1)
@@ -107,7 +96,7 @@ struct MaterialTransferResult {
 /// 0 = untouched and 1..n = region n (every id in 1..n must have pixels). Throws
 /// mr::Error(invalid_argument) for an empty region set, a region id with no pixels, or a region
 /// entirely in the sky; mr::Error(size_mismatch) for labels of another size.
-MaterialTransferResult transfer_material(const ShadedPhoto& sample, const ShadedPhoto& target,
+MR_API MaterialTransferResult transfer_material(const ShadedPhoto& sample, const ShadedPhoto& target,
                                          const Image& region_labels,
                                          const MaterialTransferOptions& options = {});
 
@@ -118,10 +107,10 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
 /// i = region i + 1, later polygons paint over earlier ones). Throws mr::Error(io) if
 /// unreadable, mr::Error(size_mismatch) if its size is not width x height,
 /// mr::Error(invalid_argument) if it has no region (or a polygon covers no pixel).
-Image load_region_labels(const std::filesystem::path& path, int width, int height);
+MR_API Image load_region_labels(const std::filesystem::path& path, int width, int height);
 
 /// The chosen materials as a JSON document (format "mr-materials", version 1): the candidates,
 /// the assignment and the objective.
-std::string material_result_to_json(const MaterialTransferResult& result);
+MR_API std::string material_result_to_json(const MaterialTransferResult& result);
 
 }  // namespace mr

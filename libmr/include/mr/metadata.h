@@ -6,13 +6,15 @@
 #include <string>
 #include <vector>
 
+#include "mr/export.h"
+
 namespace mr {
 
 /// Named attributes of an image, carried from input to output files. Names follow
 /// OpenImageIO's conventions ("Exif:FocalLengthIn35mmFormat", "Make", "oiio:ColorSpace").
 /// Values keep their type internally (so EXIF rationals round-trip); this interface reads them
 /// as text or numbers. A value type: copies are independent.
-class Metadata {
+class MR_API Metadata {
  public:
   Metadata();
   ~Metadata();

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "mr/camera.h"
+#include "mr/export.h"
 #include "mr/fog.h"
 #include "mr/image.h"
 #include "mr/scene.h"
@@ -16,7 +17,7 @@ namespace mr {
 class CancelToken;  // mr/cancel.h
 
 /// The core's output, all the photo's size.
-struct ScatteringLayers {
+struct MR_API ScatteringLayers {
   Image transmittance;   ///< T (R,G,B): tau(camera, surface) * S(surface), in [0, 1]
   Image inscatter;       ///< R (R,G,B): single-scattered light along the view ray
   Image sun_visibility;  ///< 1 channel: fraction of the sun's disk seen from the surface (AOV;
@@ -60,7 +61,7 @@ struct ScatteringLayers {
 /// bit-identical to a render without a token.
 /// Throws mr::Error: invalid_argument for a bad scene (naming the field, see validate_scene),
 /// size_mismatch, invalid_argument for NaN distances, cancelled.
-ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
+MR_API ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
                                    const Camera& camera, const FogScene& scene,
                                    const CancelToken* cancel = nullptr);
 
@@ -68,7 +69,7 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
 /// The returned FogLayers' `airlight` holds the sky radiance used. `cancel`: as for
 /// render_scattering (a cancelled call throws mr::Error(cancelled) and leaves `layers_out` as
 /// it was).
-FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
+MR_API FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
               const FogScene& scene, ScatteringLayers* layers_out = nullptr,
               const CancelToken* cancel = nullptr);
 /// fog() with a soft sky matte (issue 11 item 4), e.g. GeometryEstimate::sky_alpha: one channel
@@ -79,18 +80,18 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Camera& camera,
 /// instead of a one-pixel step between the depth's two sides. Pixels with alpha 0 or 1 are
 /// exactly as fog() above renders them. Throws as fog() above, and mr::Error(size_mismatch)
 /// for a non-empty matte of another size or channel count.
-FogLayers fog(const Image& photo, const Image& distance_m, const Image& sky_alpha,
+MR_API FogLayers fog(const Image& photo, const Image& distance_m, const Image& sky_alpha,
               const Camera& camera, const FogScene& scene, ScatteringLayers* layers_out = nullptr,
               const CancelToken* cancel = nullptr);
 
 /// Checks every field of a scene and throws mr::Error(invalid_argument) naming the first bad
 /// one by its path ("medium.g", "lighting.lamps[2].position_m") and what was found.
-void validate_scene(const FogScene& scene);
+MR_API void validate_scene(const FogScene& scene);
 
 /// Things in a valid scene that are almost certainly not what its author meant, one sentence
 /// each (empty when there are none); front ends show them as warnings. Today: a sun whose light
 /// cannot reach the camera's surroundings because the fog above is (close to) infinitely thick,
 /// e.g. homogeneous fog with no layer top: the core then correctly renders no sunlight at all.
-std::vector<std::string> scene_warnings(const FogScene& scene);
+MR_API std::vector<std::string> scene_warnings(const FogScene& scene);
 
 }  // namespace mr

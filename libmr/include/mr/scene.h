@@ -12,17 +12,18 @@
 #include <vector>
 
 #include "mr/camera.h"
+#include "mr/export.h"
 
 namespace mr {
 
 using Rgb = std::array<float, 3>;
 
-struct Vec3 {
+struct MR_API Vec3 {
   double x = 0, y = 0, z = 0;
 };
 
 /// Where the camera stands and how it is turned, in the world frame.
-struct CameraPose {
+struct MR_API CameraPose {
   Vec3 position_m{0, 1.6, 0};
   double yaw_deg = 0;    ///< heading: positive turns the view to the right (toward +X)
   double pitch_deg = 0;  ///< positive tilts the view up
@@ -41,11 +42,11 @@ struct CameraPose {
 
 /// A world direction from azimuth (degrees, 0 = +Z, 90 = +X) and elevation above the
 /// horizon (degrees): (cos(el) sin(az), sin(el), cos(el) cos(az)).
-Vec3 direction_from_azimuth_elevation(double azimuth_deg, double elevation_deg);
+MR_API Vec3 direction_from_azimuth_elevation(double azimuth_deg, double elevation_deg);
 
 /// The participating medium (DESIGN.md section 3).
 /// Extinction sigma_t(x) = sigma_t * rho(x), scattering sigma_s = albedo * sigma_t.
-struct Medium {
+struct MR_API Medium {
   Rgb sigma_t_per_m{0.0261f, 0.0261f, 0.0261f};  ///< at density 1 (150 m visibility)
   Rgb albedo{1, 1, 1};                           ///< in [0, 1]
   double g = 0;  ///< Henyey-Greenstein asymmetry, in (-1, 1); > 0 scatters forward
@@ -74,7 +75,7 @@ struct Medium {
 
 /// Sunlight: parallel rays from `direction_to_sun` with `irradiance` (scene-linear units per
 /// unit area, perpendicular to the rays) above the fog layer.
-struct Sun {
+struct MR_API Sun {
   Vec3 direction_to_sun{0, 1, 0};  ///< normalised by the core
   Rgb irradiance{3, 3, 3};
   double angular_radius_deg = 0.27;  ///< > 0 gives soft shaft edges (penumbra)
@@ -87,7 +88,7 @@ struct Sun {
 
 /// A point lamp, optionally a spot: radiant intensity I (per steradian), irradiance at x is
 /// I / |p - x|^2, attenuated by the fog between p and x and blocked by the scene.
-struct Lamp {
+struct MR_API Lamp {
   Vec3 position_m;
   Rgb intensity_per_sr{100, 90, 70};
   /// Spot lamps: the cone's axis and half-angles. Full intensity within inner_angle_deg,
@@ -103,7 +104,7 @@ struct Lamp {
   bool intensity_auto = false;
 };
 
-struct Lighting {
+struct MR_API Lighting {
   std::optional<Sun> sun;
   /// Isotropic sky radiance L_sky lighting the fog (and standing in for its multiple
   /// scattering). nullopt: estimated from the photo (the Koschmieder airlight estimate).
@@ -120,7 +121,7 @@ enum class Backend { automatic, cpu, vulkan };
 
 /// How the core renders. Quality presets set the march steps and the gradient-acceleration
 /// grid; explicit fields override them (0 = from the preset).
-struct RenderSettings {
+struct MR_API RenderSettings {
   Quality quality = Quality::normal;
   Backend backend = Backend::automatic;
   int march_steps = 0;          ///< view-ray steps per pixel (lamps and shafts add more)
@@ -139,7 +140,7 @@ struct RenderSettings {
 /// length. A focal length in pixels is tied to an image size, so the size is kept with it: for a
 /// photo of another size with the same aspect ratio (a resized copy) the focal length and the
 /// principal point scale with it (mr::camera_for_image in mr/scene_json.h).
-struct SceneCamera {
+struct MR_API SceneCamera {
   int width = 0, height = 0;  ///< the image size (pixels) focal_px and principal_point_px refer to
   double focal_px = 0;        ///< > 0
   /// In pixels of that image ((0, 0) = top-left corner of the top-left pixel); nullopt: the
@@ -152,7 +153,7 @@ struct SceneCamera {
 /// top of the photo, a wall beside the frame or a canopy overhead would otherwise let full
 /// sunlight into the fog they shade. All of it casts shadows only (it is never seen). Heights
 /// are world y (the ground at 0), azimuths as for the sun (0 = +Z, 90 = +X).
-struct Blockers {
+struct MR_API Blockers {
   /// Structures cut by the frame's top and side edges, continued beyond the frame along their
   /// own plane: vertical ones straight up to a height estimated from the tops of vertical
   /// structures the photo shows at a similar distance, else to max_height_m; other surfaces
@@ -199,7 +200,7 @@ struct Blockers {
 
 /// A structure cut by the frame that the render continued beyond it (Blockers::Completion):
 /// what was guessed and how much to trust it, so a front end can show it or ask the user.
-struct CompletedBlocker {
+struct MR_API CompletedBlocker {
   enum class Edge { top, left, right };
   Edge edge = Edge::top;
   int first_px = 0, last_px = 0;  ///< pixels along that edge: columns (top) or rows (sides)
@@ -213,7 +214,7 @@ struct CompletedBlocker {
 };
 
 /// A whole fog scene (the JSON scene document, docs/scene.md, holds the same).
-struct FogScene {
+struct MR_API FogScene {
   CameraPose pose;
   Medium medium;
   Lighting lighting;

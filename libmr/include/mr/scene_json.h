@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <string>
 
+#include "mr/export.h"
 #include "mr/scene.h"
 
 namespace mr {
@@ -32,14 +33,14 @@ inline constexpr int kSceneFormatVersion = 3;
 ///   "scene.json: /lighting/lamps/1/position_m: expected an array of 3 numbers, found a string"
 ///   "scene.json: line 3, column 14: syntax error while parsing object - ..."
 ///   "scene.json: /medium/g: medium.g = 1.2: must be in (-1, 1)"
-FogScene scene_from_json(const std::string& text, const std::string& source_name = "<scene>");
+MR_API FogScene scene_from_json(const std::string& text, const std::string& source_name = "<scene>");
 
 /// Writes a scene as a document of kSceneFormatVersion: pretty-printed (2-space indent), every
 /// field written, and exact: scene_from_json(scene_to_json(s)) equals s field by field (floats
 /// and doubles are written with enough digits to read back bit for bit).
 /// Throws mr::Error(invalid_argument) from validate_scene for a scene that could not be read
 /// back (a NaN, say), so a document written by libmr is always one it accepts.
-std::string scene_to_json(const FogScene& scene);
+MR_API std::string scene_to_json(const FogScene& scene);
 
 /// The camera of a photo `width` x `height` from a scene's recorded camera: the recorded one when
 /// the size is the same (bit for bit); for a resized photo of the same aspect ratio (within 1 %)
@@ -47,20 +48,20 @@ std::string scene_to_json(const FogScene& scene);
 /// mr::Error(invalid_argument) naming both sizes when the aspect ratio differs (a rotated or
 /// cropped photo: the recorded focal length does not carry over), or for an invalid camera or
 /// size.
-Camera camera_for_image(const SceneCamera& camera, int width, int height);
+MR_API Camera camera_for_image(const SceneCamera& camera, int width, int height);
 
 /// The SceneCamera recording `camera` (its size, focal length and principal point; the principal
 /// point is left out when it is the image's centre).
-SceneCamera scene_camera(const Camera& camera);
+MR_API SceneCamera scene_camera(const Camera& camera);
 
 /// Reads and parses a scene file; errors name the file as given.
 /// Throws mr::Error: io when the file cannot be read, invalid_argument for its content.
-FogScene load_scene(const std::filesystem::path& path);
+MR_API FogScene load_scene(const std::filesystem::path& path);
 
 /// Writes scene_to_json(scene) to `path` atomically: into a temporary file in the same folder,
 /// then renamed over `path`, so readers see the old file or the new one, never a partial one,
 /// and a failure leaves nothing behind. Throws mr::Error: invalid_argument for an invalid
 /// scene (nothing is written), io when the file cannot be written (naming the path).
-void save_scene(const std::filesystem::path& path, const FogScene& scene);
+MR_API void save_scene(const std::filesystem::path& path, const FogScene& scene);
 
 }  // namespace mr

@@ -1,7 +1,10 @@
 // libmr version.
 #pragma once
 
+#include "mr/export.h"
+
+
 namespace mr {
 /// "major.minor.patch" of the libmr this program runs against.
-const char* version() noexcept;
+MR_API const char* version() noexcept;
 }  // namespace mr

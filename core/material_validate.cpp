@@ -5,7 +5,7 @@
 #include <string>
 
 #include "mr/error.h"
-#include "mr/material.h"
+#include "mr/material_model.h"
 
 namespace mr {
 
