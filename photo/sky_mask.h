@@ -48,6 +48,12 @@ struct SkyMaskOptions {
   /// is too steep for the texture test) is sky when at least this fraction of the pixels around
   /// it are within two texture windows of the blue sky. > 1: off.
   double cloud_min_sky_ring = 0.9;
+  /// Clouds: what is above the horizon, not sky and reaches neither the horizon nor the
+  /// frame's bottom (stands on nothing), is sky when its mean saturation is at most this, its
+  /// mean per-pixel gradient at most `max_texture`, and at least `floating_min_sky_ring` of its
+  /// outline pixels touch the sky rather than the frame. 0: off.
+  double floating_max_saturation = 0.2;
+  double floating_min_sky_ring = 0.6;
   double bright_fraction = 0.6;     ///< grey sky: luma >= this x the bright reference
   double max_hole_fraction = 5e-4;  ///< enclosed non-sky specks filled up to this image fraction
   /// Sky seen through foliage: enclosed sky-coloured components up to this image fraction whose
