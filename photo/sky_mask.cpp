@@ -281,9 +281,11 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   // edge cut into the cloud where the photo has none. What is above the horizon, not sky, and
   // does not stand on anything (no pixel of it reaches the horizon or the frame's bottom: a
   // tree, a mast, a building or a mountain does) is held up by nothing but the sky: a cloud
-  // when it is grey (low saturation: a kite, a balloon or foliage is not) and not textured like
-  // foliage or a lattice (mean per-pixel gradient below `max_texture`) and mostly ringed by sky
-  // (not by the frame: a bridge deck or an eave seen from below spans it).
+  // when it is grey (low saturation: a kite, a balloon or foliage is not) or mostly of the sky's
+  // colours (blue seen through a hole in a cloud) and not textured like
+  // foliage or a lattice (mean per-pixel gradient below `max_texture`; a bright white one may
+  // be: a cumulus' sunlit detail) and mostly ringed by sky (not by the frame: a bridge deck or
+  // an eave seen from below spans it).
   if (o.floating_max_saturation > 0 && cv::countNonZero(sky) > 0) {
     cv::Mat rest(h, w, CV_8U, cv::Scalar(0));
     for (int y = 0; y < h; ++y)
@@ -292,7 +294,8 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     cv::Mat fl, fs, fc;
     const int m = cv::connectedComponentsWithStats(rest, fl, fs, fc, 8, CV_32S);
     std::vector<std::uint8_t> grounded(std::size_t(m), 0);
-    std::vector<double> sat_sum(std::size_t(m), 0.0), grad_sum(std::size_t(m), 0.0);
+    std::vector<double> sat_sum(std::size_t(m), 0.0), grad_sum(std::size_t(m), 0.0),
+        luma_sum(std::size_t(m), 0.0), sky_coloured(std::size_t(m), 0.0);
     std::vector<int> ring_sky(std::size_t(m), 0), ring_frame(std::size_t(m), 0);
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
@@ -301,6 +304,8 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
         if (y + 1 >= h || !above(x, y + 1)) grounded[l] = 1;
         sat_sum[l] += saturation.at<float>(y, x);
         grad_sum[l] += pixel_gradient.at<float>(y, x);
+        luma_sum[l] += luma.at<float>(y, x);
+        sky_coloured[l] += colour.at<std::uint8_t>(y, x);
         const bool frame = x == 0 || y == 0 || x == w - 1;
         bool next_to_sky = false;
         for (int dy = -1; dy <= 1 && !next_to_sky; ++dy)
@@ -318,8 +323,12 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     bool any_cloud = false;
     for (int i = 1; i < m; ++i) {
       const double area = fs.at<int>(i, cv::CC_STAT_AREA);
-      cloud[i] = !grounded[i] && sat_sum[i] <= o.floating_max_saturation * area &&
-                 grad_sum[i] <= o.max_texture * area &&
+      // A bright white one may be textured: a cumulus' sunlit cauliflower detail.
+      const bool white = luma_sum[i] >= std::max(0.6, double(o.bright_fraction * bright_ref)) * area;
+      // Grey, or mostly of the sky's colours (blue seen through a gap in the cloud).
+      const bool grey = sat_sum[i] <= o.floating_max_saturation * area || 2 * sky_coloured[i] > area;
+      cloud[i] = !grounded[i] && grey &&
+                 (white || grad_sum[i] <= o.max_texture * area) &&
                  ring_sky[i] >= o.floating_min_sky_ring * (ring_sky[i] + ring_frame[i]);
       any_cloud |= cloud[i] != 0;
     }
