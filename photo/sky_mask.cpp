@@ -324,11 +324,12 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     for (int i = 1; i < m; ++i) {
       const double area = fs.at<int>(i, cv::CC_STAT_AREA);
       // A bright white one may be textured: a cumulus' sunlit cauliflower detail.
-      const bool white = luma_sum[i] >= std::max(0.6, double(o.bright_fraction * bright_ref)) * area;
+      const bool white =
+          luma_sum[i] >= std::max(0.6, double(o.bright_fraction * bright_ref)) * area;
       // Grey, or mostly of the sky's colours (blue seen through a gap in the cloud).
-      const bool grey = sat_sum[i] <= o.floating_max_saturation * area || 2 * sky_coloured[i] > area;
-      cloud[i] = !grounded[i] && grey &&
-                 (white || grad_sum[i] <= o.max_texture * area) &&
+      const bool grey =
+          sat_sum[i] <= o.floating_max_saturation * area || 2 * sky_coloured[i] > area;
+      cloud[i] = !grounded[i] && grey && (white || grad_sum[i] <= o.max_texture * area) &&
                  ring_sky[i] >= o.floating_min_sky_ring * (ring_sky[i] + ring_frame[i]);
       any_cloud |= cloud[i] != 0;
     }
