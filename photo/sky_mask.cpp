@@ -101,6 +101,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     cv::blur(texture, roughness, wide);
     roughness = cv::max(roughness - coherent, 0.0);
   }
+  const cv::Mat pixel_gradient = texture.clone();  // per working pixel, before the window
   cv::blur(texture, texture, cv::Size(win, win));
 
   // Bright reference: 95th percentile of the luma above the horizon.
@@ -115,6 +116,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
 
   cv::Mat cand(h, w, CV_8U, cv::Scalar(0)), colour(h, w, CV_8U, cv::Scalar(0));
   cv::Mat blueish(h, w, CV_8U, cv::Scalar(0)), dark(h, w, CV_8U, cv::Scalar(0));
+  cv::Mat saturation(h, w, CV_32F, cv::Scalar(1));
   for (int y = 0; y < h; ++y) {
     const cv::Vec3f* p = small.ptr<cv::Vec3f>(y);
     for (int x = 0; x < w; ++x) {
@@ -122,7 +124,11 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       const float r = p[x][0], g = p[x][1], b = p[x][2], l = luma.at<float>(y, x);
       const float mx = std::max({r, g, b}), mn = std::min({r, g, b});
       const float sat = mx > 1e-4f ? (mx - mn) / mx : 0;
-      const bool blue = b > r + 0.03f && b >= g - 0.02f && l > 0.2f;
+      saturation.at<float>(y, x) = sat;
+      // A dim, barely bluish grey (shaded foliage, a wall in the shade: luma 0.3, saturation
+      // 0.15) is not a blue sky: a clear sky that dim is deep blue (saturated), and one that
+      // pale is bright.
+      const bool blue = b > r + 0.03f && b >= g - 0.02f && l > 0.2f && (sat >= 0.2f || l >= 0.5f);
       // Twilight and dusk: a deep, strongly saturated blue darker than a day sky (kept only
       // in large components from the top border down, below; dark grey-blue glass is less
       // saturated).
@@ -267,6 +273,70 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     cv::dilate(sky, grown,
                cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
     sky |= grown & colour;
+  }
+  // Issue 11 item 4: clouds the colour test refused or the core test cut. A backlit cloud's
+  // body is dark grey (neither blue nor bright), its sunlit rim textured (rougher than the
+  // core); left out, the rim's cut-off part and the body became a surface a few tens of metres
+  // away while the rest of the cloud was sky: in haze a flat patch of fog colour with a hard
+  // edge cut into the cloud where the photo has none. What is above the horizon, not sky, and
+  // does not stand on anything (no pixel of it reaches the horizon or the frame's bottom: a
+  // tree, a mast, a building or a mountain does) is held up by nothing but the sky: a cloud
+  // when it is grey (low saturation: a kite, a balloon or foliage is not) or mostly of the sky's
+  // colours (blue seen through a hole in a cloud) and not textured like
+  // foliage or a lattice (mean per-pixel gradient below `max_texture`; a bright white one may
+  // be: a cumulus' sunlit detail) and mostly ringed by sky (not by the frame: a bridge deck or
+  // an eave seen from below spans it).
+  if (o.floating_max_saturation > 0 && cv::countNonZero(sky) > 0) {
+    cv::Mat rest(h, w, CV_8U, cv::Scalar(0));
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        rest.at<std::uint8_t>(y, x) = above(x, y) && !sky.at<std::uint8_t>(y, x);
+    cv::Mat fl, fs, fc;
+    const int m = cv::connectedComponentsWithStats(rest, fl, fs, fc, 8, CV_32S);
+    std::vector<std::uint8_t> grounded(std::size_t(m), 0);
+    std::vector<double> sat_sum(std::size_t(m), 0.0), grad_sum(std::size_t(m), 0.0),
+        luma_sum(std::size_t(m), 0.0), sky_coloured(std::size_t(m), 0.0);
+    std::vector<int> ring_sky(std::size_t(m), 0), ring_frame(std::size_t(m), 0);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const int l = fl.at<int>(y, x);
+        if (l == 0) continue;
+        if (y + 1 >= h || !above(x, y + 1)) grounded[l] = 1;
+        sat_sum[l] += saturation.at<float>(y, x);
+        grad_sum[l] += pixel_gradient.at<float>(y, x);
+        luma_sum[l] += luma.at<float>(y, x);
+        sky_coloured[l] += colour.at<std::uint8_t>(y, x);
+        const bool frame = x == 0 || y == 0 || x == w - 1;
+        bool next_to_sky = false;
+        for (int dy = -1; dy <= 1 && !next_to_sky; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int yy = y + dy, xx = x + dx;
+            if (yy >= 0 && yy < h && xx >= 0 && xx < w && sky.at<std::uint8_t>(yy, xx)) {
+              next_to_sky = true;
+              break;
+            }
+          }
+        ring_sky[l] += next_to_sky;
+        ring_frame[l] += frame;
+      }
+    std::vector<std::uint8_t> cloud(std::size_t(m), 0);
+    bool any_cloud = false;
+    for (int i = 1; i < m; ++i) {
+      const double area = fs.at<int>(i, cv::CC_STAT_AREA);
+      // A bright white one may be textured: a cumulus' sunlit cauliflower detail.
+      const bool white =
+          luma_sum[i] >= std::max(0.6, double(o.bright_fraction * bright_ref)) * area;
+      // Grey, or mostly of the sky's colours (blue seen through a gap in the cloud).
+      const bool grey =
+          sat_sum[i] <= o.floating_max_saturation * area || 2 * sky_coloured[i] > area;
+      cloud[i] = !grounded[i] && grey && (white || grad_sum[i] <= o.max_texture * area) &&
+                 ring_sky[i] >= o.floating_min_sky_ring * (ring_sky[i] + ring_frame[i]);
+      any_cloud |= cloud[i] != 0;
+    }
+    if (any_cloud)
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (cloud[fl.at<int>(y, x)]) sky.at<std::uint8_t>(y, x) = 1;
   }
   // Fill small enclosed holes (non-sky components not touching the border).
   {

@@ -1,12 +1,15 @@
 // Private to libmr: the sky found automatically (issue 4 item 2). Per pixel of a working copy
 // (about 0.5 MP, display-referred: scene-linear ^ (1 / 2.2)), a pixel is a sky candidate when it
 // is above the horizon, has little texture (mean gradient magnitude over a small window below
-// `max_texture` per pixel) and is blue-ish (B > R, B >= G, not dark) or grey and bright (low
-// saturation, luma at least `bright_fraction` of the above-horizon 95th percentile). The sky is
-// the candidates' 8-connected components that touch the top border (blue ones elsewhere only
-// when blue sky does; grey-bright ones also when surrounded by blue sky: clouds), cut
-// back to what lies near its smooth core (issue 11: a textured rock face or concrete floor that
-// touches the sky is not sky; SkyMaskOptions::core_texture_factor), with small enclosed holes
+// `max_texture` per pixel) and is blue-ish (B > R, B >= G, not dark, and saturated or pale: a
+// dim, barely bluish grey is shade) or grey and bright (low saturation, luma at least
+// `bright_fraction` of the above-horizon 95th percentile). The sky is the candidates'
+// 8-connected components that touch the top border (blue ones elsewhere only when blue sky
+// does; grey-bright ones also when surrounded by blue sky: clouds), cut back to what lies near
+// its smooth core (issue 11: a textured rock face or concrete floor that touches the sky is not
+// sky; SkyMaskOptions::core_texture_factor), joined by the clouds that stand on nothing (grey or
+// sky-coloured regions above the horizon that reach neither it nor the frame's bottom: a
+// backlit cloud's dark body; SkyMaskOptions::floating_max_saturation), with small enclosed holes
 // (birds, specks: below `max_hole_fraction` of the image) filled; at full resolution its edges
 // are refined with a guided filter (cv::ximgproc::guidedFilter, guide = the display-referred
 // photo) and clipped to the horizon again. Never throws for any image content.
@@ -48,6 +51,13 @@ struct SkyMaskOptions {
   /// is too steep for the texture test) is sky when at least this fraction of the pixels around
   /// it are within two texture windows of the blue sky. > 1: off.
   double cloud_min_sky_ring = 0.9;
+  /// Clouds: what is above the horizon, not sky and reaches neither the horizon nor the
+  /// frame's bottom (stands on nothing), is sky when its mean saturation is at most this (or
+  /// most of it has the sky's colours), its mean per-pixel gradient is at most `max_texture`
+  /// (or it is bright white: a cumulus), and at least `floating_min_sky_ring` of its outline
+  /// pixels touch the sky rather than the frame. 0: off.
+  double floating_max_saturation = 0.2;
+  double floating_min_sky_ring = 0.6;
   double bright_fraction = 0.6;     ///< grey sky: luma >= this x the bright reference
   double max_hole_fraction = 5e-4;  ///< enclosed non-sky specks filled up to this image fraction
   /// Sky seen through foliage: enclosed sky-coloured components up to this image fraction whose
