@@ -184,18 +184,19 @@ std::vector<double> robust_inverse_line(const double* forward, int count);
 /// which at any ordinary aperture means a subject centimetres to a few metres away (a 50 mm
 /// lens at f/2.8 focused at 2 m keeps about +-0.2 m sharp; a subject tens of metres away has
 /// its background nearly as sharp as itself). Measured on the display-referred luma at about
-/// `working_long_side` pixels across: at the edges (Canny) of the photo, the blur is estimated
-/// from the gradient's drop after a Gaussian re-blur of sigma s0 (Zhuo and Sim 2011: an edge
-/// blurred by sigma has gradient ratio R = sqrt(sigma^2 + s0^2) / sigma, so sigma =
-/// s0 / sqrt(R^2 - 1)); in blocks of `block_px` working pixels with enough edge pixels, the
-/// median blur decides: sharp (<= sharp_px), blurred (>= blurred_px), or neither. Blocks that
-/// are mostly `sky` (row-major at the photo's size, or empty) are left out.
+/// `working_long_side` pixels across, in blocks of `block_px` working pixels: the blur is
+/// estimated from the drop of the block's gradient energy after a Gaussian re-blur of sigma s0
+/// (after Zhuo and Sim 2011: an edge blurred by sigma has its gradient energy divided by
+/// R = sqrt(sigma^2 + s0^2) / sigma, so sigma = s0 / sqrt(R^2 - 1)); sharp (<= sharp_px),
+/// blurred (>= blurred_px), or neither; a block whose re-blurred RMS gradient is below
+/// `min_structure` (luma per working pixel: a plain wall, noise) is neither. Blocks that are
+/// mostly `sky` (row-major at the photo's size, or empty) are left out.
 struct DefocusOptions {
   int working_long_side = 640;
   int block_px = 32;
   double reblur_sigma_px = 2.0;
-  double sharp_px = 1.2, blurred_px = 3.0;
-  int min_edge_pixels = 12;
+  double sharp_px = 0.8, blurred_px = 1.8;
+  double min_structure = 0.004;
 };
 struct Defocus {
   std::size_t blocks = 0;          ///< blocks not mostly sky

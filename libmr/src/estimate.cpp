@@ -333,8 +333,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     const photo::Defocus defocus = photo::estimate_defocus(photo->view(), mask.sky);
     g.defocused_fraction = defocus.blurred_fraction();
     g.sharp_fraction = defocus.sharp_fraction();
+    // ... with the subject filling most of the frame: a landscape with a wide sky whose smooth
+    // glow and calm water pass for blur (a lake at twilight) is not a close-up.
     const bool closeup = defocus.blurred_fraction() >= options.closeup_min_defocused &&
-                         defocus.sharp_fraction() >= options.closeup_min_sharp;
+                         defocus.sharp_fraction() >= options.closeup_min_sharp &&
+                         double(mask.pixels) <= options.closeup_max_sky_fraction * double(n);
     double limit_m = kInfinity;
     std::string cue;
     if (closeup) {

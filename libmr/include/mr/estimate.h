@@ -76,12 +76,15 @@ struct EstimateOptions {
   /// (from 46 m at the defaults). The depth's shape is unchanged, only its metres.
   double bounded_scene_depth_m = 8.0;
   /// A close-up (issue 11 item 3): where at least `closeup_min_defocused` of the frame's blocks
-  /// (sky left out) have strongly blurred edges and at least `closeup_min_sharp` have sharp ones
+  /// (sky left out) are strongly blurred and at least `closeup_min_sharp` are sharp
   /// (photo/geometry.h, estimate_defocus: a shallow depth of field, which means a subject
-  /// centimetres to a few metres away), with the same conditions as above, the geometry is
-  /// scaled so that its far billboard stands `closeup_scene_depth_m` ahead.
+  /// centimetres to a few metres away) and the sky mask covers at most
+  /// `closeup_max_sky_fraction` of the frame (a subject filling it), with the same conditions as
+  /// above, the geometry is scaled so that its far billboard stands `closeup_scene_depth_m`
+  /// ahead. EXIF rarely survives in shared photos and gives no subject distance in most, so
+  /// the photo's own focus is the cue.
   double closeup_scene_depth_m = 3.0;
-  double closeup_min_defocused = 0.3, closeup_min_sharp = 0.05;
+  double closeup_min_defocused = 0.12, closeup_min_sharp = 0.1, closeup_max_sky_fraction = 0.5;
   /// Optional, caller-owned (mr/cancel.h): requested, the estimate stops at its next step with
   /// mr::Error(cancelled); its progress callback hears each step as it starts, in order
   /// "horizon", "sky mask", "depth", "refine" (and "light" for estimate_scene), with done = the
