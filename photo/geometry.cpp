@@ -456,7 +456,7 @@ std::vector<float> refine_inverse_distance(ConstImageView photo,
   return out;
 }
 
-std::vector<double> robust_inverse_line(const double* forward, int count) {
+std::vector<double> robust_inverse_line(const double* forward, int count, int reach) {
   std::vector<double> out(std::size_t(std::max(0, count)), kInf);
   std::vector<double> xs, qs;
   for (int k = 0; k < count; ++k)
@@ -490,8 +490,52 @@ std::vector<double> robust_inverse_line(const double* forward, int count) {
         weight[i] = residual[i] <= c ? 1.0 : c / residual[i];
     }
   }
+  if (!(reach > 0) || xs.size() < 3) {
+    for (int k = 0; k < count; ++k) {
+      const double q = a + b * k;
+      out[std::size_t(k)] = q > 0 ? 1 / q : kInf;
+    }
+    return out;
+  }
+  // Local lines (tricube kernel of `reach` columns, the global fit's robust weights), blended
+  // with the global line by their kernel mass so the result stays continuous where the
+  // measured columns thin out.
+  std::vector<double> robust(xs.size(), 1.0);
+  {
+    std::vector<double> residual(xs.size());
+    for (std::size_t i = 0; i < xs.size(); ++i) residual[i] = std::abs(qs[i] - a - b * xs[i]);
+    const double c = 1.345 * 1.4826 * median(residual);
+    if (c > 0)
+      for (std::size_t i = 0; i < xs.size(); ++i)
+        robust[i] = residual[i] <= c ? 1.0 : c / residual[i];
+  }
   for (int k = 0; k < count; ++k) {
-    const double q = a + b * k;
+    double sw = 0, sx = 0, sq = 0, sxx = 0, sxq = 0;
+    const auto lo = std::lower_bound(xs.begin(), xs.end(), k - reach);
+    for (auto it = lo; it != xs.end() && *it <= k + reach; ++it) {
+      const std::size_t i = std::size_t(it - xs.begin());
+      const double u = std::abs(xs[i] - k) / (reach + 1);
+      const double t = 1 - u * u * u;
+      const double wt = robust[i] * t * t * t;
+      sw += wt, sx += wt * xs[i], sq += wt * qs[i];
+    }
+    double q = a + b * k;
+    if (sw > 0) {
+      const double mx = sx / sw, mq = sq / sw;
+      for (auto it = lo; it != xs.end() && *it <= k + reach; ++it) {
+        const std::size_t i = std::size_t(it - xs.begin());
+        const double u = std::abs(xs[i] - k) / (reach + 1);
+        const double t = 1 - u * u * u;
+        const double wt = robust[i] * t * t * t;
+        sxx += wt * (xs[i] - mx) * (xs[i] - mx), sxq += wt * (xs[i] - mx) * (qs[i] - mq);
+      }
+      // The local slope only where the kernel spans enough columns, else the local mean.
+      const double local = sxx > 1e-9 * sw * reach * reach ? mq + sxq / sxx * (k - mx) : mq;
+      // Kernel mass of about a third of the reach's columns: mostly local.
+      const double mass = sw / (0.3 * reach + 1);
+      const double f = mass / (1 + mass);
+      q = f * local + (1 - f) * q;
+    }
     out[std::size_t(k)] = q > 0 ? 1 / q : kInf;
   }
   return out;

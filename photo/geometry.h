@@ -174,10 +174,19 @@ float sky_fold(float proximity);
 /// inverse distances q = 1 / forward[k] of the measured columns, robustly (iteratively
 /// reweighted least squares with Huber weights at 1.345 x the residuals' scaled median absolute
 /// deviation, 20 rounds), so a few columns reaching a foreground object do not pull it; for one
-/// vertical plane seen by a level camera q is exactly linear in the column. Returns 1 / q for
-/// every column (+inf where the line's q <= 0); with fewer than two distinct measured columns,
-/// their median everywhere; all +inf without any.
-std::vector<double> robust_inverse_line(const double* forward, int count);
+/// vertical plane seen by a level camera q is exactly linear in the column. With `reach` > 0
+/// (and at least 3 measured columns) each column takes a local line instead (weighted least
+/// squares over the measured columns within `reach`, tricube kernel times the global fit's
+/// robust weights: a box's two faces keep their own slopes, rounded over `reach` at the
+/// corner), mixed with the global line by the kernel's mass (m / (1 + m), m = the weights'
+/// sum over 0.3 reach + 1), so the result is continuous in the column also where measured
+/// columns thin out. Returns 1 / q for every column (+inf where q <= 0); with fewer than two
+/// distinct measured columns, their median everywhere; all +inf without any.
+std::vector<double> robust_inverse_line(const double* forward, int count, int reach = 0);
+inline std::vector<double> robust_inverse_line(const std::vector<double>& forward, int count,
+                                               int reach = 0) {
+  return robust_inverse_line(forward.data(), count, reach);
+}
 
 /// How much of a photo is strongly out of focus (issue 11 item 3: a close-up's cue). A
 /// background blurred well beyond the sharp subject's edges means a shallow depth of field,
@@ -207,8 +216,5 @@ struct Defocus {
 };
 Defocus estimate_defocus(ConstImageView photo, const std::vector<std::uint8_t>& sky,
                          const DefocusOptions& options = {});
-inline std::vector<double> robust_inverse_line(const std::vector<double>& forward, int count) {
-  return robust_inverse_line(forward.data(), count);
-}
 
 }  // namespace mr::photo

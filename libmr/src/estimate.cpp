@@ -503,11 +503,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         // without one) make a staircase: each step a vertical seam from the structure's top
         // down to its foot, wherever the photo has one there or not, and the refinement cannot
         // smooth it inside texture (foliage, a snow field), whose every edge stops it. A
-        // structure's forward distance is a smooth function of the column instead: a robust
-        // line in inverse forward distance over the columns (exact for one vertical plane,
-        // seen level: 1 / z is linear in x), no nearer than its nearest contact and no farther
-        // than the far billboard.
-        const std::vector<double> fitted = photo::robust_inverse_line(sm, width);
+        // structure's forward distance is a smooth function of the column instead: robust
+        // local lines in inverse forward distance over the columns (exact for one vertical
+        // plane seen level: 1 / z is linear in x; a corner rounded over w / 12 columns), no
+        // nearer than its nearest contact and no farther than the far billboard.
+        const std::vector<double> fitted =
+            photo::robust_inverse_line(sm, width, std::max(8, w / 12));
         double nearest = far_forward;
         for (int k = 0; k < width; ++k)
           if (sm[k] > 0) nearest = std::min(nearest, sm[k]);
