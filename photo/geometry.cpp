@@ -364,7 +364,8 @@ namespace {
 // global smoother guided by the photo in display-referred 8-bit (its guide must be 8-bit), both
 // area-averaged down to at most o.working_pixels and the result brought back up linearly.
 template <typename Options>  // DepthRefineOptions, SkyProximityOptions
-cv::Mat smooth_against_photo(ConstImageView photo, const cv::Mat& map, const Options& o) {
+cv::Mat smooth_against_photo(ConstImageView photo, const cv::Mat& map, const Options& o,
+                             double texture_px = 0) {
   const int w = photo.width, h = photo.height;
   const double s = std::min(1.0, std::sqrt(o.working_pixels / (double(w) * h)));
   const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
@@ -388,6 +389,15 @@ cv::Mat smooth_against_photo(ConstImageView photo, const cv::Mat& map, const Opt
   if (s < 1) {
     cv::resize(display, guide, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
     cv::resize(map, small, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);
+  }
+  if (texture_px > 0) {
+    // Fine texture (snow crust, grass, foliage, bark) out of the guide, its outlines kept
+    // (rolling guidance, Zhang et al. 2014): with every grain of texture an edge, the smoother
+    // leaves each pixel with its own unrefined value, a speckled, jagged depth in exactly
+    // the low-confidence band it should smooth (a seam in dense fog).
+    cv::Mat plain;
+    cv::ximgproc::rollingGuidanceFilter(guide, plain, -1, 25, texture_px, 4);
+    guide = plain;
   }
   cv::Mat smoothed;
   cv::ximgproc::fastGlobalSmootherFilter(guide, small, smoothed, o.lambda, o.sigma_color);
@@ -431,7 +441,7 @@ std::vector<float> refine_inverse_distance(ConstImageView photo,
       m[x] = {c * inverse_distance[i], c};
     }
   }
-  const cv::Mat smoothed = smooth_against_photo(photo, weighted, o);
+  const cv::Mat smoothed = smooth_against_photo(photo, weighted, o, o.texture_px);
   for (int y = 0; y < h; ++y) {
     const cv::Vec2f* m = smoothed.ptr<cv::Vec2f>(y);
     for (int x = 0; x < w; ++x) {
@@ -443,6 +453,142 @@ std::vector<float> refine_inverse_distance(ConstImageView photo,
       out[i] = std::max(0.0f, keep * inverse_distance[i] + (1 - keep) * q);
     }
   }
+  return out;
+}
+
+std::vector<double> robust_inverse_line(const double* forward, int count, int reach) {
+  std::vector<double> out(std::size_t(std::max(0, count)), kInf);
+  std::vector<double> xs, qs;
+  for (int k = 0; k < count; ++k)
+    if (forward[k] > 0 && std::isfinite(forward[k])) xs.push_back(k), qs.push_back(1 / forward[k]);
+  if (xs.empty()) return out;
+  auto median = [](std::vector<double> v) {
+    auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  double a = median(qs), b = 0;
+  if (xs.front() != xs.back()) {
+    std::vector<double> weight(xs.size(), 1.0), residual(xs.size());
+    for (int round = 0; round < 20; ++round) {
+      double sw = 0, sx = 0, sq = 0;
+      for (std::size_t i = 0; i < xs.size(); ++i)
+        sw += weight[i], sx += weight[i] * xs[i], sq += weight[i] * qs[i];
+      const double mx = sx / sw, mq = sq / sw;
+      double sxx = 0, sxq = 0;
+      for (std::size_t i = 0; i < xs.size(); ++i) {
+        sxx += weight[i] * (xs[i] - mx) * (xs[i] - mx);
+        sxq += weight[i] * (xs[i] - mx) * (qs[i] - mq);
+      }
+      b = sxx > 0 ? sxq / sxx : 0;
+      a = mq - b * mx;
+      for (std::size_t i = 0; i < xs.size(); ++i) residual[i] = std::abs(qs[i] - a - b * xs[i]);
+      const double scale = 1.4826 * median(residual);
+      if (!(scale > 1e-12 * std::abs(mq))) break;  // the measured columns lie on the line
+      const double c = 1.345 * scale;
+      for (std::size_t i = 0; i < xs.size(); ++i)
+        weight[i] = residual[i] <= c ? 1.0 : c / residual[i];
+    }
+  }
+  if (!(reach > 0) || xs.size() < 3) {
+    for (int k = 0; k < count; ++k) {
+      const double q = a + b * k;
+      out[std::size_t(k)] = q > 0 ? 1 / q : kInf;
+    }
+    return out;
+  }
+  // Local lines (tricube kernel of `reach` columns, the global fit's robust weights), blended
+  // with the global line by their kernel mass so the result stays continuous where the
+  // measured columns thin out.
+  std::vector<double> robust(xs.size(), 1.0);
+  {
+    std::vector<double> residual(xs.size());
+    for (std::size_t i = 0; i < xs.size(); ++i) residual[i] = std::abs(qs[i] - a - b * xs[i]);
+    const double c = 1.345 * 1.4826 * median(residual);
+    if (c > 0)
+      for (std::size_t i = 0; i < xs.size(); ++i)
+        robust[i] = residual[i] <= c ? 1.0 : c / residual[i];
+  }
+  for (int k = 0; k < count; ++k) {
+    double sw = 0, sx = 0, sq = 0, sxx = 0, sxq = 0;
+    const auto lo = std::lower_bound(xs.begin(), xs.end(), k - reach);
+    for (auto it = lo; it != xs.end() && *it <= k + reach; ++it) {
+      const std::size_t i = std::size_t(it - xs.begin());
+      const double u = std::abs(xs[i] - k) / (reach + 1);
+      const double t = 1 - u * u * u;
+      const double wt = robust[i] * t * t * t;
+      sw += wt, sx += wt * xs[i], sq += wt * qs[i];
+    }
+    double q = a + b * k;
+    if (sw > 0) {
+      const double mx = sx / sw, mq = sq / sw;
+      for (auto it = lo; it != xs.end() && *it <= k + reach; ++it) {
+        const std::size_t i = std::size_t(it - xs.begin());
+        const double u = std::abs(xs[i] - k) / (reach + 1);
+        const double t = 1 - u * u * u;
+        const double wt = robust[i] * t * t * t;
+        sxx += wt * (xs[i] - mx) * (xs[i] - mx), sxq += wt * (xs[i] - mx) * (qs[i] - mq);
+      }
+      // The local slope only where the kernel spans enough columns, else the local mean.
+      const double local = sxx > 1e-9 * sw * reach * reach ? mq + sxq / sxx * (k - mx) : mq;
+      // Kernel mass of about a third of the reach's columns: mostly local.
+      const double mass = sw / (0.3 * reach + 1);
+      const double f = mass / (1 + mass);
+      q = f * local + (1 - f) * q;
+    }
+    out[std::size_t(k)] = q > 0 ? 1 / q : kInf;
+  }
+  return out;
+}
+
+Defocus estimate_defocus(ConstImageView photo, const std::vector<std::uint8_t>& sky,
+                         const DefocusOptions& o) {
+  Defocus out;
+  const int w = photo.width, h = photo.height;
+  if (w < 16 || h < 16 || photo.channels < 1) return out;
+  const bool with_sky = sky.size() == std::size_t(w) * h;
+  const cv::Mat src = detail::as_mat(photo);
+  const int ch = photo.channels;
+  cv::Mat luma(h, w, CV_32F), sky_f(h, w, CV_32F, cv::Scalar(0));
+  for (int y = 0; y < h; ++y) {
+    const float* row = src.ptr<float>(y);
+    for (int x = 0; x < w; ++x) {
+      const float* p = row + std::ptrdiff_t(x) * ch;
+      float v = ch >= 3 ? 0.2126f * p[0] + 0.7152f * p[1] + 0.0722f * p[2] : p[0];
+      if (!std::isfinite(v)) v = 0;
+      luma.at<float>(y, x) = std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f);
+      if (with_sky) sky_f.at<float>(y, x) = sky[std::size_t(y) * w + x] ? 1.0f : 0.0f;
+    }
+  }
+  const double s = std::min(1.0, double(o.working_long_side) / std::max(w, h));
+  if (s < 1) {
+    const cv::Size size(std::max(16, int(std::lround(w * s))), std::max(16, int(std::lround(h * s))));
+    cv::resize(luma, luma, size, 0, 0, cv::INTER_AREA);
+    cv::resize(sky_f, sky_f, size, 0, 0, cv::INTER_AREA);
+  }
+  cv::Mat reblurred;
+  cv::GaussianBlur(luma, reblurred, cv::Size(0, 0), o.reblur_sigma_px);
+  auto squared_gradient = [](const cv::Mat& m) {
+    cv::Mat gx, gy;
+    cv::Sobel(m, gx, CV_32F, 1, 0, 3, 1.0 / 8);
+    cv::Sobel(m, gy, CV_32F, 0, 1, 3, 1.0 / 8);
+    return cv::Mat(gx.mul(gx) + gy.mul(gy));
+  };
+  const cv::Mat e1 = squared_gradient(luma), e2 = squared_gradient(reblurred);
+  const int bw = o.block_px, ww = luma.cols, wh = luma.rows;
+  for (int by = 0; by + bw / 2 <= wh; by += bw)
+    for (int bx = 0; bx + bw / 2 <= ww; bx += bw) {
+      const cv::Rect r(bx, by, std::min(bw, ww - bx), std::min(bw, wh - by));
+      if (cv::mean(sky_f(r))[0] > 0.5) continue;
+      ++out.blocks;
+      const double s1 = cv::mean(e1(r))[0], s2 = cv::mean(e2(r))[0];
+      // Too little structure to tell (a plain wall, JPEG noise): neither.
+      if (!(std::sqrt(s2) >= o.min_structure)) continue;
+      const double ratio = s1 / s2;
+      const double blur = ratio > 1.0001 ? o.reblur_sigma_px / std::sqrt(ratio * ratio - 1) : 1e3;
+      out.sharp_blocks += blur <= o.sharp_px;
+      out.blurred_blocks += blur >= o.blurred_px;
+    }
   return out;
 }
 

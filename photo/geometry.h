@@ -127,6 +127,10 @@ struct DepthRefineOptions {
   double working_pixels = 0.5e6;
   double lambda = 1500;    ///< smoothness (working pixels^2)
   double sigma_color = 4;  ///< of 255, display-referred
+  /// Texture smaller than about this many working pixels is taken out of the guide first
+  /// (rolling guidance filter, sigma_space = texture_px, sigma_color 25 of 255, 4 rounds), so
+  /// that the smoother spreads across grain and stops only at outlines. 0: off.
+  double texture_px = 3;
 };
 /// `inverse_distance` and `confidence` ([0, 1]) are row-major at the photo's size (photo:
 /// scene-linear, >= 1 channel); returns the refined inverse distance (>= 0), same layout.
@@ -163,5 +167,54 @@ std::vector<float> sky_proximity(ConstImageView photo, const std::vector<std::ui
 /// square makes the distance's return from infinity gentle: the fog's transmittance
 /// exp(-sigma d) ramps over many pixels rather than a few, for thin haze too).
 float sky_fold(float proximity);
+
+/// A smooth forward distance for a structure's columns (issue 11 item 3: no seam between
+/// columns). `forward[k]`, k < count: the structure's forward distance measured in column k
+/// (> 0), or <= 0 (or not finite) where none was measured. Fits a line q = a + b k to the
+/// inverse distances q = 1 / forward[k] of the measured columns, robustly (iteratively
+/// reweighted least squares with Huber weights at 1.345 x the residuals' scaled median absolute
+/// deviation, 20 rounds), so a few columns reaching a foreground object do not pull it; for one
+/// vertical plane seen by a level camera q is exactly linear in the column. With `reach` > 0
+/// (and at least 3 measured columns) each column takes a local line instead (weighted least
+/// squares over the measured columns within `reach`, tricube kernel times the global fit's
+/// robust weights: a box's two faces keep their own slopes, rounded over `reach` at the
+/// corner), mixed with the global line by the kernel's mass (m / (1 + m), m = the weights'
+/// sum over 0.3 reach + 1), so the result is continuous in the column also where measured
+/// columns thin out. Returns 1 / q for every column (+inf where q <= 0); with fewer than two
+/// distinct measured columns, their median everywhere; all +inf without any.
+std::vector<double> robust_inverse_line(const double* forward, int count, int reach = 0);
+inline std::vector<double> robust_inverse_line(const std::vector<double>& forward, int count,
+                                               int reach = 0) {
+  return robust_inverse_line(forward.data(), count, reach);
+}
+
+/// How much of a photo is strongly out of focus (issue 11 item 3: a close-up's cue). A
+/// background blurred well beyond the sharp subject's edges means a shallow depth of field,
+/// which at any ordinary aperture means a subject centimetres to a few metres away (a 50 mm
+/// lens at f/2.8 focused at 2 m keeps about +-0.2 m sharp; a subject tens of metres away has
+/// its background nearly as sharp as itself). Measured on the display-referred luma at about
+/// `working_long_side` pixels across, in blocks of `block_px` working pixels: the blur is
+/// estimated from the drop of the block's gradient energy after a Gaussian re-blur of sigma s0
+/// (after Zhuo and Sim 2011: an edge blurred by sigma has its gradient energy divided by
+/// R = sqrt(sigma^2 + s0^2) / sigma, so sigma = s0 / sqrt(R^2 - 1)); sharp (<= sharp_px),
+/// blurred (>= blurred_px), or neither; a block whose re-blurred RMS gradient is below
+/// `min_structure` (luma per working pixel: a plain wall, noise) is neither. Blocks that are
+/// mostly `sky` (row-major at the photo's size, or empty) are left out.
+struct DefocusOptions {
+  int working_long_side = 640;
+  int block_px = 32;
+  double reblur_sigma_px = 2.0;
+  double sharp_px = 0.8, blurred_px = 1.8;
+  double min_structure = 0.004;
+};
+struct Defocus {
+  std::size_t blocks = 0;          ///< blocks not mostly sky
+  std::size_t sharp_blocks = 0;    ///< of them, with sharp edges
+  std::size_t blurred_blocks = 0;  ///< of them, with strongly blurred edges
+  double blurred_fraction() const { return blocks ? double(blurred_blocks) / blocks : 0.0; }
+  double sharp_fraction() const { return blocks ? double(sharp_blocks) / blocks : 0.0; }
+};
+Defocus estimate_defocus(ConstImageView photo, const std::vector<std::uint8_t>& sky,
+                         const DefocusOptions& options = {});
 
 }  // namespace mr::photo

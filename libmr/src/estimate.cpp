@@ -30,6 +30,7 @@ namespace mr {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
 std::string fmt(const char* format, double v) {
   char buf[64];
@@ -309,6 +310,54 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   if (!(depression > 0 && depression < 90))
     throw Error(ErrorCode::invalid_argument,
                 "billboard_depression_deg: must be in (0, 90), found " + fmt("%g", depression));
+  // Issue 11: a close-up or an interior, where the sky mask finds (next to) no sky, has no
+  // horizon to run the ground to.
+  constexpr double kBoundedSkyFraction = 0.002;
+  const bool bounded = double(mask.pixels) < kBoundedSkyFraction * double(n);
+  // Issue 11 item 3: the scale of a scene nobody measured. A photo without any sky shows no
+  // horizon and no ground running to it: an interior, a close-up, a wall, a field seen from
+  // above. Its far billboard at the outdoor default (46 m from 1.6 m) makes a close-up vanish
+  // in dense fog and puts a night look's lamps tens of metres into it; such a scene is metres
+  // deep. Scaling the camera height scales every distance of the ground plane, the billboards
+  // and the annotated planes alike (exactly: they are all linear in it), so the depth's shape
+  // (and whether it jumps anywhere) does not change, only its metres. Only a guessed height is
+  // rescaled; a distance hint fixes the scale, so the photo keeps the default then.
+  // A background blurred far beyond the subject's sharp edges is a shallow depth of field: a
+  // close-up (photo/geometry.h, estimate_defocus), sky or not.
+  for (const double v : {options.bounded_scene_depth_m, options.closeup_scene_depth_m})
+    if (!(v > 0) || !std::isfinite(v))
+      throw Error(ErrorCode::invalid_argument,
+                  "bounded_scene_depth_m, closeup_scene_depth_m: must be > 0, found " +
+                      fmt("%g", v));
+  if (g.height_source == EstimateSource::fallback && annotations.distance_hints.empty()) {
+    const photo::Defocus defocus = photo::estimate_defocus(photo->view(), mask.sky);
+    g.defocused_fraction = defocus.blurred_fraction();
+    g.sharp_fraction = defocus.sharp_fraction();
+    // ... with the subject filling most of the frame: a landscape with a wide sky whose smooth
+    // glow and calm water pass for blur (a lake at twilight) is not a close-up.
+    const bool closeup = defocus.blurred_fraction() >= options.closeup_min_defocused &&
+                         defocus.sharp_fraction() >= options.closeup_min_sharp &&
+                         double(mask.pixels) <= options.closeup_max_sky_fraction * double(n);
+    double limit_m = kInfinity;
+    std::string cue;
+    if (closeup) {
+      limit_m = options.closeup_scene_depth_m;
+      cue = "close-up (" + fmt("%.0f", 100 * defocus.blurred_fraction()) +
+            " % of the frame strongly out of focus, " +
+            fmt("%.0f", 100 * defocus.sharp_fraction()) + " % sharp)";
+    } else if (bounded) {
+      limit_m = options.bounded_scene_depth_m;
+      cue = "no sky: a bounded scene";
+    }
+    const double scale = limit_m / (height / std::tan(depression * kDeg));
+    if (scale < 1) {
+      height *= scale;
+      g.pose.position_m.y = height;
+      for (float& d : g.distance_m.pixels())
+        if (std::isfinite(d)) d = float(d * scale);
+      g.scale_cue = cue + ", far billboard at " + fmt("%g", limit_m) + " m";
+    }
+  }
   const double far_forward = height / std::tan(depression * kDeg);
   const Vec3 f = g.pose.axes()[0];
   const double fl = std::hypot(f.x, f.z);
@@ -326,7 +375,13 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // Per pixel: the forward distance of the structure it is on where it meets the ground (0:
   // none found).
   std::vector<float> contact_forward(n, 0.0f);
-  if (options.ground_contact) {
+  // Without any sky the horizon is a guess (no ground is seen running to it) and everything
+  // above it is "structure": a snow field seen from above, the back wall of a bar. Its
+  // contacts would be wherever a dark trunk or a table leg happens to reach below the guessed
+  // horizon, each making a column of its own depth from the top of the frame down: vertical
+  // seams with no edge in the photo. Such a scene keeps the far billboard over the ground
+  // plane (bounded, see above), which is continuous.
+  if (options.ground_contact && !bounded) {
     const photo::GroundMask ground =
         photo::estimate_ground_mask(photo->view(), g.horizon, mask.sky);
     if (ground.valid) {
@@ -444,20 +499,21 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
                            window.end());
           sm[k] = window[window.size() / 2];
         }
-        // Gaps: the nearest contact column (left or right) of the same component.
-        std::vector<double> filled(sm, sm + width);
-        int last = -1;
-        for (int k = 0; k < width; ++k) {
-          if (sm[k] > 0) {
-            last = k;
-            continue;
-          }
-          int next = k + 1;
-          while (next < width && !(sm[next] > 0)) ++next;
-          const bool use_left = last >= 0 && (next >= width || k - last <= next - k);
-          filled[k] = use_left ? sm[last] : sm[next];
-        }
-        std::copy(filled.begin(), filled.end(), sm);
+        // Issue 11 item 3: per-column contacts (and the nearest contact copied into the columns
+        // without one) make a staircase: each step a vertical seam from the structure's top
+        // down to its foot, wherever the photo has one there or not, and the refinement cannot
+        // smooth it inside texture (foliage, a snow field), whose every edge stops it. A
+        // structure's forward distance is a smooth function of the column instead: robust
+        // local lines in inverse forward distance over the columns (exact for one vertical
+        // plane seen level: 1 / z is linear in x; a corner rounded over w / 12 columns), no
+        // nearer than its nearest contact and no farther than the far billboard.
+        const std::vector<double> fitted =
+            photo::robust_inverse_line(sm, width, std::max(8, w / 12));
+        double nearest = far_forward;
+        for (int k = 0; k < width; ++k)
+          if (sm[k] > 0) nearest = std::min(nearest, sm[k]);
+        for (int k = 0; k < width; ++k)
+          sm[k] = std::clamp(fitted[std::size_t(k)], nearest, far_forward);
       }
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
@@ -470,14 +526,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   }
 
   constexpr int kFar = 5, kContact = 6;
-  // Issue 11: a close-up or an interior, where the sky mask finds (next to) no sky, has no
-  // horizon to run the ground to.
-  constexpr double kBoundedSkyFraction = 0.002;
-  const bool bounded = double(mask.pixels) < kBoundedSkyFraction * double(n);
   std::vector<std::uint8_t> pixel_class(n, 0);              // what decided each pixel's distance
   std::vector<double> column_forward(std::size_t(w), 0.0);  // the structure above the horizon
   std::vector<int> column_cov(std::size_t(w), 0);
   std::size_t counts[7] = {0, 0, 0, 0, 0, 0, 0};  // sky, ground, plane, hint, room, far, contact
+  // Ground pixels behind a billboard: the billboard's distance over the ground plane's (< 1).
+  std::vector<float> ground_ratio(n, 0.0f);
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
@@ -493,13 +547,13 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         d = billboard(x, y, far_forward), cov = kFar;
       } else if (map.coverage[i] == photo::Coverage::ground && column_forward[std::size_t(x)] > 0) {
         const float b = billboard(x, y, column_forward[std::size_t(x)]);
-        if (b < d) d = b, cov = column_cov[std::size_t(x)];
+        if (b < d) ground_ratio[i] = b / d, d = b, cov = column_cov[std::size_t(x)];
       } else if (map.coverage[i] == photo::Coverage::ground && bounded) {
         // No sky: nothing in the photo is known to be far, and a ground plane running to
         // the horizon behind a table top or a wall would end in a seam where it meets the far
         // billboard above the horizon; the far billboard closes the scene (bounded depth).
         const float b = billboard(x, y, far_forward);
-        if (b < d) d = b, cov = kFar;
+        if (b < d) ground_ratio[i] = b / d, d = b, cov = kFar;
       }
       ++counts[cov];
       pixel_class[i] = std::uint8_t(cov);
@@ -540,7 +594,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       const float alpha = mask.alpha[i];
       g.sky_alpha.at(x, y, 0) = alpha;
       float conf = cls == kFar ? 0.05f : cls == kContact ? 0.3f : 1.0f;
-      if (cls == int(photo::Coverage::ground)) {
+      if (cls == int(photo::Coverage::ground) || ground_ratio[i] > 0) {
         // Near the horizon a pixel of the ground spans many metres (at 2 degrees below it, 4 %
         // of its distance), whether the ground runs flat to the horizon is a guess, and a flat
         // ground there makes the fog jump from clear to opaque within a pixel or two in haze:
@@ -548,7 +602,13 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         // depression (4 degrees: 23 m from 1.6 m), and the refinement smooths what is above.
         const double below =
             std::asin(std::clamp(-g.pose.ray_direction(camera, x, y).y, -1.0, 1.0));
-        conf = float(std::clamp(below / (2 * depression * kDeg), 0.0, 1.0));
+        const float ground_conf = float(std::clamp(below / (2 * depression * kDeg), 0.0, 1.0));
+        // A ground pixel cut by a billboard in front of it (the ground behind a structure, or
+        // a bounded scene's far billboard): the billboard's confidence where it is well in
+        // front, rising continuously to the ground's where the two meet (ratio 1), so the
+        // refinement does not cut a seam along the line where they cross.
+        const float r = ground_ratio[i];
+        conf = r > 0 ? std::max(conf, ground_conf * r * r * r * r) : ground_conf;
       }
       float inv = std::isfinite(d) && d > 0 ? 1.0f / d : 0.0f;
       if (std::isfinite(d) && alpha > 0 && cls != int(photo::Coverage::hint) &&
@@ -654,8 +714,13 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                        : g.height_source == EstimateSource::known_length ? "from the known length"
                        : g.height_source == EstimateSource::interior_box
                            ? "from the interior box's ceiling height and ceiling point"
-                           : "default") +
+                       : g.scale_cue.empty() ? "default"
+                                             : "default, scaled: " + g.scale_cue) +
                       ")");
+  if (g.defocused_fraction > 0 || g.sharp_fraction > 0)
+    est.notes.push_back("focus: " + fmt("%.0f", 100 * g.defocused_fraction) +
+                        " % of the frame (sky left out) strongly out of focus, " +
+                        fmt("%.0f", 100 * g.sharp_fraction) + " % sharp");
   const double n = double(photo.width()) * photo.height();
   est.notes.push_back(
       "depth: " + fmt("%.1f", 100.0 * g.ground_pixels / n) + " % ground, " +

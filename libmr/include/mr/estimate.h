@@ -69,6 +69,23 @@ struct MR_API EstimateOptions {
   /// feet (any column meeting the ground counts), canopy included, instead of needing contacts
   /// in 30 % of its columns. false: off (the estimate as before).
   bool vegetation = true;
+  /// Issue 11 item 3: a photo in which the sky mask finds no sky (an interior, a close-up, a
+  /// wall, a field seen from above) shows no horizon and no ground running to it, so nothing in
+  /// it is known to be far: when the camera height is not annotated (nor derived from a known
+  /// length or an interior box) and no distance hint fixes the scale, the whole geometry is
+  /// scaled (through the camera height) so that its far billboard stands this many metres ahead
+  /// (from 46 m at the defaults). The depth's shape is unchanged, only its metres.
+  double bounded_scene_depth_m = 8.0;
+  /// A close-up (issue 11 item 3): where at least `closeup_min_defocused` of the frame's blocks
+  /// (sky left out) are strongly blurred and at least `closeup_min_sharp` are sharp
+  /// (photo/geometry.h, estimate_defocus: a shallow depth of field, which means a subject
+  /// centimetres to a few metres away) and the sky mask covers at most
+  /// `closeup_max_sky_fraction` of the frame (a subject filling it), with the same conditions as
+  /// above, the geometry is scaled so that its far billboard stands `closeup_scene_depth_m`
+  /// ahead. EXIF rarely survives in shared photos and gives no subject distance in most, so
+  /// the photo's own focus is the cue.
+  double closeup_scene_depth_m = 3.0;
+  double closeup_min_defocused = 0.12, closeup_min_sharp = 0.1, closeup_max_sky_fraction = 0.5;
   /// Optional, caller-owned (mr/cancel.h): requested, the estimate stops at its next step with
   /// mr::Error(cancelled); its progress callback hears each step as it starts, in order
   /// "horizon", "sky mask", "depth", "refine" (and "light" for estimate_scene), with done = the
@@ -114,6 +131,12 @@ struct MR_API GeometryEstimate {
   std::size_t billboard_pixels = 0;
   /// Pixels on structures standing where they meet the ground (EstimateOptions::ground_contact).
   std::size_t contact_pixels = 0;
+  /// Why the scene's metres differ from the default camera height's, for a person to read
+  /// (EstimateOptions::bounded_scene_depth_m); empty when they do not.
+  std::string scale_cue;
+  /// The frame's blocks (sky left out) with strongly blurred / sharp edges (the close-up cue);
+  /// 0 when not measured (an annotated or derived camera height, a distance hint, no photo).
+  double defocused_fraction = 0, sharp_fraction = 0;
   /// With the automatic sky mask (issue 11 items 3 and 4), one channel each at the photo's size
   /// (empty otherwise). sky_alpha: the soft sky matte in [0, 1] (1 sky; fractional only along
   /// the sky's edge, as soft as the photo's edge there; 0 at and below the horizon); a pixel is

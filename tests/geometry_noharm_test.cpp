@@ -1,0 +1,323 @@
+// Issue 11 item 3, "depth that does no harm": the automatic geometry's remaining artifacts, on
+// synthetic photos made to fail the way real ones did (gallery/results/geometry_tune.md):
+// dark trunks on a snow field seen from above (no sky, no ground plane to the horizon) became
+// vertical depth columns from the top of the frame down to each trunk's foot; posts standing on
+// the ground under a sky got a staircase of per-column distances; a close-up was placed tens
+// of metres away (dense fog erased it, a night look's lamps hung tens of metres into it).
+// Every test prints its numbers.
+#include <gtest/gtest.h>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include "mr/estimate.h"
+#include "mr/fog.h"
+#include "mr/io.h"
+#include "mr/scattering.h"
+#include "photo/geometry.h"
+
+namespace mr {
+namespace {
+
+constexpr int kW = 640, kH = 480;
+const Camera kCamera = Camera::from_horizontal_fov(kW, kH, 60);
+
+// Scene-linear photo of a display-referred [0, 1] CV_32FC3 picture (gamma 2.2).
+Image to_photo(const cv::Mat& display) {
+  Image out(display.cols, display.rows, 3);
+  for (int y = 0; y < display.rows; ++y)
+    for (int x = 0; x < display.cols; ++x)
+      for (int c = 0; c < 3; ++c)
+        out.at(x, y, c) = std::pow(std::clamp(display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f), 2.2f);
+  return out;
+}
+
+// With MR_TEST_IMAGES=<folder>: the photos and depths as PNGs, to look at (a distance map as
+// 1 - exp(-d / scale_m), sky blue-white).
+void dump(const std::string& name, const Image& image, double scale_m = 10) {
+  const char* folder = std::getenv("MR_TEST_IMAGES");
+  if (!folder || !*folder) return;
+  if (image.channels() == 1) {
+    Image v(image.width(), image.height(), 3);
+    for (int y = 0; y < image.height(); ++y)
+      for (int x = 0; x < image.width(); ++x) {
+        const float d = image.at(x, y, 0);
+        const float g = std::isfinite(d) ? float(-std::expm1(-d / scale_m)) : 1.0f;
+        for (int c = 0; c < 3; ++c)
+          v.at(x, y, c) = std::pow(g, 2.2f) * (c == 2 || std::isfinite(d) ? 1.0f : 0.8f);
+      }
+    write_image(std::string(folder) + "/" + name + ".png", v);
+    return;
+  }
+  write_image(std::string(folder) + "/" + name + ".png", image);
+}
+
+// Display-referred luma.
+cv::Mat display_luma(const Image& img) {
+  cv::Mat l(img.height(), img.width(), CV_32F);
+  for (int y = 0; y < img.height(); ++y)
+    for (int x = 0; x < img.width(); ++x) {
+      double v = 0;
+      const double wts[3] = {0.2126, 0.7152, 0.0722};
+      for (int c = 0; c < 3; ++c)
+        v += wts[c] * std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f);
+      l.at<float>(y, x) = float(v);
+    }
+  return l;
+}
+
+// Where the photo has an edge: its display luma's largest difference to a neighbour within
+// `reach` pixels (a square window) is at least `contrast`.
+cv::Mat edge_near(const Image& photo, int reach, float contrast) {
+  const cv::Mat l = display_luma(photo);
+  cv::Mat hi, lo;
+  const cv::Mat k = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * reach + 1, 2 * reach + 1));
+  cv::dilate(l, hi, k);
+  cv::erode(l, lo, k);
+  cv::Mat out = (hi - lo) >= contrast;
+  return out;
+}
+
+// Depth discontinuities where the photo has no edge: horizontally neighbouring pixels whose
+// transmittance in a reference fog differs by more than 0.03, with no photo edge (contrast
+// 0.15) within 2 px. The reference fog's extinction length is the scene's own far distance
+// (`far_m`: the far billboard's forward distance), so the count does not depend on the
+// scene's metres; the sky's transmittance is 0. Writes the seams in red over the photo.
+std::size_t vertical_seams_off_edges(const Image& photo, const Image& distance, double far_m,
+                                     const std::string& name = "") {
+  const cv::Mat edge = edge_near(photo, 2, 0.15f);
+  auto t = [&](int x, int y) {
+    const float d = distance.at(x, y, 0);
+    return std::isfinite(d) ? std::exp(-d / far_m) : 0.0;
+  };
+  Image map = photo;
+  std::size_t n = 0;
+  for (int y = 0; y < photo.height(); ++y)
+    for (int x = 0; x + 1 < photo.width(); ++x) {
+      if (edge.at<std::uint8_t>(y, x)) continue;
+      if (std::abs(t(x + 1, y) - t(x, y)) > 0.03) {
+        ++n;
+        map.at(x, y, 0) = 1, map.at(x, y, 1) = map.at(x, y, 2) = 0;
+      }
+    }
+  if (!name.empty()) dump(name, map);
+  return n;
+}
+
+double far_billboard_m(const GeometryEstimate& g) {
+  return g.pose.position_m.y / std::tan(EstimateOptions{}.billboard_depression_deg * M_PI / 180);
+}
+
+// A snow field seen from above (no sky anywhere): bright textured snow, a few soft drifts,
+// dark birch trunks standing in it, each from the top border down to its foot at a different
+// row (a real case: the fresh set's description of a snowy birch wood from above).
+cv::Mat snow_field_display() {
+  cv::Mat m(kH, kW, CV_32FC3);
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> grain(-0.07f, 0.07f);
+  // Crust and footprints: blotches a few pixels across (rough at any scale the sky mask reads).
+  cv::Mat blotches(kH, kW, CV_32F);
+  cv::RNG(5).fill(blotches, cv::RNG::NORMAL, 0, 1);
+  cv::GaussianBlur(blotches, blotches, cv::Size(0, 0), 2.5);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const float drift = 0.04f * std::sin(x / 37.0f + y / 53.0f);
+      const float v = 0.76f + drift + 0.8f * blotches.at<float>(y, x) + 0.5f * grain(rng);
+      m.at<cv::Vec3f>(y, x) = cv::Vec3f(v, v + 0.01f, v + 0.03f);
+    }
+  const int feet[] = {300, 420, 260, 380, 330, 450, 290, 400};
+  for (int i = 0; i < 8; ++i) {
+    const int x0 = 40 + i * 76 + (i % 3) * 7, width = 9 + (i % 4) * 3;
+    for (int y = 0; y <= feet[i]; ++y)
+      for (int x = x0; x < x0 + width; ++x) {
+        const float v = 0.12f + 0.05f * grain(rng);
+        m.at<cv::Vec3f>(y, x) = cv::Vec3f(v, v, v);
+      }
+  }
+  return m;
+}
+
+TEST(GeometryNoHarm, SnowFieldFromAboveHasNoDepthColumns) {
+  const Image photo = to_photo(snow_field_display());
+  const GeometryEstimate g = estimate_geometry(photo, kCamera, Annotations{});
+  dump("snow_photo", photo);
+  dump("snow_depth", g.distance_m);
+  EXPECT_EQ(g.sky_pixels, 0u);
+  EXPECT_EQ(g.contact_pixels, 0u);  // no structure stands on a guessed horizon
+  const std::size_t seams =
+      vertical_seams_off_edges(photo, g.distance_m, far_billboard_m(g), "snow_seams");
+  std::printf("snow field: %zu vertical depth seams (> 5 %%) off the photo's edges; "
+              "structures %zu px, scale: %s\n",
+              seams, g.contact_pixels, g.scale_cue.c_str());
+  // Bar: a few isolated pixels where the ground's confidence ramp meets the far billboard
+  // in the grain (0.05 % of the frame; the gallery's created-edge target is 0.02 % of the
+  // frame for a whole fogged image), against 2.5 % of the frame in columns before.
+  const double frame = double(kW) * kH;
+  EXPECT_LT(double(seams), 5e-4 * frame);
+  // Also at the outdoor scale (no rescaling): the columns came from the structures' contacts.
+  EstimateOptions unscaled;
+  unscaled.bounded_scene_depth_m = 1e6;
+  const GeometryEstimate u = estimate_geometry(photo, kCamera, Annotations{}, unscaled);
+  const std::size_t seams_unscaled =
+      vertical_seams_off_edges(photo, u.distance_m, far_billboard_m(u), "snow_seams_unscaled");
+  std::printf("snow field, unscaled: %zu seams\n", seams_unscaled);
+  EXPECT_LT(double(seams_unscaled), 5e-4 * frame);
+  EXPECT_EQ(u.contact_pixels, 0u);
+}
+
+// Posts standing on a snow field under a sky, joined at their tops by a textured grey band (a
+// fence's top rail, a row of sheds): one structure whose feet are at different rows. Their
+// contacts used to be copied column by column into the band between them: a staircase of
+// distances with a vertical seam halfway between each two posts, where the photo has none.
+cv::Mat posts_display() {
+  cv::Mat m(kH, kW, CV_32FC3);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      cv::Vec3f c;
+      if (y < 140) {
+        const float t = y / 140.0f;
+        c = cv::Vec3f(0.36f, 0.55f, 0.86f) * (1 - t) + cv::Vec3f(0.70f, 0.78f, 0.88f) * t;
+      } else if (y < 200) {
+        const float v = 0.45f + grain(rng);  // the band: textured grey
+        c = cv::Vec3f(v, v, v);
+      } else {
+        const float v = 0.85f + 0.6f * grain(rng);  // the snow
+        c = cv::Vec3f(v, v + 0.01f, v + 0.03f);
+      }
+      m.at<cv::Vec3f>(y, x) = c;
+    }
+  const int feet[] = {300, 340, 270, 380, 320, 420, 290, 360, 310, 400};
+  for (int i = 0; i < 10; ++i) {
+    const int x0 = 12 + i * 63;
+    for (int y = 200; y <= feet[i]; ++y)
+      for (int x = x0; x < x0 + 26; ++x) {
+        const float v = 0.40f + grain(rng);
+        m.at<cv::Vec3f>(y, x) = cv::Vec3f(v, v, v);
+      }
+  }
+  return m;
+}
+
+TEST(GeometryNoHarm, PostsStandingOnTheGroundMakeNoStaircase) {
+  const Image photo = to_photo(posts_display());
+  Annotations level;
+  level.horizon = std::array<PixelPoint, 2>{PixelPoint{0, 239.5}, PixelPoint{kW - 1, 239.5}};
+  level.camera_height_m = 1.6;
+  const GeometryEstimate g = estimate_geometry(photo, kCamera, level);
+  dump("posts_photo", photo);
+  dump("posts_depth", g.distance_m, 50);
+  const std::size_t seams =
+      vertical_seams_off_edges(photo, g.distance_m, far_billboard_m(g), "posts_seams");
+  std::printf("posts: %zu vertical depth seams (> 5 %%) off the photo's edges; structures %zu px\n",
+              seams, g.contact_pixels);
+  EXPECT_GT(g.contact_pixels, 0u);  // the case does stand structures on the ground
+  EXPECT_EQ(seams, 0u);
+}
+
+// A close-up without sky: a cup (a bright disc) on a wooden table seen from above, as the
+// tuning half's coffee photo. A real close-up is centimetres to a few metres away.
+cv::Mat closeup_display() {
+  cv::Mat m(kH, kW, CV_32FC3);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const float n = grain(rng) + 0.08f * std::sin(y / 2.5f + x / 90.0f);
+      m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.45f + n, 0.30f + n, 0.18f + n);
+    }
+  cv::circle(m, cv::Point(320, 300), 130, cv::Scalar(0.92, 0.9, 0.88), cv::FILLED, cv::LINE_AA);
+  cv::circle(m, cv::Point(320, 300), 80, cv::Scalar(0.35, 0.2, 0.1), cv::FILLED, cv::LINE_AA);
+  return m;
+}
+
+TEST(GeometryNoHarm, CloseUpIsMetresAwayNotTensOfMetres) {
+  const Image photo = to_photo(closeup_display());
+  const SceneEstimate est = estimate_scene(photo, kCamera, Annotations{});
+  const GeometryEstimate& g = est.geometry;
+  EXPECT_EQ(g.sky_pixels, 0u);
+  std::vector<float> subject, all;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const float d = g.distance_m.at(x, y, 0);
+      ASSERT_TRUE(std::isfinite(d));
+      all.push_back(d);
+      if (std::hypot(x - 320, y - 300) < 120) subject.push_back(d);
+    }
+  std::sort(subject.begin(), subject.end());
+  const float largest = *std::max_element(all.begin(), all.end());
+  const float subject_median = subject[subject.size() / 2];
+  std::printf("close-up: subject median %.2f m, largest distance %.2f m (%s)\n", subject_median,
+              largest, g.scale_cue.c_str());
+  // The far billboard 8 m ahead: nothing beyond 8 m / cos(the frame's widest angle), and
+  // the subject a few metres away.
+  EXPECT_LT(largest, 8.0 / std::cos(std::atan(std::hypot(320.0, 240.0) / kCamera.focal_px)) + 0.01);
+  EXPECT_LT(subject_median, 3.0f);
+  // Dense fog (the gallery's: visibility 60 m, top 80 m) leaves the subject visible.
+  FogScene s = est.scene;
+  const float sigma = float(extinction_from_visibility(60));
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  s.medium.layer_top_m = 80;
+  s.render.backend = Backend::cpu;
+  const FogLayers f = fog(photo, g.distance_m, g.sky_alpha, kCamera, s);
+  std::vector<float> t;
+  for (int y = 0; y < kH; y += 4)
+    for (int x = 0; x < kW; x += 4)
+      if (std::hypot(x - 320, y - 300) < 120) t.push_back(f.transmittance.at(x, y, 1));
+  std::sort(t.begin(), t.end());
+  std::printf("close-up, dense fog: subject transmittance median %.3f\n", t[t.size() / 2]);
+  EXPECT_GT(t[t.size() / 2], 0.8f);
+}
+
+TEST(GeometryNoHarm, RobustInverseLine) {
+  // One vertical plane: inverse forward distance exactly linear in the column.
+  std::vector<double> f(100, 0.0);
+  for (int k = 0; k < 100; k += 3) f[std::size_t(k)] = 1 / (0.05 + 0.001 * k);
+  // Two columns reaching a foreground object do not pull the line.
+  f[30] = 1.0, f[60] = 2.0;
+  const std::vector<double> fit = photo::robust_inverse_line(f, 100);
+  double worst = 0;
+  for (int k = 0; k < 100; ++k)
+    worst = std::max(worst, std::abs(fit[std::size_t(k)] * (0.05 + 0.001 * k) - 1));
+  std::printf("robust line: worst relative error %.2e\n", worst);
+  EXPECT_LT(worst, 1e-3);
+  // A box's two faces meeting at column 50 (inverse distance linear on each, continuous at
+  // the corner): local lines follow both faces better than one line, with no jump anywhere.
+  std::vector<double> box(100, 0.0);
+  auto q_box = [](int k) { return k < 50 ? 0.05 + 0.001 * k : 0.1 - 0.0008 * (k - 50); };
+  for (int k = 0; k < 100; k += 2) box[std::size_t(k)] = 1 / q_box(k);
+  const std::vector<double> local = photo::robust_inverse_line(box, 100, 8);
+  const std::vector<double> global = photo::robust_inverse_line(box, 100);
+  double local_face = 0, global_face = 0, worst_step = 0;
+  for (int k = 0; k < 100; ++k) {
+    if (std::abs(k - 50) > 9) {
+      local_face = std::max(local_face, std::abs(local[std::size_t(k)] * q_box(k) - 1));
+      global_face = std::max(global_face, std::abs(global[std::size_t(k)] * q_box(k) - 1));
+    }
+    if (k > 0)
+      worst_step = std::max(worst_step, std::abs(local[std::size_t(k)] / local[std::size_t(k - 1)] - 1));
+  }
+  std::printf("two faces: worst face error local %.3f, one line %.3f; largest step %.4f\n",
+              local_face, global_face, worst_step);
+  EXPECT_LT(local_face, 0.75 * global_face);  // measured 0.181 vs 0.298
+  EXPECT_LT(worst_step, 0.03);  // the faces' own slope is up to 2 % per column
+  // One measured column: its value everywhere; none: +inf.
+  std::vector<double> one(10, 0.0);
+  one[4] = 7;
+  for (const double v : photo::robust_inverse_line(one, 10)) EXPECT_NEAR(v, 7, 1e-12);
+  for (const double v : photo::robust_inverse_line(std::vector<double>(5, 0.0), 5))
+    EXPECT_TRUE(std::isinf(v));
+}
+
+}  // namespace
+}  // namespace mr
