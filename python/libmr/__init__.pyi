@@ -353,12 +353,32 @@ class FogLayers:
     backend_notice_is_warning: bool
     timings: dict[str, float]
     warnings: List[str]
+    call_s: float
 
 def default_camera(width: int, height: int, scene: Optional[Scene] = None,
                    metadata: Optional[Metadata] = None) -> Camera: ...
 def fog(image: _Image, depth: _Image, scene: Optional[Scene] = None, *,
         camera: Optional[Camera] = None, sky_alpha: Optional[_Image] = None,
         metadata: Optional[Metadata] = None, cancel: Optional[CancelToken] = None) -> FogLayers: ...
+class FileFogResult:
+    streamed: bool
+    reason: str
+    camera: Camera
+    width: int
+    height: int
+    no_surface_pixels: int
+    invalid_pixels: int
+    sky_threshold_pixels: int
+    clamped_pixels: int
+
+def fog_file(photo: _Path, depth: _Path, output: _Path, scene: Optional[Scene] = None, *,
+             camera: Optional[Camera] = None, depth_kind: _DepthKindArg = "distance",
+             depth_scale: float = 1.0, baseline_m: float = 0.0, doffs_px: float = 0.0,
+             sky_depth_m: float = 65504.0, pixel_type: _PixelTypeArg = "automatic",
+             colorspace: str = "", input_colorspace: str = "", software: str = "",
+             jpeg_quality: int = 95, overwrite: bool = True,
+             color: Union[ColorConfig, _Path, None] = None,
+             cancel: Optional[CancelToken] = None) -> FileFogResult: ...
 def fog_homogeneous(image: _Image, depth: _Image, sigma_t_per_m: Union[float, _RgbLike],
                     airlight: Union[float, _RgbLike, None] = None) -> FogLayers: ...
 

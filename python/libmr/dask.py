@@ -6,9 +6,10 @@
     summary = libmr.dask.fog_frames(paths, "foggy/", scene=scene, scheduler="tcp://head:8786")
     print(summary)            # done / skipped / failed, and each failure's one-line reason
 
-Each frame is a task: read the photo (OIIO/OCIO), read its depth map, fog (libmr.fog, the GIL
-released), write the output atomically (a hidden temporary file renamed into place: a reader never
-sees a partial file, a killed worker leaves no partial output). Outputs that exist are skipped
+Each frame is a task, libmr.fog_file: exactly what `mr fog` does with one photo (sky-light-only
+scenes stream through decode -> fog -> encode in strips, others render the whole frame; the GIL
+released), the output written atomically (a hidden temporary file renamed into place: a reader
+never sees a partial file, a killed worker leaves no partial output). Outputs that exist are skipped
 (unless overwrite=True), so a killed run resumes where it stopped; a worker that dies mid-task
 has its task re-run elsewhere by Dask. A bad frame (unreadable, corrupt, missing or wrong-size
 depth) is reported in the summary and the batch goes on. Outputs are named as by `mr fog`:
@@ -147,12 +148,10 @@ def fog_frame(frame: Frame, scene_json: str, overwrite: bool = False,
         return ("skipped", frame.photo, "")
     try:
         scene = libmr.scene_from_json(scene_json, "scene")
-        photo, md = libmr.read_image(frame.photo, with_metadata=True)
-        camera = libmr.default_camera(photo.shape[1], photo.shape[0], scene, md)
-        depth = libmr.read_depth(frame.depth, camera)
-        md["Software"] = OUTPUT_SOFTWARE  # marks the output as ours, as `mr fog` does
-        layers = libmr.fog(photo, depth.distance_m, scene, camera=camera, metadata=md)
-        libmr.write_image(frame.output, layers.composite, pixel_type=pixel_type, overwrite=True)
+        # As `mr fog`: sky-only scenes stream in strips, others render the whole frame; the
+        # output is written atomically, tagged as mr fog's.
+        libmr.fog_file(frame.photo, frame.depth, frame.output, scene, pixel_type=pixel_type,
+                       software=OUTPUT_SOFTWARE, overwrite=True)
         return ("done", frame.photo, "")
     except libmr.Error as e:
         return ("failed", frame.photo, e.message)

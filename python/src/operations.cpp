@@ -1,7 +1,10 @@
 // The long calls: fog, depth, estimation, material transfer. Each converts its arguments with
 // the GIL held (numpy arrays, a copy of the scene), then releases the GIL for the C++ work, so
 // Python threads and Dask workers render in parallel.
+#include <cctype>
+#include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <optional>
 
 #include "common.h"
@@ -11,6 +14,8 @@
 #include "mr/depth.h"
 #include "mr/estimate.h"
 #include "mr/fog.h"
+#include "mr/fog_stream.h"
+#include "mr/io.h"
 #include "mr/material.h"
 #include "mr/scattering.h"
 #include "mr/scene_json.h"
@@ -26,6 +31,16 @@ struct FogResult {
   bool backend_notice_is_warning = false;
   py::dict timings;
   std::vector<std::string> warnings;
+  double call_s = 0;  // inside the C++ call (the binding's own overhead is the rest)
+};
+
+struct FileFogResult {
+  bool streamed = false;
+  std::string reason;  // why it did not stream (empty when it did)
+  mr::Camera camera;
+  int width = 0, height = 0;
+  std::size_t no_surface_pixels = 0, invalid_pixels = 0, sky_threshold_pixels = 0,
+              clamped_pixels = 0;
 };
 
 struct DepthResult {
@@ -115,6 +130,115 @@ mr::Rgb rgb_arg(py::handle value, const char* what) {
   } catch (const py::cast_error&) {
     invalid(std::string(what) + ": expected a number or 3 numbers (R, G, B)");
   }
+}
+
+// The write options `mr fog` uses (cli/fog_command.cpp, output_write_options): with an automatic
+// pixel type, EXR keeps float inputs float (else half) and PNG/TIFF keep 16-bit inputs 16-bit;
+// display-referred (integer) outputs are encoded through the config's highlight roll-off.
+mr::WriteOptions mr_fog_write_options(const std::string& output, const mr::ImageFileInfo& input,
+                                      mr::PixelType type, const std::string& colorspace,
+                                      const mr::ColorConfig& config, int jpeg_quality,
+                                      bool overwrite) {
+  mr::WriteOptions w;
+  w.color = &config;
+  w.colorspace = colorspace;
+  w.pixel_type = type;
+  w.jpeg_quality = jpeg_quality;
+  w.overwrite = overwrite;
+  std::string ext = std::filesystem::path(output).extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (w.pixel_type == mr::PixelType::automatic) {
+    if (ext == ".exr")
+      w.pixel_type =
+          input.pixel_type == mr::PixelType::float32 ? mr::PixelType::float32 : mr::PixelType::half;
+    else if (input.pixel_type == mr::PixelType::uint16 &&
+             (ext == ".png" || ext == ".tif" || ext == ".tiff"))
+      w.pixel_type = mr::PixelType::uint16;
+  }
+  const bool float_out =
+      w.pixel_type == mr::PixelType::half || w.pixel_type == mr::PixelType::float32 ||
+      (w.pixel_type == mr::PixelType::automatic && (ext == ".exr" || ext == ".hdr"));
+  if (w.colorspace.empty() && !float_out) w.colorspace = config.display_colorspace();
+  return w;
+}
+
+// One photo file -> one fogged file, as `mr fog` does it: scenes lit by the sky alone stream
+// through decode -> fog -> encode in strips (mr::FogStreamer, one per thread, buffers reused);
+// the rest, and what the streamer declines, take the full-frame path. Runs without the GIL.
+FileFogResult fog_file(const std::string& photo_path, const std::string& depth_path,
+                       const std::string& output, const mr::FogScene& scene,
+                       const std::optional<mr::Camera>& given_camera,
+                       const mr::DepthOptions& depth_options, mr::PixelType pixel_type,
+                       const std::string& colorspace, const std::string& input_colorspace,
+                       const std::string& software, int jpeg_quality, bool overwrite,
+                       const mr::ColorConfig& config, const mr::CancelToken* cancel) {
+  if (!overwrite && std::filesystem::exists(output))
+    throw mr::Error(mr::ErrorCode::io, output + ": exists (overwrite=False)");
+  const mr::ImageFileInfo info = mr::probe_image(photo_path);
+  const mr::WriteOptions write =
+      mr_fog_write_options(output, info, pixel_type, colorspace, config, jpeg_quality, overwrite);
+  mr::ReadOptions read;
+  read.colorspace = input_colorspace;
+  read.color = &config;
+  auto camera_for = [&](int width, int height, const mr::Metadata& metadata) {
+    return given_camera ? *given_camera : default_camera(width, height, &scene, metadata);
+  };
+  FileFogResult result;
+  mr::Image photo;
+  if (mr::is_sky_only(scene) && scene.render.backend != mr::Backend::vulkan) {
+    mr::FogScene render_scene = scene;
+    mr::StreamFogRequest request;
+    bool stream = true;
+    if (!scene.lighting.sky_radiance) {  // 'auto': the dark channel prior needs the whole photo
+      photo = mr::read_image(photo_path, read);
+      stream = photo.channels() >= 3;
+      if (stream) render_scene.lighting.sky_radiance = mr::estimate_airlight(photo);
+      request.photo_image = &photo;
+    }
+    if (stream) {
+      request.photo = photo_path;
+      request.depth = depth_path;
+      request.output = output;
+      request.depth_options = depth_options;
+      request.scene = &render_scene;
+      request.camera = camera_for;
+      request.color = &config;
+      request.input_colorspace = input_colorspace;
+      request.software = software;
+      request.write = write;
+      thread_local mr::FogStreamer streamer;
+      const mr::StreamFogResult r = streamer.fog_file(request, cancel);
+      result.reason = r.reason;
+      if (r.streamed) {
+        result.streamed = true;
+        result.camera = r.camera;
+        result.width = r.width;
+        result.height = r.height;
+        result.no_surface_pixels = r.no_surface_pixels;
+        result.invalid_pixels = r.invalid_pixels;
+        result.sky_threshold_pixels = r.sky_threshold_pixels;
+        result.clamped_pixels = r.clamped_pixels;
+        return result;
+      }
+    }
+  } else {
+    result.reason =
+        "the scene has a sun, lamps or noise (the scattering core needs the whole frame)";
+  }
+  if (photo.empty()) photo = mr::read_image(photo_path, read);
+  if (!software.empty()) photo.metadata().set("Software", software);
+  const mr::Camera camera = camera_for(photo.width(), photo.height(), photo.metadata());
+  const mr::DepthMap depth = mr::read_depth(depth_path, camera, depth_options);
+  const mr::FogLayers layers = mr::fog(photo, depth.distance_m, camera, scene, nullptr, cancel);
+  mr::write_image(output, layers.composite, write);
+  result.camera = camera;
+  result.width = photo.width();
+  result.height = photo.height();
+  result.no_surface_pixels = depth.no_surface_pixels;
+  result.invalid_pixels = depth.invalid_pixels;
+  result.sky_threshold_pixels = depth.sky_threshold_pixels;
+  result.clamped_pixels = depth.clamped_pixels;
+  return result;
 }
 
 }  // namespace
@@ -248,6 +372,9 @@ void bind_operations(py::module_& m) {
       .def_readonly("timings", &FogResult::timings,
                     "seconds (mesh_s, bvh_s, scatter_s, total_s, ...) and pixel / ray counts")
       .def_readonly("warnings", &FogResult::warnings, "scene_warnings(scene)")
+      .def_readonly("call_s", &FogResult::call_s,
+                    "seconds spent in the C++ call (mr::fog); the rest of the Python call's "
+                    "time is the binding's overhead (argument conversion, copies, arrays)")
       .def("__repr__",
            [](const FogResult& r) { return "libmr.FogLayers(backend='" + r.backend + "')"; });
 
@@ -280,7 +407,10 @@ void bind_operations(py::module_& m) {
         mr::FogLayers layers;
         {
           py::gil_scoped_release release;
+          const auto start = std::chrono::steady_clock::now();
           layers = mr::fog(photo.image(), distance.image(), alpha.image(), cam, s, &aovs, cancel);
+          r.call_s =
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
           r.warnings = mr::scene_warnings(s);
         }
         r.composite = to_array(std::move(layers.composite));
@@ -320,11 +450,14 @@ void bind_operations(py::module_& m) {
         p.sigma_t_per_m = rgb_arg(sigma_t_per_m, "sigma_t_per_m");
         if (!airlight.is_none()) p.airlight = rgb_arg(airlight, "airlight");
         mr::FogLayers layers;
+        FogResult r;
         {
           py::gil_scoped_release release;
+          const auto start = std::chrono::steady_clock::now();
           layers = mr::fog(photo.image(), distance.image(), p);
+          r.call_s =
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         }
-        FogResult r;
         r.composite = to_array(std::move(layers.composite));
         r.transmittance = to_array(std::move(layers.transmittance));
         r.inscatter = to_array(std::move(layers.inscatter));
@@ -339,6 +472,60 @@ void bind_operations(py::module_& m) {
       "Koschmieder fog (homogeneous, sky light only): T = exp(-sigma_t d), R = A (1 - T), "
       "C = I T + R. sigma_t_per_m: 1/m, one number or (R, G, B); airlight A: scene-linear, "
       "None = estimate_airlight(image).");
+
+  py::class_<FileFogResult>(m, "FileFogResult", "What fog_file did.")
+      .def_readonly("streamed", &FileFogResult::streamed,
+                    "True: decoded, fogged and encoded in strips (sky-light-only scenes)")
+      .def_readonly("reason", &FileFogResult::reason, "why it did not stream")
+      .def_readonly("camera", &FileFogResult::camera)
+      .def_readonly("width", &FileFogResult::width)
+      .def_readonly("height", &FileFogResult::height)
+      .def_readonly("no_surface_pixels", &FileFogResult::no_surface_pixels)
+      .def_readonly("invalid_pixels", &FileFogResult::invalid_pixels)
+      .def_readonly("sky_threshold_pixels", &FileFogResult::sky_threshold_pixels)
+      .def_readonly("clamped_pixels", &FileFogResult::clamped_pixels);
+  m.def(
+      "fog_file",
+      [](py::handle photo, py::handle depth, py::handle output, const mr::FogScene* scene,
+         std::optional<mr::Camera> camera, py::handle depth_kind, double depth_scale,
+         double baseline_m, double doffs_px, double sky_depth_m, py::handle pixel_type,
+         const std::string& colorspace, const std::string& input_colorspace,
+         const std::string& software, int jpeg_quality, bool overwrite, py::object color,
+         mr::CancelToken* cancel) {
+        const std::string photo_path = path_arg(photo, "photo");
+        const std::string depth_path = path_arg(depth, "depth");
+        const std::string output_path = path_arg(output, "output");
+        const mr::FogScene s = scene ? *scene : mr::FogScene();
+        mr::DepthOptions d;
+        d.kind = depth_kind_arg(depth_kind);
+        d.scale = depth_scale;
+        d.baseline_m = baseline_m;
+        d.doffs_px = doffs_px;
+        d.sky_depth_m = sky_depth_m;
+        const mr::PixelType type = pixel_type_arg(pixel_type);
+        const mr::ColorConfig config = color.is_none() ? mr::ColorConfig::from_environment()
+                                       : py::isinstance<mr::ColorConfig>(color)
+                                           ? color.cast<mr::ColorConfig>()
+                                           : mr::ColorConfig::from_file(path_arg(color, "color"));
+        py::gil_scoped_release release;
+        return fog_file(photo_path, depth_path, output_path, s, camera, d, type, colorspace,
+                        input_colorspace, software, jpeg_quality, overwrite, config, cancel);
+      },
+      py::arg("photo"), py::arg("depth"), py::arg("output"), py::arg("scene") = py::none(),
+      py::kw_only(), py::arg("camera") = py::none(), py::arg("depth_kind") = "distance",
+      py::arg("depth_scale") = 1.0, py::arg("baseline_m") = 0.0, py::arg("doffs_px") = 0.0,
+      py::arg("sky_depth_m") = mr::kDefaultSkyDepthM, py::arg("pixel_type") = "automatic",
+      py::arg("colorspace") = "", py::arg("input_colorspace") = "", py::arg("software") = "",
+      py::arg("jpeg_quality") = 95, py::arg("overwrite") = true, py::arg("color") = py::none(),
+      py::arg("cancel") = py::none(),
+      "One photo file -> one fogged file, exactly as `mr fog` writes it: the camera as "
+      "default_camera (or `camera`), the depth file read as read_depth (kind, scale in "
+      "metres per stored unit, ...), the output written atomically with mr fog's options "
+      "(pixel_type 'automatic': EXR keeps float inputs float, else half; PNG/TIFF keep 16-bit "
+      "inputs; 8/16-bit outputs through the highlight roll-off 'srgb_rolloff'). Scenes lit by "
+      "the sky alone stream in strips (a few MiB of memory whatever the size); others render "
+      "the whole frame. software: the output's Software tag (empty: the photo's). "
+      "overwrite=False: FileError if the output exists. Releases the GIL.");
 
   // --- estimation ---
   py::class_<mr::SunEstimate>(m, "SunEstimate", "The sun fitted to the shadow pairs.")

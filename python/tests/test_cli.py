@@ -52,3 +52,12 @@ def test_python_fog_equals_mr_fog(tmp_path, extra):
     # and written by Python the same way, the files' pixels are identical too
     libmr.write_image(tmp_path / "py.exr", layers.composite, pixel_type="float")
     np.testing.assert_array_equal(libmr.read_image(tmp_path / "py.exr"), cli_out)
+    # fog_file: file to file as mr fog does it (the default JPEG output: roll-off, 8 bits)
+    subprocess.run([MR, "fog", str(photo), "--out-dir", str(tmp_path / "jpg"), "--scene",
+                    str(tmp_path / "scene.json"), "-q"], check=True)
+    result = libmr.fog_file(photo, tmp_path / "leuven_depth.exr", tmp_path / "ff.jpg", scene)
+    assert result.streamed == (scene.lighting.sun is None)
+    np.testing.assert_array_equal(libmr.read_image(tmp_path / "ff.jpg", to_scene_linear=False),
+                                  libmr.read_image(tmp_path / "jpg" / "leuven_fog.jpg", to_scene_linear=False))
+    with pytest.raises(libmr.FileError, match="exists"):
+        libmr.fog_file(photo, tmp_path / "leuven_depth.exr", tmp_path / "ff.jpg", scene, overwrite=False)
