@@ -11,6 +11,7 @@ output folders).
 """
 
 import argparse
+import contextlib
 import pathlib
 import shutil
 import subprocess
@@ -29,6 +30,10 @@ def main():
     ap.add_argument("--width", type=int, default=1920)
     ap.add_argument("--height", type=int, default=1080)
     ap.add_argument("--scratch", default="/tmp/libmr_dask_bench")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--trim", action="store_true",
+                    help="keep distributed's default MALLOC_TRIM_THRESHOLD_ in the workers")
+    ap.add_argument("--threads-per-worker", type=int, default=1)
     a = ap.parse_args()
     scratch = pathlib.Path(a.scratch)
     shutil.rmtree(scratch, ignore_errors=True)
@@ -54,7 +59,10 @@ def main():
     from distributed import Client, LocalCluster
 
     t0 = time.perf_counter()
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    environment = libmr.dask.local_worker_environment() if not a.trim else contextlib.nullcontext()
+    with environment:
+        cluster = LocalCluster(n_workers=a.workers, threads_per_worker=a.threads_per_worker,
+                               processes=True, dashboard_address=None)
     client = Client(cluster)
     client.run(lambda: __import__("libmr").version())  # workers import libmr before timing
     start_s = time.perf_counter() - t0
@@ -68,7 +76,7 @@ def main():
         client.close()
         cluster.close()
     assert summary.done == a.frames, str(summary)
-    print(f"libmr.dask, 2 workers x 1:    {dask_s:7.2f} s  {a.frames / dask_s:6.2f} photos/s"
+    print(f"libmr.dask, {a.workers} workers x {a.threads_per_worker}:    {dask_s:7.2f} s  {a.frames / dask_s:6.2f} photos/s"
           f"  (cluster start-up {start_s:.1f} s apart)")
     print(f"dask / mr throughput: {mr_s / dask_s:.2f}x")
 

@@ -190,6 +190,18 @@ def remove_stale_temporaries(folder: PathLike, local: bool = True) -> List[str]:
     return removed
 
 
+def local_worker_environment():
+    """A dask config context for starting local workers without the MALLOC_TRIM_THRESHOLD_ that
+    distributed sets by default: any fixed glibc trim threshold also fixes the mmap threshold, so
+    every frame's large buffers are mmapped afresh and page-faulted in again (libmr's batch path
+    reuses them; see README "Batch speed and memory"). The numpy thread limits are kept."""
+    import dask
+
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    return dask.config.set({"distributed.nanny.pre-spawn-environ": environ})
+
+
 def fog_frames(inputs: Union[PathLike, Iterable[PathLike]], out_dir: PathLike, *,
                scene: Optional["libmr.Scene"] = None, depth: Optional[str] = None,
                suffix: str = "_fog", format: Optional[str] = None, pixel_type: str = "automatic",
@@ -221,8 +233,9 @@ def fog_frames(inputs: Union[PathLike, Iterable[PathLike]], out_dir: PathLike, *
     if scheduler is None:
         # The dashboard (Dask's progress diagnostics) needs bokeh; without it, none.
         dashboard = ":0" if importlib.util.find_spec("bokeh") else None
-        own_cluster = LocalCluster(n_workers=n_workers, threads_per_worker=threads_per_worker,
-                                   processes=True, dashboard_address=dashboard)
+        with local_worker_environment():
+            own_cluster = LocalCluster(n_workers=n_workers, threads_per_worker=threads_per_worker,
+                                       processes=True, dashboard_address=dashboard)
         client = Client(own_cluster)
     elif isinstance(scheduler, Client):
         client = scheduler

@@ -144,3 +144,25 @@ def test_stale_temporaries_of_dead_writers_are_removed(tmp_path):
     assert removed == [str(dead)]
     assert alive.exists() and other.exists()
     assert libmr.dask.remove_stale_temporaries(tmp_path, local=False) == []  # not a day old
+
+
+def test_own_local_cluster_and_progress_lines(tmp_path):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(3):
+        libmr.write_image(folder / f"p{i}.png", np.full((12, 16, 3), 0.2 * i, np.float32))
+        libmr.write_image(folder / f"p{i}_depth.exr", np.full((12, 16), 5.0 + i, np.float32),
+                          pixel_type="float")
+    lines = []
+    s = libmr.Scene()
+    s.lighting.sky_radiance = (0.7, 0.7, 0.7)
+    summary = libmr.dask.fog_frames(folder, tmp_path / "out", scene=s, n_workers=1, progress=True,
+                                    progress_every=1, log=lines.append)
+    assert (summary.done, summary.skipped, summary.failed) == (3, 0, []), str(summary)
+    assert sum(1 for line in lines if "frames (" in line) == 3 and "3 done" in lines[-1]
+    assert sorted(os.listdir(tmp_path / "out")) == ["p0_fog.png", "p1_fog.png", "p2_fog.png"]
+    # sky light only: the closed form C = I T + L (1 - T), T = exp(-sigma_t d), within 8-bit rounding
+    t = np.exp(-np.array(s.medium.sigma_t_per_m) * 6.0)
+    expected = 0.2 * t + 0.7 * (1 - t)
+    out = libmr.read_image(tmp_path / "out" / "p1_fog.png", colorspace="srgb_rolloff")
+    np.testing.assert_allclose(out[0, 0], expected, rtol=0, atol=4e-3)
