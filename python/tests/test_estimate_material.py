@@ -1,0 +1,105 @@
+"""estimate() and transfer_material() through Python equal `mr estimate` and `mr material` on the
+sample photos (same inputs, bit-identical outputs)."""
+
+import json
+import os
+import pathlib
+import re
+import subprocess
+
+import numpy as np
+import pytest
+
+import libmr
+from conftest import SAMPLES
+
+MR = os.environ.get("MR_CLI")
+needs_cli = pytest.mark.skipif(not MR or not pathlib.Path(MR).exists(), reason="MR_CLI not given")
+
+
+@needs_cli
+def test_estimate_equals_mr_estimate(tmp_path):
+    photo_path, notes = SAMPLES / "leuven.jpg", SAMPLES / "leuven_annotations.json"
+    subprocess.run([MR, "estimate", str(photo_path), "--annotations", str(notes), "-o",
+                    str(tmp_path / "s.json"), "--depth-out", str(tmp_path / "d.exr"), "-q"], check=True)
+    photo = libmr.read_image(photo_path)
+    est = libmr.estimate(photo, annotations=notes)
+    assert est.camera_source == "exif"
+    assert est.scene == libmr.load_scene(tmp_path / "s.json")
+    cli_depth = libmr.read_image(tmp_path / "d.exr", to_scene_linear=False, reject_non_finite=False)
+    assert est.distance_m.shape == (563, 751, 1)
+    np.testing.assert_array_equal(est.distance_m, cli_depth)
+    # the annotations as a dict or as JSON text are the same document
+    again = libmr.estimate(photo, annotations=json.loads(notes.read_text()))
+    np.testing.assert_array_equal(again.distance_m, est.distance_m)
+    assert est.horizon_source == "annotations" and 0 < est.confidence <= 1
+    assert est.notes
+
+
+def test_estimate_errors_and_cancel(tmp_path):
+    photo = libmr.read_image(SAMPLES / "aerial.jpg")
+    bad = {"format": "libmr-annotations", "version": 1, "horizon": [[0, 10], "x"]}
+    with pytest.raises(libmr.InvalidArgumentError, match="/horizon/1"):
+        libmr.estimate(photo, annotations=bad)
+    with pytest.raises(libmr.FileError):
+        libmr.estimate(photo, annotations=tmp_path / "missing.json")
+    token = libmr.CancelToken()
+    token.request()
+    with pytest.raises(libmr.CancelledError):
+        libmr.estimate(photo, cancel=token)
+
+
+def reduced(stem, folder):
+    """Every third pixel of a sample photo and its depth map, as files (as the C++ CLI test)."""
+    photo = libmr.read_image(SAMPLES / f"{stem}.jpg")[::3, ::3]
+    depth = libmr.read_image(SAMPLES / f"{stem}_depth.exr", to_scene_linear=False,
+                             reject_non_finite=False)[::3, ::3]
+    libmr.write_image(folder / f"{stem}.png", photo)
+    libmr.write_image(folder / f"{stem}_depth.exr", depth, pixel_type="float")
+    return folder / f"{stem}.png", folder / f"{stem}_depth.exr"
+
+
+@needs_cli
+def test_transfer_material_equals_mr_material(tmp_path):
+    sample_png, sample_depth = reduced("building", tmp_path)
+    target_png, target_depth = reduced("leuven", tmp_path)
+    scene = libmr.Scene()
+    scene.lighting.sun = libmr.Sun(direction_to_sun=libmr.direction_from_azimuth_elevation(-135, 45),
+                                   irradiance=(2.5, 2.5, 2.5))
+    scene.lighting.sky_radiance = (0.4, 0.4, 0.4)
+    libmr.save_scene(tmp_path / "scene.json", scene)
+    w, h = libmr.probe_image(target_png).width, libmr.probe_image(target_png).height
+    mask = np.zeros((h, w, 1), np.float32)
+    mask[140:180, 40:200] = 1 / 255  # the street
+    mask[30:120, 2:35] = 2 / 255  # the left house's wall
+    libmr.write_image(tmp_path / "mask.png", mask, pixel_type="8", colorspace="raw")
+    subprocess.run([MR, "material", "--sample", str(sample_png), "--sample-depth", str(sample_depth),
+                    "--sample-scene", str(tmp_path / "scene.json"), "--sample-fov", "50",
+                    "--target", str(target_png), "--target-depth", str(target_depth),
+                    "--target-scene", str(tmp_path / "scene.json"), "--fov", "60",
+                    "--regions", str(tmp_path / "mask.png"), "-o", str(tmp_path / "cli.exr"),
+                    "--materials-json", str(tmp_path / "m.json"), "-q"], check=True)
+
+    sample = libmr.read_image(sample_png)
+    target = libmr.read_image(target_png)
+    s_cam = libmr.Camera.from_horizontal_fov(sample.shape[1], sample.shape[0], 50.0)
+    t_cam = libmr.Camera.from_horizontal_fov(w, h, 60.0)
+    labels = libmr.load_region_labels(tmp_path / "mask.png", w, h)
+    assert labels.shape == (h, w, 1) and set(np.unique(labels)) == {0, 1, 2}
+    result = libmr.transfer_material(
+        sample, libmr.read_depth(sample_depth, s_cam).distance_m,
+        target, libmr.read_depth(target_depth, t_cam).distance_m, labels,
+        sample_scene=scene, target_scene=scene, sample_camera=s_cam, target_camera=t_cam)
+    assert result.image.shape == (h, w, 3)
+    assert len(result.assignment) == 2 and result.candidates
+    np.testing.assert_array_equal(result.image, libmr.read_image(tmp_path / "cli.exr"))
+    py_doc, cli_doc = json.loads(result.to_json()), json.loads((tmp_path / "m.json").read_text())
+    # the notes also say how long steps took (seconds); everything else is identical
+    timing = re.compile(r"[0-9.]+ s\b")
+    assert [timing.sub("T", n) for n in py_doc.pop("notes")] == [timing.sub("T", n) for n in cli_doc.pop("notes")]
+    assert py_doc == cli_doc
+    with pytest.raises(libmr.SizeMismatchError):
+        libmr.transfer_material(sample, libmr.read_depth(sample_depth, s_cam).distance_m, target,
+                                libmr.read_depth(target_depth, t_cam).distance_m, labels[:-1],
+                                sample_scene=scene, target_scene=scene, sample_camera=s_cam,
+                                target_camera=t_cam)
