@@ -289,25 +289,16 @@ float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& 
 
   const std::uint32_t stream = physics::ao_stream(seed);
   int open = 0;
-  for (int first = 0; first < ray_count; first += 8) {
-    RayPacket8 packet;
-    for (int k = 0; k < 8; ++k) {
-      const int index = first + k;
-      packet.valid[k] = index < ray_count ? -1 : 0;
-      const physics::Float3 dir = physics::ao_direction(stream, index, ray_count, n, t1, t2);
-      packet.origin_x[k] = origin[0];
-      packet.origin_y[k] = origin[1];
-      packet.origin_z[k] = origin[2];
-      packet.direction_x[k] = float(dir.x);
-      packet.direction_y[k] = float(dir.y);
-      packet.direction_z[k] = float(dir.z);
-      packet.t_near[k] = 0.0f;
-      packet.t_far[k] = max_distance_m;
-    }
-    bool blocked[8];
-    scene.occluded8(packet, blocked);
-    for (int k = 0; k < 8 && first + k < ray_count; ++k) open += blocked[k] ? 0 : 1;
-  }
+  occluded_rays(
+      scene, std::size_t(ray_count),
+      [&](std::size_t index) {
+        const physics::Float3 dir = physics::ao_direction(stream, int(index), ray_count, n, t1, t2);
+        return ShadowRay{{origin[0], origin[1], origin[2]},
+                         {float(dir.x), float(dir.y), float(dir.z)},
+                         0.0f,
+                         max_distance_m};
+      },
+      [&](std::size_t, bool blocked) { open += blocked ? 0 : 1; });
   return float(open) / float(ray_count);
 }
 

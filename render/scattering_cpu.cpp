@@ -181,30 +181,18 @@ class Core {
       sample_t[i] = physics::segment_sample_t(bounds[i], bounds[i + 1], jitter, int(i));
     std::size_t rays = 0;
     if (scene_.lighting.sun && in_.occluders) {
-      RayPacket8 packet;
-      bool blocked[8];
-      for (std::size_t first = 0; first < segments; first += 8) {
-        for (int k = 0; k < 8; ++k) {
-          const std::size_t i = first + std::size_t(k);
-          packet.valid[k] = i < segments ? -1 : 0;
-          if (i >= segments) continue;
-          const double ts = sample_t[i];
-          const Vec3d xs = add(origin_, w, ts);
-          const Vec3d dir = sun_sample_direction(i, jitter, double(segments + 1), pixel_rotation);
-          packet.origin_x[k] = float(xs[0]);
-          packet.origin_y[k] = float(xs[1]);
-          packet.origin_z[k] = float(xs[2]);
-          packet.direction_x[k] = float(dir[0]);
-          packet.direction_y[k] = float(dir[1]);
-          packet.direction_z[k] = float(dir[2]);
-          packet.t_near[k] = float(1e-3 + 1e-4 * ts);
-          packet.t_far[k] = std::numeric_limits<float>::infinity();
-          ++rays;
-        }
-        in_.occluders->occluded8(packet, blocked);
-        for (int k = 0; k < 8 && first + std::size_t(k) < segments; ++k)
-          sun_visible[first + std::size_t(k)] = !blocked[k];
-      }
+      occluded_rays(
+          *in_.occluders, segments,
+          [&](std::size_t i) {
+            const double ts = sample_t[i];
+            const Vec3d xs = add(origin_, w, ts);
+            const Vec3d dir = sun_sample_direction(i, jitter, double(segments + 1), pixel_rotation);
+            return ShadowRay{{float(xs[0]), float(xs[1]), float(xs[2])},
+                             {float(dir[0]), float(dir[1]), float(dir[2])},
+                             float(1e-3 + 1e-4 * ts)};
+          },
+          [&](std::size_t i, bool blocked) { sun_visible[i] = !blocked; });
+      rays += segments;
       // Shaft edges: where the visibility changes between two samples, bisect for the crossing
       // (to 1/64 of the gap), so each segment gets its exact lit part instead of all or nothing:
       // one sample per segment alone leaves a jitter-dithered edge of 1/steps steps.
@@ -359,32 +347,22 @@ class Core {
     const int count = sun_tan_radius_ > 0 ? plan_.sun_surface_rays : 1;
     rays_.local() += std::size_t(count);
     int seen = 0;
-    for (int first = 0; first < count; first += 8) {
-      RayPacket8 packet;
-      bool blocked[8];
-      for (int k = 0; k < 8; ++k) {
-        const int i = first + k;
-        packet.valid[k] = i < count ? -1 : 0;
-        if (i >= count) continue;
-        Vec3d dir = sun_dir_;
-        if (sun_tan_radius_ > 0) {
-          const double r = sun_tan_radius_ * std::sqrt((i + 0.5) / count);
-          const double phi = kGoldenAngle * (i + pixel_jitter(x, y, scene_.render.seed) * count);
-          dir =
-              normalized(add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
-        }
-        packet.origin_x[k] = float(xo[0]);
-        packet.origin_y[k] = float(xo[1]);
-        packet.origin_z[k] = float(xo[2]);
-        packet.direction_x[k] = float(dir[0]);
-        packet.direction_y[k] = float(dir[1]);
-        packet.direction_z[k] = float(dir[2]);
-        packet.t_near[k] = 0.0f;
-        packet.t_far[k] = std::numeric_limits<float>::infinity();
-      }
-      in_.occluders->occluded8(packet, blocked);
-      for (int k = 0; k < 8 && first + k < count; ++k) seen += !blocked[k];
-    }
+    occluded_rays(
+        *in_.occluders, std::size_t(count),
+        [&](std::size_t index) {
+          const int i = int(index);
+          Vec3d dir = sun_dir_;
+          if (sun_tan_radius_ > 0) {
+            const double r = sun_tan_radius_ * std::sqrt((i + 0.5) / count);
+            const double phi = kGoldenAngle * (i + pixel_jitter(x, y, scene_.render.seed) * count);
+            dir = normalized(
+                add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
+          }
+          return ShadowRay{{float(xo[0]), float(xo[1]), float(xo[2])},
+                           {float(dir[0]), float(dir[1]), float(dir[2])},
+                           0.0f};
+        },
+        [&](std::size_t, bool blocked) { seen += !blocked; });
     return double(seen) / count;
   }
 

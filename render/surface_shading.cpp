@@ -183,25 +183,10 @@ void frame(const Vec3f& n, Vec3f& t, Vec3f& b) {
 // Traces `dirs` from `origin` to infinity; returns how many escape.
 int count_escaping(const OccluderScene& scene, const Vec3f& origin, const Vec3f* dirs, int count) {
   int escaped = 0;
-  for (int first = 0; first < count; first += 8) {
-    RayPacket8 packet;
-    bool blocked[8];
-    for (int k = 0; k < 8; ++k) {
-      const int i = first + k;
-      packet.valid[k] = i < count ? -1 : 0;
-      const Vec3f d = i < count ? dirs[i] : Vec3f{0, 1, 0};
-      packet.origin_x[k] = origin[0];
-      packet.origin_y[k] = origin[1];
-      packet.origin_z[k] = origin[2];
-      packet.direction_x[k] = d[0];
-      packet.direction_y[k] = d[1];
-      packet.direction_z[k] = d[2];
-      packet.t_near[k] = 0.0f;
-      packet.t_far[k] = std::numeric_limits<float>::infinity();
-    }
-    scene.occluded8(packet, blocked);
-    for (int k = 0; k < 8 && first + k < count; ++k) escaped += !blocked[k];
-  }
+  occluded_rays(
+      scene, std::size_t(std::max(count, 0)),
+      [&](std::size_t i) { return ShadowRay{origin, dirs[i], 0.0f}; },
+      [&](std::size_t, bool blocked) { escaped += !blocked; });
   return escaped;
 }
 

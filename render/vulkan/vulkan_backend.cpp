@@ -13,6 +13,7 @@
 #include <optional>
 #include <vector>
 
+#include "render/math.h"
 #include "render/photo_fallback.h"
 #include "render/vulkan/context.h"
 #include "shaders/scattering_params.h"
@@ -51,16 +52,7 @@ constexpr float kFar = 3.0e38f;       // cleared shadow-map texels: nothing ther
 // that the CPU shades, in the half-plane test).
 constexpr double kSlopeBiasTexels = 0.5;
 
-using V3 = std::array<double, 3>;
-V3 vec(const Vec3& v) { return {v.x, v.y, v.z}; }
-double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-V3 cross(const V3& a, const V3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-V3 normalized(const V3& a) {
-  const double n = std::sqrt(dot(a, a));
-  return {a[0] / n, a[1] / n, a[2] / n};
-}
+using V3 = Vec3d;  // render/math.h
 gpu::vec4 v4(const V3& v, double w = 0) { return {float(v[0]), float(v[1]), float(v[2]), float(w)}; }
 gpu::vec4 v4(const Rgb& v, double w = 0) { return {v[0], v[1], v[2], float(w)}; }
 
