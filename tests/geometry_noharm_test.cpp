@@ -24,6 +24,7 @@
 #include "mr/io.h"
 #include "mr/scattering.h"
 #include "photo/geometry.h"
+#include "tests/display_luma.h"
 
 namespace mr {
 namespace {
@@ -61,19 +62,7 @@ void dump(const std::string& name, const Image& image, double scale_m = 10) {
   write_image(std::string(folder) + "/" + name + ".png", image);
 }
 
-// Display-referred luma.
-cv::Mat display_luma(const Image& img) {
-  cv::Mat l(img.height(), img.width(), CV_32F);
-  for (int y = 0; y < img.height(); ++y)
-    for (int x = 0; x < img.width(); ++x) {
-      double v = 0;
-      const double wts[3] = {0.2126, 0.7152, 0.0722};
-      for (int c = 0; c < 3; ++c)
-        v += wts[c] * std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f);
-      l.at<float>(y, x) = float(v);
-    }
-  return l;
-}
+using mr::test::display_luma;  // tests/display_luma.h
 
 // Where the photo has an edge: its display luma's largest difference to a neighbour within
 // `reach` pixels (a square window) is at least `contrast`.

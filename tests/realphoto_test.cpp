@@ -27,6 +27,7 @@
 #include "mr/scattering.h"
 #include "photo/geometry.h"
 #include "photo/sky_mask.h"
+#include "tests/display_luma.h"
 
 namespace mr {
 namespace {
@@ -110,19 +111,7 @@ Annotations level_horizon() {
   return a;
 }
 
-// Display-referred luma (gamma 2.2) of a scene-linear RGB image.
-cv::Mat display_luma(const Image& img) {
-  cv::Mat l(img.height(), img.width(), CV_32F);
-  for (int y = 0; y < img.height(); ++y)
-    for (int x = 0; x < img.width(); ++x) {
-      double v = 0;
-      const double wts[3] = {0.2126, 0.7152, 0.0722};
-      for (int c = 0; c < 3; ++c)
-        v += wts[c] * std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f);
-      l.at<float>(y, x) = float(v);
-    }
-  return l;
-}
+using mr::test::display_luma;  // tests/display_luma.h
 
 // Per pixel: the larger forward difference (right, down) of a single-channel map.
 cv::Mat gradient(const cv::Mat& l) {

@@ -27,6 +27,7 @@
 #include "mr/io.h"
 #include "mr/scattering.h"
 #include "photo/sky_mask.h"
+#include "tests/display_luma.h"
 
 namespace mr {
 namespace {
@@ -300,15 +301,7 @@ FogLayers haze(const Image& photo, const Camera& camera, SceneEstimate* est_out 
 // Display-referred luma blurred by 1 px and its gradient magnitude (central differences), as
 // gallery/measures.py's created-edge measure takes them.
 cv::Mat edge_strength(const Image& img) {
-  cv::Mat l(img.height(), img.width(), CV_32F);
-  for (int y = 0; y < img.height(); ++y)
-    for (int x = 0; x < img.width(); ++x) {
-      double v = 0;
-      const double wts[3] = {0.2126, 0.7152, 0.0722};
-      for (int c = 0; c < 3; ++c)
-        v += wts[c] * std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f);
-      l.at<float>(y, x) = float(v);
-    }
+  cv::Mat l = mr::test::display_luma(img);
   cv::GaussianBlur(l, l, cv::Size(7, 7), 1.0, 1.0, cv::BORDER_REPLICATE);
   cv::Mat gx, gy, g;
   cv::Sobel(l, gx, CV_32F, 1, 0, 1, 0.5, 0, cv::BORDER_REPLICATE);
