@@ -1,4 +1,5 @@
 #include "mr/scene.h"
+#include "core/vec3.h"
 
 #include <cmath>
 #include <numbers>
@@ -6,10 +7,9 @@
 namespace mr {
 
 namespace {
+
+using vec3::cross;  // core/vec3.h
 constexpr double kDeg = std::numbers::pi / 180.0;
-Vec3 cross(const Vec3& a, const Vec3& b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
 }  // namespace
 
 std::array<Vec3, 3> CameraPose::axes() const {

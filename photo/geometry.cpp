@@ -11,11 +11,14 @@
 #include <string>
 
 #include "core/cv_bridge.h"
+#include "core/vec3.h"
 #include "mr/error.h"
 
 namespace mr::photo {
 
 namespace {
+
+using vec3::dot;  // core/vec3.h
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -32,10 +35,6 @@ std::string fmt(const PixelPoint& p) {
 
 [[noreturn]] void fail(const std::string& pointer, const std::string& problem) {
   throw Error(ErrorCode::invalid_argument, pointer + ": " + problem);
-}
-
-double dot(const Vec3& a, const Vec3& b) {
-  return a.x * b.x + a.y * b.y + a.z * b.z;
 }
 
 // Normalised image coordinates of a pixel-centre point.

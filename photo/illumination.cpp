@@ -11,19 +11,21 @@
 #include <string>
 
 #include "mr/error.h"
+#include "core/vec3.h"
 #include "photo/ceres_options.h"
 
 namespace mr::photo {
 namespace {
 
+using vec3::add;  // core/vec3.h
+using vec3::dot;
+using vec3::norm;
+using vec3::normalized;
+using vec3::scale;
+using vec3::sub;
+
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-Vec3 add(const Vec3& a, const Vec3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-Vec3 sub(const Vec3& a, const Vec3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-Vec3 scale(const Vec3& a, double s) { return {a.x * s, a.y * s, a.z * s}; }
-double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
-Vec3 normalized(const Vec3& a) { return scale(a, 1.0 / norm(a)); }
 bool finite(const Vec3& a) {
   return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
 }

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "mr/error.h"
+#include "core/vec3.h"
 #include "photo/ceres_options.h"
 #include "photo/geometry.h"
 #include "photo/illumination.h"
@@ -22,20 +23,13 @@
 namespace mr::photo {
 namespace {
 
+using vec3::cross;  // core/vec3.h
+using vec3::dot;
+using vec3::scale;
+using vec3::sub;
+
 Vec3 add(const Vec3& a, const Vec3& b) {
   return {a.x + b.x, a.y + b.y, a.z + b.z};
-}
-Vec3 sub(const Vec3& a, const Vec3& b) {
-  return {a.x - b.x, a.y - b.y, a.z - b.z};
-}
-Vec3 scale(const Vec3& a, double s) {
-  return {a.x * s, a.y * s, a.z * s};
-}
-double dot(const Vec3& a, const Vec3& b) {
-  return a.x * b.x + a.y * b.y + a.z * b.z;
-}
-Vec3 cross(const Vec3& a, const Vec3& b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 double luminance(const std::array<double, 3>& c) {
   return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
