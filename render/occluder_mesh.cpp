@@ -11,33 +11,14 @@
 #include <string>
 
 #include "mr/error.h"
+#include "render/math.h"
 
 namespace mr::render {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-struct V3 {
-  double x = 0, y = 0, z = 0;
-};
-inline V3 operator+(V3 a, V3 b) {
-  return {a.x + b.x, a.y + b.y, a.z + b.z};
-}
-inline V3 operator-(V3 a, V3 b) {
-  return {a.x - b.x, a.y - b.y, a.z - b.z};
-}
-inline V3 operator*(double s, V3 a) {
-  return {s * a.x, s * a.y, s * a.z};
-}
-inline double dot(V3 a, V3 b) {
-  return a.x * b.x + a.y * b.y + a.z * b.z;
-}
-inline V3 cross(V3 a, V3 b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
-inline double length(V3 a) {
-  return std::sqrt(dot(a, a));
-}
+using V3 = Vec3d;  // render/math.h
 
 /// The camera's rays in the world frame. Pixel (x, y)'s centre is image point (x + 0.5, y + 0.5)
 /// and its corners are the integer image points, as in mr::CameraPose::ray_direction.
