@@ -492,9 +492,10 @@ TEST(SkyThroughHaze, BlurredLavenderBackgroundOfACloseUpIsNotSky) {
   const double haze_edges = created_edges(photo, hazed.composite, cv::Mat(), "lavender_haze_edges");
   const double dense_edges =
       created_edges(photo, dense.composite, cv::Mat(), "lavender_dense_edges");
-  // The background's fog is as smooth as the photo: in dense fog the lavender's transmittance
-  // differs from the sage's below it by little (both stand with the subject), where before the
-  // lavender was opaque (seen through the whole layer) and the sage clear.
+  // In dense fog the lavender stands with the subject, a few metres away, like the sage below
+  // it: before, it was sky, opaque (seen through the whole layer: transmittance 0) next to the
+  // clear sage. Created edges before (the same photo through mr fog --depth auto of the branch
+  // base, gallery/measures.py): haze 0.49 %, dense 0.007 %.
   auto mean_t = [&](const FogLayers& f, int y0, int y1) {
     double sum = 0;
     int count = 0;
@@ -512,7 +513,8 @@ TEST(SkyThroughHaze, BlurredLavenderBackgroundOfACloseUpIsNotSky) {
       100 * dense_edges);
   EXPECT_GT(raw_sky, 0.9);  // the failure class is present
   EXPECT_EQ(sky, 0u);
-  EXPECT_LT(std::abs(t_lavender - t_sage), 0.1);
+  EXPECT_GT(t_lavender, 0.6);
+  EXPECT_GT(t_sage, 0.6);
   EXPECT_LE(haze_edges, 2e-4);
   EXPECT_LE(dense_edges, 2e-4);
 }
