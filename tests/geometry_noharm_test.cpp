@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -310,10 +311,10 @@ TEST(GeometryNoHarm, RobustInverseLine) {
 
 // A portrait with sky (the tuning half's cameraman, a person in front of the sky on a lawn):
 // a dark coat and a head rising from the bottom of the frame far above the horizon, a pale blue
-// sky, a sharp lawn running to a level horizon (the image's middle row: no lines, so the
-// fall-back horizon is right). The person's feet are out of the frame: no contact with the
-// ground, so before, the whole person stood on the far billboard (46 m) and vanished in dense
-// fog. What covers the bottom row hides the ground there: it is no farther than that ground.
+// sky, a sharp lawn running to a level horizon (the image's middle row, given). The person's
+// feet are out of the frame: no contact with the ground, so before, the person stood on the far
+// billboard and faded in dense fog (person median 11 m, transmittance 0.49). What covers the
+// bottom row hides the ground there: it is no farther than that ground.
 TEST(GeometryNoHarm, PersonInFrontOfTheSkyIsNearNotOnTheFarBillboard) {
   cv::Mat m(kH, kW, CV_32FC3);
   std::mt19937 rng(17);
@@ -345,7 +346,12 @@ TEST(GeometryNoHarm, PersonInFrontOfTheSkyIsNearNotOnTheFarBillboard) {
   cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);  // a lens: edges a pixel wide
   const Image photo = to_photo(m);
   dump("portrait_photo", photo);
-  const SceneEstimate est = estimate_scene(photo, kCamera, Annotations{});
+  // The horizon is given (in a real photo: found from its lines, the cameraman's buildings);
+  // under the level fall-back the bottom row is not known to be below the horizon.
+  Annotations horizon;
+  horizon.horizon = std::array<PixelPoint, 2>{PixelPoint{0, kH / 2.0 - 0.5},
+                                              PixelPoint{kW - 1.0, kH / 2.0 - 0.5}};
+  const SceneEstimate est = estimate_scene(photo, kCamera, horizon);
   const GeometryEstimate& g = est.geometry;
   dump("portrait_depth", g.distance_m);
   std::vector<float> d;

@@ -462,8 +462,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           // frame): what covers the bottom row below the horizon hides the ground there, so it
           // stands no farther than that ground: the bottom edge of the frame is its contact,
           // an upper bound (fog errs towards too much). Without it, such a subject went to the
-          // far billboard and vanished in dense fog.
-          const bool off_bottom = yc + 1 >= h;
+          // far billboard and vanished in dense fog. Only with a measured horizon (annotated,
+          // or from the photo's lines): under the level fall-back the bottom row may be above
+          // the true horizon (a camera looking up into a canopy), and there is no ground there.
+          const bool off_bottom = yc + 1 >= h && g.horizon_source != EstimateSource::fallback;
           if (!off_bottom && !ground.ground[std::size_t(yc + 1) * w + x]) continue;
           // Issue 11 item 3: something standing on the ground rises above the horizon by a fair
           // part of what it spans below it; the sea up to a boat, a person or a low wall do not,
