@@ -628,33 +628,6 @@ GroundMask estimate_ground_mask(ConstImageView photo, const std::array<PixelPoin
   cv::Vec3d mean;
   cv::Matx33d inverse;
   std::vector<cv::Vec3d> kept = samples;
-  // Issue 11 (a portrait: a dark coat covering part of the band): a first fit with the mean and
-  // covariance of all samples sits between the ground and the intruder and keeps both; start
-  // from the per-channel median and median absolute deviation instead (right while the ground
-  // is most of the band), and refit from its inliers.
-  {
-    cv::Vec3d median, spread;
-    std::vector<double> v(samples.size());
-    for (int c = 0; c < 3; ++c) {
-      for (std::size_t i = 0; i < samples.size(); ++i) v[i] = samples[i][c];
-      auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
-      std::nth_element(v.begin(), mid, v.end());
-      median[c] = *mid;
-      for (std::size_t i = 0; i < samples.size(); ++i) v[i] = std::abs(samples[i][c] - median[c]);
-      std::nth_element(v.begin(), mid, v.end());
-      spread[c] = 1.4826 * *mid;
-    }
-    std::vector<cv::Vec3d> inliers;
-    for (const auto& p : samples) {
-      double d2 = 0;
-      for (int c = 0; c < 3; ++c) {
-        const double sd = std::max(spread[c], o.min_sigma);
-        d2 += (p[c] - median[c]) * (p[c] - median[c]) / (sd * sd);
-      }
-      if (d2 < 3.0 * 3.0) inliers.push_back(p);
-    }
-    if (int(inliers.size()) >= o.min_samples) kept = std::move(inliers);
-  }
   for (int pass = 0; pass < 4; ++pass) {
     mean = cv::Vec3d(0, 0, 0);
     for (const auto& v : kept) mean += v;
