@@ -527,6 +527,73 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   return out;
 }
 
+CloseUpSky keep_evident_sky(ConstImageView photo, SkyMask& mask, const CloseUpSkyOptions& o) {
+  CloseUpSky out;
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(w) * h;
+  if (w < 1 || h < 1 || photo.channels < 1 || mask.width != w || mask.height != h ||
+      mask.sky.size() != n || mask.alpha.size() != n)
+    return out;
+  cv::Mat support(h, w, CV_8U);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      support.at<std::uint8_t>(y, x) = mask.sky[i] != 0 || mask.alpha[i] > 0;
+    }
+  cv::Mat labels;
+  const int m = cv::connectedComponents(support, labels, 8, CV_32S);
+  if (m <= 1) return out;
+  const cv::Mat display = display_rgb(photo);
+  std::vector<cv::Vec3d> sum(std::size_t(m), cv::Vec3d(0, 0, 0));
+  std::vector<std::size_t> sky_count(std::size_t(m), 0), top_run(std::size_t(m), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int l = labels.at<int>(y, x);
+      const std::size_t i = std::size_t(y) * w + x;
+      if (l == 0 || !mask.sky[i]) continue;
+      const cv::Vec3f& p = display.at<cv::Vec3f>(y, x);
+      sum[std::size_t(l)] += cv::Vec3d(p[0], p[1], p[2]);
+      ++sky_count[std::size_t(l)];
+      if (y == 0) ++top_run[std::size_t(l)];
+    }
+  std::vector<std::uint8_t> keep(std::size_t(m), 0);
+  for (int l = 1; l < m; ++l) {
+    const std::size_t k = std::size_t(l);
+    if (sky_count[k] == 0 || double(top_run[k]) < o.min_top_fraction * w) continue;
+    const cv::Vec3d c = sum[k] * (1.0 / double(sky_count[k]));
+    const double mx = std::max({c[0], c[1], c[2]}), mn = std::min({c[0], c[1], c[2]});
+    if (!(mx > 1e-6) || !((mx - mn) / mx >= o.min_saturation)) continue;
+    // Hue in degrees (the hexcone's), from the mean colour.
+    const double d = mx - mn;
+    double hue = mx == c[0]   ? 60 * std::fmod((c[1] - c[2]) / d, 6.0)
+                 : mx == c[1] ? 60 * ((c[2] - c[0]) / d + 2)
+                              : 60 * ((c[0] - c[1]) / d + 4);
+    if (hue < 0) hue += 360;
+    keep[k] = hue >= o.min_hue_deg && hue <= o.max_hue_deg;
+  }
+  std::size_t kept = 0, dropped = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int l = labels.at<int>(y, x);
+      if (l == 0) continue;
+      const std::size_t i = std::size_t(y) * w + x;
+      if (keep[std::size_t(l)]) {
+        kept += mask.sky[i] != 0;
+        continue;
+      }
+      dropped += mask.sky[i] != 0;
+      mask.sky[i] = 0;
+      mask.alpha[i] = 0.0f;
+    }
+  if (mask.pixels > 0)
+    mask.gap_pixels = std::size_t(std::lround(double(mask.gap_pixels) * double(kept) /
+                                              double(mask.pixels)));
+  mask.pixels = kept;
+  out.kept_pixels = kept;
+  out.dropped_pixels = dropped;
+  return out;
+}
+
 GroundMask estimate_ground_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
                                 const std::vector<std::uint8_t>& sky, const GroundMaskOptions& o) {
   GroundMask out;

@@ -88,6 +88,34 @@ struct SkyMask {
 SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
                           const SkyMaskOptions& options = {});
 
+/// Issue 11: a close-up's background (a bee on a flower, a bird on a trunk) is blurred smooth
+/// by the shallow depth of field, and a smooth lavender, green-grey or pale grey bokeh passes
+/// the sky tests above. Seen through the whole fog layer it becomes a flat, hard-edged patch of
+/// fog colour next to a subject one to three metres away. In a close-up (the caller decides,
+/// photo/geometry.h estimate_defocus) what the mask calls sky is kept only with a clear sky's
+/// evidence: the component (of the matte's support, alpha > 0, 8-connected) reaches the top
+/// border along at least `min_top_fraction` of the frame's width, and its mean display-referred
+/// colour is a clear sky's blue: hue within [min_hue_deg, max_hue_deg] (a daylight sky in sRGB
+/// is about 200-230 degrees; lavender and violet bokeh 250-290) and saturation at least
+/// `min_saturation` (a pale blue-grey or white backdrop is not enough). The rest becomes surface
+/// (sky 0, alpha 0): in a close-up it stands at the scene's bounded depth with the subject, and
+/// the fog over the whole background is as smooth as the photo. Dropping a real sky costs only a
+/// lighter fog over it; keeping bokeh as sky cuts a hard patch into the photo.
+struct CloseUpSkyOptions {
+  double min_top_fraction = 0.15;
+  double min_hue_deg = 185, max_hue_deg = 245;
+  double min_saturation = 0.2;
+};
+struct CloseUpSky {
+  std::size_t kept_pixels = 0;     ///< sky pixels (alpha >= 0.5) left as sky
+  std::size_t dropped_pixels = 0;  ///< sky pixels made surface
+};
+/// Updates `mask` (sky, alpha, pixels; gap_pixels scaled by what is left) in place; `photo`:
+/// scene-linear, the mask's size. Never throws for any image content; a mask of another size is
+/// left alone.
+CloseUpSky keep_evident_sky(ConstImageView photo, SkyMask& mask,
+                            const CloseUpSkyOptions& options = {});
+
 /// Ground-coloured pixels (issue 4 item 2: where structures meet the ground). The ground's
 /// colour is modelled from the bottom band of the photo (the lowest `band_fraction` of the rows,
 /// the middle `band_width_fraction` of the columns (walls and kerbs line the sides), at least

@@ -313,7 +313,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // Issue 11: a close-up or an interior, where the sky mask finds (next to) no sky, has no
   // horizon to run the ground to.
   constexpr double kBoundedSkyFraction = 0.002;
-  const bool bounded = double(mask.pixels) < kBoundedSkyFraction * double(n);
+  bool bounded = double(mask.pixels) < kBoundedSkyFraction * double(n);
   // Issue 11 item 3: the scale of a scene nobody measured. A photo without any sky shows no
   // horizon and no ground running to it: an interior, a close-up, a wall, a field seen from
   // above. Its far billboard at the outdoor default (46 m from 1.6 m) makes a close-up vanish
@@ -341,10 +341,21 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     double limit_m = kInfinity;
     std::string cue;
     if (closeup) {
+      // Issue 11: a close-up's smooth, blurred background passes for sky (lavender, green-grey
+      // or pale bokeh); seen through the whole fog layer it would be a flat, hard-edged patch
+      // of fog colour beside a subject metres away. Only a clear blue sky across the top stays
+      // sky; the rest is the background surface at the close-up's bounded depth
+      // (photo/sky_mask.h, keep_evident_sky).
+      const photo::CloseUpSky kept = photo::keep_evident_sky(photo->view(), mask);
+      bounded = double(mask.pixels) < kBoundedSkyFraction * double(n);
       limit_m = options.closeup_scene_depth_m;
       cue = "close-up (" + fmt("%.0f", 100 * defocus.blurred_fraction()) +
             " % of the frame strongly out of focus, " +
-            fmt("%.0f", 100 * defocus.sharp_fraction()) + " % sharp)";
+            fmt("%.0f", 100 * defocus.sharp_fraction()) + " % sharp";
+      if (kept.dropped_pixels > 0)
+        cue += "; " + fmt("%.1f", 100.0 * double(kept.dropped_pixels) / double(n)) +
+               " % of the frame blurred background, not sky";
+      cue += ")";
     } else if (bounded) {
       limit_m = options.bounded_scene_depth_m;
       cue = "no sky: a bounded scene";
@@ -446,8 +457,16 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
                   width = stats.at<int>(l, cv::CC_STAT_WIDTH);
         for (int k = 0; k < width; ++k) {
           const int x = left + k, yc = lowest[offset[l] + k];
-          if (yc < 0 || yc + 1 >= h || !(yc >= horizon_y(x) + 1)) continue;
-          if (!ground.ground[std::size_t(yc + 1) * w + x]) continue;
+          if (yc < 0 || !(yc >= horizon_y(x) + 1)) continue;
+          // Issue 11 item 2 (a person or a plant in front of the sky, its foot out of the
+          // frame): what covers the bottom row below the horizon hides the ground there, so it
+          // stands no farther than that ground: the bottom edge of the frame is its contact,
+          // an upper bound (fog errs towards too much). Without it, such a subject went to the
+          // far billboard and vanished in dense fog. Only with a measured horizon (annotated,
+          // or from the photo's lines): under the level fall-back the bottom row may be above
+          // the true horizon (a camera looking up into a canopy), and there is no ground there.
+          const bool off_bottom = yc + 1 >= h && g.horizon_source != EstimateSource::fallback;
+          if (!off_bottom && !ground.ground[std::size_t(yc + 1) * w + x]) continue;
           // Issue 11 item 3: something standing on the ground rises above the horizon by a fair
           // part of what it spans below it; the sea up to a boat, a person or a low wall do not,
           // and made into a billboard they become a wall of columns with seams between them.
