@@ -28,7 +28,7 @@ using shadow::Ray;
 std::vector<Ray> random_rays(int count, std::uint32_t seed, float lo, float hi) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> pos(lo, hi), dir(-1, 1), len(0.05f, 2.0f), u(0, 1);
-  std::vector<Ray> rays(std::size_t(count));
+  std::vector<Ray> rays(static_cast<std::size_t>(count));
   for (Ray& r : rays) {
     r.origin = {pos(rng), pos(rng), pos(rng)};
     r.direction = {dir(rng), dir(rng), dir(rng)};
@@ -248,7 +248,7 @@ TEST(ShadowTraversal, RopesReachTheLeafARootDescentFinds) {
     ASSERT_GT(tree.leaf_count(), 100u);
     std::mt19937 rng(1);
     std::uniform_real_distribution<float> u(0.01f, 0.99f), e(-1, 1);
-    int checked = 0, boundary = 0;
+    int checked = 0, boundary = 0, ties = 0;
     const std::size_t stride = std::max<std::size_t>(1, tree.leaf_count() / 3000);
     for (std::uint32_t leaf = 0; leaf < tree.leaf_count(); leaf += std::uint32_t(stride)) {
       const shadow::Box& box = tree.leaf_box(leaf);
@@ -268,7 +268,16 @@ TEST(ShadowTraversal, RopesReachTheLeafARootDescentFinds) {
           ++boundary;
           continue;
         }
-        EXPECT_EQ(via_rope, tree.leaf_at(p, dir)) << "leaf " << leaf << " face " << face;
+        const std::uint32_t by_descent = tree.leaf_at(p, dir);
+        // p on an edge of the face (tiny leaves: the random point rounded onto the box's
+        // boundary on another axis) lies in several neighbours; either is right.
+        bool on_edge = false;
+        for (int k = 0; k < 3; ++k)
+          on_edge = on_edge || (k != axis && (p[std::size_t(k)] == box.lo[k] || p[std::size_t(k)] == box.hi[k]));
+        if (on_edge) ++ties;
+        if (!on_edge) {
+          EXPECT_EQ(via_rope, by_descent) << "leaf " << leaf << " face " << face;
+        }
         // The neighbour touches the face and holds p.
         const shadow::Box& nb = tree.leaf_box(via_rope);
         EXPECT_EQ((face & 1) ? nb.lo[axis] : nb.hi[axis], p[std::size_t(axis)]);
@@ -281,6 +290,9 @@ TEST(ShadowTraversal, RopesReachTheLeafARootDescentFinds) {
     }
     EXPECT_GT(checked, 1000);
     EXPECT_GT(boundary, 0);
+    EXPECT_LT(ties, checked / 100);
+    std::printf("ropes: %d faces checked, %d on the scene boundary, %d points on a face's edge\n",
+                checked, boundary, ties);
   }
 }
 
