@@ -15,8 +15,9 @@
 //  * Orders (any-hit traversal with a stack):
 //      standard     front to back along the ray (as for a nearest hit);
 //      sato         Nah & Manocha 2014: a fixed order per node, the child with the larger
-//                   occlusion chance per unit of traversal cost first, here its triangles' area
-//                   over its SAH cost (the paper's "surface area" metrics; no ray set);
+//                   occlusion chance per unit of traversal cost first, here
+//                   min(1, 2 x its triangles' area / its box's area) over its SAH cost (in the
+//                   spirit of the paper's surface-area metrics; no ray set);
 //      srdh         Feltman, Lee & Fatahalian 2012's idea of specialising to a representative
 //                   shadow-ray set: the order per node from sample rays (the child with the
 //                   larger measured P(occluded | entered) / measured cost first). Simplified:
@@ -29,7 +30,8 @@
 //                   in node) / SA(node), if that exceeds `lift_min_gain`; at most
 //                   `lift_max_per_node` per node; they stay in their leaves too, and a ray
 //                   remembers the lifted triangles it tested and skips them there. A ray
-//                   predicted occluded tests a node's lifted triangles before descending.
+//                   predicted occluded tests a node's lifted triangles before descending
+//                   (front to back, as the standard traversal).
 //                   (b) neighbour (rope) indices: each leaf face points to the smallest node
 //                   holding the whole neighbouring face (Havran; Popov et al. 2007), so a ray
 //                   predicted unoccluded walks leaf to leaf without restarting from the root.
@@ -107,8 +109,8 @@ class KdTree {
   /// Any hit with a stack traversal in the given order (the baseline and SATO; SRDH once
   /// train_srdh has run, else it behaves as SATO). `counters` may be null.
   bool occluded(const Ray& ray, Order order, KindCounters* counters = nullptr) const;
-  /// The multi-index traversal: `predict_occluded` true = lifted indices first (stack
-  /// traversal in SATO order), false = rope walk. Same answers as occluded().
+  /// The multi-index traversal: `predict_occluded` true = lifted indices first (front-to-back
+  /// stack traversal), false = rope walk. Same answers as occluded().
   bool occluded_multi_index(const Ray& ray, bool predict_occluded,
                             KindCounters* counters = nullptr) const;
   /// SRDH's per-node order from a representative ray set (each traced through both children of
