@@ -376,9 +376,16 @@ TEST(ShadowTraversal, CpuRendersAreIdenticalWithEitherTraversal) {
   s.render.backend = Backend::cpu;
   s.render.threads = 2;
   s.render.shadow_traversal = ShadowTraversal::embree;
+  const std::uint64_t packets0 = MultiIndexShadowQuery::packets_traced();
   const ScatteringLayers a = render_scattering(in.photo, in.depth, in.camera, s);
+  const std::uint64_t packets1 = MultiIndexShadowQuery::packets_traced();
   s.render.shadow_traversal = ShadowTraversal::multi_index;
   const ScatteringLayers b = render_scattering(in.photo, in.depth, in.camera, s);
+  const std::uint64_t packets2 = MultiIndexShadowQuery::packets_traced();
+  EXPECT_EQ(packets1, packets0);      // Embree's render did not use the tree
+  EXPECT_GT(packets2, packets1 + 1000);  // the other one did, for its shadow rays
+  std::printf("multi-index render: %llu shadow packets on the tree\n",
+              (unsigned long long)(packets2 - packets1));
   ASSERT_EQ(a.inscatter.pixels().size(), b.inscatter.pixels().size());
   std::size_t differing = 0;
   for (std::size_t i = 0; i < a.inscatter.pixels().size(); ++i)

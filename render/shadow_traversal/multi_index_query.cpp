@@ -1,5 +1,7 @@
 #include "render/shadow_traversal/multi_index_query.h"
 
+#include <atomic>
+
 #include "render/embree_scene.h"
 
 namespace mr::render {
@@ -7,7 +9,12 @@ namespace mr::render {
 namespace {
 // The previous outcome on this thread: the prediction for the next ray (starts "unoccluded").
 thread_local bool previous_occluded = false;
+std::atomic<std::uint64_t> packet_count{0};
 }  // namespace
+
+std::uint64_t MultiIndexShadowQuery::packets_traced() {
+  return packet_count.load(std::memory_order_relaxed);
+}
 
 MultiIndexShadowQuery::MultiIndexShadowQuery(const TriangleMesh& mesh,
                                              const shadow::KdTreeOptions& options)
@@ -23,6 +30,7 @@ bool MultiIndexShadowQuery::occluded(const std::array<float, 3>& origin,
 }
 
 void MultiIndexShadowQuery::occluded8(const RayPacket8& rays, bool occluded_out[8]) const {
+  packet_count.fetch_add(1, std::memory_order_relaxed);
   bool predict = previous_occluded;
   for (int k = 0; k < 8; ++k) {
     if (rays.valid[k] == 0) {

@@ -3,6 +3,7 @@
 // prediction, and Embree's OccluderScene behind the same interface.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 
 #include "render/occluder_mesh.h"
@@ -26,6 +27,8 @@ class MultiIndexShadowQuery final : public ShadowQuery {
   void occluded8(const RayPacket8& rays, bool occluded_out[8]) const override;
   const char* name() const override { return "multi-index"; }
   const shadow::KdTree& tree() const { return tree_; }
+  /// Packets traced by all MultiIndexShadowQuery objects so far (tests: that a render used it).
+  static std::uint64_t packets_traced();
 
  private:
   shadow::KdTree tree_;
