@@ -204,6 +204,15 @@ FogPlan make_plan(const FogCommandOptions& o) {
       throw Error(ErrorCode::invalid_argument,
                   "--backend '" + o.backend + "': expected auto, cpu or vulkan");
   }
+  if (!o.shadow_traversal.empty()) {
+    if (o.shadow_traversal == "embree")
+      scene.render.shadow_traversal = ShadowTraversal::embree;
+    else if (o.shadow_traversal == "multi-index")
+      scene.render.shadow_traversal = ShadowTraversal::multi_index;
+    else
+      throw Error(ErrorCode::invalid_argument, "--shadow-traversal '" + o.shadow_traversal +
+                                                   "': expected embree or multi-index");
+  }
   // Photos in parallel already use the cores; each render gets what its arena allows.
   validate_scene(scene);
 
@@ -682,6 +691,9 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
   cmd->add_option(
       "--backend", o.backend,
       "auto, cpu or vulkan [default: auto: Vulkan on a GPU, else the CPU with a notice]");
+  cmd->add_option("--shadow-traversal", o.shadow_traversal,
+                  "CPU shadow rays: embree or multi-index (seed 004's kd-tree; same answers, "
+                  "see README 'Shadow-ray traversal') [default: embree]");
   cmd->add_option("--sun-azimuth", o.sun_azimuth_deg,
                   "Sun azimuth, degrees (0 = the camera's forward at yaw 0, 90 = right)");
   cmd->add_option("--sun-elevation", o.sun_elevation_deg,

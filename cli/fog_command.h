@@ -42,6 +42,7 @@ struct FogCommandOptions {
   std::string save_scene_path;  ///< --save-scene: write the resolved scene
   std::string quality;
   std::string backend;  ///< --backend auto|cpu|vulkan
+  std::string shadow_traversal;  ///< --shadow-traversal embree|multi-index (issue 17)
   std::optional<double> sun_azimuth_deg, sun_elevation_deg;
   std::string sun_direction;    ///< "x,y,z"
   std::string sun_irradiance;   ///< "v", "R,G,B" or "auto" (empty: auto unless --scene has a sun)

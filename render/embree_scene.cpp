@@ -173,7 +173,8 @@ OccluderScene::OccluderScene(OccluderScene&& other) noexcept
       device_(std::exchange(other.device_, nullptr)),
       scene_(std::exchange(other.scene_, nullptr)),
       extra_scene_(std::exchange(other.extra_scene_, nullptr)),
-      native_ray8_(other.native_ray8_) {}
+      native_ray8_(other.native_ray8_),
+      shadow_query_(std::move(other.shadow_query_)) {}
 
 OccluderScene& OccluderScene::operator=(OccluderScene&& other) noexcept {
   if (this != &other) {
@@ -184,6 +185,7 @@ OccluderScene& OccluderScene::operator=(OccluderScene&& other) noexcept {
     scene_ = std::exchange(other.scene_, nullptr);
     extra_scene_ = std::exchange(other.extra_scene_, nullptr);
     native_ray8_ = other.native_ray8_;
+    shadow_query_ = std::move(other.shadow_query_);
   }
   return *this;
 }

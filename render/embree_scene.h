@@ -9,8 +9,10 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <utility>
 
 #include "render/occluder_mesh.h"
+#include "render/shadow_query.h"
 
 namespace mr::render {
 
@@ -81,6 +83,10 @@ class OccluderScene {
   const TriangleMesh& mesh() const { return mesh_; }
   /// Whether occluded8 uses Embree's native 8-wide packet kernel.
   bool native_packets() const { return native_ray8_; }
+  /// Issue 17: another traversal of the same mesh (render/shadow_query.h) that occluded_rays
+  /// uses instead of Embree; null (the default): Embree. Set before the scene is shared.
+  void set_shadow_query(std::shared_ptr<const ShadowQuery> query) { shadow_query_ = std::move(query); }
+  const ShadowQuery* shadow_query() const { return shadow_query_.get(); }
 
  private:
   struct ErrorSink;
@@ -92,6 +98,7 @@ class OccluderScene {
   RTCScene scene_ = nullptr;        // the surface triangles (mesh_.surface_triangle_count)
   RTCScene extra_scene_ = nullptr;  // the triangles after them, if any (extrusions, blockers)
   bool native_ray8_ = false;
+  std::shared_ptr<const ShadowQuery> shadow_query_;
 };
 
 /// One shadow ray for occluded_rays: from `origin` along `direction` (need not be unit length),
@@ -124,7 +131,10 @@ void occluded_rays(const OccluderScene& scene, std::size_t count, MakeRay&& make
       packet.t_near[k] = ray.t_near;
       packet.t_far[k] = ray.t_far;
     }
-    scene.occluded8(packet, hit);
+    if (const ShadowQuery* query = scene.shadow_query())
+      query->occluded8(packet, hit);
+    else
+      scene.occluded8(packet, hit);
     for (int k = 0; k < 8 && first + std::size_t(k) < count; ++k) blocked(first + std::size_t(k), hit[k]);
   }
 }

@@ -2,12 +2,14 @@
 
 #include <chrono>
 #include <cstring>
+#include <memory>
 #include <mutex>
 #include <utility>
 #include <vector>
 
 #include "render/blockers.h"
 #include "render/depth_downsample.h"
+#include "render/shadow_traversal/multi_index_query.h"
 
 namespace mr::render {
 
@@ -70,6 +72,7 @@ struct Entry {
   Blockers blockers;
   int mesh_step = 1;
   MeshOptions mesh_options;
+  ShadowTraversal shadow_traversal = ShadowTraversal::embree;
   std::shared_ptr<const OccluderGeometry> geometry;
 };
 
@@ -88,7 +91,7 @@ bool matches(const Entry& e, const OccluderGeometryRequest& r) {
       pa.pitch_deg != pb.pitch_deg || pa.roll_deg != pb.roll_deg)
     return false;
   if (e.mesh_step != r.mesh_step || !same(e.mesh_options, r.mesh_options) ||
-      !same(e.blockers, *r.blockers))
+      !same(e.blockers, *r.blockers) || e.shadow_traversal != r.shadow_traversal)
     return false;
   // Bit for bit (memcmp: +inf sky compares equal to itself, as it should).
   for (int y = 0; y < d.height; ++y)
@@ -146,6 +149,9 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   throw_if_cancelled(r.cancel, what);
   start = Clock::now();
   if (mesh.triangle_count() > 0) geometry->occluders.emplace(std::move(mesh));
+  if (geometry->occluders && r.shadow_traversal == ShadowTraversal::multi_index)
+    geometry->occluders->set_shadow_query(
+        std::make_shared<MultiIndexShadowQuery>(geometry->occluders->mesh()));
   t.bvh_s = seconds_since(start);
 
   auto entry = std::make_shared<Entry>();
@@ -161,6 +167,7 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   entry->blockers = *r.blockers;
   entry->mesh_step = r.mesh_step;
   entry->mesh_options = r.mesh_options;
+  entry->shadow_traversal = r.shadow_traversal;
   entry->geometry = geometry;
   {
     const std::lock_guard lock(cache_mutex);

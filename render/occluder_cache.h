@@ -35,6 +35,9 @@ struct OccluderGeometryRequest {
   int mesh_step = 1;
   MeshOptions mesh_options;
   const CancelToken* cancel = nullptr;  ///< checked between the stages
+  /// multi_index: the scene's shadow queries go to the multi-index kd-tree (issue 17), built
+  /// with the BVH (its time is in bvh_s) and attached with OccluderScene::set_shadow_query.
+  ShadowTraversal shadow_traversal = ShadowTraversal::embree;
 };
 
 struct OccluderGeometryTimings {

@@ -118,6 +118,11 @@ enum class Quality { draft, normal, final };
 /// device (lavapipe) is never picked automatically, the CPU backend being faster there.
 /// vulkan: the Vulkan backend on the best device, lavapipe included; an error if there is none.
 enum class Backend { automatic, cpu, vulkan };
+/// How the CPU backend answers its shadow rays (issue 17): Embree's BVH (the default), or the
+/// multi-index kd-tree of seed 004 (lifted primitive indices, leaf ropes, per-ray prediction).
+/// Both give the same answers (watertight triangle tests aside: see render/shadow_traversal/);
+/// the table in README.md ("Shadow-ray traversal") says which is faster where.
+enum class ShadowTraversal { embree, multi_index };
 
 /// How the core renders. Quality presets set the march steps and the gradient-acceleration
 /// grid; explicit fields override them (0 = from the preset).
@@ -133,6 +138,7 @@ struct MR_API RenderSettings {
                               ///< or leaving the layer, at most 100 km)
   std::uint32_t seed = 1;     ///< jitter seed; equal seeds give identical images
   int threads = 0;            ///< 0: all cores
+  ShadowTraversal shadow_traversal = ShadowTraversal::embree;  ///< CPU backend only
 };
 
 /// The intrinsics of the camera a scene was made for (what `mr estimate` found: EXIF, the

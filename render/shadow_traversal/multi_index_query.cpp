@@ -1,0 +1,60 @@
+#include "render/shadow_traversal/multi_index_query.h"
+
+#include <atomic>
+
+#include "render/embree_scene.h"
+
+namespace mr::render {
+
+namespace {
+// The previous outcome on this thread: the prediction for the next ray (starts "unoccluded").
+thread_local bool previous_occluded = false;
+std::atomic<std::uint64_t> packet_count{0};
+}  // namespace
+
+std::uint64_t MultiIndexShadowQuery::packets_traced() {
+  return packet_count.load(std::memory_order_relaxed);
+}
+
+MultiIndexShadowQuery::MultiIndexShadowQuery(const TriangleMesh& mesh,
+                                             const shadow::KdTreeOptions& options)
+    : tree_(mesh, options) {}
+
+bool MultiIndexShadowQuery::occluded(const std::array<float, 3>& origin,
+                                     const std::array<float, 3>& direction, float t_near,
+                                     float t_far) const {
+  const bool hit =
+      tree_.occluded_multi_index(shadow::Ray{origin, direction, t_near, t_far}, previous_occluded);
+  previous_occluded = hit;
+  return hit;
+}
+
+void MultiIndexShadowQuery::occluded8(const RayPacket8& rays, bool occluded_out[8]) const {
+  packet_count.fetch_add(1, std::memory_order_relaxed);
+  bool predict = previous_occluded;
+  for (int k = 0; k < 8; ++k) {
+    if (rays.valid[k] == 0) {
+      occluded_out[k] = false;
+      continue;
+    }
+    const shadow::Ray ray{{rays.origin_x[k], rays.origin_y[k], rays.origin_z[k]},
+                          {rays.direction_x[k], rays.direction_y[k], rays.direction_z[k]},
+                          rays.t_near[k],
+                          rays.t_far[k]};
+    occluded_out[k] = tree_.occluded_multi_index(ray, predict);
+    predict = occluded_out[k];
+  }
+  previous_occluded = predict;
+}
+
+bool EmbreeShadowQuery::occluded(const std::array<float, 3>& origin,
+                                 const std::array<float, 3>& direction, float t_near,
+                                 float t_far) const {
+  return scene_.occluded(origin, direction, t_near, t_far);
+}
+
+void EmbreeShadowQuery::occluded8(const RayPacket8& rays, bool occluded_out[8]) const {
+  scene_.occluded8(rays, occluded_out);
+}
+
+}  // namespace mr::render
