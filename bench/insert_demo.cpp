@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
                            Look{"4_overcast_fog", false, true}}) {
     mr::FogScene s = scene;
     if (look.sun) {
-      s.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(-60, 30), {3, 3, 3}, 0.27};
+      s.lighting.sun = mr::Sun{mr::direction_from_azimuth_elevation(110, 35), {3, 3, 3}, 0.27};
       s.lighting.sun->irradiance_auto = true;
     }
     mr::InsertOptions options;

@@ -38,6 +38,7 @@ InsertOptions InsertOptions::preview() {
   o.sun_rays = 4;
   o.sky_rays = 8;
   o.mesh_step = 2;
+  o.sky_influence_radii = 4;
   return o;
 }
 
@@ -146,6 +147,9 @@ InsertResult insert_objects(const Image& photo, const Image& distance_m, const C
   settings.sun_rays = options.sun_rays;
   settings.sky_rays = options.sky_rays;
   settings.depth_tolerance = options.depth_tolerance;
+  if (!(options.sky_influence_radii >= 1))
+    throw Error(ErrorCode::invalid_argument, "insert objects: sky_influence_radii must be >= 1");
+  settings.sky_influence_radii = options.sky_influence_radii;
   settings.threads = options.threads;
   render::insertion::InsertionLayers layers = render::insertion::render_insertion(in, settings);
   result.timings.render_s = seconds_since(render_start);

@@ -294,6 +294,17 @@ InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSetti
   out.object_radiance = Image(w, h, 3);
   std::atomic<std::size_t> shadow_rays{0}, camera_rays{0};
 
+  // CameraPose::ray_direction with the axes computed once (it recomputes them per call).
+  const auto cam_axes = in.pose.axes();
+  auto ray_direction = [&](double x, double y) {
+    const double u = (x + 0.5 - in.camera.cx) / in.camera.focal_px, v = (y + 0.5 - in.camera.cy) / in.camera.focal_px;
+    const Vec3& f = cam_axes[0];
+    const Vec3& r = cam_axes[1];
+    const Vec3& up = cam_axes[2];
+    const double dx = u * r.x - v * up.x + f.x, dy = u * r.y - v * up.y + f.y, dz = u * r.z - v * up.z + f.z;
+    const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
+    return Vec3f{float(dx / len), float(dy / len), float(dz / len)};
+  };
   const float tol = float(settings.depth_tolerance);
   // The per-pixel occlusion test, bilinearly filtered (see the header).
   auto depth_visibility = [&](float sx, float sy, float t) {
@@ -329,21 +340,10 @@ InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSetti
           Rgb ratio = {1, 1, 1};
           const Vec3f n = {in.normals.at(x, y, 0), in.normals.at(x, y, 1), in.normals.at(x, y, 2)};
           if (std::isfinite(d) && d > 0 && dot(n, n) > 0.5f && !world.bounds.empty()) {
-            const Vec3f ray = to_f(in.pose.ray_direction(in.camera, x, y));
+            const Vec3f ray = ray_direction(x, y);
             const Vec3f p = add3(eye, ray, d);
             const float lift = 1e-3f + 1e-3f * d;
             const Vec3f origin = add3(p, n, lift);
-            // The pixel's footprint on its tangent plane: one origin per camera sample position,
-            // so shadow edges crossing the pixel are anti-aliased (as the photo's own are).
-            Vec3f origins[64];
-            int origin_count = 0;
-            for (int k = 0; k < S2; ++k) {
-              const float sx = float(x) + (float(k % S) + 0.5f) / float(S), sy = float(y) + (float(k / S) + 0.5f) / float(S);
-              const Vec3f r = to_f(in.pose.ray_direction(in.camera, double(sx) - 0.5, double(sy) - 0.5));
-              const float denom = dot(r, n);
-              const float t = denom < -1e-3f ? dot(sub3(p, eye), n) / denom : -1.0f;
-              origins[origin_count++] = (t > 0.9f * d && t < 1.1f * d) ? add3(add3(eye, r, t), n, lift) : origin;
-            }
             const float footprint = 2.0f * d / float(in.camera.focal_px);
             bool sun_maybe = false, sky_maybe = false, lamp_maybe = false;
             for (const auto& s : world.bounds) {
@@ -358,6 +358,17 @@ InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSetti
               }
             }
             if (sun_maybe || sky_maybe || lamp_maybe) {
+              // The pixel's footprint on its tangent plane: one origin per camera sample position,
+              // so shadow edges crossing the pixel are anti-aliased (as the photo's own are).
+              Vec3f origins[64];
+              int origin_count = 0;
+              for (int k = 0; k < S2; ++k) {
+                const float sx = float(x) + (float(k % S) + 0.5f) / float(S), sy = float(y) + (float(k / S) + 0.5f) / float(S);
+                const Vec3f r = ray_direction(double(sx) - 0.5, double(sy) - 0.5);
+                const float denom = dot(r, n);
+                const float t = denom < -1e-3f ? dot(sub3(p, eye), n) / denom : -1.0f;
+                origins[origin_count++] = (t > 0.9f * d && t < 1.1f * d) ? add3(add3(eye, r, t), n, lift) : origin;
+              }
               build_rays(set, L, origins, origin_count, n, rotation, 0, 1, L.sun ? L.sun_rays : 0, 0, 1, sky_total,
                          std::max(sky_total, 1));
               const std::span<const ShadowRay> rays(set.rays, std::size_t(set.size));
@@ -391,7 +402,7 @@ InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSetti
           Rgb radiance = {0, 0, 0};
           float new_distance = d;
           if (in_rect) {
-            const Vec3f centre_ray = to_f(in.pose.ray_direction(in.camera, x, y));
+            const Vec3f centre_ray = ray_direction(x, y);
             const ObjectHit centre = in.objects->intersect(eye, centre_ray, 0.0f);
             ++local_camera;
             if (centre.hit() && depth_visibility(float(x) + 0.5f, float(y) + 0.5f, centre.t) >= 0.5f)
@@ -404,8 +415,7 @@ InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSetti
               const std::uint32_t hk = physics::hash32(seed ^ (0x9E3779B9u * std::uint32_t(k + 1)));
               const float jx = float(hk & 0xFFFF) / 65536.0f, jy = float(hk >> 16) / 65536.0f;
               const float sx = float(x) + (float(si) + jx) / float(S), sy = float(y) + (float(sj) + jy) / float(S);
-              const Vec3 dir_d = in.pose.ray_direction(in.camera, double(sx) - 0.5, double(sy) - 0.5);
-              const Vec3f dir = to_f(dir_d);
+              const Vec3f dir = ray_direction(double(sx) - 0.5, double(sy) - 0.5);
               const ObjectHit hit = in.objects->intersect(eye, dir, 0.0f);
               ++local_camera;
               if (!hit.hit()) continue;
