@@ -20,6 +20,10 @@
 #include "output_safety.h"
 #include "mr/scene_json.h"
 #include "progress.h"
+#ifdef MR_CLI_INSERT
+#include "mr/insert.h"
+#include "mr/object_io.h"
+#endif
 
 namespace fs = std::filesystem;
 
@@ -428,6 +432,9 @@ std::optional<Outcome> run_streamed(const FogCommandOptions& o, const FogPlan& p
                                     const Job& job, Reporter& report) {
   if (!is_sky_only(plan.scene) || plan.scene.render.backend == Backend::vulkan || o.aovs)
     return std::nullopt;
+#ifdef MR_CLI_INSERT
+  if (!plan.scene.objects.empty()) return std::nullopt;  // objects: the full-frame path
+#endif
   const PhotoProgress progress(report, job.photo.string(), {{{"render"}, 1}});
   std::error_code ec;
   if (o.depth == "auto" && !fs::exists(job.depth, ec)) return std::nullopt;
@@ -531,7 +538,7 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
                                 {{"occluders"}, lights ? 1.0 : 0.0},
                                 {{"render"}, 2}});
   Image sky_alpha;  // the estimate's soft sky matte (empty for a depth file)
-  const DepthMap depth =
+  DepthMap depth =
       estimated ? estimate_depth(o, job, photo, camera, scene, progress.token(), sky_alpha)
                 : read_depth(job.depth, camera, plan.depth);
   // Issue 11 item 4: an estimated scene's fog lies in a layer with a top, so the sky is seen
@@ -544,6 +551,32 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
                    depth.invalid_pixels, depth.sky_threshold_pixels, depth.clamped_pixels);
+#ifdef MR_CLI_INSERT
+  // Issue 16: the scene document's objects are composited into the photo first (mr/insert.h);
+  // then they take part in the fog like the photo's surfaces: their distance where they are in
+  // front, their triangles among the shadow casters (shafts).
+  if (!scene.objects.empty()) {
+    const fs::path document =
+        is_pattern(o.scene_path) ? expand_pattern(o.scene_path, job.photo) : fs::path(o.scene_path);
+    std::vector<InsertObject> objects;
+    for (const SceneObject& so : scene.objects) {
+      InsertObject io;
+      io.mesh = resolve_object_mesh(so, document.parent_path());
+      for (const std::string& w : io.mesh.warnings) report.warning(w);
+      io.placement = so.placement;
+      io.material = so.material;
+      objects.push_back(std::move(io));
+    }
+    InsertOptions insert_options;
+    insert_options.threads = o.threads;
+    InsertResult inserted = insert_objects(photo, depth.distance_m, camera, scene, objects,
+                                           insert_options, progress.token());
+    photo = std::move(inserted.clear_composite);
+    depth.distance_m = std::move(inserted.distance_m);
+    for (Blockers::Polygon& p : object_shadow_polygons(objects))
+      scene.blockers.polygons.push_back(std::move(p));
+  }
+#endif
   ScatteringLayers aovs;
   const FogLayers layers =
       fog(photo, depth.distance_m, sky_alpha, camera, scene, &aovs, progress.token());

@@ -171,6 +171,19 @@ double quad_hit(const Quad& q, const Vec3& o, const Vec3& d) {
   return t;
 }
 
+// The nearest t > kRayEpsilon where the unit ray meets the sphere, or +inf.
+double sphere_hit(const Sphere& s, const Vec3& o, const Vec3& d) {
+  const Vec3 q = o - s.centre;
+  const double b = dot(q, d), c = dot(q, q) - s.radius * s.radius;
+  const double disc = b * b - c;
+  if (disc < 0) return kInfinity;
+  const double root = std::sqrt(disc);
+  const double t0 = -b - root, t1 = -b + root;
+  if (t0 > kRayEpsilon) return t0;
+  if (t1 > kRayEpsilon) return t1;
+  return kInfinity;
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -192,6 +205,10 @@ double Geometry::first_hit(const Vec3& o, const Vec3& d, double t_max) const {
     const double t = quad_hit(q, o, d);
     if (t > kRayEpsilon && t < best) best = t;
   }
+  for (const Sphere& sp : spheres) {
+    const double t = sphere_hit(sp, o, d);
+    if (t < best) best = t;
+  }
   return best < t_max ? best : kInfinity;
 }
 
@@ -209,6 +226,8 @@ bool Geometry::occluded(const Vec3& o, const Vec3& d, double t_max) const {
     const double t = quad_hit(q, o, d);
     if (t > kRayEpsilon && t < t_max) return true;
   }
+  for (const Sphere& sp : spheres)
+    if (sphere_hit(sp, o, d) < t_max) return true;
   return false;
 }
 
@@ -245,8 +264,38 @@ Vec3 Geometry::first_hit_normal(const Vec3& o, const Vec3& d) const {
     const double t = quad_hit(q, o, d);
     if (t > kRayEpsilon && t < best) best = t, n = normalized(cross(q.edge_u, q.edge_v));
   }
+  for (const Sphere& sp : spheres) {
+    const double t = sphere_hit(sp, o, d);
+    if (t < best) best = t, n = normalized(at(o, d, t) - sp.centre);
+  }
   if (dot(n, d) > 0) n = -1.0 * n;
   return n;
+}
+
+Geometry::Hit Geometry::first_hit_info(const Vec3& o, const Vec3& d) const {
+  Hit h;
+  // The nearest primitive: each kind tested alone, with the same tests as first_hit.
+  auto consider = [&](Hit::Kind kind, std::size_t index, double t) {
+    if (t > kRayEpsilon && t < h.t) h.t = t, h.kind = kind, h.index = index;
+  };
+  if (ground && d.y != 0) consider(Hit::Kind::ground, 0, -o.y / d.y);
+  for (std::size_t i = 0; i < boxes.size(); ++i) {
+    double t0, t1;
+    if (box_span(boxes[i], o, d, t0, t1)) consider(Hit::Kind::box, i, t0 > kRayEpsilon ? t0 : t1);
+  }
+  for (std::size_t i = 0; i < quads.size(); ++i) consider(Hit::Kind::quad, i, quad_hit(quads[i], o, d));
+  for (std::size_t i = 0; i < spheres.size(); ++i) consider(Hit::Kind::sphere, i, sphere_hit(spheres[i], o, d));
+  if (h.kind == Hit::Kind::none) return h;
+  Geometry one;  // the hit primitive alone gives its normal
+  switch (h.kind) {
+    case Hit::Kind::ground: one.ground = true; break;
+    case Hit::Kind::box: one.boxes.push_back(boxes[h.index]); break;
+    case Hit::Kind::quad: one.quads.push_back(quads[h.index]); break;
+    case Hit::Kind::sphere: one.spheres.push_back(spheres[h.index]); break;
+    case Hit::Kind::none: break;
+  }
+  h.normal = one.first_hit_normal(o, d);
+  return h;
 }
 
 Image distance_map(const Camera& camera, const CameraPose& pose, const Geometry& geometry) {

@@ -60,6 +60,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -83,11 +84,28 @@ struct Quad {
   Vec3 corner, edge_u, edge_v;
 };
 
-/// The estimator's own analytic scene: an optional ground plane y = 0, boxes and quads.
+/// A solid sphere (issue 16: an inserted object).
+struct Sphere {
+  Vec3 centre;
+  double radius = 1;
+};
+
+/// The estimator's own analytic scene: an optional ground plane y = 0, boxes, quads, spheres.
 struct Geometry {
   bool ground = false;
   std::vector<Box> boxes;
   std::vector<Quad> quads;
+  std::vector<Sphere> spheres;
+
+  /// What the unit ray o + t d first meets (t > 0): distance, unit normal facing the ray's
+  /// origin, and which primitive (kind and index into its list).
+  struct Hit {
+    enum class Kind { none, ground, box, quad, sphere } kind = Kind::none;
+    std::size_t index = 0;
+    double t = kInfinity;
+    Vec3 normal{0, 0, 0};
+  };
+  Hit first_hit_info(const Vec3& o, const Vec3& d) const;
 
   /// Distance to the nearest surface along the unit ray o + t d, t in (0, t_max); +inf if none.
   double first_hit(const Vec3& o, const Vec3& d, double t_max = kInfinity) const;

@@ -13,6 +13,7 @@
 #include "mr/fog.h"
 #include "mr/fog_stream.h"
 #include "mr/image.h"
+#include "mr/insert.h"
 #include "mr/io.h"
 #include "mr/metadata.h"
 #include "mr/scattering.h"

@@ -1,0 +1,496 @@
+// Differential rendering of inserted objects (render/insertion/differential.h).
+#include "render/insertion/differential.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "mr/error.h"
+#include "render/physics/medium.h"
+#include "render/surface_shading.h"
+
+namespace mr::render::insertion {
+
+namespace {
+
+constexpr float kPi = 3.14159265358979323846f;
+constexpr int kMaxRays = 256;
+
+Vec3f add3(const Vec3f& a, const Vec3f& b, float s = 1) {
+  return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]};
+}
+Vec3f sub3(const Vec3f& a, const Vec3f& b) {
+  return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+}
+
+float radical_inverse(std::uint32_t i) {
+  i = (i << 16u) | (i >> 16u);
+  i = ((i & 0x55555555u) << 1u) | ((i & 0xAAAAAAAAu) >> 1u);
+  i = ((i & 0x33333333u) << 2u) | ((i & 0xCCCCCCCCu) >> 2u);
+  i = ((i & 0x0F0F0F0Fu) << 4u) | ((i & 0xF0F0F0F0u) >> 4u);
+  i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
+  return float(double(i) * 2.3283064365386963e-10);
+}
+
+void frame(const Vec3f& n, Vec3f& t, Vec3f& b) {
+  const Vec3f helper = std::fabs(n[1]) < 0.9f ? Vec3f{0, 1, 0} : Vec3f{1, 0, 0};
+  t = unit(cross(helper, n));
+  b = cross(n, t);
+}
+
+// The light the renderer samples, prepared once.
+struct Lights {
+  bool sun = false;
+  Vec3f sun_dir{}, sun_u{}, sun_v{};
+  float sun_tan_radius = 0;
+  int sun_rays = 1;
+  Lighting sun_sky;                   // sun and sky only (lamps shadowed separately)
+  std::vector<Lighting> single_lamp;  // one lamp each
+  std::vector<Vec3f> lamp_position;
+};
+
+// Direction i of `count` over the sun's disk: stratified in radius, golden-angle spiral in
+// azimuth, rotated per pixel (as render/surface_shading.cpp samples it).
+Vec3f sun_direction(const Lights& L, int i, int count, float rotation) {
+  if (count <= 1 || L.sun_tan_radius <= 0) return L.sun_dir;
+  const float r = L.sun_tan_radius * std::sqrt((float(i) + 0.5f) / float(count));
+  const float phi = 2.39996323f * float(i) + 2 * kPi * rotation;
+  const float c = std::cos(phi), s = std::sin(phi);
+  return unit(Vec3f{L.sun_dir[0] + r * (c * L.sun_u[0] + s * L.sun_v[0]),
+                    L.sun_dir[1] + r * (c * L.sun_u[1] + s * L.sun_v[1]),
+                    L.sun_dir[2] + r * (c * L.sun_u[2] + s * L.sun_v[2])});
+}
+
+// Cosine-weighted direction i of `count` about n (Hammersley, Cranley-Patterson rotated).
+Vec3f sky_direction(const Vec3f& n, const Vec3f& t, const Vec3f& b, int i, int count, float rotation) {
+  const float u1 = (float(i) + 0.5f) / float(count);
+  float u2 = radical_inverse(std::uint32_t(i)) + rotation;
+  u2 -= std::floor(u2);
+  const float rad = std::sqrt(u1), phi = 2 * kPi * u2;
+  const float a = rad * std::cos(phi), c = rad * std::sin(phi), z = std::sqrt(std::max(0.0f, 1 - u1));
+  return {a * t[0] + c * b[0] + z * n[0], a * t[1] + c * b[1] + z * n[1], a * t[2] + c * b[2] + z * n[2]};
+}
+
+// The rays of one shading point: sun directions, upward sky directions, lamp segments.
+struct RaySet {
+  ShadowRay rays[kMaxRays];
+  int sun_first = 0, sun_count = 0, sun_total = 0;  // sun_total: directions drawn (incl. below n)
+  int sky_first = 0, sky_count = 0;                 // upward ones traced
+  int lamp_first = 0, lamp_count = 0;
+  int size = 0;
+};
+
+// Fills `set` for a point at `origin` with normal n: the sun directions with index
+// first, first + stride, ... < total (`count` of them), the sky's likewise, every lamp.
+// With several origins (points spread over the pixel's footprint), ray j of each kind starts at
+// origins[j % origin_count], so the shadow is anti-aliased like the camera's samples; lamps start
+// at origins[0].
+void build_rays(RaySet& set, const Lights& L, const Vec3f* origins, int origin_count, const Vec3f& n,
+                float rotation, int sun_start, int sun_stride, int sun_n, int sky_start, int sky_stride,
+                int sky_n, int sky_total) {
+  const Vec3f& origin = origins[0];
+  set.size = 0;
+  set.sun_first = 0;
+  set.sun_count = 0;
+  set.sun_total = 0;
+  if (L.sun) {
+    for (int j = 0; j < sun_n; ++j) {
+      const int i = (sun_start + j * sun_stride) % L.sun_rays;
+      const Vec3f s = sun_direction(L, i, L.sun_rays, rotation);
+      ++set.sun_total;
+      if (dot(n, s) > 0) set.rays[set.size++] = ShadowRay{origins[j % origin_count], s, 0.0f};
+    }
+  }
+  set.sun_count = set.size;
+  set.sky_first = set.size;
+  if (sky_n > 0 && L.sun_sky.sky_radiance) {
+    Vec3f t, b;
+    frame(n, t, b);
+    for (int j = 0; j < sky_n; ++j) {
+      const int i = (sky_start + j * sky_stride) % sky_total;
+      const Vec3f d = sky_direction(n, t, b, i, sky_total, rotation);
+      if (d[1] > 0) set.rays[set.size++] = ShadowRay{origins[j % origin_count], d, 0.0f};
+    }
+  }
+  set.sky_count = set.size - set.sky_first;
+  set.lamp_first = set.size;
+  for (const Vec3f& lamp : L.lamp_position) {
+    const Vec3f to = sub3(lamp, origin);
+    set.rays[set.size++] = ShadowRay{origin, to, 0.0f, 1.0f - 1e-4f};
+  }
+  set.lamp_count = set.size - set.lamp_first;
+}
+
+// Visibility shares of a ray set given which rays are blocked.
+struct Visibility {
+  float sun = 0, sky_share = 1;
+  float lamp[16]{};
+};
+Visibility visibility_of(const RaySet& set, const bool* blocked) {
+  Visibility v;
+  if (set.sun_total > 0) {
+    int seen = 0;
+    for (int i = 0; i < set.sun_count; ++i) seen += !blocked[set.sun_first + i];
+    v.sun = float(seen) / float(set.sun_total);
+  }
+  if (set.sky_count > 0) {
+    int seen = 0;
+    for (int i = 0; i < set.sky_count; ++i) seen += !blocked[set.sky_first + i];
+    v.sky_share = float(seen) / float(set.sky_count);
+  }
+  for (int i = 0; i < set.lamp_count && i < 16; ++i) v.lamp[i] = blocked[set.lamp_first + i] ? 0.0f : 1.0f;
+  return v;
+}
+
+// The shading terms of a point under the lights with the given visibilities (the one call into
+// the shared BRDF code; an alternative shading path replaces this function).
+ShadingTerms terms_at(const Lights& L, const SurfacePoint& base, const Visibility& vis, float roughness) {
+  SurfacePoint p = base;
+  p.sun_visibility = vis.sun;
+  p.sky_visibility = 0.5f * (1 + p.normal[1]) * vis.sky_share;
+  ShadingTerms t = shading_terms(p, L.sun_sky, roughness);
+  for (std::size_t k = 0; k < L.single_lamp.size() && k < 16; ++k) {
+    if (vis.lamp[k] <= 0) continue;
+    const ShadingTerms l = shading_terms(p, L.single_lamp[k], roughness);
+    for (int c = 0; c < 3; ++c) {
+      t.diffuse[c] += l.diffuse[c];
+      t.specular_f0[c] += l.specular_f0[c];
+      t.specular_bias[c] += l.specular_bias[c];
+    }
+  }
+  return t;
+}
+
+// Whether a ray from `origin` along unit `dir` (spreading by tan_spread per metre) can pass
+// within the bounding sphere (centre c, radius r) at t > 0, before t_max.
+bool may_hit_sphere(const Vec3f& origin, const Vec3f& dir, float tan_spread, const std::array<float, 4>& s,
+                    float t_max = std::numeric_limits<float>::infinity()) {
+  const Vec3f q = {s[0] - origin[0], s[1] - origin[1], s[2] - origin[2]};
+  const float along = dot(q, dir);
+  const float r = s[3];
+  if (along < -r) return false;
+  if (along - r > t_max) return false;
+  const float a = std::clamp(along, 0.0f, t_max);
+  const Vec3f closest = {q[0] - a * dir[0], q[1] - a * dir[1], q[2] - a * dir[2]};
+  const float spread = r + std::max(a, 0.0f) * tan_spread + 1e-4f;
+  return dot(closest, closest) < spread * spread;
+}
+
+}  // namespace
+
+void EmbreeVisibility::occluded(Geometry which, std::span<const ShadowRay> rays, bool* blocked) const {
+  if (which == Geometry::objects) {
+    objects_.occluded(rays, blocked);
+    return;
+  }
+  if (!photo_) {
+    std::fill(blocked, blocked + rays.size(), false);
+    return;
+  }
+  occluded_rays(
+      *photo_, rays.size(), [&](std::size_t i) { return rays[i]; },
+      [&](std::size_t i, bool b) { blocked[i] = b; });
+}
+
+InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSettings& settings) {
+  const int w = in.camera.width, h = in.camera.height;
+  auto check = [&](ConstImageView v, int channels_min, int channels_max, const char* what) {
+    if (v.width != w || v.height != h)
+      throw Error(ErrorCode::size_mismatch, std::string("insert objects: the ") + what + " is " +
+                                                std::to_string(v.width) + "x" + std::to_string(v.height) +
+                                                ", the camera " + std::to_string(w) + "x" + std::to_string(h));
+    if (v.channels < channels_min || v.channels > channels_max)
+      throw Error(ErrorCode::invalid_argument, std::string("insert objects: the ") + what + " has " +
+                                                   std::to_string(v.channels) + " channels");
+  };
+  check(in.photo, 3, 64, "photo");
+  check(in.distance_m, 1, 1, "distance map");
+  check(in.normals, 3, 3, "normal map");
+  if (!in.objects || !in.visibility)
+    throw Error(ErrorCode::invalid_argument, "insert objects: no object scene or visibility path");
+  if (settings.samples_per_axis < 1 || settings.samples_per_axis > 8)
+    throw Error(ErrorCode::invalid_argument, "insert objects: samples_per_axis must be in 1..8, got " +
+                                                 std::to_string(settings.samples_per_axis));
+  if (settings.sun_rays < 1 || settings.sun_rays > 64 || settings.sky_rays < 0 || settings.sky_rays > 128)
+    throw Error(ErrorCode::invalid_argument,
+                "insert objects: sun_rays must be in 1..64 and sky_rays in 0..128");
+  if (in.lighting.lamps.size() > 16)
+    throw Error(ErrorCode::invalid_argument, "insert objects: at most 16 lamps");
+  if (!in.lighting.sky_radiance)
+    throw Error(ErrorCode::invalid_argument, "insert objects: the sky radiance must be resolved");
+
+  Lights L;
+  L.sun_sky.sky_radiance = in.lighting.sky_radiance;
+  if (in.lighting.sun) {
+    L.sun = true;
+    L.sun_sky.sun = in.lighting.sun;
+    L.sun_dir = unit(to_f(in.lighting.sun->direction_to_sun));
+    if (dot(L.sun_dir, L.sun_dir) == 0)
+      throw Error(ErrorCode::invalid_argument, "lighting.sun.direction_to_sun is zero");
+    frame(L.sun_dir, L.sun_u, L.sun_v);
+    L.sun_tan_radius = float(std::tan(in.lighting.sun->angular_radius_deg * kPi / 180));
+    L.sun_rays = L.sun_tan_radius > 0 ? settings.sun_rays : 1;
+  }
+  for (const Lamp& lamp : in.lighting.lamps) {
+    Lighting one;
+    one.lamps.push_back(lamp);
+    L.single_lamp.push_back(one);
+    L.lamp_position.push_back(to_f(lamp.position_m));
+  }
+
+  const WorldObjects& world = in.objects->world();
+  const int S = settings.samples_per_axis, S2 = S * S;
+  const int sky_total = settings.sky_rays;
+  const Vec3f eye = to_f(in.pose.position_m);
+  const int channels = in.photo.channels;
+
+  // Screen rectangles that may show an object (its bounding sphere's box projected), so pixels
+  // elsewhere trace no camera rays.
+  struct Rect {
+    int x0, y0, x1, y1;
+  };
+  std::vector<Rect> rects;
+  {
+    const auto [forward, right, up] = in.pose.axes();
+    for (const auto& s : world.bounds) {
+      double xmin = 1e30, xmax = -1e30, ymin = 1e30, ymax = -1e30;
+      bool behind = false;
+      for (int k = 0; k < 8; ++k) {
+        const Vec3 c = {s[0] + ((k & 1) ? s[3] : -s[3]) - in.pose.position_m.x,
+                        s[1] + ((k & 2) ? s[3] : -s[3]) - in.pose.position_m.y,
+                        s[2] + ((k & 4) ? s[3] : -s[3]) - in.pose.position_m.z};
+        const double z = c.x * forward.x + c.y * forward.y + c.z * forward.z;
+        if (z <= 1e-6) {
+          behind = true;
+          break;
+        }
+        const double u = (c.x * right.x + c.y * right.y + c.z * right.z) / z;
+        const double v = -(c.x * up.x + c.y * up.y + c.z * up.z) / z;
+        const double px = in.camera.cx + u * in.camera.focal_px, py = in.camera.cy + v * in.camera.focal_px;
+        xmin = std::min(xmin, px), xmax = std::max(xmax, px), ymin = std::min(ymin, py), ymax = std::max(ymax, py);
+      }
+      if (behind)
+        rects.push_back({0, 0, w - 1, h - 1});
+      else
+        rects.push_back({int(std::max(0.0, std::floor(xmin) - 1)), int(std::max(0.0, std::floor(ymin) - 1)),
+                         int(std::min(double(w - 1), std::ceil(xmax) + 1)),
+                         int(std::min(double(h - 1), std::ceil(ymax) + 1))});
+    }
+  }
+
+  InsertionLayers out;
+  out.composite = Image::uninitialized(w, h, channels);
+  out.matte = Image(w, h, 1, {"A"});
+  out.shadow = Image::uninitialized(w, h, 3);
+  out.difference = Image::uninitialized(w, h, 3);
+  out.distance_m = Image::uninitialized(w, h, 1, {"Z"});
+  out.object_radiance = Image(w, h, 3);
+  std::atomic<std::size_t> shadow_rays{0}, camera_rays{0};
+
+  // CameraPose::ray_direction with the axes computed once (it recomputes them per call).
+  const auto cam_axes = in.pose.axes();
+  auto ray_direction = [&](double x, double y) {
+    const double u = (x + 0.5 - in.camera.cx) / in.camera.focal_px, v = (y + 0.5 - in.camera.cy) / in.camera.focal_px;
+    const Vec3& f = cam_axes[0];
+    const Vec3& r = cam_axes[1];
+    const Vec3& up = cam_axes[2];
+    const double dx = u * r.x - v * up.x + f.x, dy = u * r.y - v * up.y + f.y, dz = u * r.z - v * up.z + f.z;
+    const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
+    return Vec3f{float(dx / len), float(dy / len), float(dz / len)};
+  };
+  const float tol = float(settings.depth_tolerance);
+  // The per-pixel occlusion test, bilinearly filtered (see the header).
+  auto depth_visibility = [&](float sx, float sy, float t) {
+    const float fx = sx - 0.5f, fy = sy - 0.5f;
+    const int x0 = int(std::floor(fx)), y0 = int(std::floor(fy));
+    const float ax = fx - float(x0), ay = fy - float(y0);
+    float vis = 0;
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) {
+        const int x = std::clamp(x0 + i, 0, w - 1), y = std::clamp(y0 + j, 0, h - 1);
+        const float d = in.distance_m.at(x, y, 0);
+        const bool front = !(std::isfinite(d) && d > 0) || t < d * (1 + tol);
+        vis += front ? (i ? ax : 1 - ax) * (j ? ay : 1 - ay) : 0.0f;
+      }
+    return vis;
+  };
+
+  tbb::task_arena arena(settings.threads > 0 ? settings.threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
+      RaySet set;
+      bool blocked_objects[kMaxRays], blocked_photo[kMaxRays], blocked_any[kMaxRays];
+      std::size_t local_shadow = 0, local_camera = 0;
+      for (int y = rows.begin(); y != rows.end(); ++y) {
+        throw_if_cancelled(in.cancel, "insert objects");
+        for (int x = 0; x < w; ++x) {
+          const std::uint32_t seed = physics::hash32(std::uint32_t(y) * 73856093u ^ std::uint32_t(x));
+          const float rotation = float(seed >> 8) * (1.0f / 16777216.0f);
+          const float d = in.distance_m.at(x, y, 0);
+          const float* I = in.photo.pixel(x, y);
+
+          // ---- The photo's surface: shading with / without the objects -----------------
+          Rgb ratio = {1, 1, 1};
+          const Vec3f n = {in.normals.at(x, y, 0), in.normals.at(x, y, 1), in.normals.at(x, y, 2)};
+          if (std::isfinite(d) && d > 0 && dot(n, n) > 0.5f && !world.bounds.empty()) {
+            const Vec3f ray = ray_direction(x, y);
+            const Vec3f p = add3(eye, ray, d);
+            const float lift = 1e-3f + 1e-3f * d;
+            const Vec3f origin = add3(p, n, lift);
+            const float footprint = 2.0f * d / float(in.camera.focal_px);
+            bool sun_maybe = false, sky_maybe = false, lamp_maybe = false;
+            for (const auto& s : world.bounds) {
+              if (L.sun && dot(n, L.sun_dir) > -L.sun_tan_radius)
+                sun_maybe = sun_maybe || may_hit_sphere(origin, L.sun_dir, L.sun_tan_radius * 1.01f, {s[0], s[1], s[2], s[3] + footprint});
+              const Vec3f q = {s[0] - origin[0], s[1] - origin[1], s[2] - origin[2]};
+              sky_maybe = sky_maybe || dot(q, q) < float(settings.sky_influence_radii * settings.sky_influence_radii) * s[3] * s[3];
+              for (const Vec3f& lp : L.lamp_position) {
+                const Vec3f to = sub3(lp, origin);
+                const float len = std::sqrt(dot(to, to));
+                if (len > 0) lamp_maybe = lamp_maybe || may_hit_sphere(origin, {to[0] / len, to[1] / len, to[2] / len}, 0, s, len);
+              }
+            }
+            if (sun_maybe || sky_maybe || lamp_maybe) {
+              // The pixel's footprint on its tangent plane: one origin per camera sample position,
+              // so shadow edges crossing the pixel are anti-aliased (as the photo's own are).
+              Vec3f origins[64];
+              int origin_count = 0;
+              for (int k = 0; k < S2; ++k) {
+                const float sx = float(x) + (float(k % S) + 0.5f) / float(S), sy = float(y) + (float(k / S) + 0.5f) / float(S);
+                const Vec3f r = ray_direction(double(sx) - 0.5, double(sy) - 0.5);
+                const float denom = dot(r, n);
+                const float t = denom < -1e-3f ? dot(sub3(p, eye), n) / denom : -1.0f;
+                origins[origin_count++] = (t > 0.9f * d && t < 1.1f * d) ? add3(add3(eye, r, t), n, lift) : origin;
+              }
+              build_rays(set, L, origins, origin_count, n, rotation, 0, 1, L.sun ? L.sun_rays : 0, 0, 1, sky_total,
+                         std::max(sky_total, 1));
+              const std::span<const ShadowRay> rays(set.rays, std::size_t(set.size));
+              in.visibility->occluded(Geometry::objects, rays, blocked_objects);
+              local_shadow += std::size_t(set.size);
+              if (!sky_maybe)  // the sky rays could not meet an object (see sky_influence_radii)
+                for (int i = 0; i < set.sky_count; ++i) blocked_objects[set.sky_first + i] = false;
+              bool any = false;
+              for (int i = 0; i < set.size; ++i) any = any || blocked_objects[i];
+              if (any) {
+                in.visibility->occluded(Geometry::photo, rays, blocked_photo);
+                local_shadow += std::size_t(set.size);
+                for (int i = 0; i < set.size; ++i) blocked_any[i] = blocked_photo[i] || blocked_objects[i];
+                SurfacePoint sp;
+                sp.surface = true;
+                sp.normal = n;
+                sp.view = {-ray[0], -ray[1], -ray[2]};
+                sp.position_m = p;
+                const ShadingTerms without = terms_at(L, sp, visibility_of(set, blocked_photo), 1.0f);
+                const ShadingTerms with = terms_at(L, sp, visibility_of(set, blocked_any), 1.0f);
+                for (int c = 0; c < 3; ++c)
+                  ratio[c] = without.diffuse[c] > 1e-12f ? with.diffuse[c] / without.diffuse[c] : 1.0f;
+              }
+            }
+          }
+
+          // ---- The objects: sub-pixel camera rays, occlusion, shading --------------------
+          bool in_rect = false;
+          for (const Rect& r : rects) in_rect = in_rect || (x >= r.x0 && x <= r.x1 && y >= r.y0 && y <= r.y1);
+          float coverage = 0;
+          Rgb radiance = {0, 0, 0};
+          float new_distance = d;
+          if (in_rect) {
+            const Vec3f centre_ray = ray_direction(x, y);
+            const ObjectHit centre = in.objects->intersect(eye, centre_ray, 0.0f);
+            ++local_camera;
+            if (centre.hit() && depth_visibility(float(x) + 0.5f, float(y) + 0.5f, centre.t) >= 0.5f)
+              new_distance = centre.t;
+            const int sun_n = L.sun ? std::max(1, (L.sun_rays + S2 - 1) / S2) : 0;
+            const int sky_n = sky_total > 0 ? std::max(1, (sky_total + S2 - 1) / S2) : 0;
+            for (int k = 0; k < S2; ++k) {
+              const int si = k % S, sj = k / S;
+              // Stratified jitter from the pixel's hash.
+              const std::uint32_t hk = physics::hash32(seed ^ (0x9E3779B9u * std::uint32_t(k + 1)));
+              const float jx = float(hk & 0xFFFF) / 65536.0f, jy = float(hk >> 16) / 65536.0f;
+              const float sx = float(x) + (float(si) + jx) / float(S), sy = float(y) + (float(sj) + jy) / float(S);
+              const Vec3f dir = ray_direction(double(sx) - 0.5, double(sy) - 0.5);
+              const ObjectHit hit = in.objects->intersect(eye, dir, 0.0f);
+              ++local_camera;
+              if (!hit.hit()) continue;
+              const float vis = depth_visibility(sx, sy, hit.t);
+              if (vis <= 0) continue;
+              // The hit's geometry: the geometric normal toward the camera, the shading normal
+              // (interpolated) on the same side, bent toward the viewer where interpolation
+              // turned it away (silhouettes of coarse meshes).
+              const std::uint32_t* tri = &world.indices[3 * std::size_t(hit.prim)];
+              auto P = [&](int k2) {
+                const float* q = &world.positions[3 * std::size_t(tri[k2])];
+                return Vec3f{q[0], q[1], q[2]};
+              };
+              const Vec3f a = P(0), b = P(1), c = P(2);
+              Vec3f ng = unit(cross(sub3(b, a), sub3(c, a)));
+              if (dot(ng, dir) > 0) ng = {-ng[0], -ng[1], -ng[2]};
+              Vec3f ns = ng;
+              if (world.smooth[hit.prim]) {
+                Vec3f m{0, 0, 0};
+                const float bw[3] = {1 - hit.u - hit.v, hit.u, hit.v};
+                for (int k2 = 0; k2 < 3; ++k2)
+                  for (int cc = 0; cc < 3; ++cc) m[cc] += bw[k2] * world.normals[3 * std::size_t(tri[k2]) + cc];
+                m = unit(m);
+                if (dot(m, ng) < 0) m = {-m[0], -m[1], -m[2]};
+                ns = m;
+              }
+              const Vec3f view = {-dir[0], -dir[1], -dir[2]};
+              const float nv = dot(ns, view);
+              if (nv < 0.02f) ns = unit(add3(ns, view, 0.02f - nv));
+              const Vec3f hp = add3(eye, dir, hit.t);
+              const Vec3f origin = add3(hp, ng, 1e-4f + 2e-5f * hit.t);
+              build_rays(set, L, &origin, 1, ns, rotation, k % std::max(L.sun_rays, 1), S2, sun_n, k % std::max(sky_total, 1),
+                         S2, sky_n, std::max(sky_total, 1));
+              const std::span<const ShadowRay> rays(set.rays, std::size_t(set.size));
+              in.visibility->occluded(Geometry::objects, rays, blocked_objects);
+              in.visibility->occluded(Geometry::photo, rays, blocked_photo);
+              local_shadow += 2 * std::size_t(set.size);
+              for (int i = 0; i < set.size; ++i) blocked_any[i] = blocked_photo[i] || blocked_objects[i];
+              const SurfaceReflectance refl = reflectance_at(world, hit.prim, hit.u, hit.v);
+              SurfacePoint sp;
+              sp.surface = true;
+              sp.normal = ns;
+              sp.view = view;
+              sp.position_m = hp;
+              const ShadingTerms t = terms_at(L, sp, visibility_of(set, blocked_any), refl.roughness);
+              for (int cc = 0; cc < 3; ++cc)
+                radiance[cc] += vis * (refl.diffuse_albedo[cc] * t.diffuse[cc] + refl.f0[cc] * t.specular_f0[cc] +
+                                       t.specular_bias[cc]);
+              coverage += vis;
+            }
+            coverage /= float(S2);
+            for (float& v : radiance) v /= float(S2);
+          }
+
+          float* C = out.composite.view().pixel(x, y);
+          for (int c = 0; c < 3; ++c) {
+            const float shadowed = I[c] * ratio[c];
+            C[c] = radiance[c] + (1 - coverage) * shadowed;
+            out.shadow.view().at(x, y, c) = ratio[c];
+            out.difference.view().at(x, y, c) = C[c] - I[c];
+            out.object_radiance.view().at(x, y, c) = radiance[c];
+          }
+          for (int c = 3; c < channels; ++c)
+            C[c] = c == 3 ? I[c] * (1 - coverage) + coverage : I[c];  // alpha: the object is opaque
+          out.matte.view().at(x, y, 0) = coverage;
+          out.distance_m.view().at(x, y, 0) = new_distance;
+        }
+      }
+      shadow_rays += local_shadow;
+      camera_rays += local_camera;
+    });
+  });
+  out.shadow_rays = shadow_rays;
+  out.camera_rays = camera_rays;
+  return out;
+}
+
+}  // namespace mr::render::insertion

@@ -1,0 +1,117 @@
+// Private to libmr: inserted objects (mr/objects.h) in world space and in an Embree scene, for the
+// differential renderer of issue 16 (render/insertion/differential.h). Unlike the occluder mesh
+// (render/embree_scene.h), whose rays only ask "blocked?", the camera's rays must find which
+// triangle they hit and where on it (to shade it), so this scene also answers rtcIntersect queries
+// with the triangle and its barycentrics.
+#pragma once
+
+#include <embree3/rtcore.h>
+
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "mr/image.h"
+#include "mr/material_model.h"
+#include "mr/objects.h"
+#include "render/embree_scene.h"
+#include "render/math.h"
+#include "render/surface_shading.h"
+
+namespace mr::render::insertion {
+
+/// The material of an object's triangles as the renderer shades it: the metallic-roughness
+/// parameters (glTF 2.0) with their textures, or an mr::Material that replaces them.
+struct ShadingMaterial {
+  Rgb base_color{0.8f, 0.8f, 0.8f};
+  float metallic = 0, roughness = 0.5f;
+  const Image* base_color_texture = nullptr;          ///< linear RGB(A), or null
+  const Image* metallic_roughness_texture = nullptr;  ///< G = roughness, B = metallic, or null
+  std::optional<Material> material;  ///< when set: diffuse, F0 and roughness from it
+};
+
+/// What a surface point of an object reflects with (render/surface_shading.h's split form):
+/// radiance = diffuse_albedo * diffuse + f0 * specular_f0 + specular_bias, per channel.
+struct SurfaceReflectance {
+  Rgb diffuse_albedo{}, f0{};
+  float roughness = 0.5f;
+};
+
+/// Every inserted object's triangles in world metres (placement applied), with what shading
+/// needs per vertex and per triangle. Holds copies of the meshes' textures.
+struct WorldObjects {
+  std::vector<float> positions;   ///< x, y, z per vertex (plus one float of padding at the end)
+  std::vector<float> normals;     ///< x, y, z per vertex (unit; zero where the mesh had none)
+  std::vector<float> uvs;         ///< u, v per vertex (0 where the mesh had none)
+  std::vector<std::uint32_t> indices;         ///< 3 per triangle
+  std::vector<std::uint32_t> triangle_material;  ///< per triangle, index into materials
+  std::vector<std::uint8_t> smooth;  ///< per triangle: 1 = interpolate vertex normals, 0 = flat
+  std::vector<ShadingMaterial> materials;
+  std::vector<std::shared_ptr<const Image>> textures;  ///< owned; materials point into them
+  /// Per object: bounding sphere (centre, radius) in world metres, for the renderer's cheap
+  /// "can this object matter here?" tests.
+  std::vector<std::array<float, 4>> bounds;
+
+  std::size_t triangle_count() const { return indices.size() / 3; }
+  std::size_t vertex_count() const { return positions.size() / 3; }
+};
+
+/// The object-to-world transform of a placement (mr/objects.h): scale, then yaw about the
+/// object's +Y, then the rotation taking +Y to `up` (the shortest one), then the translation.
+struct PlacementTransform {
+  double rotation[3][3]{};  ///< row-major, applied to column vectors
+  double scale = 1;
+  Vec3d translation{0, 0, 0};
+  Vec3d apply(const Vec3d& p) const;
+  Vec3d rotate(const Vec3d& v) const;  ///< directions (normals): rotation only
+};
+PlacementTransform placement_transform(const ObjectPlacement& placement);
+
+/// Appends `mesh` placed by `placement` (with `material_override` replacing every material when
+/// set). Drops degenerate triangles (zero area after placement). Throws mr::Error
+/// (invalid_argument) naming mesh.source for malformed meshes (indices out of range, non-finite
+/// positions, mismatched attribute arrays, material or texture indices out of range), and for a
+/// non-positive or non-finite scale.
+void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlacement& placement,
+                   const std::optional<Material>& material_override = std::nullopt);
+
+/// The reflectance at a hit (triangle `prim`, barycentrics u, v): the material's parameters,
+/// times its textures sampled bilinearly (repeat) at the interpolated uv.
+SurfaceReflectance reflectance_at(const WorldObjects& world, std::uint32_t prim, float u, float v);
+
+/// A camera-ray hit on an object.
+struct ObjectHit {
+  float t = std::numeric_limits<float>::infinity();  ///< in units of the direction's length
+  std::uint32_t prim = 0;
+  float u = 0, v = 0;  ///< barycentrics of vertices 1 and 2
+  bool hit() const { return t < std::numeric_limits<float>::infinity(); }
+};
+
+/// The objects in an Embree scene (RAII; not copyable). Queries are const and thread-safe.
+class ObjectScene {
+ public:
+  /// Keeps a reference to `world`, which must outlive the scene and stay unchanged. An empty
+  /// world gives a scene that nothing hits.
+  explicit ObjectScene(const WorldObjects& world);
+  ~ObjectScene();
+  ObjectScene(const ObjectScene&) = delete;
+  ObjectScene& operator=(const ObjectScene&) = delete;
+
+  ObjectHit intersect(const Vec3f& origin, const Vec3f& direction, float t_near,
+                      float t_far = std::numeric_limits<float>::infinity()) const;
+  /// For each ray i: blocked[i] = whether a triangle lies on it (rtcOccluded1 per ray).
+  void occluded(std::span<const ShadowRay> rays, bool* blocked) const;
+  bool empty() const { return scene_ == nullptr; }
+  const WorldObjects& world() const { return world_; }
+
+ private:
+  const WorldObjects& world_;
+  RTCDevice device_ = nullptr;
+  RTCScene scene_ = nullptr;
+};
+
+}  // namespace mr::render::insertion
