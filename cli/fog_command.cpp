@@ -560,9 +560,11 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   if (estimated && o.layer_top == "auto" && o.layer.empty() && !scene.medium.height_fog &&
       std::isinf(scene.medium.layer_top_m))
     scene.medium.layer_top_m = default_layer_top_m(scene.medium);
-  // Issue 11: the estimated scene's fog is lit by the photo's sky by direction unless the
-  // scene file or --sky-light chose.
-  if (estimated && !scene.lighting.sky_by_direction) scene.lighting.sky_by_direction = true;
+  // Issue 11: the estimated scene's fog is lit by the photo's own sky by direction unless the
+  // scene file or --sky-light chose, or a sky radiance was given (--airlight, the scene file:
+  // e.g. a night look's dark sky is not the photo's daylight sky).
+  if (estimated && !scene.lighting.sky_by_direction && !plan.scene.lighting.sky_radiance)
+    scene.lighting.sky_by_direction = true;
   const std::string depth_name =
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
@@ -740,7 +742,8 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
                   "The sky light in the fog: 'direction' (each view ray takes the photo's own "
                   "sky around its direction, phase-weighted, the ground below the horizon: "
                   "sunsets and sky gradients survive haze), 'uniform' (one sky radiance), or "
-                  "'auto': the scene's, else direction when --depth auto estimates the geometry")
+                  "'auto': the scene's, else direction when --depth auto estimates the geometry and "
+                  "no --airlight or scene sky radiance is given")
       ->default_str("auto");
   cmd->add_option("--albedo", o.albedo, "Single-scattering albedo: v or R,G,B [default: 1]");
   cmd->add_option("--g", o.g, "Henyey-Greenstein asymmetry in (-1, 1) [default: 0]");

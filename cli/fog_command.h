@@ -54,7 +54,7 @@ struct FogCommandOptions {
   std::string layer_top = "auto";
   /// The fog's sky light (mr/sky_light.h): "direction" (the photo's sky by direction),
   /// "uniform" (one sky radiance), "auto": the scene file's, else by direction when the geometry
-  /// is estimated (--depth auto) and uniform otherwise.
+  /// is estimated (--depth auto) with the sky radiance 'auto', uniform otherwise.
   std::string sky_light = "auto";
   std::string albedo;
   std::optional<double> g;

@@ -55,7 +55,7 @@ std::array<double, 3> sample_latlong(const Image& map, const Vec3& d) {
 Image convolve_henyey_greenstein(const Image& env, double g, int out_width, int out_height) {
   const int ew = env.width(), eh = env.height();
   std::vector<Vec3> dirs(std::size_t(ew) * eh);
-  std::vector<double> solid(std::size_t(eh));
+  std::vector<double> solid(static_cast<std::size_t>(eh));
   for (int r = 0; r < eh; ++r) {
     solid[std::size_t(r)] = latlong_texel_solid_angle(ew, eh, r);
     for (int c = 0; c < ew; ++c) dirs[std::size_t(r) * ew + c] = latlong_direction(ew, eh, c + 0.5, r + 0.5);
@@ -162,16 +162,31 @@ Image environment_deviation(ConstImageView photo, ConstImageView distance_m, con
     }
   }
   Image out(width, height, 3);
-  for (int r = 0; r < height; ++r)
+  for (int r = 0; r < half; ++r)
     for (int col = 0; col < width; ++col)
       for (int c = 0; c < 3; ++c) {
-        double v = ground[c];
-        if (r < half) {
-          const std::size_t t = std::size_t(r) * width + col;
-          v = count[t] > 0 ? sum[3 * t + c] / count[t] : row_mean[3 * std::size_t(r) + c];
-        }
+        const std::size_t t = std::size_t(r) * width + col;
+        const double v = count[t] > 0 ? sum[3 * t + c] / count[t] : row_mean[3 * std::size_t(r) + c];
         out.at(col, r, c) = float(v - double(sky_radiance[c]));
       }
+  // Below the horizon: the ground seen from inside the fog. The light scattered toward the
+  // camera comes from points spread along the view ray, about one optical depth in; seen from
+  // such a point (for a ray at 30 degrees: half an optical depth above the camera), the ground
+  // lies behind optical depth kGroundOpticalHeight / sin(depression) of fog, and what the fog in
+  // between sends is the horizon sky's light (a deep path through the same fog). So the
+  // environment goes from the horizon sky's colour (in its column) at the horizon to mostly the
+  // ground's colour straight down, with no step at the horizon.
+  constexpr double kGroundOpticalHeight = 0.5;
+  for (int r = half; r < height; ++r) {
+    const double depression = std::sin(-texel_elevation(height, r + 0.5));
+    const double to_ground = std::exp(-kGroundOpticalHeight / depression);
+    for (int col = 0; col < width; ++col)
+      for (int c = 0; c < 3; ++c) {
+        const double horizon = double(out.at(col, half - 1, c)) + double(sky_radiance[c]);
+        const double v = horizon + (ground[c] - horizon) * to_ground;
+        out.at(col, r, c) = float(v - double(sky_radiance[c]));
+      }
+  }
   return out;
 }
 
