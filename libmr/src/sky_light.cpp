@@ -9,6 +9,7 @@
 #include <string>
 
 #include "mr/error.h"
+#include "photo/airlight.h"
 #include "photo/sky_light.h"
 #include "render/medium.h"
 
@@ -54,6 +55,18 @@ SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m, const
   if (photo::all_zero(env)) return out;  // uniform: exactly today's render
   out.deviation =
       photo::convolve_henyey_greenstein(env, out.g, sizes.out_width, sizes.out_height);
+  // Every automatic fog colour goes through the neutral prior (photo/airlight.h: fog takes the
+  // colour of daylight, 4000..10000 K): so does the light from each direction, so a deep blue
+  // sky or a red sunset tints the fog as a daylight would, no more.
+  for (int y = 0; y < out.deviation.height(); ++y)
+    for (int x = 0; x < out.deviation.width(); ++x) {
+      float* d = out.deviation.pixel(x, y);
+      const std::array<float, 3> light{std::max(0.0f, sky_radiance[0] + d[0]),
+                                       std::max(0.0f, sky_radiance[1] + d[1]),
+                                       std::max(0.0f, sky_radiance[2] + d[2])};
+      const std::array<float, 3> bounded = photo::neutral_fog_colour(light);
+      for (int c = 0; c < 3; ++c) d[c] = bounded[c] - sky_radiance[c];
+    }
   return out;
 }
 
