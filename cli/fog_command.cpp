@@ -83,6 +83,13 @@ FogPlan make_plan(const FogCommandOptions& o) {
       scene.lighting.sky_radiance = parse_rgb(o.airlight);
     else if (o.scene_path.empty())
       scene.lighting.sky_radiance.reset();
+    if (o.sky_light == "direction")
+      scene.lighting.sky_by_direction = true;
+    else if (o.sky_light == "uniform")
+      scene.lighting.sky_by_direction = false;
+    else if (o.sky_light != "auto")
+      throw std::invalid_argument("--sky-light must be direction, uniform or auto, not '" +
+                                  o.sky_light + "'");
     if (!o.albedo.empty()) scene.medium.albedo = parse_rgb(o.albedo);
     if (o.g) scene.medium.g = *o.g;
     if (!o.height_fog.empty()) {
@@ -453,6 +460,28 @@ std::optional<Outcome> run_streamed(const FogCommandOptions& o, const FogPlan& p
     render_scene.lighting.sky_radiance = estimate_airlight(photo);
     request.photo_image = &photo;
   }
+  // Sky light by direction: its low-resolution map from the whole photo and depth, read once
+  // here; the fog and the encoding still stream, sampling the map per pixel.
+  SkyLight sky_light;
+  if (scene.lighting.sky_by_direction.value_or(false)) {
+    if (photo.empty()) {
+      ReadOptions read;
+      read.colorspace = o.input_colorspace;
+      read.color = &plan.color;
+      photo = read_image(job.photo, read);
+      if (photo.channels() < 3) return std::nullopt;
+      request.photo_image = &photo;
+    }
+    std::error_code size_ec;
+    if (!fs::exists(job.depth, size_ec)) return std::nullopt;
+    const Camera camera = make_camera(o, plan.scene, job.photo, photo);
+    const DepthMap depth = read_depth(job.depth, camera, plan.depth);
+    if (depth.distance_m.width() != photo.width() || depth.distance_m.height() != photo.height())
+      return std::nullopt;  // the full-frame path reports it
+    sky_light = sky_light_from_photo(photo, depth.distance_m, camera, render_scene,
+                                     *render_scene.lighting.sky_radiance);
+    request.sky_light = &sky_light;
+  }
   request.photo = job.photo;
   request.depth = job.depth;
   request.output = job.output;
@@ -547,6 +576,11 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   if (estimated && o.layer_top == "auto" && o.layer.empty() && !scene.medium.height_fog &&
       std::isinf(scene.medium.layer_top_m))
     scene.medium.layer_top_m = default_layer_top_m(scene.medium);
+  // Issue 11: the estimated scene's fog is lit by the photo's own sky by direction unless the
+  // scene file or --sky-light chose, or a sky radiance was given (--airlight, the scene file:
+  // e.g. a night look's dark sky is not the photo's daylight sky).
+  if (estimated && !scene.lighting.sky_by_direction && !plan.scene.lighting.sky_radiance)
+    scene.lighting.sky_by_direction = true;
   const std::string depth_name =
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
@@ -748,6 +782,13 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
                   "The fog's top (height above the ground: 60m, 1.5km), 'none', or 'auto': with "
                   "--depth auto estimating the geometry and no --layer / --height-fog / scene "
                   "top, half the visibility within 30 m..2 km (the sky is seen through the fog)")
+      ->default_str("auto");
+  cmd->add_option("--sky-light", o.sky_light,
+                  "The sky light in the fog: 'direction' (each view ray takes the photo's own "
+                  "sky around its direction, phase-weighted, the ground below the horizon: "
+                  "sunsets and sky gradients survive haze), 'uniform' (one sky radiance), or "
+                  "'auto': the scene's, else direction when --depth auto estimates the geometry and "
+                  "no --airlight or scene sky radiance is given")
       ->default_str("auto");
   cmd->add_option("--albedo", o.albedo, "Single-scattering albedo: v or R,G,B [default: 1]");
   cmd->add_option("--g", o.g, "Henyey-Greenstein asymmetry in (-1, 1) [default: 0]");

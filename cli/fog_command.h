@@ -53,6 +53,10 @@ struct FogCommandOptions {
   /// "auto" (default): with an estimated geometry (--depth auto) and no top given, the fog's
   /// top from its visibility (mr::default_layer_top_m); "none": no top; else a distance.
   std::string layer_top = "auto";
+  /// The fog's sky light (mr/sky_light.h): "direction" (the photo's sky by direction),
+  /// "uniform" (one sky radiance), "auto": the scene file's, else by direction when the geometry
+  /// is estimated (--depth auto) with the sky radiance 'auto', uniform otherwise.
+  std::string sky_light = "auto";
   std::string albedo;
   std::optional<double> g;
   std::string noise;            ///< "amplitude[,scale[,octaves[,seed]]]"

@@ -225,6 +225,44 @@ TEST(FogStream, PhotoInMemoryWithEstimatedSkyMatches) {
   expect_same_pixels(dir / "full.jpg", dir / "stream.jpg");
 }
 
+TEST(FogStream, SkyLightByDirectionMatchesTheFullFramePath) {
+  // Issue 11: the photo's sky by direction, its low-resolution map sampled per pixel as the
+  // strips are fogged; without the map the request declines.
+  test::ScratchDir dir;
+  FogStreamer streamer;
+  Case c;
+  c.photo = kSamples / "building.jpg";
+  c.depth = kSamples / "building_depth.exr";
+  c.scene.lighting.sky_by_direction = true;
+  c.scene.medium.g = 0.6;
+  full_frame(c, dir / "full.jpg");
+  StreamFogResult r = streamed(c, dir / "declined.jpg", streamer);
+  EXPECT_FALSE(r.streamed);
+  const Image photo = read_image(c.photo);
+  const Camera camera = Camera::from_metadata(photo.width(), photo.height(), photo.metadata());
+  const SkyLight sky_light = sky_light_from_photo(
+      photo, read_depth(c.depth, camera).distance_m, camera, c.scene, *c.scene.lighting.sky_radiance);
+  ASSERT_FALSE(sky_light.deviation.empty());
+  StreamFogRequest req;
+  req.photo = c.photo;
+  req.depth = c.depth;
+  req.output = dir / "stream.jpg";
+  req.scene = &c.scene;
+  req.sky_light = &sky_light;
+  r = streamer.fog_file(req);
+  ASSERT_TRUE(r.streamed) << r.reason;
+  expect_same_pixels(dir / "full.jpg", dir / "stream.jpg");
+  // And it changed the picture (the sky's map is not uniform).
+  Case uniform = c;
+  uniform.scene.lighting.sky_by_direction = false;
+  full_frame(uniform, dir / "uniform.jpg");
+  const Image a = read_stored(dir / "full.jpg"), b = read_stored(dir / "uniform.jpg");
+  double diff = 0;
+  for (std::size_t i = 0; i < a.pixels().size(); ++i)
+    diff = std::max(diff, double(std::fabs(a.pixels()[i] - b.pixels()[i])));
+  EXPECT_GT(diff, 2.0 / 255);
+}
+
 TEST(FogStream, DeclinesWhatNeedsTheWholeFrame) {
   test::ScratchDir dir;
   FogStreamer streamer;

@@ -99,6 +99,9 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   const FogScene& scene = *req.scene;
   if (!is_sky_only(scene)) return decline("the scene has a sun, lamps or noise");
   if (!scene.lighting.sky_radiance) return decline("the sky radiance is estimated from the photo");
+  const bool by_direction = scene.lighting.sky_by_direction.value_or(false);
+  if (by_direction && !req.sky_light)
+    return decline("the sky light by direction needs its map (mr::sky_light_from_photo)");
   validate_scene(scene);
   ColorConfig storage = ColorConfig::builtin();
   const ColorConfig& config = req.color ? *req.color : (storage = ColorConfig::from_environment());
@@ -387,6 +390,17 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                     for (int c = 0; c < 3; ++c)
                       od[c] = render::scaled_optical_depth(sigma[c], unit);
                     render::sky_only_inscatter(od, medium.albedo, sky, inscatter);
+                    if (by_direction && !req.sky_light->deviation.empty()) {
+                      // As mr::add_sky_light on the full-frame path's float layers: the
+                      // deviation from L_sky along this pixel's ray.
+                      const Rgb deviation =
+                          req.sky_light->deviation_at(scene.pose.ray_direction(camera, x, y));
+                      const double od_stored[3] = {float(od[0]), float(od[1]), float(od[2])};
+                      double extra[3];
+                      render::sky_only_inscatter(od_stored, medium.albedo, deviation, extra);
+                      for (int c = 0; c < 3; ++c)
+                        inscatter[c] = float(std::max(0.0, double(float(inscatter[c])) + extra[c]));
+                    }
                     double tau = 0;
                     for (int c = 0; c < 3; ++c) {
                       if (c == 0 || !(od[c] == od[c - 1])) tau = std::exp(-od[c]);

@@ -11,6 +11,7 @@
 #include "mr/cancel.h"
 #include "mr/depth.h"
 #include "mr/error.h"
+#include "mr/sky_light.h"
 #include "photo/airlight.h"
 #include "photo/composite.h"
 #include "photo/illumination.h"
@@ -108,6 +109,10 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
                      : need_sun_estimate ? "sun irradiance"
                                          : "lamp intensity") +
                     " is 'auto' but no photo of the camera's size was given to estimate it from");
+  if (scene.lighting.sky_by_direction.value_or(false) &&
+      (photo.channels() < 3 || photo.width() != camera.width || photo.height() != camera.height))
+    throw Error(ErrorCode::invalid_argument,
+                "render_scattering: lighting.sky_by_direction needs the photo at the camera's size");
   check_lamps_outside_geometry(distance_m, camera, scene);
 
   ScatteringLayers out;
@@ -147,6 +152,11 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
   out.backend_notice = std::move(frame.notice);
   out.backend_notice_is_warning = frame.notice_is_warning;
   out.completed_blockers = std::move(frame.completed_blockers);
+  // Issue 11: the sky term lit by the photo's sky by direction (mr/sky_light.h), exact in
+  // closed form from each pixel's optical depth, whichever backend rendered.
+  if (scene.lighting.sky_by_direction.value_or(false))
+    add_sky_light(sky_light_from_photo(photo, distance_m, camera, scene, out.sky_radiance),
+                  scene.medium, camera, scene.pose, out.optical_depth, out.inscatter);
   const render::FrameTimings& t = frame.timings;
   out.timings.mesh_s = t.mesh_s;
   out.timings.bvh_s = t.bvh_s;

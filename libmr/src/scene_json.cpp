@@ -172,7 +172,7 @@ Lamp read_lamp(const Json& j, const std::string& p, const Reader& r) {
 
 Lighting read_lighting(const Json& j, const std::string& p, const Reader& r) {
   r.object(j, p);
-  r.check_keys(j, p, {"sun", "sky_radiance", "lamps"});
+  r.check_keys(j, p, {"sun", "sky_radiance", "lamps", "sky_by_direction"});
   Lighting l;
   if (const Json* s = member(j, "sun"); s && !s->is_null()) l.sun = read_sun(*s, p + "/sun", r);
   if (const Json* s = member(j, "sky_radiance")) {
@@ -189,6 +189,14 @@ Lighting read_lighting(const Json& j, const std::string& p, const Reader& r) {
     if (!lamps->is_array()) r.expected(lp, "an array of lamp objects", *lamps);
     for (std::size_t i = 0; i < lamps->size(); ++i)
       l.lamps.push_back(read_lamp((*lamps)[i], lp + "/" + std::to_string(i), r));
+  }
+  // Sky light by direction (mr/sky_light.h): true, false, or "auto" / null / absent (the front
+  // end decides).
+  if (const Json* v = member(j, "sky_by_direction"); v && !v->is_null()) {
+    if (v->is_boolean())
+      l.sky_by_direction = v->get<bool>();
+    else if (!(v->is_string() && v->get_ref<const std::string&>() == "auto"))
+      r.expected(p + "/sky_by_direction", "true, false or \"auto\"", *v);
   }
   return l;
 }
@@ -566,6 +574,7 @@ Json to_document(const FogScene& s) {
     lamps.push_back(std::move(j));
   }
   lighting["lamps"] = std::move(lamps);
+  lighting["sky_by_direction"] = l.sky_by_direction ? Json(*l.sky_by_direction) : Json("auto");
 
   const RenderSettings& r = s.render;
   static constexpr const char* kQuality[] = {"draft", "normal", "final"};

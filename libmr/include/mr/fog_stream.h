@@ -2,7 +2,8 @@
 //
 // A scene lit by the sky alone (no sun, no lamps, no noise wisps; homogeneous or exponential
 // height fog, with or without a layer) has a closed form per pixel (DESIGN.md section 3):
-//   T = tau = exp(-sigma_t * optical_depth),  R = albedo L_sky (1 - tau),  C = I T + R.
+//   T = tau = exp(-sigma_t * optical_depth),  R = albedo L_sky (1 - tau),  C = I T + R
+// (with sky light by direction, mr/sky_light.h, L_sky becomes L_in(view ray) from a low-res map).
 // No pixel needs another, so decode, fog and encode run over strips of rows: the photo and the
 // depth map are decoded strip by strip (OIIO scanline reads), converted through the same OCIO
 // processors as mr::read_image / mr::write_image, fogged with the same closed form as the
@@ -28,6 +29,7 @@
 #include "mr/io.h"
 #include "mr/metadata.h"
 #include "mr/scene.h"
+#include "mr/sky_light.h"
 
 namespace mr {
 
@@ -59,6 +61,11 @@ struct MR_API StreamFogRequest {
   std::string software;
   /// As for write_image (pixel type, colour space, JPEG quality, overwrite).
   WriteOptions write;
+  /// The photo's sky light by direction (mr/sky_light.h, e.g. from mr::sky_light_from_photo
+  /// with the scene's sky radiance and medium.g), needed when scene->lighting.sky_by_direction is
+  /// true (else the request does not stream): its low-resolution map is sampled at each pixel's
+  /// view ray as the strips are fogged. Must outlive the call.
+  const SkyLight* sky_light = nullptr;
   /// Rows per strip (0: chosen from the width, a multiple of 16 so that JPEG MCU rows and
   /// OpenEXR's 16-line chunks are decoded once).
   int strip_rows = 0;

@@ -19,4 +19,5 @@
 #include "mr/scattering.h"
 #include "mr/scene.h"
 #include "mr/scene_json.h"
+#include "mr/sky_light.h"
 #include "mr/version.h"

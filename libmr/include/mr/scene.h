@@ -110,6 +110,13 @@ struct MR_API Lighting {
   /// scattering). nullopt: estimated from the photo (the Koschmieder airlight estimate).
   std::optional<Rgb> sky_radiance;
   std::vector<Lamp> lamps;
+  /// Sky light by direction (mr/sky_light.h, issue 11): true: the fog's sky in-scatter along
+  /// each view ray takes the photo's own sky around that direction (phase-weighted; the ground
+  /// below the horizon) instead of the uniform L_sky, so sunsets, sky gradients and cloud
+  /// colours survive haze; needs the photo. false: the uniform L_sky. nullopt ("auto" in a scene
+  /// document): the front end decides (`mr fog`: by direction when it estimates the geometry,
+  /// --depth auto); the library renders it as false.
+  std::optional<bool> sky_by_direction;
 };
 
 enum class Quality { draft, normal, final };

@@ -1,0 +1,67 @@
+// Private to libmr: sky light by direction (issue 11, "real photos, no help").
+//
+// Single scattering of the light arriving from every direction w' at a point of the fog, seen
+// along the view direction w, is L_in(w) = integral over the sphere of L_env(w') p(w . w') dw'
+// with p the Henyey-Greenstein phase (w' is the direction one looks in to see that light, as for
+// the sun: render/physics/scattering.h). A uniform environment L_sky gives L_in = L_sky (p is
+// normalised): the scattering core's isotropic sky light. Its sky term of R is
+// albedo L_sky (1 - tau(0, D)) along every view ray, whatever the density (the source is
+// constant along the ray, so the march telescopes), so a direction-dependent L_in(w) replaces
+// it exactly by adding albedo (L_in(w) - L_sky) (1 - tau(0, D)) to R: the same closed form
+// (render/medium.h, sky_only_inscatter) with the deviation in place of L_sky.
+//
+// The environment comes from the photo: the sky directions it shows take its sky's radiance,
+// the sky directions it does not show are filled smoothly from the rows of sky it does show
+// (the mean of each elevation row, interpolated between rows and held beyond them; L_sky with no
+// sky at all), and every direction below the horizon takes the ground's upward radiance, the
+// mean of the photo's surface pixels below the horizon. It is kept as a low-resolution
+// latitude-longitude map of its deviation from L_sky (so a uniform environment gives exactly
+// zero) and convolved with the phase function texel by texel (exact for the map, the kernel
+// weights normalised to sum to 1): the convolved map is smooth at the scale of the phase lobe,
+// and a pixel takes it bilinearly at its view direction.
+#pragma once
+
+#include <array>
+
+#include "mr/camera.h"
+#include "mr/image.h"
+#include "mr/scene.h"
+
+namespace mr::photo {
+
+/// A latitude-longitude map (3 channels): column c covers azimuths (c / W) 360 - 180 to
+/// ((c + 1) / W) 360 - 180 degrees (azimuth 0 = +Z, 90 = +X, as mr::direction_from_azimuth_
+/// elevation), row r elevations 90 - (r / H) 180 to 90 - ((r + 1) / H) 180 (row 0 at the
+/// zenith). H even, so the horizon is a texel boundary.
+/// The unit world direction of the point (col, row) in texel units (texel centres at + 0.5).
+Vec3 latlong_direction(int width, int height, double col, double row);
+/// The solid angle of a texel of row `row` (steradians).
+double latlong_texel_solid_angle(int width, int height, int row);
+/// Bilinear sample of a lat-long map at a world direction (azimuth wraps, elevation clamps at
+/// the first and last rows' centres).
+std::array<double, 3> sample_latlong(const Image& map, const Vec3& direction);
+
+/// The phase convolution of a lat-long map (any size, H even) onto an out_width x out_height
+/// lat-long map: out(w) = sum_i env_i p_HG(g, w . w_i) dOmega_i / sum_i p_HG(g, w . w_i)
+/// dOmega_i over the input texels' centres w_i, with their solid angles.
+Image convolve_henyey_greenstein(const Image& env, double g, int out_width, int out_height);
+
+/// The environment's resolution for a phase lobe (texels small against the lobe's half-width,
+/// capped), and the convolved map's.
+struct LatLongSizes {
+  int env_width, env_height, out_width, out_height;
+};
+LatLongSizes latlong_sizes_for(double g);
+
+/// The environment of a photo as the deviation from `sky_radiance` (lat-long, `width` x
+/// `height`): sky pixels are those whose distance is_sky (+inf), seen from `pose` by `camera`
+/// (see the file comment for the fill). The photo: scene-linear, >= 3 channels, the camera's
+/// size; `distance_m`: 1 channel, the same size.
+Image environment_deviation(ConstImageView photo, ConstImageView distance_m, const Camera& camera,
+                            const CameraPose& pose, const std::array<float, 3>& sky_radiance,
+                            int width, int height);
+
+/// True when every value of the map is exactly 0 (a uniform environment: no correction).
+bool all_zero(const Image& map);
+
+}  // namespace mr::photo
