@@ -578,9 +578,9 @@ TEST(SceneJson, BadEnumStrings) {
 }
 
 TEST(SceneJson, FormatAndVersion) {
-  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 4}"),
-                  "scene.json: /version: version 4 is newer than this libmr supports (it reads "
-                  "versions 1 to 3); upgrade libmr");
+  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 5}"),
+                  "scene.json: /version: version 5 is newer than this libmr supports (it reads "
+                  "versions 1 to 4); upgrade libmr");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 0}"),
                   "scene.json: /version: version 0 does not exist");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\"}"), "scene.json: /version: missing");
