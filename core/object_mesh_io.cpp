@@ -431,6 +431,9 @@ std::optional<Image> Importer::decode(const std::string& filename, Filesystem::I
                                       std::string& why) const {
   ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);  // base colour keeps its colour where alpha < 1
+  // OIIO 2.4's readers take the memory proxy from the configuration hint (the open() argument
+  // alone is not passed on to every plugin).
+  if (io) config.attribute("oiio:ioproxy", TypeDesc::PTR, &io);
   std::unique_ptr<ImageInput> in;
   try {
     in = ImageInput::open(filename, &config, io);

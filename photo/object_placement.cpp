@@ -115,15 +115,19 @@ SurfaceAtPixel surface_at_pixel(const Camera& camera, const CameraPose& pose,
   // its own surface), then grow to the window's points on the fitted plane, and refit.
   std::vector<char> use = near_centre;
   Plane plane = fit_plane(pts, use);
-  for (int iteration = 0; iteration < 3 && plane.valid; ++iteration) {
-    std::vector<double> residuals;
-    for (std::size_t i = 0; i < pts.size(); ++i)
-      if (use[i]) residuals.push_back(std::abs(dot(pts[i] - plane.centroid, plane.normal)));
-    const double tolerance = std::max(3.0 * median(residuals), 1e-3 + 2e-3 * d0);
-    // The clicked pixel's surface must be the one kept: centre the test on its own point.
+  for (int iteration = 0; iteration < 4 && plane.valid; ++iteration) {
+    // Distances of every window point from the plane through the clicked point. Their median
+    // measures the noise plus how wrong the plane still is (a 3x3 fit to noisy depth can be
+    // tilted): points within 3 times it are kept, so the set grows while the plane is poor and
+    // settles on the clicked surface, the window's majority, when it is good.
     const double offset = dot(centre_point - plane.centroid, plane.normal);
+    std::vector<double> residuals(pts.size());
     for (std::size_t i = 0; i < pts.size(); ++i)
-      use[i] = std::abs(dot(pts[i] - plane.centroid, plane.normal) - offset) < tolerance;
+      residuals[i] = std::abs(dot(pts[i] - plane.centroid, plane.normal) - offset);
+    // Noise-free depth leaves residuals of rounding only: then a point counts as on the plane
+    // within half a pixel's footprint, so the first row of a crossing surface stays out.
+    const double tolerance = std::max(3.0 * median(residuals), 1e-3 + 0.5 * d0 / camera.focal_px);
+    for (std::size_t i = 0; i < pts.size(); ++i) use[i] = residuals[i] < tolerance;
     plane = fit_plane(pts, use);
   }
   SurfaceAtPixel out;

@@ -20,9 +20,10 @@ struct SurfaceAtPixel {
 
 /// Fits a plane to the world points of the pixels within `radius_px` of the clicked one (finite,
 /// positive distances only), robustly: first to the clicked pixel's 3x3 neighbourhood, then,
-/// three times, to the window's points within max(3 x the median residual, 1 mm + 0.2 % of the
-/// distance) of the plane through the clicked point, so that a window straddling a depth edge
-/// keeps the clicked pixel's surface; and intersects the ray through (x, y) with it. Where no plane fits (fewer than 6 inliers, or collinear points)
+/// four times, to the window's points within max(3 x their median distance, 1 mm + half a
+/// pixel's footprint d / (2 f)) of the plane through the clicked point, so that a window
+/// straddling a depth edge keeps its majority surface; and intersects the ray through (x, y)
+/// with it. Where no plane fits (fewer than 6 inliers, or collinear points)
 /// or the intersection is implausible, the position is the clicked pixel's own distance along
 /// the ray and normal_valid is false.
 /// Throws mr::Error(invalid_argument) when (x, y) is outside the image, the image does not
