@@ -44,6 +44,7 @@
 #include <optional>
 
 #include "blockers_panel.h"
+#include "objects_panel.h"
 #include "export_dialog.h"
 #include "fog_panel.h"
 #include "grabcut_assist.h"
@@ -124,6 +125,20 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
   blockers_dock_->setWidget(blockers_scroll);
   addDockWidget(Qt::RightDockWidgetArea, blockers_dock_);
   tabifyDockWidget(annotation_dock_, blockers_dock_);
+  // Inserted 3D objects (issue 16): like the blockers, they live in the scene; the panel edits
+  // a copy and writes it back.
+  objects_panel_ = new ObjectsPanel;
+  objects_panel_->setObjectName("objectsPanel");
+  auto* objects_scroll = new QScrollArea;
+  objects_scroll->setWidget(objects_panel_);
+  objects_scroll->setWidgetResizable(true);
+  objects_scroll->setHorizontalScrollBarPolicy(Qt::ScrollBarAlwaysOff);
+  objects_dock_ = new QDockWidget(tr("Objects"), this);
+  objects_dock_->setObjectName("objectsDock");
+  objects_dock_->setFeatures(QDockWidget::DockWidgetMovable | QDockWidget::DockWidgetFloatable);
+  objects_dock_->setWidget(objects_scroll);
+  addDockWidget(Qt::RightDockWidgetArea, objects_dock_);
+  tabifyDockWidget(blockers_dock_, objects_dock_);
   fog_dock_->raise();
 
   layer_box_ = new QComboBox;
@@ -259,6 +274,18 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
   });
   connect(blockers_panel_, &BlockersPanel::rejected, this,
           [this](const QString& m) { statusBar()->showMessage(tr("Blockers: %1").arg(m), 10000); });
+  // Object edits are undoable with the annotations (one Edit > Undo).
+  objects_panel_->setUndoStack(editor_->undoStack());
+  connect(objects_panel_, &ObjectsPanel::changed, this, [this] {
+    mr::FogScene scene = fog_panel_->scene();
+    scene.objects = objects_panel_->objects();
+    fog_panel_->setScene(scene);
+    scene_modified_ = true;
+    updateTitle();
+    requestPreview();
+  });
+  connect(objects_panel_, &ObjectsPanel::rejected, this,
+          [this](const QString& m) { statusBar()->showMessage(tr("Objects: %1").arg(m), 10000); });
   estimate_timer_.setSingleShot(true);
   estimate_timer_.setInterval(250);
   connect(&estimate_timer_, &QTimer::timeout, this, [this] { reestimate(true); });
@@ -408,6 +435,10 @@ void MainWindow::openPhoto(const QString& path) {
           view_->setAfter(QImage());
           fog_panel_->setScene(pending_scene_ ? *pending_scene_ : doc->scene);
           blockers_panel_->setBlockers(fog_panel_->scene().blockers);
+          objects_panel_->setObjects(fog_panel_->scene().objects);
+          // Model paths are stored relative to the project's folder once it has one.
+          objects_panel_->setDocumentDir(
+              project_path_.isEmpty() ? QString() : QFileInfo(project_path_).absolutePath());
           syncBlockersContext();
           pending_scene_.reset();
           pending_annotations_.reset();
@@ -442,6 +473,7 @@ void MainWindow::syncBlockersContext() {
   }
   const double hfov = document_ ? document_->camera.horizontal_fov_deg() : 60.0;
   blockers_panel_->setContext(scene.pose, hfov, sun_azimuth);
+  objects_panel_->setCameraPose(scene.pose);
 }
 
 void MainWindow::requestPreview() {

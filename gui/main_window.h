@@ -41,6 +41,7 @@ namespace mrstudio {
 
 class BlockersPanel;
 class FogPanel;
+class ObjectsPanel;
 class ImageView;
 
 /// Measures how long the event loop goes without running a 10 ms timer (the longest gap).
@@ -116,6 +117,8 @@ class MainWindow : public QMainWindow {
   /// Blockers the photo does not show (the scene's mr::Blockers; its own dock).
   BlockersPanel* blockersPanel() const { return blockers_panel_; }
   QDockWidget* blockersDock() const { return blockers_dock_; }
+  ObjectsPanel* objectsPanel() const { return objects_panel_; }
+  QDockWidget* objectsDock() const { return objects_dock_; }
   ImageView* imageView() const { return view_; }
   QComboBox* layerBox() const { return layer_box_; }
   QSlider* splitSlider() const { return split_slider_; }
@@ -195,6 +198,8 @@ class MainWindow : public QMainWindow {
   FogPanel* fog_panel_;
   BlockersPanel* blockers_panel_;
   QDockWidget* blockers_dock_;
+  ObjectsPanel* objects_panel_;  // issue 16: inserted 3D objects (the scene's objects list)
+  QDockWidget* objects_dock_;
   QComboBox* layer_box_;
   QSlider* split_slider_;
   QLabel* backend_label_;

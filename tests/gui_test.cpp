@@ -11,6 +11,7 @@
 #include <QElapsedTimer>
 #include <QFile>
 #include <QGroupBox>
+#include <QLabel>
 #include <QLineEdit>
 #include <QListWidget>
 #include <QMessageBox>
@@ -34,6 +35,7 @@
 
 #include "annotation_editor.h"
 #include "blockers_panel.h"
+#include "objects_panel.h"
 #include "export_dialog.h"
 #include "fog_panel.h"
 #include "grabcut_assist.h"
@@ -237,6 +239,7 @@ class GuiTest : public QObject {
   void interiorBoxByClicks();
   void fogPanelRoundTripEveryParameter();
   void blockersPanelEditsValidatesAndRoundTrips();
+  void objectsPanelAddsEditsAndUndoes();
   void blockersShadeTheSunnyPreview();
   void blockersFromThePhotosAnnotations();
   void statusBarShowsProgress();
@@ -1458,6 +1461,85 @@ static void dragWidget(QWidget* w, const QPointF& a, const QPointF& b) {
     QApplication::sendEvent(w, &move);
   }
   QTest::mouseRelease(w, Qt::LeftButton, Qt::NoModifier, b.toPoint());
+}
+
+// Issue 16: the Objects dock adds primitives and models, edits placements and removes objects,
+// each an undoable command; broken model files are refused with the library's message; the
+// objects go into the scene document and read back.
+void GuiTest::objectsPanelAddsEditsAndUndoes() {
+  ObjectsPanel panel;
+  QUndoStack undo;
+  panel.setUndoStack(&undo);
+  mr::CameraPose pose;
+  pose.position_m = {1, 1.6, 2};
+  pose.yaw_deg = 90;
+  panel.setCameraPose(pose);
+  panel.setObjects({});
+  QSignalSpy changed(&panel, &ObjectsPanel::changed);
+  QSignalSpy rejected(&panel, &ObjectsPanel::rejected);
+
+  panel.primitiveBox()->setCurrentText("cylinder");
+  panel.addPrimitiveButton()->click();
+  QCOMPARE(int(panel.objects().size()), 1);
+  QCOMPARE(panel.objects()[0].mesh, std::string("primitive:cylinder"));
+  // On the ground 5 m ahead of the camera (turned to +X).
+  QCOMPARE(panel.objects()[0].placement.position_m.y, 0.0);
+  QVERIFY(std::abs(panel.objects()[0].placement.position_m.x - 6) < 1e-9);
+  QVERIFY(std::abs(panel.objects()[0].placement.position_m.z - 2) < 1e-9);
+  QCOMPARE(panel.list()->count(), 1);
+  QCOMPARE(panel.selected(), 0);
+
+  // Edits of one field in a row are one undo step.
+  panel.scaleSpin()->setValue(2);
+  panel.scaleSpin()->setValue(3);
+  panel.yawSpin()->setValue(45);
+  panel.positionSpin(2)->setValue(9);
+  QCOMPARE(panel.objects()[0].placement.scale, 3.0);
+  QCOMPARE(panel.objects()[0].placement.yaw_deg, 45.0);
+  QCOMPARE(panel.objects()[0].placement.position_m.z, 9.0);
+  QCOMPARE(undo.count(), 4);  // add, scale (merged), yaw, move
+  undo.undo();
+  QCOMPARE(panel.objects()[0].placement.position_m.z, 2.0);
+  QCOMPARE(panel.positionSpin(2)->value(), 2.0);
+  undo.undo();
+  undo.undo();
+  QCOMPARE(panel.objects()[0].placement.scale, 1.0);
+  undo.undo();
+  QVERIFY(panel.objects().empty());
+  undo.redo();
+  QCOMPARE(int(panel.objects().size()), 1);
+  QVERIFY(changed.count() >= 8);
+
+  // A model file, checked by loading it; a broken one is refused.
+  const QString model = "/usr/share/assimp/models/glTF2/BoxTextured-glTF-Binary/BoxTextured.glb";
+  if (QFile::exists(model)) {
+    QVERIFY(panel.addModel(model));
+    QCOMPARE(int(panel.objects().size()), 2);
+    QCOMPARE(panel.selected(), 1);
+    QCOMPARE(panel.objects()[1].mesh, model.toStdString());  // no document folder: absolute
+  }
+  QTemporaryDir dir;
+  QFile broken(dir.filePath("broken.glb"));
+  QVERIFY(broken.open(QIODevice::WriteOnly));
+  broken.write("glTF not really");
+  broken.close();
+  const int before = int(panel.objects().size());
+  QVERIFY(!panel.addModel(broken.fileName()));
+  QCOMPARE(int(panel.objects().size()), before);
+  QVERIFY(rejected.count() >= 1);
+  QVERIFY(panel.messageLabel()->text().contains("broken.glb"));
+
+  // Remove, undo the removal; the scene document keeps the objects.
+  panel.list()->setCurrentRow(0);
+  panel.removeButton()->click();
+  QCOMPARE(int(panel.objects().size()), before - 1);
+  undo.undo();
+  QCOMPARE(int(panel.objects().size()), before);
+  mr::FogScene scene;
+  scene.objects = panel.objects();
+  const mr::FogScene back = mr::scene_from_json(mr::scene_to_json(scene), "objects.json");
+  QCOMPARE(int(back.objects.size()), before);
+  QCOMPARE(back.objects[0].mesh, std::string("primitive:cylinder"));
 }
 
 void GuiTest::blockersPanelEditsValidatesAndRoundTrips() {

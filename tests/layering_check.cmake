@@ -7,7 +7,7 @@
 #   cmake -DSOURCE_DIR=<repo> -P tests/layering_check.cmake
 # Prints every violation as "file:line: includes X (layer L may include only ...)" and fails.
 cmake_minimum_required(VERSION 3.25)
-set(core_types annotations camera cancel error export image material_model metadata objects scene version)
+set(core_types annotations camera cancel error export image material_model metadata objects scene vec3 version)
 list(TRANSFORM core_types PREPEND "mr/")
 list(TRANSFORM core_types APPEND ".h")
 

@@ -255,7 +255,7 @@ TEST(SceneJson, RoundTripOfDefaultsAndUnboundedLayer) {
 
 TEST(SceneJson, WritesEveryKeyPrettyAndReadably) {
   const std::string text = scene_to_json(every_field_set());
-  EXPECT_EQ(text.rfind("{\n  \"format\": \"libmr-scene\",\n  \"version\": 3,\n", 0), 0u) << text;
+  EXPECT_EQ(text.rfind("{\n  \"format\": \"libmr-scene\",\n  \"version\": 4,\n", 0), 0u) << text;
   for (const char* key : {"camera_pose",
                           "position_m",
                           "yaw_deg",
@@ -578,9 +578,9 @@ TEST(SceneJson, BadEnumStrings) {
 }
 
 TEST(SceneJson, FormatAndVersion) {
-  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 4}"),
-                  "scene.json: /version: version 4 is newer than this libmr supports (it reads "
-                  "versions 1 to 3); upgrade libmr");
+  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 5}"),
+                  "scene.json: /version: version 5 is newer than this libmr supports (it reads "
+                  "versions 1 to 4); upgrade libmr");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 0}"),
                   "scene.json: /version: version 0 does not exist");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\"}"), "scene.json: /version: missing");
@@ -603,7 +603,7 @@ TEST(SceneJson, CameraRoundTripsAndIsOptional) {
   FogScene s;
   s.camera = SceneCamera{1600, 1200, 1234.5678901234567, std::nullopt};
   const std::string text = scene_to_json(s);
-  EXPECT_CONTAINS(text, "\"version\": 3");
+  EXPECT_CONTAINS(text, "\"version\": 4");
   EXPECT_CONTAINS(text, "\"camera\": {");
   EXPECT_EQ(text.find("principal_point_px"), std::string::npos);  // the centre: left out
   const FogScene back = scene_from_json(text, "cam.json");

@@ -23,6 +23,7 @@
 #include "json_reading.h"
 #include "mr/error.h"
 #include "mr/fog.h"
+#include "mr/object_io.h"
 #include "mr/scattering.h"
 
 namespace mr {
@@ -368,6 +369,52 @@ Blockers read_blockers(const Json& j, const std::string& p, const Reader& r) {
   return b;
 }
 
+// The "objects" list (version 4): 3D objects inserted into the photo (mr/objects.h).
+Material read_material(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(j, p, {"diffuse_albedo", "specular_albedo", "roughness"});
+  Material m;
+  if (const Json* v = member(j, "diffuse_albedo")) m.diffuse_albedo = r.rgb(*v, p + "/diffuse_albedo");
+  if (const Json* v = member(j, "specular_albedo"))
+    m.specular_albedo = r.single(*v, p + "/specular_albedo");
+  if (const Json* v = member(j, "roughness")) m.roughness = r.single(*v, p + "/roughness");
+  return m;
+}
+
+ObjectPlacement read_placement(const Json& j, const std::string& p, const Reader& r) {
+  r.object(j, p);
+  r.check_keys(j, p, {"position_m", "up", "yaw_deg", "scale"});
+  ObjectPlacement o;
+  if (const Json* v = member(j, "position_m")) o.position_m = r.vec3(*v, p + "/position_m");
+  if (const Json* v = member(j, "up")) o.up = r.vec3(*v, p + "/up");
+  if (const Json* v = member(j, "yaw_deg")) o.yaw_deg = r.number(*v, p + "/yaw_deg");
+  if (const Json* v = member(j, "scale")) o.scale = r.number(*v, p + "/scale");
+  return o;
+}
+
+std::vector<SceneObject> read_objects(const Json& j, const std::string& p, const Reader& r) {
+  if (!j.is_array()) r.expected(p, "an array of objects", j);
+  std::vector<SceneObject> objects;
+  for (std::size_t i = 0; i < j.size(); ++i) {
+    const std::string ip = p + "/" + std::to_string(i);
+    const Json& o = j[i];
+    r.object(o, ip);
+    r.check_keys(o, ip, {"mesh", "placement", "material"});
+    SceneObject obj;
+    const Json* mesh = member(o, "mesh");
+    if (!mesh)
+      r.fail(ip + "/mesh", "missing; give a model file (relative to this document) or "
+                           "\"primitive:sphere\", \"primitive:box\", ...");
+    if (!mesh->is_string()) r.expected(ip + "/mesh", "a string", *mesh);
+    obj.mesh = mesh->get<std::string>();
+    if (const Json* v = member(o, "placement")) obj.placement = read_placement(*v, ip + "/placement", r);
+    if (const Json* v = member(o, "material"); v && !v->is_null())
+      obj.material = read_material(*v, ip + "/material", r);
+    objects.push_back(std::move(obj));
+  }
+  return objects;
+}
+
 FogScene read_document(const Json& doc, const Reader& r) {
   if (!doc.is_object())
     r.fail("", "expected a JSON object at the top level, found " + describe(doc));
@@ -396,7 +443,7 @@ FogScene read_document(const Json& doc, const Reader& r) {
 
   r.check_keys(doc, "",
                {"format", "version", "camera_pose", "medium", "lighting", "render", "camera",
-                "blockers"});
+                "blockers", "objects"});
   FogScene s;
   // Completing structures cut by the frame came with version 3; older documents keep rendering
   // as they did.
@@ -418,6 +465,12 @@ FogScene read_document(const Json& doc, const Reader& r) {
              "version " +
                  std::to_string(v));
     s.camera = read_camera(*j, "/camera", r);
+  }
+  if (const Json* j = member(doc, "objects")) {
+    if (v < 4)
+      r.fail("/objects", "objects are part of the format from version 4 on; this document is "
+                         "version " + std::to_string(v));
+    s.objects = read_objects(*j, "/objects", r);
   }
   return s;
 }
@@ -599,6 +652,20 @@ Json to_document(const FogScene& s) {
     doc["camera"] = std::move(camera);
   }
   doc["blockers"] = blockers_document(s.blockers);
+  Json objects = Json::array();
+  for (const SceneObject& o : s.objects) {
+    Json j{{"mesh", o.mesh},
+           {"placement", Json{{"position_m", vec3_json(o.placement.position_m)},
+                              {"up", vec3_json(o.placement.up)},
+                              {"yaw_deg", o.placement.yaw_deg},
+                              {"scale", o.placement.scale}}}};
+    j["material"] = o.material ? Json{{"diffuse_albedo", rgb_json(o.material->diffuse_albedo)},
+                                      {"specular_albedo", float_for_json(o.material->specular_albedo)},
+                                      {"roughness", float_for_json(o.material->roughness)}}
+                               : Json(nullptr);
+    objects.push_back(std::move(j));
+  }
+  doc["objects"] = std::move(objects);
   return doc;
 }
 
@@ -703,7 +770,17 @@ SceneCamera scene_camera(const Camera& camera) {
 FogScene load_scene(const fs::path& path) {
   const std::string name = path.string();
   const std::string text = json::read_document_file(path, "a scene file");
-  return scene_from_json(text, name);
+  FogScene scene = scene_from_json(text, name);
+  // Model files are relative to the document: only here is its folder known.
+  for (std::size_t i = 0; i < scene.objects.size(); ++i) {
+    const fs::path model = object_mesh_path(scene.objects[i], path.parent_path());
+    std::error_code ec;
+    if (!model.empty() && !fs::is_regular_file(model, ec))
+      throw Error(ErrorCode::io, name + ": /objects/" + std::to_string(i) + "/mesh: model file " +
+                                     model.string() + (fs::exists(model, ec) ? " is not a regular file"
+                                                                              : " not found"));
+  }
+  return scene;
 }
 
 void save_scene(const fs::path& path, const FogScene& scene) {

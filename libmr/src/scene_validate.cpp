@@ -266,6 +266,13 @@ void validate_scene(const FogScene& scene) {
   validate_lighting(scene.lighting);
   validate_render(scene.render);
   validate_blockers(scene.blockers);
+  // Inserted objects (issue 16): each entry's mesh name, placement and material.
+  constexpr std::size_t kMaxObjects = 4096;
+  if (scene.objects.size() > kMaxObjects)
+    fail("objects", std::to_string(scene.objects.size()) + " objects",
+         "at most " + std::to_string(kMaxObjects));
+  for (std::size_t i = 0; i < scene.objects.size(); ++i)
+    validate_scene_object(scene.objects[i], "objects[" + std::to_string(i) + "]");
 }
 
 }  // namespace mr

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "mr/export.h"
-#include "mr/scene.h"
+#include "mr/vec3.h"
 
 namespace mr {
 

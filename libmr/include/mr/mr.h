@@ -16,6 +16,8 @@
 #include "mr/insert.h"
 #include "mr/io.h"
 #include "mr/metadata.h"
+#include "mr/object_io.h"
+#include "mr/objects.h"
 #include "mr/scattering.h"
 #include "mr/scene.h"
 #include "mr/scene_json.h"

@@ -13,14 +13,10 @@
 
 #include "mr/camera.h"
 #include "mr/export.h"
+#include "mr/objects.h"
+#include "mr/vec3.h"
 
 namespace mr {
-
-using Rgb = std::array<float, 3>;
-
-struct MR_API Vec3 {
-  double x = 0, y = 0, z = 0;
-};
 
 /// Where the camera stands and how it is turned, in the world frame.
 struct MR_API CameraPose {
@@ -237,6 +233,9 @@ struct MR_API FogScene {
   std::optional<SceneCamera> camera;
   /// Shadow casters the photo does not show (completion of structures cut by the frame on).
   Blockers blockers;
+  /// 3D objects inserted into the photo (issue 16; mr/objects.h), in document order. Their
+  /// relative mesh paths are relative to the scene document (mr::resolve_object_mesh).
+  std::vector<SceneObject> objects;
 };
 
 }  // namespace mr

@@ -23,8 +23,10 @@ inline constexpr const char* kSceneFormatName = "libmr-scene";
 /// version from 1 up to this one. Version 2 added the optional "camera" (the rest of the
 /// format, defaults included, is version 1's). Version 3 added "blockers" (shadow casters the
 /// photo does not show) with the completion of structures cut by the frame on by default;
-/// documents of versions 1 and 2 read with it off, so they render as before.
-inline constexpr int kSceneFormatVersion = 3;
+/// documents of versions 1 and 2 read with it off, so they render as before. Version 4 added
+/// "objects" (3D objects inserted into the photo, mr/objects.h; mesh paths relative to the
+/// document); older documents have none.
+inline constexpr int kSceneFormatVersion = 4;
 
 /// Parses a scene document. `source_name` (usually the file name) starts every error message.
 /// The result has passed validate_scene.
@@ -54,8 +56,10 @@ MR_API Camera camera_for_image(const SceneCamera& camera, int width, int height)
 /// point is left out when it is the image's centre).
 MR_API SceneCamera scene_camera(const Camera& camera);
 
-/// Reads and parses a scene file; errors name the file as given.
-/// Throws mr::Error: io when the file cannot be read, invalid_argument for its content.
+/// Reads and parses a scene file; errors name the file as given. The model files of its objects
+/// (relative to the file's folder) must exist: a missing one is an io error naming it.
+/// Throws mr::Error: io when the file or a model file cannot be read, invalid_argument for its
+/// content.
 MR_API FogScene load_scene(const std::filesystem::path& path);
 
 /// Writes scene_to_json(scene) to `path` atomically: into a temporary file in the same folder,
