@@ -20,10 +20,8 @@
 #include "output_safety.h"
 #include "mr/scene_json.h"
 #include "progress.h"
-#ifdef MR_CLI_INSERT
 #include "mr/insert.h"
 #include "mr/object_io.h"
-#endif
 
 namespace fs = std::filesystem;
 
@@ -439,9 +437,7 @@ std::optional<Outcome> run_streamed(const FogCommandOptions& o, const FogPlan& p
                                     const Job& job, Reporter& report) {
   if (!is_sky_only(plan.scene) || plan.scene.render.backend == Backend::vulkan || o.aovs)
     return std::nullopt;
-#ifdef MR_CLI_INSERT
   if (!plan.scene.objects.empty()) return std::nullopt;  // objects: the full-frame path
-#endif
   const PhotoProgress progress(report, job.photo.string(), {{{"render"}, 1}});
   std::error_code ec;
   if (o.depth == "auto" && !fs::exists(job.depth, ec)) return std::nullopt;
@@ -585,7 +581,6 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
       estimated ? job.photo.string() + " (estimated depth)" : job.depth.string();
   warn_about_depth(report, o, depth_name, depth.distance_m.pixel_count(), depth.no_surface_pixels,
                    depth.invalid_pixels, depth.sky_threshold_pixels, depth.clamped_pixels);
-#ifdef MR_CLI_INSERT
   // Issue 16: the scene document's objects are composited into the photo first (mr/insert.h);
   // then they take part in the fog like the photo's surfaces: their distance where they are in
   // front, their triangles among the shadow casters (shafts).
@@ -610,7 +605,6 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
     for (Blockers::Polygon& p : object_shadow_polygons(objects))
       scene.blockers.polygons.push_back(std::move(p));
   }
-#endif
   ScatteringLayers aovs;
   const FogLayers layers =
       fog(photo, depth.distance_m, sky_alpha, camera, scene, &aovs, progress.token());

@@ -10,9 +10,7 @@
 
 #include "estimate_command.h"
 #include "fog_command.h"
-#ifdef MR_CLI_INSERT
 #include "insert_command.h"
-#endif
 #include "material_command.h"
 #include "mr/io.h"
 #include "mr/version.h"
@@ -94,10 +92,8 @@ int main(int argc, char** argv) {
   CLI::App* estimate = mr::cli::add_estimate_command(app, estimate_options);
   mr::cli::MaterialCommandOptions material_options;
   CLI::App* material = mr::cli::add_material_command(app, material_options);
-#ifdef MR_CLI_INSERT
   mr::cli::InsertCommandOptions insert_options;
   CLI::App* insert = mr::cli::add_insert_command(app, insert_options);
-#endif
   // A usage error is one line, the last one printed: "ERROR: <problem>; see mr <command> --help".
   app.failure_message([](const CLI::App* failed, const CLI::Error& e) {
     std::string where = "mr";
@@ -117,9 +113,7 @@ int main(int argc, char** argv) {
     if (fog->parsed()) return mr::cli::run_fog_command(fog_options, g_interrupted);
     if (estimate->parsed()) return mr::cli::run_estimate_command(estimate_options);
     if (material->parsed()) return mr::cli::run_material_command(material_options);
-#ifdef MR_CLI_INSERT
     if (insert->parsed()) return mr::cli::run_insert_command(insert_options, g_interrupted);
-#endif
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "ERROR: out of memory (fewer threads with -j, or smaller photos)\n");
     return 1;
