@@ -1,6 +1,6 @@
 // Display-referred luma (Rec. 709 weights on gamma-2.2 values of the clamped scene-linear RGB),
-// the image gallery/measures.py measures created edges on; shared by the tests of real photos,
-// the sky mask and the automatic geometry.
+// the image gallery/measures.py measures created edges on, and that measure's gradient; shared by
+// the tests of real photos, the sky mask, the sky light and the automatic geometry.
 #pragma once
 
 #include <opencv2/core.hpp>
@@ -23,6 +23,20 @@ inline cv::Mat display_luma(const Image& img) {
       l.at<float>(y, x) = float(v);
     }
   return l;
+}
+
+// Per pixel: the larger forward difference (right, down) of a single-channel map; the gradient
+// of gallery/measures.py's created-edge measure.
+inline cv::Mat forward_gradient(const cv::Mat& l) {
+  cv::Mat g(l.rows, l.cols, CV_32F, cv::Scalar(0));
+  for (int y = 0; y < l.rows; ++y)
+    for (int x = 0; x < l.cols; ++x) {
+      float v = 0;
+      if (x + 1 < l.cols) v = std::max(v, std::abs(l.at<float>(y, x + 1) - l.at<float>(y, x)));
+      if (y + 1 < l.rows) v = std::max(v, std::abs(l.at<float>(y + 1, x) - l.at<float>(y, x)));
+      g.at<float>(y, x) = v;
+    }
+  return g;
 }
 
 }  // namespace mr::test

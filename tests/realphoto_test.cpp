@@ -112,19 +112,8 @@ Annotations level_horizon() {
 }
 
 using mr::test::display_luma;  // tests/display_luma.h
+constexpr auto gradient = mr::test::forward_gradient;
 
-// Per pixel: the larger forward difference (right, down) of a single-channel map.
-cv::Mat gradient(const cv::Mat& l) {
-  cv::Mat g(l.rows, l.cols, CV_32F, cv::Scalar(0));
-  for (int y = 0; y < l.rows; ++y)
-    for (int x = 0; x < l.cols; ++x) {
-      float v = 0;
-      if (x + 1 < l.cols) v = std::max(v, std::abs(l.at<float>(y, x + 1) - l.at<float>(y, x)));
-      if (y + 1 < l.rows) v = std::max(v, std::abs(l.at<float>(y + 1, x) - l.at<float>(y, x)));
-      g.at<float>(y, x) = v;
-    }
-  return g;
-}
 
 // The created-edge measure: the fraction of pixels where the fogged image's gradient
 // (display-referred luma) is more than twice the photo's plus a floor of 0.01 (2.5 / 255).

@@ -241,23 +241,11 @@ Image sunset_photo(const FogScene& scene) {
   return photo;
 }
 
-cv::Mat gradient(const cv::Mat& l) {  // per pixel: the larger forward difference
-  cv::Mat g(l.rows, l.cols, CV_32F, cv::Scalar(0));
-  for (int y = 0; y < l.rows; ++y)
-    for (int x = 0; x < l.cols; ++x) {
-      float v = 0;
-      if (x + 1 < l.cols) v = std::max(v, std::abs(l.at<float>(y, x + 1) - l.at<float>(y, x)));
-      if (y + 1 < l.rows) v = std::max(v, std::abs(l.at<float>(y + 1, x) - l.at<float>(y, x)));
-      g.at<float>(y, x) = v;
-    }
-  return g;
-}
-
 // The gallery's created-edge measure (gallery/measures.py): the fogged image's gradient of
-// display luma more than twice the photo's plus 0.01.
 // display luma more than twice the photo's plus 0.01; over the rows [0, rows).
 double created_edge_fraction(const Image& photo, const Image& fogged, int rows) {
-  const cv::Mat gp = gradient(test::display_luma(photo)), gf = gradient(test::display_luma(fogged));
+  const cv::Mat gp = test::forward_gradient(test::display_luma(photo)),
+                gf = test::forward_gradient(test::display_luma(fogged));
   std::size_t created = 0;
   for (int y = 0; y < rows; ++y)
     for (int x = 0; x < gp.cols; ++x) created += gf.at<float>(y, x) > 2 * gp.at<float>(y, x) + 0.01f;
