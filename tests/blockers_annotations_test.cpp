@@ -73,7 +73,14 @@ TEST(BlockersAnnotations, RoundTripIsExactAndTheSchemaIsTheScenes) {
   const std::string scene_text = scene_to_json(s1);
   const auto start = scene_text.find("\"blockers\": ");
   ASSERT_NE(start, std::string::npos);
-  const std::string object = scene_text.substr(start + 12, scene_text.rfind('}') - start - 12);
+  // The object runs to its matching brace (other keys, e.g. "objects", may follow it).
+  std::size_t end = start + 12;
+  for (int depth = 0; end < scene_text.size(); ++end) {
+    depth += scene_text[end] == '{' ? 1 : scene_text[end] == '}' ? -1 : 0;
+    if (depth == 0 && scene_text[end] == '}') break;
+  }
+  ASSERT_LT(end, scene_text.size());
+  const std::string object = scene_text.substr(start + 12, end + 1 - (start + 12));
   const Annotations c = annotations_from_json(kHead + ", \"blockers\": " + object + "}", "c.json");
   ASSERT_TRUE(c.blockers);
   FogScene s3;

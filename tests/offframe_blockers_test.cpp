@@ -291,7 +291,8 @@ TEST(OffFrame, BlockersReadWriteAndValidate) {
   s.blockers.polygons.push_back({{{1, 0, 2}, {3, 0, 2}, {3, 5, 2}}});
   s.blockers.canopy = Blockers::Canopy{7, 0.25, 20, 0.75, 9};
   const std::string text = scene_to_json(s);
-  EXPECT_NE(text.find("\"version\": 3"), std::string::npos);
+  // Written as the current format (blockers came with version 3; objects made it 4).
+  EXPECT_NE(text.find("\"version\": " + std::to_string(kSceneFormatVersion)), std::string::npos);
   const FogScene t = scene_from_json(text, "b.json");
   EXPECT_EQ(scene_to_json(t), text);
   EXPECT_EQ(t.blockers.completion.max_height_m, 22);
