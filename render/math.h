@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
 
 #include "mr/scene.h"
 #include "render/physics/types.h"
@@ -57,6 +58,17 @@ inline Vec3f unit(const Vec3f& a) {
 }
 inline Vec3f to_f(const Vec3& v) {
   return {float(v.x), float(v.y), float(v.z)};
+}
+
+// Van der Corput radical inverse in base 2 (the second Hammersley coordinate): i's bits
+// mirrored about the binary point, in [0, 1).
+inline double radical_inverse_base2(std::uint32_t i) {
+  i = (i << 16u) | (i >> 16u);
+  i = ((i & 0x55555555u) << 1u) | ((i & 0xAAAAAAAAu) >> 1u);
+  i = ((i & 0x33333333u) << 2u) | ((i & 0xCCCCCCCCu) >> 2u);
+  i = ((i & 0x0F0F0F0Fu) << 4u) | ((i & 0xF0F0F0F0u) >> 4u);
+  i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
+  return double(i) * 2.3283064365386963e-10;
 }
 
 }  // namespace mr::render

@@ -16,6 +16,7 @@
 
 #include "mr/error.h"
 #include "render/embree_scene.h"
+#include "render/math.h"
 #include "render/occluder_mesh.h"
 #include "render/physics/medium.h"
 #include "render/physics/scattering.h"
@@ -72,15 +73,6 @@ LobeSample specular_lobe(const Vec3f& n, const Vec3f& l, const Vec3f& v, float r
 constexpr int kTableMu = 96;
 constexpr int kTableRoughness = 50;  // roughness nodes, uniform on [0.02, 1]
 constexpr int kTableSamples = 1024;  // Hammersley points per node
-
-double radical_inverse_base2(std::uint32_t i) {
-  i = (i << 16u) | (i >> 16u);
-  i = ((i & 0x55555555u) << 1u) | ((i & 0xAAAAAAAAu) >> 1u);
-  i = ((i & 0x33333333u) << 2u) | ((i & 0xCCCCCCCCu) >> 2u);
-  i = ((i & 0x0F0F0F0Fu) << 4u) | ((i & 0xF0F0F0F0u) >> 4u);
-  i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
-  return double(i) * 2.3283064365386963e-10;
-}
 
 double table_roughness(int j) {
   return kMinRoughness + (1.0 - kMinRoughness) * j / (kTableRoughness - 1);

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "mr/error.h"
+#include "render/math.h"
 #include "render/physics/medium.h"
 #include "render/surface_shading.h"
 
@@ -28,15 +29,6 @@ Vec3f add3(const Vec3f& a, const Vec3f& b, float s = 1) {
 }
 Vec3f sub3(const Vec3f& a, const Vec3f& b) {
   return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
-}
-
-float radical_inverse(std::uint32_t i) {
-  i = (i << 16u) | (i >> 16u);
-  i = ((i & 0x55555555u) << 1u) | ((i & 0xAAAAAAAAu) >> 1u);
-  i = ((i & 0x33333333u) << 2u) | ((i & 0xCCCCCCCCu) >> 2u);
-  i = ((i & 0x0F0F0F0Fu) << 4u) | ((i & 0xF0F0F0F0u) >> 4u);
-  i = ((i & 0x00FF00FFu) << 8u) | ((i & 0xFF00FF00u) >> 8u);
-  return float(double(i) * 2.3283064365386963e-10);
 }
 
 void frame(const Vec3f& n, Vec3f& t, Vec3f& b) {
@@ -71,7 +63,7 @@ Vec3f sun_direction(const Lights& L, int i, int count, float rotation) {
 // Cosine-weighted direction i of `count` about n (Hammersley, Cranley-Patterson rotated).
 Vec3f sky_direction(const Vec3f& n, const Vec3f& t, const Vec3f& b, int i, int count, float rotation) {
   const float u1 = (float(i) + 0.5f) / float(count);
-  float u2 = radical_inverse(std::uint32_t(i)) + rotation;
+  float u2 = float(radical_inverse_base2(std::uint32_t(i))) + rotation;
   u2 -= std::floor(u2);
   const float rad = std::sqrt(u1), phi = 2 * kPi * u2;
   const float a = rad * std::cos(phi), c = rad * std::sin(phi), z = std::sqrt(std::max(0.0f, 1 - u1));
