@@ -465,8 +465,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           // far billboard and vanished in dense fog. Only with a measured horizon (annotated,
           // or from the photo's lines): under the level fall-back the bottom row may be above
           // the true horizon (a camera looking up into a canopy), and there is no ground there.
-          const bool off_bottom = yc + 1 >= h && g.horizon_source != EstimateSource::fallback;
-          if (!off_bottom && !ground.ground[std::size_t(yc + 1) * w + x]) continue;
+          if (yc + 1 >= h) {
+            if (g.horizon_source == EstimateSource::fallback) continue;
+          } else if (!ground.ground[std::size_t(yc + 1) * w + x]) {
+            continue;
+          }
           // Issue 11 item 3: something standing on the ground rises above the horizon by a fair
           // part of what it spans below it; the sea up to a boat, a person or a low wall do not,
           // and made into a billboard they become a wall of columns with seams between them.
