@@ -48,8 +48,8 @@ TEST(InsertCycles, CyclesPhotoMatchesTheMonteCarloReference) {
   st.pixel_samples_per_axis = test::kMcSlowBuild ? 2 : 4;
   st.sky_samples = test::kMcSlowBuild ? 64 : 256;
   st.seed = 11;
-  const Image mc = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting, s.photo_geometry,
-                                           s.photo_materials, st);
+  const Image mc = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting,
+                                           s.photo_geometry, s.photo_materials, st);
   const double err = mean_relative_difference(mc, cycles);
   std::printf("Cycles photo vs Monte Carlo reference: mean relative difference %.4f\n", err);
   EXPECT_LT(err, 0.02);
@@ -63,13 +63,16 @@ TEST(InsertCycles, CompositeMatchesCycles) {
   const Image want = read_image(kCycles / "with_objects.exr");
   const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
   const Image full_distance = mcref::distance_map(s.camera, s.scene.pose, s.full_geometry);
-  const InsertResult got = insert_objects(photo, distance, s.camera, s.scene, s.objects, InsertOptions{});
+  const InsertResult got =
+      insert_objects(photo, distance, s.camera, s.scene, s.objects, InsertOptions{});
   if (const char* dir = std::getenv("MR_INSERT_TEST_IMAGES"))
     write_image(std::filesystem::path(dir) / "cycles_product_composite.exr", got.composite);
-  const test::CompositeError e = test::composite_error(photo, want, got.composite, distance, full_distance);
-  std::printf("vs Cycles: composite mean rel error %.4f (n %zu); object pixels %.4f (n %zu); "
-              "object-shadow region %.4f (n %zu)\n",
-              e.mean, e.n, e.objects, e.n_objects, e.shadow, e.n_shadow);
+  const test::CompositeError e =
+      test::composite_error(photo, want, got.composite, distance, full_distance);
+  std::printf(
+      "vs Cycles: composite mean rel error %.4f (n %zu); object pixels %.4f (n %zu); "
+      "object-shadow region %.4f (n %zu)\n",
+      e.mean, e.n, e.objects, e.n_objects, e.shadow, e.n_shadow);
   ASSERT_GT(e.n_shadow, 300u);  // the shadows are there to compare
   ASSERT_GT(e.n_objects, 600u);
   EXPECT_LT(e.mean, 0.02);

@@ -36,8 +36,8 @@ inline InsertScene make_insert_scene() {
   // real photos), which the reference's 3.5 m wall does not have.
   s.scene.blockers.completion.enabled = false;
   s.photo_geometry.ground = true;
-  s.photo_geometry.boxes = {Box{{3.5, 0, 5}, {4.5, 3.5, 20}},     // side wall (right)
-                            Box{{-10, 0, 20}, {10, 6, 21}},       // back wall
+  s.photo_geometry.boxes = {Box{{3.5, 0, 5}, {4.5, 3.5, 20}},      // side wall (right)
+                            Box{{-10, 0, 20}, {10, 6, 21}},        // back wall
                             Box{{-2.4, 0, 5}, {-1.9, 2.2, 5.5}}};  // pillar (left foreground)
   mcref::SurfaceMaterial ground, wall, pillar;
   ground.diffuse_albedo = {0.40, 0.38, 0.35};
@@ -101,7 +101,8 @@ inline CompositeError composite_error(const Image& photo, const Image& want, con
           near_object = near_object || object_pixel(xx, yy);
         }
       bool shadowed = false;
-      for (int c = 0; c < 3; ++c) shadowed = shadowed || want.at(x, y, c) < 0.97f * photo.at(x, y, c);
+      for (int c = 0; c < 3; ++c)
+        shadowed = shadowed || want.at(x, y, c) < 0.97f * photo.at(x, y, c);
       for (int c = 0; c < 3; ++c) {
         const double ref = want.at(x, y, c);
         if (!(ref > 1e-4)) continue;
