@@ -85,8 +85,9 @@ struct Agreement {
   int rays = 0, hits = 0, embree_disagreements = 0, unexplained = 0, kd_disagreements = 0;
 };
 
-/// Every kd traversal against the standard one (must agree exactly: one triangle test) and the
-/// standard one against Embree (disagreements must be measure-zero cases).
+/// Every kd traversal (and SRDH's ray-set-built tree) against the standard one (must agree
+/// exactly: one triangle test) and the standard one against Embree (disagreements must be
+/// measure-zero cases).
 Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays, bool robust_embree) {
   Agreement a;
   OccluderSceneOptions options;
@@ -96,12 +97,17 @@ Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays
   std::vector<Ray> sample;
   for (std::size_t i = 0; i < rays.size(); i += 7) sample.push_back(rays[i]);
   tree.train_srdh(sample);
+  // SRDH's own tree, its split costs measured on the sample rays.
+  KdTree srdh_tree(mesh, sample);
+  srdh_tree.train_srdh(sample);
   bool previous = false;
   for (const Ray& r : rays) {
     const bool standard = tree.occluded(r, Order::standard);
     const bool answers[] = {tree.occluded(r, Order::sato), tree.occluded(r, Order::srdh),
                             tree.occluded_multi_index(r, true), tree.occluded_multi_index(r, false),
-                            tree.occluded_multi_index(r, previous)};
+                            tree.occluded_multi_index(r, previous),
+                            srdh_tree.occluded(r, Order::standard),
+                            srdh_tree.occluded(r, Order::srdh)};
     for (bool b : answers) a.kd_disagreements += b != standard;
     previous = standard;
     const bool reference = embree.occluded(r.origin, r.direction, r.t_near, r.t_far);
@@ -367,6 +373,48 @@ TEST(ShadowTraversal, QueryInterfaceMatchesEmbreeInPackets) {
   // Moving the scene keeps the attached traversal.
   OccluderScene moved(std::move(scene));
   EXPECT_EQ(moved.shadow_query(), query.get());
+}
+
+// The traversal is a render option of the scene document too ("render": {"shadow_traversal"}):
+// written by every writer, read back exactly, optional when read (absent: Embree), and any other
+// value is an error naming the key.
+TEST(ShadowTraversal, SceneDocumentCarriesTheTraversal) {
+  FogScene s;
+  for (ShadowTraversal t : {ShadowTraversal::multi_index, ShadowTraversal::embree}) {
+    s.render.shadow_traversal = t;
+    const std::string text = scene_to_json(s);
+    EXPECT_NE(text.find(t == ShadowTraversal::embree ? "\"shadow_traversal\": \"embree\""
+                                                     : "\"shadow_traversal\": \"multi-index\""),
+              std::string::npos)
+        << text;
+    EXPECT_EQ(scene_from_json(text).render.shadow_traversal, t);
+  }
+  s.render.shadow_traversal = ShadowTraversal::multi_index;
+  std::string text = scene_to_json(s);
+  const std::string key = "\"shadow_traversal\": \"multi-index\"";
+  const std::size_t at = text.find(key);
+  ASSERT_NE(at, std::string::npos);
+  // Absent (a document written before the key existed): Embree. The writer puts one member on
+  // a line: drop that line (and the comma before it if it was the object's last member).
+  std::string without = text;
+  const std::size_t line_start = without.rfind('\n', at) + 1;
+  const std::size_t line_end = without.find('\n', at);
+  const bool last = without[line_end - 1] != ',';
+  without.erase(line_start, line_end + 1 - line_start);
+  if (last) without.erase(without.rfind(',', line_start), 1);
+  EXPECT_EQ(without.find("shadow_traversal"), std::string::npos) << without;
+  EXPECT_EQ(scene_from_json(without).render.shadow_traversal, ShadowTraversal::embree);
+  // A wrong value: a clear error naming the key and the choices.
+  std::string wrong = text;
+  wrong.replace(at, key.size(), "\"shadow_traversal\": \"kd\"");
+  try {
+    scene_from_json(wrong, "scene.json");
+    ADD_FAILURE() << "no error for shadow_traversal \"kd\"";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("/render/shadow_traversal"), std::string::npos) << what;
+    EXPECT_NE(what.find("multi-index"), std::string::npos) << what;
+  }
 }
 
 // Renders through the CPU core (public API) with either traversal give identical images.
