@@ -231,7 +231,9 @@ struct KdTree::Builder {
   const std::vector<float>& triangles;
   const std::vector<Ray>* rays = nullptr;  // SRDH's sample; null: SAH
   int max_depth = 0;
+  // Subtrees built as tasks: big ones near the root (each spliced once per level above it).
   static constexpr std::size_t kParallelRefs = 32768;
+  static constexpr int kParallelDepth = 5;
 
   void leaf(Fragment& out, const std::vector<PrimRef>& refs) const {
     Node n{};
@@ -306,24 +308,29 @@ struct KdTree::Builder {
     Box bl = box, br = box;
     bl.hi[best_axis] = best_split;
     br.lo[best_axis] = best_split;
-    std::vector<PrimRef> left, right;
-    left.reserve(n / 2 + 16);
+    // The left child's list is written over the parent's (each reference read before its slot
+    // is written: at most one left entry per reference read), the right one into a new list.
+    std::vector<PrimRef>& left = refs;
+    std::vector<PrimRef> right;
     right.reserve(n / 2 + 16);
-    for (const PrimRef& r : refs) {
+    std::size_t n_left = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const PrimRef r = refs[i];
       if (r.hi[best_axis] < best_split) {
-        left.push_back(r);
+        left[n_left++] = r;
       } else if (r.lo[best_axis] > best_split) {
         right.push_back(r);
       } else {  // straddles or touches the plane: clip to each side
         PrimRef c;
         c.tri = r.tri;
         const float* v = &triangles[9 * std::size_t(r.tri)];
-        if (clipped_bounds(v, bl, c)) left.push_back(c);
         if (clipped_bounds(v, br, c)) right.push_back(c);
+        if (clipped_bounds(v, bl, c)) left[n_left++] = c;
       }
     }
-    if (left.size() == n && right.size() == n) return leaf(out, refs);  // separates nothing
-    std::vector<PrimRef>().swap(refs);  // free the parent's list before descending
+    // Separates nothing: a leaf (`refs` now holds the left copies: the same triangles, in order).
+    if (n_left == n && right.size() == n) return leaf(out, refs);
+    left.resize(n_left);
     std::vector<RayRef> rays_left, rays_right;
     for (const RayRef& rr : ray_refs) {
       const Ray& ray = (*rays)[rr.id];
@@ -350,8 +357,10 @@ struct KdTree::Builder {
     node.a = kNone;
     node.b = kNone;
     out.nodes.push_back(node);
-    if (left.size() + right.size() > kParallelRefs) {
+    if (depth < kParallelDepth && left.size() + right.size() > kParallelRefs) {
       Fragment right_part;
+      right_part.nodes.reserve(4 * right.size());  // virtual: pages never written cost nothing
+      right_part.refs.reserve(2 * right.size());
       tbb::task_group group;
       group.run([&] { build(right_part, right, rays_right, br, depth + 1); });
       build(out, left, rays_left, bl, depth + 1);
@@ -425,6 +434,10 @@ KdTree::KdTree(const TriangleMesh& mesh, const std::vector<Ray>& srdh_rays,
     }
   }
   Fragment tree;
+  // Generous reservations (product meshes: about 6 nodes and 6 references per triangle): only
+  // the pages written become resident, and growing by copying would double the peak.
+  tree.nodes.reserve(12 * count + 64);
+  tree.refs.reserve(12 * count + 64);
   builder.build(tree, all, ray_refs, bounds, 0);
   nodes_ = std::move(tree.nodes);
   refs_ = std::move(tree.refs);
