@@ -23,9 +23,9 @@
 //                   spirit of the paper's surface-area metrics; no ray set);
 //      srdh         Feltman, Lee & Fatahalian 2012's idea of specialising to a representative
 //                   shadow-ray set: the order per node from sample rays (the child with the
-//                   larger measured P(occluded | entered) / measured cost first). Simplified:
-//                   the tree itself is the SAH tree (SRDH also re-builds the tree with a
-//                   ray-set cost model; not done here).
+//                   larger measured P(occluded | entered) / measured cost first), on
+//                   the SAH tree or on SRDH's own tree (the constructor taking
+//                   sample rays: split costs from the rays' measured child-entry chances).
 //      multi-index  seed 004 (Liang & Huang 2019): (a) lifted primitive indices: triangles whose
 //                   box surface area exceeds `lift_area_ratio` x the mean are candidates; each
 //                   goes to the ancestor of its leaf with the largest gain
