@@ -29,6 +29,7 @@
 #include <ctime>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -525,11 +526,47 @@ void build_only(const std::string& name, const mr::render::TriangleMesh& mesh) {
   std::fflush(stdout);
 }
 
+/// --explain: every ray on which the standard kd traversal and Embree disagree, answered again by
+/// brute force (the same watertight test on every triangle: a one-leaf tree) and by Embree's
+/// robust mode, to tell a tree bug (brute force agrees with Embree) from the triangle tests'
+/// edge cases (brute force agrees with the tree).
+void explain(const std::string& name, const mr::render::TriangleMesh& mesh, const std::vector<Ray>& rays) {
+  const mr::render::OccluderScene embree{mr::render::TriangleMesh(mesh)};
+  mr::render::OccluderSceneOptions robust_options;
+  robust_options.robust = true;
+  const mr::render::OccluderScene robust{mr::render::TriangleMesh(mesh), robust_options};
+  KdTreeOptions plain_options = g_tree_options;
+  plain_options.multi_index = false;
+  const KdTree tree(mesh, plain_options);
+  KdTreeOptions one_leaf = plain_options;
+  one_leaf.max_leaf_size = std::numeric_limits<int>::max();
+  const KdTree brute(mesh, one_leaf);
+  std::size_t disagreements = 0, tree_bugs = 0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Ray& r = rays[i];
+    const bool e = embree.occluded(r.origin, r.direction, r.t_near, r.t_far);
+    const bool k = tree.occluded(r, Order::standard);
+    if (e == k) continue;
+    ++disagreements;
+    const bool b = brute.occluded(r, Order::standard);
+    const bool rb = robust.occluded(r.origin, r.direction, r.t_near, r.t_far);
+    tree_bugs += b != k;
+    std::printf("%s ray %zu: origin %.9g %.9g %.9g direction %.9g %.9g %.9g t %.9g..%.9g: Embree %d, "
+                "Embree robust %d, kd-tree %d, brute-force watertight %d\n",
+                name.c_str(), i, double(r.origin[0]), double(r.origin[1]), double(r.origin[2]),
+                double(r.direction[0]), double(r.direction[1]), double(r.direction[2]),
+                double(r.t_near), double(r.t_far), int(e), int(rb), int(k), int(b));
+  }
+  std::printf("%s: %zu rays, %zu disagree with Embree, %zu where the tree differs from brute force\n",
+              name.c_str(), rays.size(), disagreements, tree_bugs);
+  std::fflush(stdout);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int size = 1024, reps = 3, record_every = 8;
-  bool record = false, only_build = false;
+  bool record = false, only_build = false, only_explain = false;
   std::size_t max_rays = 0;  // 0: all
   std::string scenes = "atrium,bedroom,forest,leuven";
   std::string rays_file = "shadow_rays_leuven_1080p.bin";
@@ -543,6 +580,7 @@ int main(int argc, char** argv) {
     else if (a == "--record") record = true;
     else if (a == "--record-every") record_every = std::atoi(next().c_str());
     else if (a == "--build-only") only_build = true;
+    else if (a == "--explain") only_explain = true;
     else if (a == "--cost-intersect") g_tree_options.cost_intersect = float(std::atof(next().c_str()));
     else if (a == "--max-leaf") g_tree_options.max_leaf_size = std::atoi(next().c_str());
     else if (a == "--empty-bonus") g_tree_options.empty_bonus = float(std::atof(next().c_str()));
@@ -557,6 +595,8 @@ int main(int argc, char** argv) {
           "  --record-every N    keep 1 block of 1024 rays in N per thread (default 8)\n"
           "  --rays-file PATH    leuven's rays (default shadow_rays_leuven_1080p.bin)\n"
           "  --build-only        only build the kd-tree per scene: CPU time, nodes, memory\n"
+          "  --explain           only list the rays where the kd-tree and Embree disagree, with\n"
+          "                      brute-force and robust-Embree answers (seed's scenes)\n"
           "  --max-rays N        replay about N of leuven's rays: every k-th block of 1024 (0: all)\n"
           "  --cost-intersect C  kd-tree SAH: triangle test cost, node step = 1 (default 1.5)\n"
           "  --max-leaf N        kd-tree: always a leaf at N triangles or fewer (default 2)\n"
@@ -568,6 +608,15 @@ int main(int argc, char** argv) {
     }
   }
   auto wants = [&](const std::string& s) { return ("," + scenes + ",").find("," + s + ",") != std::string::npos; };
+  if (only_explain) {
+    for (const auto& make : {&mr::bench::atrium, &mr::bench::bedroom, &mr::bench::forest}) {
+      const mr::bench::ShadowScene s = make();
+      if (!wants(s.name)) continue;
+      const mr::render::OccluderScene embree{mr::render::TriangleMesh(s.mesh)};
+      explain(s.name, s.mesh, scene_rays(s, embree, size));
+    }
+    return 0;
+  }
   if (only_build) {
     for (const auto& make : {&mr::bench::atrium, &mr::bench::bedroom, &mr::bench::forest}) {
       const mr::bench::ShadowScene s = make();
