@@ -160,9 +160,8 @@ bool clipped_bounds(const float* v, const Box& b, PrimRef& out) {
     for (int k = 0; k < 3; ++k) poly[0][i][k] = v[3 * i + k];
   int cur = 0;
   for (int k = 0; k < 3; ++k) {
-    const double widen =
-        1e-6 * std::max({std::fabs(double(b.lo[k])), std::fabs(double(b.hi[k])),
-                         double(b.hi[k]) - double(b.lo[k]), 1e-30});
+    const double widen = 1e-6 * std::max({std::fabs(double(b.lo[k])), std::fabs(double(b.hi[k])),
+                                          double(b.hi[k]) - double(b.lo[k]), 1e-30});
     for (int side = 0; side < 2; ++side) {
       // Keep sign * (x_k - plane) >= 0.
       const double plane = side == 0 ? double(b.lo[k]) - widen : double(b.hi[k]) + widen;
@@ -294,8 +293,8 @@ struct KdTree::Builder {
           p_left = (float(r_left) + prior * p_left) / (ray_total + prior);
           p_right = (float(r_right) + prior * p_right) / (ray_total + prior);
         }
-        float cost =
-            o.cost_traversal + o.cost_intersect * (p_left * float(n_left) + p_right * float(n_right));
+        float cost = o.cost_traversal +
+                     o.cost_intersect * (p_left * float(n_left) + p_right * float(n_right));
         if (n_left == 0 || n_right == 0) cost *= o.empty_bonus;
         if (cost < best_cost) {
           best_cost = cost;
@@ -334,7 +333,8 @@ struct KdTree::Builder {
     std::vector<RayRef> rays_left, rays_right;
     for (const RayRef& rr : ray_refs) {
       const Ray& ray = (*rays)[rr.id];
-      const float org = ray.origin[std::size_t(best_axis)], d = ray.direction[std::size_t(best_axis)];
+      const float org = ray.origin[std::size_t(best_axis)],
+                  d = ray.direction[std::size_t(best_axis)];
       if (d == 0.0f) {
         if (org <= best_split) rays_left.push_back(rr);
         if (org >= best_split) rays_right.push_back(rr);
@@ -720,7 +720,8 @@ bool KdTree::stack_traverse(const Ray& ray, int order_bit, bool use_lifted, floa
       }
       const std::uint32_t left = node + 1, right = n->a;
       const float o = r.o[axis], d = r.d[axis], split = n->split;
-      // Child intervals along the ray. With d == 0 the ray stays on one side (both if on the plane).
+      // Child intervals along the ray. With d == 0 the ray stays on one side (both if on the
+      // plane).
       bool visit_left, visit_right;
       float left_min = t_min, left_max = t_max, right_min = t_min, right_max = t_max;
       if (d == 0.0f) {

@@ -89,11 +89,12 @@ struct KindCounters {
 struct KdTreeOptions {
   float cost_traversal = 1.0f;
   float cost_intersect = 1.5f;
-  float empty_bonus = 0.8f;   ///< cost factor of a split with an empty side
-  int max_leaf_size = 2;      ///< at most this many triangles: always a leaf
-  bool multi_index = true;    ///< lifted indices and ropes (else only the plain tree)
-  float lift_area_ratio = 0.5f;  ///< candidate: triangle box area > this x the mean (seed: 0.45-0.6)
-  float lift_lambda = 0.6f;      ///< the seed's depth curve
+  float empty_bonus = 0.8f;  ///< cost factor of a split with an empty side
+  int max_leaf_size = 2;     ///< at most this many triangles: always a leaf
+  bool multi_index = true;   ///< lifted indices and ropes (else only the plain tree)
+  float lift_area_ratio =
+      0.5f;                  ///< candidate: triangle box area > this x the mean (seed: 0.45-0.6)
+  float lift_lambda = 0.6f;  ///< the seed's depth curve
   float lift_min_gain = 0.05f;
   int lift_max_per_node = 2;
   /// SRDH build: the weight, in sample rays, of the surface-area prior in a node's measured
@@ -184,16 +185,16 @@ class KdTree {
                         const std::array<float, 3>& direction, int entry_face,
                         std::uint64_t& visited) const;
 
-  std::vector<float> triangles_;        // 9 floats per triangle (v0, v1, v2)
-  std::vector<std::uint32_t> refs_;     // leaf triangle references
+  std::vector<float> triangles_;     // 9 floats per triangle (v0, v1, v2)
+  std::vector<std::uint32_t> refs_;  // leaf triangle references
   std::vector<Node> nodes_;
   Box bounds_{};
   int max_depth_ = 0;
   std::size_t leaf_count_ = 0;
   // Multi-index parts.
-  std::vector<Box> leaf_boxes_;                        // per leaf number
-  std::vector<std::uint32_t> leaf_nodes_;              // leaf number -> node index
-  std::vector<std::array<std::uint32_t, 6>> ropes_;    // per leaf number: node index or ~0u
+  std::vector<Box> leaf_boxes_;                              // per leaf number
+  std::vector<std::uint32_t> leaf_nodes_;                    // leaf number -> node index
+  std::vector<std::array<std::uint32_t, 6>> ropes_;          // per leaf number: node index or ~0u
   std::vector<std::array<std::uint32_t, 2>> lifted_ranges_;  // (first, count) in lifted_prims_
   std::vector<std::uint32_t> lifted_prims_;
 };
