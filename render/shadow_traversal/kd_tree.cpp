@@ -230,9 +230,12 @@ struct KdTree::Builder {
   const std::vector<float>& triangles;
   const std::vector<Ray>* rays = nullptr;  // SRDH's sample; null: SAH
   int max_depth = 0;
-  // Subtrees built as tasks: big ones near the root (each spliced once per level above it).
+  // Subtrees built as tasks: big ones near the root, but not the root's children or
+  // grandchildren, whose fragments (up to half the tree) would be copied once more into their
+  // parent's at the end, raising the peak; below them each subtree is still built in parallel.
   static constexpr std::size_t kParallelRefs = 32768;
-  static constexpr int kParallelDepth = 5;
+  static constexpr int kFirstParallelDepth = 2;
+  static constexpr int kParallelDepths = 5;
 
   void leaf(Fragment& out, const std::vector<PrimRef>& refs) const {
     Node n{};
@@ -357,7 +360,8 @@ struct KdTree::Builder {
     node.a = kNone;
     node.b = kNone;
     out.nodes.push_back(node);
-    if (depth < kParallelDepth && left.size() + right.size() > kParallelRefs) {
+    if (depth >= kFirstParallelDepth && depth < kFirstParallelDepth + kParallelDepths &&
+        left.size() + right.size() > kParallelRefs) {
       Fragment right_part;
       right_part.nodes.reserve(4 * right.size());  // virtual: pages never written cost nothing
       right_part.refs.reserve(2 * right.size());
@@ -509,14 +513,15 @@ std::vector<float> KdTree::subtree_costs(const KdTreeOptions& options) const {
 }
 
 void KdTree::build_multi_index(const KdTreeOptions& options) {
+  // Lifting first: its temporary per-node costs are freed before the leaf boxes and ropes (24
+  // bytes per leaf each) are allocated, which lowers the peak.
+  lift_primitives(options);
   leaf_boxes_.assign(leaf_count_, Box{});
-  leaf_nodes_.assign(leaf_count_, kNone);
   auto rec = [&](auto&& self, std::uint32_t i, const Box& box) -> void {
     const Node& n = nodes_[i];
     const std::uint32_t axis = n.flags & 3u;
     if (axis == kLeafAxis) {
       leaf_boxes_[n.b] = box;
-      leaf_nodes_[n.b] = i;
       return;
     }
     Box bl = box, br = box;
@@ -527,11 +532,10 @@ void KdTree::build_multi_index(const KdTreeOptions& options) {
   };
   if (!nodes_.empty()) rec(rec, 0, bounds_);
   build_ropes();
-  lift_primitives(options);
 }
 
 void KdTree::build_ropes() {
-  ropes_.assign(leaf_nodes_.size(), {kNone, kNone, kNone, kNone, kNone, kNone});
+  ropes_.assign(leaf_count_, {kNone, kNone, kNone, kNone, kNone, kNone});
   if (nodes_.empty()) return;
   struct Frame {
     std::uint32_t node;
@@ -675,7 +679,7 @@ std::size_t KdTree::memory_bytes(bool multi_index_parts) const {
   std::size_t bytes = nodes_.size() * sizeof(Node) + refs_.size() * sizeof(std::uint32_t) +
                       triangles_.size() * sizeof(float);
   if (multi_index_parts)
-    bytes += leaf_boxes_.size() * sizeof(Box) + leaf_nodes_.size() * sizeof(std::uint32_t) +
+    bytes += leaf_boxes_.size() * sizeof(Box) +
              ropes_.size() * sizeof(ropes_[0]) + lifted_ranges_.size() * sizeof(lifted_ranges_[0]) +
              lifted_prims_.size() * sizeof(std::uint32_t);
   return bytes;

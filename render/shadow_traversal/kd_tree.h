@@ -7,7 +7,7 @@
 //    (Wald & Havran 2006's "perfect splits", binned). Costs C_trav = 1, C_isect = 1.5,
 //    empty-space bonus 0.8 (leaf if no split is cheaper, at most 2 triangles or at depth
 //    8 + 1.3 log2 N). O(references) per node, no sorting, 28-byte references freed before the
-//    children are built; subtrees of more than 32 k references are built as TBB tasks.
+//    children are built; big subtrees at depths 2-6 are built as TBB tasks.
 //  * Triangle test: watertight (Woop, Benthin & Wald 2013, JCGT 2(1)), with the double-precision
 //    fallback for zero edge functions. A hit is t_near < t <= t_far (Embree's rule) with all three
 //    edge functions >= 0 or all <= 0: points on an edge or a vertex count, for both triangles
@@ -156,8 +156,6 @@ class KdTree {
   std::uint32_t rope_step(std::uint32_t leaf, int face, const std::array<float, 3>& p,
                           const std::array<float, 3>& direction) const;
   const Box& leaf_box(std::uint32_t leaf) const { return leaf_boxes_[leaf]; }
-  /// The node index of leaf number `leaf`.
-  std::uint32_t leaf_node(std::uint32_t leaf) const { return leaf_nodes_[leaf]; }
   const Box& bounds() const { return bounds_; }
 
   struct Node {
@@ -193,7 +191,6 @@ class KdTree {
   std::size_t leaf_count_ = 0;
   // Multi-index parts.
   std::vector<Box> leaf_boxes_;                              // per leaf number
-  std::vector<std::uint32_t> leaf_nodes_;                    // leaf number -> node index
   std::vector<std::array<std::uint32_t, 6>> ropes_;          // per leaf number: node index or ~0u
   std::vector<std::array<std::uint32_t, 2>> lifted_ranges_;  // (first, count) in lifted_prims_
   std::vector<std::uint32_t> lifted_prims_;
