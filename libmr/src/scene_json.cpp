@@ -646,10 +646,11 @@ Json to_document(const FogScene& s) {
                        {"light_path_attenuation", r.light_path_attenuation},
                        {"max_distance_m", r.max_distance_m},
                        {"seed", r.seed},
-                       {"threads", r.threads},
-                       {"shadow_traversal", r.shadow_traversal == ShadowTraversal::multi_index
-                                                ? "multi-index"
-                                                : "embree"}};
+                       {"threads", r.threads}};
+  // Issue 17, added within version 4: written only when not the default, so that documents
+  // which do not use it stay readable by the libmr builds before it (which reject unknown keys).
+  if (r.shadow_traversal == ShadowTraversal::multi_index)
+    doc["render"]["shadow_traversal"] = "multi-index";
   if (s.camera) {  // optional: documents without it read as before
     Json camera = Json{
         {"width", s.camera->width}, {"height", s.camera->height}, {"focal_px", s.camera->focal_px}};
