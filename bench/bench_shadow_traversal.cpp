@@ -5,8 +5,9 @@
 // wall clock and CPU time: on a loaded machine only the CPU-time rates and the counts mean much),
 // build time and memory.
 //
-//   build/bench/mr_bench_shadow_traversal [--size 1024] [--reps 3] [--scenes atrium,bedroom,forest,leuven]
-//   build/bench/mr_bench_shadow_traversal --record   # records the leuven rays first (see below)
+//   build/bench/mr_bench_shadow_traversal [--size 1024] [--reps 3] [--scenes
+//   atrium,bedroom,forest,leuven] build/bench/mr_bench_shadow_traversal --record   # records the
+//   leuven rays first (see below)
 //
 // Scenes (bench/shadow_scenes.h): a Sponza-like atrium, a bedroom-like interior, a forest of
 // thin occluders; size x size primary hit points (Embree rtcIntersect1 from the scene's
@@ -29,6 +30,7 @@
 #include <ctime>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -56,6 +58,9 @@ using mr::render::shadow::KindCounters;
 using mr::render::shadow::Order;
 using mr::render::shadow::Ray;
 using Clock = std::chrono::steady_clock;
+
+// The kd-tree's build options (--cost-intersect, --max-leaf, --empty-bonus override them).
+KdTreeOptions g_tree_options;
 
 double now_s() {
   return std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
@@ -204,8 +209,8 @@ std::vector<Ray> load_rays(const std::string& path, std::uint64_t& total) {
 // ----------------------------------------------------------------------------------------------
 // The seed's scenes: primary hits and their shadow rays
 
-std::vector<Ray> scene_rays(const mr::bench::ShadowScene& s, const mr::render::OccluderScene& embree,
-                            int size) {
+std::vector<Ray> scene_rays(const mr::bench::ShadowScene& s,
+                            const mr::render::OccluderScene& embree, int size) {
   using V3 = std::array<float, 3>;
   auto sub = [](V3 a, V3 b) { return V3{a[0] - b[0], a[1] - b[1], a[2] - b[2]}; };
   auto cross = [](V3 a, V3 b) {
@@ -234,8 +239,7 @@ std::vector<Ray> scene_rays(const mr::bench::ShadowScene& s, const mr::render::O
     }
   std::vector<Ray> rays;
   rays.reserve(2 * hits.size());
-  for (const V3& p : hits)
-    rays.push_back({p, sub(s.point_light, p), 0.0f, 1.0f - 1e-4f});
+  for (const V3& p : hits) rays.push_back({p, sub(s.point_light, p), 0.0f, 1.0f - 1e-4f});
   std::uint32_t state = 12345;
   auto rnd = [&] {
     state = state * 1664525u + 1013904223u;
@@ -308,44 +312,68 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
   std::printf("\n### %s: %zu triangles, %zu shadow rays%s\n\n", name.c_str(), mesh.triangle_count(),
               rays.size(), note.c_str());
   std::fflush(stdout);
-  // Builds.
+  // Builds. The kd-tree is built once (the plain tree: standard, SATO, SRDH's order), then the
+  // multi-index parts are added to the same tree (its traversals use neither SATO's nor SRDH's
+  // order bits), so "multi-index" costs the plain build plus its own parts.
   double rss0 = rss_mb(), t0 = now_s(), c0 = process_cpu_s();
   const mr::render::OccluderScene embree{mr::render::TriangleMesh(mesh)};
   const double embree_build = now_s() - t0, embree_cpu = process_cpu_s() - c0;
-  const double embree_mb = rss_mb() - rss0 - double(mesh.positions.size() * 4 + mesh.indices.size() * 4) / 1048576.0;
-  KdTreeOptions plain_options;
+  const double embree_mb =
+      rss_mb() - rss0 - double(mesh.positions.size() * 4 + mesh.indices.size() * 4) / 1048576.0;
+  KdTreeOptions plain_options = g_tree_options;
   plain_options.multi_index = false;
   t0 = now_s();
   c0 = process_cpu_s();
-  KdTree plain(mesh, plain_options);
+  KdTree tree(mesh, plain_options);
   const double plain_build = now_s() - t0, plain_cpu = process_cpu_s() - c0;
+  const double plain_mb = double(tree.memory_bytes(false)) / 1048576.0;
   t0 = now_s();
   c0 = process_cpu_s();
-  const KdTree multi(mesh);
-  const double multi_build = now_s() - t0, multi_cpu = process_cpu_s() - c0;
+  tree.build_multi_index(g_tree_options);
+  const double multi_build = plain_build + now_s() - t0,
+               multi_cpu = plain_cpu + process_cpu_s() - c0;
+  const KdTree& plain = tree;
+  KdTree& trained = tree;
+  const KdTree& multi = tree;
   // SRDH's representative ray set: every 16th ray of the frame.
   std::vector<Ray> sample;
   for (std::size_t i = 0; i < rays.size(); i += 16) sample.push_back(rays[i]);
   t0 = now_s();
   c0 = process_cpu_s();
-  plain.train_srdh(sample);
+  trained.train_srdh(sample);
   const double srdh_train = now_s() - t0, srdh_cpu = process_cpu_s() - c0;
+  // SRDH's own tree: split costs from the same sample rays (then its order, trained on them).
+  t0 = now_s();
+  c0 = process_cpu_s();
+  KdTree srdh_tree(mesh, sample, plain_options);
+  srdh_tree.train_srdh(sample);
+  const double srdh_build = now_s() - t0, srdh_build_cpu = process_cpu_s() - c0;
 
   std::vector<char> reference(rays.size());
   std::size_t occluded = 0;
   for (std::size_t i = 0; i < rays.size(); ++i) {
-    reference[i] = embree.occluded(rays[i].origin, rays[i].direction, rays[i].t_near, rays[i].t_far);
+    reference[i] =
+        embree.occluded(rays[i].origin, rays[i].direction, rays[i].t_near, rays[i].t_far);
     occluded += std::size_t(reference[i]);
   }
-  std::printf("occluded (Embree): %.1f %%. Builds (wall / process CPU s, memory): Embree %.2f / %.2f s, "
-              "~%.0f MB (RSS growth less the mesh); kd-tree %.2f / %.2f s, %.0f MB (%zu nodes, depth %d); "
-              "SRDH training on %zu rays %.2f / %.2f s; multi-index %.2f / %.2f s, %.0f MB (%zu lifted "
-              "triangles, ropes for %zu leaves)\n\n",
-              100.0 * double(occluded) / double(std::max<std::size_t>(rays.size(), 1)), embree_build,
-              embree_cpu, embree_mb, plain_build, plain_cpu, double(plain.memory_bytes(false)) / 1048576.0,
-              plain.node_count(), plain.max_depth(), sample.size(), srdh_train, srdh_cpu, multi_build,
-              multi_cpu, double(multi.memory_bytes(true)) / 1048576.0, multi.lifted_count(),
-              multi.leaf_count());
+  std::printf(
+      "occluded (Embree): %.1f %%. Builds (wall / process CPU s, memory): Embree %.2f / %.2f s, "
+      "~%.0f MB (RSS growth less the mesh); kd-tree %.2f / %.2f s, %.0f MB (%zu nodes, %zu leaves, "
+      "%.2f references per triangle, depth %d); "
+      "SRDH training on %zu rays %.2f / %.2f s; SRDH tree from them (build + order) %.2f / %.2f s, "
+      "%zu nodes, %.2f references per triangle; multi-index (plain tree + its parts) %.2f / %.2f "
+      "s, %.0f MB (%zu lifted "
+      "triangles, ropes for %zu leaves)\n\n",
+      100.0 * double(occluded) / double(std::max<std::size_t>(rays.size(), 1)), embree_build,
+      embree_cpu, embree_mb, plain_build, plain_cpu, plain_mb, plain.node_count(),
+      plain.leaf_count(),
+      double(plain.reference_count()) / double(std::max<std::size_t>(1, plain.triangle_count())),
+      plain.max_depth(), sample.size(), srdh_train, srdh_cpu, srdh_build, srdh_build_cpu,
+      srdh_tree.node_count(),
+      double(srdh_tree.reference_count()) /
+          double(std::max<std::size_t>(1, srdh_tree.triangle_count())),
+      multi_build, multi_cpu, double(multi.memory_bytes(true)) / 1048576.0, multi.lifted_count(),
+      multi.leaf_count());
 
   auto ordered = [](const KdTree& tree, Order order) -> Method {
     return [&tree, order](const std::vector<Ray>& r, std::size_t a, std::size_t b, KindCounters* c,
@@ -414,13 +442,18 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
     measure(row, m, rays, reference, reps, timed);
     rows.push_back(row);
   };
-  std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", plain_cpu, double(plain.memory_bytes(false)) / 1048576.0);
+  std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", plain_cpu,
+                double(plain.memory_bytes(false)) / 1048576.0);
   add("standard", ordered(plain, Order::standard), true, buf);
   add("SATO", ordered(plain, Order::sato), true, buf);
   std::snprintf(buf, sizeof buf, "%.2f + %.2f s, %.0f MB", plain_cpu, srdh_cpu,
                 double(plain.memory_bytes(false)) / 1048576.0);
   add("SRDH (order only)", ordered(plain, Order::srdh), true, buf);
-  std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", multi_cpu, double(multi.memory_bytes(true)) / 1048576.0);
+  std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", srdh_build_cpu,
+                double(srdh_tree.memory_bytes(false)) / 1048576.0);
+  add("SRDH (ray-set build + order)", ordered(srdh_tree, Order::srdh), true, buf);
+  std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", multi_cpu,
+                double(multi.memory_bytes(true)) / 1048576.0);
   add("multi-index", multi_method(multi, 0), true, buf);
   // Ablations: counts only (not timed, to save the machine's time).
   add("multi-index, oracle prediction", multi_method(multi, 3), true, buf, false);
@@ -430,11 +463,13 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
   add("Embree rtcOccluded1", embree1, false, buf);
   add("Embree 8-wide (product)", embree8, false, buf);
 
-  const double base_on = double(rows[0].counters.occluded.nodes) / double(std::max<std::uint64_t>(1, rows[0].counters.occluded.rays));
+  const double base_on = double(rows[0].counters.occluded.nodes) /
+                         double(std::max<std::uint64_t>(1, rows[0].counters.occluded.rays));
   (void)base_on;
-  std::printf("| method | occl. nodes/ray | occl. tris/ray | unocc. nodes/ray | unocc. tris/ray | "
-              "1T Mrays/s (wall) | 1T Mrays/CPU-s | 2T Mrays/s (wall) | 2T Mrays/CPU-s | "
-              "build (CPU), memory | answers != Embree |\n");
+  std::printf(
+      "| method | occl. nodes/ray | occl. tris/ray | unocc. nodes/ray | unocc. tris/ray | "
+      "1T Mrays/s (wall) | 1T Mrays/CPU-s | 2T Mrays/s (wall) | 2T Mrays/CPU-s | "
+      "build (CPU), memory | answers != Embree |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
   const double n = double(rays.size()) / 1e6;
   for (const Row& r : rows) {
@@ -448,13 +483,17 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
       };
       std::printf("| %s | %s | %s | %s | %s |", r.name.c_str(),
                   pct(per(r.counters.occluded.nodes, r.counters.occluded.rays),
-                      per(base.occluded.nodes, base.occluded.rays)).c_str(),
+                      per(base.occluded.nodes, base.occluded.rays))
+                      .c_str(),
                   pct(per(r.counters.occluded.primitives, r.counters.occluded.rays),
-                      per(base.occluded.primitives, base.occluded.rays)).c_str(),
+                      per(base.occluded.primitives, base.occluded.rays))
+                      .c_str(),
                   pct(per(r.counters.unoccluded.nodes, r.counters.unoccluded.rays),
-                      per(base.unoccluded.nodes, base.unoccluded.rays)).c_str(),
+                      per(base.unoccluded.nodes, base.unoccluded.rays))
+                      .c_str(),
                   pct(per(r.counters.unoccluded.primitives, r.counters.unoccluded.rays),
-                      per(base.unoccluded.primitives, base.unoccluded.rays)).c_str());
+                      per(base.unoccluded.primitives, base.unoccluded.rays))
+                      .c_str());
     } else {
       std::printf("| %s | - | - | - | - |", r.name.c_str());
     }
@@ -471,45 +510,187 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
   std::fflush(stdout);
 }
 
+double peak_rss_mb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / 1024.0;
+}
+
+/// --build-only: the kd-tree build alone (no rays, no Embree): its CPU time and memory.
+void build_only(const std::string& name, const mr::render::TriangleMesh& mesh) {
+  const double rss0 = rss_mb(), peak0 = peak_rss_mb();
+  double t0 = now_s(), c0 = process_cpu_s();
+  KdTreeOptions plain_options = g_tree_options;
+  plain_options.multi_index = false;
+  KdTree tree(mesh, plain_options);
+  const double wall = now_s() - t0, cpu = process_cpu_s() - c0, peak1 = peak_rss_mb();
+  t0 = now_s();
+  c0 = process_cpu_s();
+  tree.build_multi_index(g_tree_options);
+  const double multi_wall = now_s() - t0, multi_cpu = process_cpu_s() - c0;
+  std::printf(
+      "%s: %zu triangles; kd-tree %.2f s wall / %.2f s process CPU, %zu nodes, %zu leaves (%zu "
+      "empty), "
+      "%.2f references per triangle, depth %d, %.0f MB; multi-index parts +%.2f s wall / "
+      "+%.2f s CPU, %.0f MB in all (%zu lifted); RSS before %.0f MB, peak before %.0f MB, "
+      "peak after the plain build %.0f MB, peak after all %.0f MB\n",
+      name.c_str(), mesh.triangle_count(), wall, cpu, tree.node_count(), tree.leaf_count(),
+      tree.empty_leaf_count(),
+      double(tree.reference_count()) / double(std::max<std::size_t>(1, tree.triangle_count())),
+      tree.max_depth(), double(tree.memory_bytes(false)) / 1048576.0, multi_wall, multi_cpu,
+      double(tree.memory_bytes(true)) / 1048576.0, tree.lifted_count(), rss0, peak0, peak1,
+      peak_rss_mb());
+  std::fflush(stdout);
+}
+
+/// --explain: every ray on which the standard kd traversal and Embree disagree, answered again by
+/// brute force (the same watertight test on every triangle: a one-leaf tree) and by Embree's
+/// robust mode, to tell a tree bug (brute force agrees with Embree) from the triangle tests'
+/// edge cases (brute force agrees with the tree).
+void explain(const std::string& name, const mr::render::TriangleMesh& mesh,
+             const std::vector<Ray>& rays) {
+  const mr::render::OccluderScene embree{mr::render::TriangleMesh(mesh)};
+  mr::render::OccluderSceneOptions robust_options;
+  robust_options.robust = true;
+  const mr::render::OccluderScene robust{mr::render::TriangleMesh(mesh), robust_options};
+  KdTreeOptions plain_options = g_tree_options;
+  plain_options.multi_index = false;
+  const KdTree tree(mesh, plain_options);
+  KdTreeOptions one_leaf = plain_options;
+  one_leaf.max_leaf_size = std::numeric_limits<int>::max();
+  const KdTree brute(mesh, one_leaf);
+  std::size_t disagreements = 0, tree_bugs = 0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Ray& r = rays[i];
+    const bool e = embree.occluded(r.origin, r.direction, r.t_near, r.t_far);
+    const bool k = tree.occluded(r, Order::standard);
+    if (e == k) continue;
+    ++disagreements;
+    const bool b = brute.occluded(r, Order::standard);
+    const bool rb = robust.occluded(r.origin, r.direction, r.t_near, r.t_far);
+    tree_bugs += b != k;
+    std::printf(
+        "%s ray %zu: origin %.9g %.9g %.9g direction %.9g %.9g %.9g t %.9g..%.9g: Embree %d, "
+        "Embree robust %d, kd-tree %d, brute-force watertight %d\n",
+        name.c_str(), i, double(r.origin[0]), double(r.origin[1]), double(r.origin[2]),
+        double(r.direction[0]), double(r.direction[1]), double(r.direction[2]), double(r.t_near),
+        double(r.t_far), int(e), int(rb), int(k), int(b));
+  }
+  std::printf(
+      "%s: %zu rays, %zu disagree with Embree, %zu where the tree differs from brute force\n",
+      name.c_str(), rays.size(), disagreements, tree_bugs);
+  std::fflush(stdout);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int size = 1024, reps = 3, record_every = 8;
-  bool record = false;
+  bool record = false, only_build = false, only_explain = false;
+  std::size_t max_rays = 0;  // 0: all
   std::string scenes = "atrium,bedroom,forest,leuven";
   std::string rays_file = "shadow_rays_leuven_1080p.bin";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&] { return i + 1 < argc ? std::string(argv[++i]) : std::string(); };
-    if (a == "--size") size = std::atoi(next().c_str());
-    else if (a == "--reps") reps = std::atoi(next().c_str());
-    else if (a == "--scenes") scenes = next();
-    else if (a == "--rays-file") rays_file = next();
-    else if (a == "--record") record = true;
-    else if (a == "--record-every") record_every = std::atoi(next().c_str());
-    else {
+    if (a == "--size")
+      size = std::atoi(next().c_str());
+    else if (a == "--reps")
+      reps = std::atoi(next().c_str());
+    else if (a == "--scenes")
+      scenes = next();
+    else if (a == "--rays-file")
+      rays_file = next();
+    else if (a == "--record")
+      record = true;
+    else if (a == "--record-every")
+      record_every = std::atoi(next().c_str());
+    else if (a == "--build-only")
+      only_build = true;
+    else if (a == "--explain")
+      only_explain = true;
+    else if (a == "--cost-intersect")
+      g_tree_options.cost_intersect = float(std::atof(next().c_str()));
+    else if (a == "--max-leaf")
+      g_tree_options.max_leaf_size = std::atoi(next().c_str());
+    else if (a == "--empty-bonus")
+      g_tree_options.empty_bonus = float(std::atof(next().c_str()));
+    else if (a == "--max-rays")
+      max_rays = std::size_t(std::atoll(next().c_str()));
+    else if (a == "--help" || a == "-h") {
+      std::printf(
+          "usage: mr_bench_shadow_traversal [options]\n"
+          "  --scenes LIST       comma-separated of atrium,bedroom,forest,leuven (default: all)\n"
+          "  --size N            primary hits N x N for the seed's scenes (default 1024; the "
+          "seed's)\n"
+          "  --reps N            timed runs per method, median reported (default 3)\n"
+          "  --record            first record leuven's shadow rays (a 1080p sunlit CPU render)\n"
+          "  --record-every N    keep 1 block of 1024 rays in N per thread (default 8)\n"
+          "  --rays-file PATH    leuven's rays (default shadow_rays_leuven_1080p.bin)\n"
+          "  --build-only        only build the kd-tree per scene: CPU time, nodes, memory\n"
+          "  --explain           only list the rays where the kd-tree and Embree disagree, with\n"
+          "                      brute-force and robust-Embree answers (seed's scenes)\n"
+          "  --max-rays N        replay about N of leuven's rays: every k-th block of 1024 (0: "
+          "all)\n"
+          "  --cost-intersect C  kd-tree SAH: triangle test cost, node step = 1 (default 1.5)\n"
+          "  --max-leaf N        kd-tree: always a leaf at N triangles or fewer (default 2)\n"
+          "  --empty-bonus F     kd-tree SAH: cost factor of a split with an empty side (0.8)\n");
+      return 0;
+    } else {
       std::fprintf(stderr, "unknown argument %s\n", a.c_str());
       return 2;
     }
   }
+  auto wants = [&](const std::string& s) {
+    return ("," + scenes + ",").find("," + s + ",") != std::string::npos;
+  };
+  if (only_explain) {
+    for (const auto& make : {&mr::bench::atrium, &mr::bench::bedroom, &mr::bench::forest}) {
+      const mr::bench::ShadowScene s = make();
+      if (!wants(s.name)) continue;
+      const mr::render::OccluderScene embree{mr::render::TriangleMesh(s.mesh)};
+      explain(s.name, s.mesh, scene_rays(s, embree, size));
+    }
+    return 0;
+  }
+  if (only_build) {
+    for (const auto& make : {&mr::bench::atrium, &mr::bench::bedroom, &mr::bench::forest}) {
+      const mr::bench::ShadowScene s = make();
+      if (wants(s.name)) build_only(s.name, s.mesh);
+    }
+    if (wants("leuven")) {
+      const mr::bench::Inputs& in = mr::bench::leuven_inputs(1920, 1080);
+      const LeuvenGeometry g = leuven_geometry(in, leuven_scene_for_rays(in));
+      build_only("leuven 1080p", g.mesh);
+    }
+    return 0;
+  }
   if (record) record_leuven(rays_file, record_every);
-  auto wants = [&](const std::string& s) { return ("," + scenes + ",").find("," + s + ",") != std::string::npos; };
-  std::printf("Counts are exact; times are medians of %d runs on a shared machine (CPU time is the "
-              "steadier measure). Per-ray prediction of the multi-index tree: the previous ray's "
-              "outcome.\n",
-              reps);
+  std::printf(
+      "Counts are exact; times are medians of %d runs on a shared machine (CPU time is the "
+      "steadier measure). Per-ray prediction of the multi-index tree: the previous ray's "
+      "outcome.\n",
+      reps);
   for (const auto& make : {&mr::bench::atrium, &mr::bench::bedroom, &mr::bench::forest}) {
     mr::bench::ShadowScene s = make();
     if (!wants(s.name)) continue;
     const mr::render::OccluderScene embree{mr::render::TriangleMesh(s.mesh)};
     const std::vector<Ray> rays = scene_rays(s, embree, size);
     char note[128];
-    std::snprintf(note, sizeof note, " (%dx%d primary hits, a point and an area light)", size, size);
+    std::snprintf(note, sizeof note, " (%dx%d primary hits, a point and an area light)", size,
+                  size);
     run_scene(s.name, s.mesh, rays, reps, note);
   }
   if (wants("leuven")) {
     std::uint64_t total = 0;
-    const std::vector<Ray> rays = load_rays(rays_file, total);
+    std::vector<Ray> rays = load_rays(rays_file, total);
+    if (max_rays > 0 && rays.size() > max_rays) {  // every k-th block of 1024 consecutive rays
+      const std::size_t k = (rays.size() + max_rays - 1) / max_rays;
+      std::vector<Ray> kept;
+      for (std::size_t i = 0; i < rays.size(); ++i)
+        if ((i / 1024) % k == 0) kept.push_back(rays[i]);
+      rays = std::move(kept);
+    }
     const mr::bench::Inputs& in = mr::bench::leuven_inputs(1920, 1080);
     const LeuvenGeometry g = leuven_geometry(in, leuven_scene_for_rays(in));
     char note[160];

@@ -47,7 +47,8 @@ bool measure_zero_case(const TriangleMesh& mesh, const Ray& r, double rel = 1e-5
     double v[3][3];
     for (int k = 0; k < 3; ++k)
       for (int c = 0; c < 3; ++c)
-        v[k][c] = mesh.positions[3 * std::size_t(mesh.indices[3 * t + std::size_t(k)]) + std::size_t(c)];
+        v[k][c] =
+            mesh.positions[3 * std::size_t(mesh.indices[3 * t + std::size_t(k)]) + std::size_t(c)];
     const double o[3] = {r.origin[0], r.origin[1], r.origin[2]};
     const double d[3] = {r.direction[0], r.direction[1], r.direction[2]};
     const double e1[3] = {v[1][0] - v[0][0], v[1][1] - v[0][1], v[1][2] - v[0][2]};
@@ -74,8 +75,8 @@ bool measure_zero_case(const TriangleMesh& mesh, const Ray& r, double rel = 1e-5
     const double t_tol = rel * std::max(1.0, std::fabs(tt));
     const bool in_t = tt > tn - t_tol && tt <= tf + t_tol;
     const bool near_edge = std::fabs(m) <= rel && in_t;
-    const bool near_bound =
-        m >= -rel && (std::fabs(tt - tn) <= t_tol || (std::isfinite(tf) && std::fabs(tt - tf) <= t_tol));
+    const bool near_bound = m >= -rel && (std::fabs(tt - tn) <= t_tol ||
+                                          (std::isfinite(tf) && std::fabs(tt - tf) <= t_tol));
     if (near_edge || near_bound) return true;
   }
   return false;
@@ -85,9 +86,11 @@ struct Agreement {
   int rays = 0, hits = 0, embree_disagreements = 0, unexplained = 0, kd_disagreements = 0;
 };
 
-/// Every kd traversal against the standard one (must agree exactly: one triangle test) and the
-/// standard one against Embree (disagreements must be measure-zero cases).
-Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays, bool robust_embree) {
+/// Every kd traversal (and SRDH's ray-set-built tree) against the standard one (must agree
+/// exactly: one triangle test) and the standard one against Embree (disagreements must be
+/// measure-zero cases).
+Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays,
+                          bool robust_embree) {
   Agreement a;
   OccluderSceneOptions options;
   options.robust = robust_embree;
@@ -96,12 +99,17 @@ Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays
   std::vector<Ray> sample;
   for (std::size_t i = 0; i < rays.size(); i += 7) sample.push_back(rays[i]);
   tree.train_srdh(sample);
+  // SRDH's own tree, its split costs measured on the sample rays.
+  KdTree srdh_tree(mesh, sample);
+  srdh_tree.train_srdh(sample);
   bool previous = false;
   for (const Ray& r : rays) {
     const bool standard = tree.occluded(r, Order::standard);
-    const bool answers[] = {tree.occluded(r, Order::sato), tree.occluded(r, Order::srdh),
-                            tree.occluded_multi_index(r, true), tree.occluded_multi_index(r, false),
-                            tree.occluded_multi_index(r, previous)};
+    const bool answers[] = {
+        tree.occluded(r, Order::sato),          tree.occluded(r, Order::srdh),
+        tree.occluded_multi_index(r, true),     tree.occluded_multi_index(r, false),
+        tree.occluded_multi_index(r, previous), srdh_tree.occluded(r, Order::standard),
+        srdh_tree.occluded(r, Order::srdh)};
     for (bool b : answers) a.kd_disagreements += b != standard;
     previous = standard;
     const bool reference = embree.occluded(r.origin, r.direction, r.t_near, r.t_far);
@@ -113,8 +121,8 @@ Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays
         ++a.unexplained;
         ADD_FAILURE() << "unexplained disagreement: origin " << r.origin[0] << "," << r.origin[1]
                       << "," << r.origin[2] << " dir " << r.direction[0] << "," << r.direction[1]
-                      << "," << r.direction[2] << " t " << r.t_near << ".." << r.t_far
-                      << " embree " << reference << " kd " << standard;
+                      << "," << r.direction[2] << " t " << r.t_near << ".." << r.t_far << " embree "
+                      << reference << " kd " << standard;
       }
     }
   }
@@ -122,10 +130,11 @@ Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays
 }
 
 void report(const char* what, const Agreement& a) {
-  std::printf("%s: %d rays, %d occluded, %d disagree with Embree (all measure-zero cases: %s), "
-              "%d kd traversals disagree\n",
-              what, a.rays, a.hits, a.embree_disagreements, a.unexplained == 0 ? "yes" : "NO",
-              a.kd_disagreements);
+  std::printf(
+      "%s: %d rays, %d occluded, %d disagree with Embree (all measure-zero cases: %s), "
+      "%d kd traversals disagree\n",
+      what, a.rays, a.hits, a.embree_disagreements, a.unexplained == 0 ? "yes" : "NO",
+      a.kd_disagreements);
 }
 
 TEST(ShadowTraversal, AgreesWithEmbreeOnRandomSoup) {
@@ -151,10 +160,12 @@ TEST(ShadowTraversal, AgreesWithEmbreeOnThinOccluders) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(0, 1), e(-1, 1);
   for (int k = 0; k < 4000; ++k) {
-    const std::array<float, 3> p{u(rng), u(rng), u(rng)}, l{0.5f * e(rng), 0.5f * e(rng), 0.5f * e(rng)};
+    const std::array<float, 3> p{u(rng), u(rng), u(rng)},
+        l{0.5f * e(rng), 0.5f * e(rng), 0.5f * e(rng)};
     const std::uint32_t i0 = b.vertex(p);
     const std::uint32_t i1 = b.vertex({p[0] + l[0], p[1] + l[1], p[2] + l[2]});
-    const std::uint32_t i2 = b.vertex({p[0] + 1e-3f * e(rng), p[1] + 1e-3f * e(rng), p[2] + 1e-3f * e(rng)});
+    const std::uint32_t i2 =
+        b.vertex({p[0] + 1e-3f * e(rng), p[1] + 1e-3f * e(rng), p[2] + 1e-3f * e(rng)});
     b.triangle(i0, i1, i2);
   }
   bench::finish(mesh);
@@ -178,8 +189,10 @@ TEST(ShadowTraversal, AgreesWithEmbreeOnGridsIncludingRaysThroughEdgesAndVertice
       {{0, 0, -1}, {0.125f, 0.25f, -1}, {-0.5f, 0.25f, -1}, {0.25f, -0.125f, -1}}};
   for (int j = 1; j < n - 1; j += 3)
     for (int i = 1; i < n - 1; i += 3)
-      for (const auto& target : std::array<std::array<float, 2>, 4>{
-               {{float(i), float(j)}, {i + 0.5f, float(j)}, {float(i), j + 0.5f}, {i + 0.5f, j + 0.5f}}})
+      for (const auto& target : std::array<std::array<float, 2>, 4>{{{float(i), float(j)},
+                                                                     {i + 0.5f, float(j)},
+                                                                     {float(i), j + 0.5f},
+                                                                     {i + 0.5f, j + 0.5f}}})
         for (const auto& d : dirs) {
           const float h = 8;  // start at z = 8 (above all layers), reach z = 0 at t = 8
           Ray r;
@@ -273,7 +286,8 @@ TEST(ShadowTraversal, RopesReachTheLeafARootDescentFinds) {
         // boundary on another axis) lies in several neighbours; either is right.
         bool on_edge = false;
         for (int k = 0; k < 3; ++k)
-          on_edge = on_edge || (k != axis && (p[std::size_t(k)] == box.lo[k] || p[std::size_t(k)] == box.hi[k]));
+          on_edge = on_edge || (k != axis &&
+                                (p[std::size_t(k)] == box.lo[k] || p[std::size_t(k)] == box.hi[k]));
         if (on_edge) ++ties;
         if (!on_edge) {
           EXPECT_EQ(via_rope, by_descent) << "leaf " << leaf << " face " << face;
@@ -329,7 +343,8 @@ TEST(ShadowTraversal, CountersAreConsistent) {
   // lifted ones on its path more than the standard traversal does.
   EXPECT_GE(lifted.unoccluded.primitives, standard.unoccluded.primitives);
   EXPECT_LE(lifted.unoccluded.primitives,
-            standard.unoccluded.primitives + lifted.unoccluded.rays * 2 * std::uint64_t(tree.max_depth()));
+            standard.unoccluded.primitives +
+                lifted.unoccluded.rays * 2 * std::uint64_t(tree.max_depth()));
   EXPECT_EQ(lifted.unoccluded.nodes, standard.unoccluded.nodes);
   // The rope walk tests the triangles of the leaves along the ray: no more than the stack
   // traversal (which may also enter leaves the ray only grazes within its rounding slack).
@@ -359,14 +374,46 @@ TEST(ShadowTraversal, QueryInterfaceMatchesEmbreeInPackets) {
       ++disagreements;
       EXPECT_TRUE(measure_zero_case(mesh, rays[i]));
     }
-    EXPECT_EQ(bool(via_embree[i]), embree.occluded(rays[i].origin, rays[i].direction,
-                                                   rays[i].t_near, rays[i].t_far));
+    EXPECT_EQ(bool(via_embree[i]),
+              embree.occluded(rays[i].origin, rays[i].direction, rays[i].t_near, rays[i].t_far));
   }
   EXPECT_LE(disagreements, 4);
   EXPECT_GT(hits, 400);
   // Moving the scene keeps the attached traversal.
   OccluderScene moved(std::move(scene));
   EXPECT_EQ(moved.shadow_query(), query.get());
+}
+
+// The traversal is a render option of the scene document too ("render": {"shadow_traversal"}):
+// read back exactly; written only when not the default (Embree), so documents that do not use it
+// read as before everywhere; optional when read; any other value is an error naming the key.
+TEST(ShadowTraversal, SceneDocumentCarriesTheTraversal) {
+  FogScene s;
+  s.render.shadow_traversal = ShadowTraversal::embree;
+  const std::string plain = scene_to_json(s);
+  EXPECT_EQ(plain.find("shadow_traversal"), std::string::npos) << plain;
+  EXPECT_EQ(scene_from_json(plain).render.shadow_traversal, ShadowTraversal::embree);
+  s.render.shadow_traversal = ShadowTraversal::multi_index;
+  const std::string text = scene_to_json(s);
+  const std::string key = "\"shadow_traversal\": \"multi-index\"";
+  const std::size_t at = text.find(key);
+  ASSERT_NE(at, std::string::npos) << text;
+  EXPECT_EQ(scene_from_json(text).render.shadow_traversal, ShadowTraversal::multi_index);
+  // Written explicitly as "embree": read as Embree.
+  std::string explicit_embree = text;
+  explicit_embree.replace(at, key.size(), "\"shadow_traversal\": \"embree\"");
+  EXPECT_EQ(scene_from_json(explicit_embree).render.shadow_traversal, ShadowTraversal::embree);
+  // A wrong value: a clear error naming the key and the choices.
+  std::string wrong = text;
+  wrong.replace(at, key.size(), "\"shadow_traversal\": \"kd\"");
+  try {
+    scene_from_json(wrong, "scene.json");
+    ADD_FAILURE() << "no error for shadow_traversal \"kd\"";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("/render/shadow_traversal"), std::string::npos) << what;
+    EXPECT_NE(what.find("multi-index"), std::string::npos) << what;
+  }
 }
 
 // Renders through the CPU core (public API) with either traversal give identical images.
@@ -382,7 +429,7 @@ TEST(ShadowTraversal, CpuRendersAreIdenticalWithEitherTraversal) {
   s.render.shadow_traversal = ShadowTraversal::multi_index;
   const ScatteringLayers b = render_scattering(in.photo, in.depth, in.camera, s);
   const std::uint64_t packets2 = MultiIndexShadowQuery::packets_traced();
-  EXPECT_EQ(packets1, packets0);      // Embree's render did not use the tree
+  EXPECT_EQ(packets1, packets0);         // Embree's render did not use the tree
   EXPECT_GT(packets2, packets1 + 1000);  // the other one did, for its shadow rays
   std::printf("multi-index render: %llu shadow packets on the tree\n",
               (unsigned long long)(packets2 - packets1));

@@ -218,7 +218,8 @@ RenderSettings read_render(const Json& j, const std::string& p, const Reader& r)
   r.check_keys(
       j, p,
       {"quality", "backend", "march_steps", "grid_step", "gradient_acceleration",
-       "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads"});
+       "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads",
+       "shadow_traversal"});
   constexpr long long kIntMin = std::numeric_limits<int>::min();
   constexpr long long kIntMax = std::numeric_limits<int>::max();
   RenderSettings s;
@@ -243,6 +244,9 @@ RenderSettings read_render(const Json& j, const std::string& p, const Reader& r)
         r.integer(*v, p + "/seed", 0, std::numeric_limits<std::uint32_t>::max()));
   if (const Json* v = member(j, "threads"))
     s.threads = static_cast<int>(r.integer(*v, p + "/threads", kIntMin, kIntMax));
+  if (const Json* v = member(j, "shadow_traversal"))  // issue 17; absent: Embree
+    s.shadow_traversal = static_cast<ShadowTraversal>(
+        r.choice(*v, p + "/shadow_traversal", {"embree", "multi-index"}));
   return s;
 }
 
@@ -643,6 +647,10 @@ Json to_document(const FogScene& s) {
                        {"max_distance_m", r.max_distance_m},
                        {"seed", r.seed},
                        {"threads", r.threads}};
+  // Issue 17, added within version 4: written only when not the default, so that documents
+  // which do not use it stay readable by the libmr builds before it (which reject unknown keys).
+  if (r.shadow_traversal == ShadowTraversal::multi_index)
+    doc["render"]["shadow_traversal"] = "multi-index";
   if (s.camera) {  // optional: documents without it read as before
     Json camera = Json{
         {"width", s.camera->width}, {"height", s.camera->height}, {"focal_px", s.camera->focal_px}};

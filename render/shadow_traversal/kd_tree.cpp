@@ -121,57 +121,183 @@ void clip_to_box(const WoopRay& r, const Box& b, float& lo, float& hi) {
 // ---------------------------------------------------------------------------------------------
 // Build
 
-struct KdTree::BuildNode {
-  Box box{};
-  bool leaf = true;
-  int axis = 0;
-  float split = 0;
-  std::unique_ptr<BuildNode> left, right;
-  std::vector<std::uint32_t> prims;
+namespace {
+
+/// A triangle reference during the build: the triangle's part inside the node, bounded.
+struct PrimRef {
+  float lo[3], hi[3];
+  std::uint32_t tri;
 };
 
-struct KdTree::Context {
-  const KdTreeOptions* options;
-  std::vector<Box> tri_boxes;
-  int max_depth = 0;
+/// A subtree built on its own (a parallel task): nodes in pre-order, the left child right after
+/// its parent; interior `a` = the right child's index and leaf `a` = the first reference, both
+/// local to the fragment until spliced.
+struct Fragment {
+  std::vector<KdTree::Node> nodes;
+  std::vector<std::uint32_t> refs;
+};
 
-  std::unique_ptr<BuildNode> build(std::vector<std::uint32_t> refs, const Box& box, int depth) {
-    auto node = std::make_unique<BuildNode>();
-    node->box = box;
-    const std::size_t n = refs.size();
-    const KdTreeOptions& o = *options;
-    const float leaf_cost = o.cost_intersect * float(n);
-    const float sa = surface_area(box);
-    if (n <= std::size_t(o.max_leaf_size) || depth >= max_depth || !(sa > 0.0f)) {
-      node->prims = std::move(refs);
-      return node;
+void splice(Fragment& out, const Fragment& part) {
+  const auto node_offset = std::uint32_t(out.nodes.size());
+  const auto ref_offset = std::uint32_t(out.refs.size());
+  out.nodes.reserve(out.nodes.size() + part.nodes.size());
+  for (KdTree::Node n : part.nodes) {
+    n.a += (n.flags & 3u) == kLeafAxis ? ref_offset : node_offset;
+    out.nodes.push_back(n);
+  }
+  out.refs.insert(out.refs.end(), part.refs.begin(), part.refs.end());
+}
+
+/// Bounds of triangle v (9 floats) clipped to box b, conservative: Sutherland-Hodgman in double
+/// against b widened by a relative 1e-6 (so a triangle that touches b, or misses it by rounding,
+/// is kept), the result rounded outwards to float and clamped to b. False if the triangle misses
+/// the widened box. A kd-tree leaf must hold every triangle that touches its box; a reference
+/// the clip keeps needlessly only costs a test.
+bool clipped_bounds(const float* v, const Box& b, PrimRef& out) {
+  double poly[2][10][3];
+  int count = 3;
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) poly[0][i][k] = v[3 * i + k];
+  int cur = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double widen = 1e-6 * std::max({std::fabs(double(b.lo[k])), std::fabs(double(b.hi[k])),
+                                          double(b.hi[k]) - double(b.lo[k]), 1e-30});
+    for (int side = 0; side < 2; ++side) {
+      // Keep sign * (x_k - plane) >= 0.
+      const double plane = side == 0 ? double(b.lo[k]) - widen : double(b.hi[k]) + widen;
+      const double sign = side == 0 ? 1.0 : -1.0;
+      const double(*in)[3] = poly[cur];
+      double(*outp)[3] = poly[1 - cur];
+      int n = 0;
+      for (int i = 0; i < count; ++i) {
+        const double* p = in[i];
+        const double* q = in[(i + 1) % count];
+        const double dp = sign * (p[k] - plane), dq = sign * (q[k] - plane);
+        if (dp >= 0) {
+          for (int c = 0; c < 3; ++c) outp[n][c] = p[c];
+          ++n;
+        }
+        if ((dp < 0 && dq > 0) || (dp > 0 && dq < 0)) {
+          const double s = dp / (dp - dq);
+          for (int c = 0; c < 3; ++c) outp[n][c] = p[c] + s * (q[c] - p[c]);
+          outp[n][k] = plane;  // exactly on the plane
+          ++n;
+        }
+      }
+      count = n;
+      cur = 1 - cur;
+      if (count == 0) return false;
     }
-    float best_cost = leaf_cost;
+  }
+  double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf}, magnitude = 0;
+  for (int i = 0; i < count; ++i)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], poly[cur][i][k]);
+      hi[k] = std::max(hi[k], poly[cur][i][k]);
+    }
+  for (int i = 0; i < 9; ++i) magnitude = std::max(magnitude, std::fabs(double(v[i])));
+  const double slack = 1e-12 * magnitude;  // the double clip's own rounding, generously
+  for (int k = 0; k < 3; ++k) {
+    float l = std::nextafter(float(lo[k] - slack), -kInf);
+    float h = std::nextafter(float(hi[k] + slack), kInf);
+    l = std::clamp(l, b.lo[k], b.hi[k]);
+    h = std::clamp(h, b.lo[k], b.hi[k]);
+    out.lo[k] = l;
+    out.hi[k] = h;
+  }
+  return true;
+}
+
+}  // namespace
+
+/// A sample shadow ray's part inside a node during an SRDH build: [t0, t1] of ray `id`.
+struct RayRef {
+  float t0, t1;
+  std::uint32_t id;
+};
+
+/// Binned SAH over clipped triangle bounds ("perfect splits" approximated by clipping straddling
+/// triangles to each child: Wald & Havran 2006): O(references) per node, no sorting; references
+/// are compact (28 bytes) and a node's list is freed before its children are built. Subtrees of
+/// more than kParallelRefs references are built as TBB tasks and spliced.
+///
+/// With sample rays (SRDH, Feltman, Lee & Fatahalian 2012), the chance that a ray entering the
+/// node enters a child is measured on the rays instead of taken as the surface-area ratio:
+/// P(child) = (rays entering child + k SA(child)/SA(node)) / (rays entering node + k), k =
+/// srdh_prior_rays (the SAH where few sample rays pass; exactly the SAH with none).
+struct KdTree::Builder {
+  const KdTreeOptions& o;
+  const std::vector<float>& triangles;
+  const std::vector<Ray>* rays = nullptr;  // SRDH's sample; null: SAH
+  int max_depth = 0;
+  // Subtrees built as tasks: big ones near the root, but not the root's children or
+  // grandchildren, whose fragments (up to half the tree) would be copied once more into their
+  // parent's at the end, raising the peak; below them each subtree is still built in parallel.
+  static constexpr std::size_t kParallelRefs = 32768;
+  static constexpr int kFirstParallelDepth = 2;
+  static constexpr int kParallelDepths = 5;
+
+  void leaf(Fragment& out, const std::vector<PrimRef>& refs) const {
+    Node n{};
+    n.split = 0;
+    n.flags = kLeafAxis | (std::uint32_t(refs.size()) << 4);
+    n.a = std::uint32_t(out.refs.size());
+    n.b = kNone;
+    for (const PrimRef& r : refs) out.refs.push_back(r.tri);
+    out.nodes.push_back(n);
+  }
+
+  void build(Fragment& out, std::vector<PrimRef>& refs, std::vector<RayRef>& ray_refs,
+             const Box& box, int depth) const {
+    const std::size_t n = refs.size();
+    const float sa = surface_area(box);
+    if (n <= std::size_t(o.max_leaf_size) || depth >= max_depth || !(sa > 0.0f))
+      return leaf(out, refs);
+    float best_cost = o.cost_intersect * float(n);  // the leaf's
     int best_axis = -1;
     float best_split = 0;
+    const bool srdh = !ray_refs.empty();
+    const float prior = o.srdh_prior_rays;
+    const float ray_total = float(ray_refs.size());
     for (int axis = 0; axis < 3; ++axis) {
       const float lo = box.lo[axis], extent = box.hi[axis] - lo;
       if (!(extent > 0.0f)) continue;
       int starts[kBins] = {}, ends[kBins] = {};
       const float scale = float(kBins) / extent;
-      for (std::uint32_t t : refs) {
-        const Box& tb = tri_boxes[t];
-        const float tlo = std::max(tb.lo[axis], lo), thi = std::min(tb.hi[axis], box.hi[axis]);
-        starts[std::clamp(int((tlo - lo) * scale), 0, kBins - 1)]++;
-        ends[std::clamp(int((thi - lo) * scale), 0, kBins - 1)]++;
+      for (const PrimRef& r : refs) {
+        starts[std::clamp(int((r.lo[axis] - lo) * scale), 0, kBins - 1)]++;
+        ends[std::clamp(int((r.hi[axis] - lo) * scale), 0, kBins - 1)]++;
       }
-      int n_left = 0, n_right = int(n);
+      int ray_starts[kBins] = {}, ray_ends[kBins] = {};
+      if (srdh)
+        for (const RayRef& rr : ray_refs) {
+          const Ray& ray = (*rays)[rr.id];
+          const float c0 = ray.origin[std::size_t(axis)] + ray.direction[std::size_t(axis)] * rr.t0;
+          const float c1 = ray.origin[std::size_t(axis)] + ray.direction[std::size_t(axis)] * rr.t1;
+          ray_starts[std::clamp(int((std::min(c0, c1) - lo) * scale), 0, kBins - 1)]++;
+          ray_ends[std::clamp(int((std::max(c0, c1) - lo) * scale), 0, kBins - 1)]++;
+        }
+      // SA of a child is linear in the plane's position along the axis.
+      const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+      const float side1 = box.hi[a1] - box.lo[a1], side2 = box.hi[a2] - box.lo[a2];
+      const float face = side1 * side2, perimeter = side1 + side2;
+      int n_left = 0, n_right = int(n), r_left = 0, r_right = int(ray_refs.size());
       for (int i = 1; i < kBins; ++i) {
         n_left += starts[i - 1];
         n_right -= ends[i - 1];
+        r_left += ray_starts[i - 1];
+        r_right -= ray_ends[i - 1];
         const float plane = lo + extent * float(i) / float(kBins);
-        Box bl = box, br = box;
-        bl.hi[axis] = plane;
-        br.lo[axis] = plane;
-        float cost = o.cost_traversal + o.cost_intersect *
-                                            (surface_area(bl) * float(n_left) +
-                                             surface_area(br) * float(n_right)) /
-                                            sa;
+        // A box a few ulps wide rounds planes onto its faces: no zero-thickness children.
+        if (!(plane > lo && plane < box.hi[axis])) continue;
+        float p_left = 2.0f * (face + (plane - lo) * perimeter) / sa;
+        float p_right = 2.0f * (face + (box.hi[axis] - plane) * perimeter) / sa;
+        if (srdh) {
+          p_left = (float(r_left) + prior * p_left) / (ray_total + prior);
+          p_right = (float(r_right) + prior * p_right) / (ray_total + prior);
+        }
+        float cost = o.cost_traversal +
+                     o.cost_intersect * (p_left * float(n_left) + p_right * float(n_right));
         if (n_left == 0 || n_right == 0) cost *= o.empty_bonus;
         if (cost < best_cost) {
           best_cost = cost;
@@ -180,46 +306,84 @@ struct KdTree::Context {
         }
       }
     }
-    if (best_axis < 0) {
-      node->prims = std::move(refs);
-      return node;
-    }
-    std::vector<std::uint32_t> left, right;
-    left.reserve(n / 2 + 1);
-    right.reserve(n / 2 + 1);
-    for (std::uint32_t t : refs) {
-      const Box& tb = tri_boxes[t];
-      const float tlo = std::max(tb.lo[best_axis], box.lo[best_axis]);
-      const float thi = std::min(tb.hi[best_axis], box.hi[best_axis]);
-      if (tlo <= best_split) left.push_back(t);
-      if (thi >= best_split) right.push_back(t);
-    }
-    if (left.size() == n && right.size() == n) {  // the split separates nothing
-      node->prims = std::move(refs);
-      return node;
-    }
-    refs.clear();
-    refs.shrink_to_fit();
-    node->leaf = false;
-    node->axis = best_axis;
-    node->split = best_split;
+    if (best_axis < 0) return leaf(out, refs);
     Box bl = box, br = box;
     bl.hi[best_axis] = best_split;
     br.lo[best_axis] = best_split;
-    if (n > 20000) {
-      tbb::task_group group;
-      group.run([&] { node->left = build(std::move(left), bl, depth + 1); });
-      node->right = build(std::move(right), br, depth + 1);
-      group.wait();
-    } else {
-      node->left = build(std::move(left), bl, depth + 1);
-      node->right = build(std::move(right), br, depth + 1);
+    // The left child's list is written over the parent's (each reference read before its slot
+    // is written: at most one left entry per reference read), the right one into a new list.
+    std::vector<PrimRef>& left = refs;
+    std::vector<PrimRef> right;
+    right.reserve(n / 2 + 16);
+    std::size_t n_left = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const PrimRef r = refs[i];
+      if (r.hi[best_axis] < best_split) {
+        left[n_left++] = r;
+      } else if (r.lo[best_axis] > best_split) {
+        right.push_back(r);
+      } else {  // straddles or touches the plane: clip to each side
+        PrimRef c;
+        c.tri = r.tri;
+        const float* v = &triangles[9 * std::size_t(r.tri)];
+        if (clipped_bounds(v, br, c)) right.push_back(c);
+        if (clipped_bounds(v, bl, c)) left[n_left++] = c;
+      }
     }
-    return node;
+    // Separates nothing: a leaf (`refs` now holds the left copies: the same triangles, in order).
+    if (n_left == n && right.size() == n) return leaf(out, refs);
+    left.resize(n_left);
+    std::vector<RayRef> rays_left, rays_right;
+    for (const RayRef& rr : ray_refs) {
+      const Ray& ray = (*rays)[rr.id];
+      const float org = ray.origin[std::size_t(best_axis)],
+                  d = ray.direction[std::size_t(best_axis)];
+      if (d == 0.0f) {
+        if (org <= best_split) rays_left.push_back(rr);
+        if (org >= best_split) rays_right.push_back(rr);
+        continue;
+      }
+      const float ts = (best_split - org) / d;
+      RayRef first = rr, second = rr;  // along the ray
+      first.t1 = std::min(rr.t1, ts);
+      second.t0 = std::max(rr.t0, ts);
+      std::vector<RayRef>& near_side = d > 0.0f ? rays_left : rays_right;
+      std::vector<RayRef>& far_side = d > 0.0f ? rays_right : rays_left;
+      if (first.t0 <= first.t1) near_side.push_back(first);
+      if (second.t0 <= second.t1) far_side.push_back(second);
+    }
+    std::vector<RayRef>().swap(ray_refs);
+    const auto index = std::uint32_t(out.nodes.size());
+    Node node{};
+    node.split = best_split;
+    node.flags = std::uint32_t(best_axis);
+    node.a = kNone;
+    node.b = kNone;
+    out.nodes.push_back(node);
+    if (depth >= kFirstParallelDepth && depth < kFirstParallelDepth + kParallelDepths &&
+        left.size() + right.size() > kParallelRefs) {
+      Fragment right_part;
+      right_part.nodes.reserve(4 * right.size());  // virtual: pages never written cost nothing
+      right_part.refs.reserve(2 * right.size());
+      tbb::task_group group;
+      group.run([&] { build(right_part, right, rays_right, br, depth + 1); });
+      build(out, left, rays_left, bl, depth + 1);
+      group.wait();
+      out.nodes[index].a = std::uint32_t(out.nodes.size());
+      splice(out, right_part);
+    } else {
+      build(out, left, rays_left, bl, depth + 1);
+      out.nodes[index].a = std::uint32_t(out.nodes.size());
+      build(out, right, rays_right, br, depth + 1);
+    }
   }
 };
 
-KdTree::KdTree(const TriangleMesh& mesh, const KdTreeOptions& options) {
+KdTree::KdTree(const TriangleMesh& mesh, const KdTreeOptions& options)
+    : KdTree(mesh, std::vector<Ray>{}, options) {}
+
+KdTree::KdTree(const TriangleMesh& mesh, const std::vector<Ray>& srdh_rays,
+               const KdTreeOptions& options) {
   const std::size_t vertices = mesh.positions.size() / 3;  // ignores OccluderScene's padding
   if (mesh.indices.size() % 3 != 0)
     throw Error(ErrorCode::invalid_argument, "kd-tree: occluder mesh has " +
@@ -227,13 +391,15 @@ KdTree::KdTree(const TriangleMesh& mesh, const KdTreeOptions& options) {
                                                  " indices, not a multiple of 3");
   const std::size_t count = mesh.indices.size() / 3;
   triangles_.resize(9 * count);
-  Context ctx;
-  ctx.options = &options;
-  ctx.tri_boxes.resize(count);
+  std::vector<PrimRef> all(count);
   Box bounds{{kInf, kInf, kInf}, {-kInf, -kInf, -kInf}};
   for (std::size_t t = 0; t < count; ++t) {
-    Box& tb = ctx.tri_boxes[t];
-    tb = Box{{kInf, kInf, kInf}, {-kInf, -kInf, -kInf}};
+    PrimRef& r = all[t];
+    r.tri = std::uint32_t(t);
+    for (int k = 0; k < 3; ++k) {
+      r.lo[k] = kInf;
+      r.hi[k] = -kInf;
+    }
     for (int v = 0; v < 3; ++v) {
       const std::uint32_t index = mesh.indices[3 * t + std::size_t(v)];
       if (index >= vertices)
@@ -247,76 +413,53 @@ KdTree::KdTree(const TriangleMesh& mesh, const KdTreeOptions& options) {
           throw Error(ErrorCode::invalid_argument,
                       "kd-tree: occluder mesh vertex " + std::to_string(index) + " is not finite");
         triangles_[9 * t + 3 * std::size_t(v) + std::size_t(k)] = x;
-        tb.lo[k] = std::min(tb.lo[k], x);
-        tb.hi[k] = std::max(tb.hi[k], x);
+        r.lo[k] = std::min(r.lo[k], x);
+        r.hi[k] = std::max(r.hi[k], x);
       }
     }
     for (int k = 0; k < 3; ++k) {
-      bounds.lo[k] = std::min(bounds.lo[k], tb.lo[k]);
-      bounds.hi[k] = std::max(bounds.hi[k], tb.hi[k]);
+      bounds.lo[k] = std::min(bounds.lo[k], r.lo[k]);
+      bounds.hi[k] = std::max(bounds.hi[k], r.hi[k]);
     }
   }
   if (count == 0) bounds = Box{{0, 0, 0}, {0, 0, 0}};
   bounds_ = bounds;
-  ctx.max_depth = int(8 + 1.3 * std::log2(double(std::max<std::size_t>(count, 1))));
-  std::vector<std::uint32_t> all(count);
-  for (std::size_t t = 0; t < count; ++t) all[t] = std::uint32_t(t);
-  std::unique_ptr<BuildNode> root = ctx.build(std::move(all), bounds, 0);
-
-  // Flatten depth first (left child right after its parent), recording what the multi-index
-  // parts and the SATO order need.
-  std::vector<Box> node_boxes;
-  std::vector<int> node_depth;
-  std::vector<std::uint32_t> parent;
-  std::vector<float> subtree_cost, subtree_area;
-  struct Frame {
-    BuildNode* node;
-    std::uint32_t parent;
-    int depth;
-  };
-  // Iterative pre-order (right pushed first so left comes next).
-  std::vector<Frame> todo{{root.get(), kNone, 0}};
-  std::vector<std::pair<std::uint32_t, BuildNode*>> right_links;  // (parent index, right node)
-  std::vector<BuildNode*> flat_build;
-  while (!todo.empty()) {
-    Frame f = todo.back();
-    todo.pop_back();
-    const std::uint32_t index = std::uint32_t(nodes_.size());
-    // A right child: patch its parent's link.
-    if (f.parent != kNone && nodes_[f.parent].a == kNone && index != f.parent + 1)
-      nodes_[f.parent].a = index;
-    Node n{};
-    max_depth_ = std::max(max_depth_, f.depth);
-    if (f.node->leaf) {
-      n.split = 0;
-      n.flags = kLeafAxis | (std::uint32_t(f.node->prims.size()) << 4);
-      n.a = std::uint32_t(refs_.size());
-      n.b = std::uint32_t(leaf_nodes_.size());
-      refs_.insert(refs_.end(), f.node->prims.begin(), f.node->prims.end());
-      leaf_nodes_.push_back(index);
-      leaf_boxes_.push_back(f.node->box);
-    } else {
-      n.split = f.node->split;
-      n.flags = std::uint32_t(f.node->axis);
-      n.a = kNone;  // patched when the right child is emitted
-      n.b = kNone;
-      todo.push_back({f.node->right.get(), index, f.depth + 1});
-      todo.push_back({f.node->left.get(), index, f.depth + 1});
+  Builder builder{options, triangles_};
+  builder.max_depth = int(8 + 1.3 * std::log2(double(std::max<std::size_t>(count, 1))));
+  std::vector<RayRef> ray_refs;
+  if (!srdh_rays.empty() && count > 0) {
+    builder.rays = &srdh_rays;
+    for (std::size_t i = 0; i < srdh_rays.size(); ++i) {
+      const WoopRay r = prepare(srdh_rays[i]);
+      if (!r.valid) continue;
+      float t0, t1;
+      clip_to_box(r, bounds, t0, t1);
+      if (t0 <= t1) ray_refs.push_back({t0, t1, std::uint32_t(i)});
     }
-    nodes_.push_back(n);
-    node_boxes.push_back(f.node->box);
-    node_depth.push_back(f.depth);
-    parent.push_back(f.parent);
-    flat_build.push_back(f.node);
   }
-  // Bottom-up: SAH cost and triangle area of every subtree (children have larger indices).
-  subtree_cost.assign(nodes_.size(), 0.0f);
-  subtree_area.assign(nodes_.size(), 0.0f);
-  for (std::size_t i = nodes_.size(); i-- > 0;) {
-    const Node& n = nodes_[i];
-    if ((n.flags & 3u) == kLeafAxis) {
+  Fragment tree;
+  // Generous reservations (product meshes: about 6 nodes and 6 references per triangle): only
+  // the pages written become resident, and growing by copying would double the peak.
+  tree.nodes.reserve(12 * count + 64);
+  tree.refs.reserve(12 * count + 64);
+  builder.build(tree, all, ray_refs, bounds, 0);
+  nodes_ = std::move(tree.nodes);
+  refs_ = std::move(tree.refs);
+  // (No shrink_to_fit: it would copy, doubling the peak; the unused capacity is never touched.)
+
+  // Leaf numbers (pre-order), the depth, and SATO's order: one recursion with the boxes on its
+  // stack (no per-node arrays: the product's trees have tens of millions of nodes).
+  struct Subtree {
+    float cost, area;  // SAH cost; triangle area (leaves' sums; shared triangles count twice)
+  };
+  std::uint32_t leaves = 0;
+  auto annotate = [&](auto&& self, std::uint32_t i, const Box& box, int depth) -> Subtree {
+    max_depth_ = std::max(max_depth_, depth);
+    Node& n = nodes_[i];
+    const std::uint32_t axis = n.flags & 3u;
+    if (axis == kLeafAxis) {
+      n.b = leaves++;
       const std::uint32_t count_here = n.flags >> 4;
-      subtree_cost[i] = options.cost_intersect * float(count_here);
       float area = 0;
       for (std::uint32_t k = 0; k < count_here; ++k) {
         const float* v = &triangles_[9 * std::size_t(refs_[n.a + k])];
@@ -326,40 +469,73 @@ KdTree::KdTree(const TriangleMesh& mesh, const KdTreeOptions& options) {
                     cz = e1[0] * e2[1] - e1[1] * e2[0];
         area += 0.5f * std::sqrt(cx * cx + cy * cy + cz * cz);
       }
-      subtree_area[i] = area;
-    } else {
-      const std::size_t l = i + 1, r = n.a;
-      const float sa = surface_area(node_boxes[i]);
-      subtree_cost[i] = options.cost_traversal +
-                        (sa > 0 ? (surface_area(node_boxes[l]) * subtree_cost[l] +
-                                   surface_area(node_boxes[r]) * subtree_cost[r]) /
-                                      sa
-                                : subtree_cost[l] + subtree_cost[r]);
-      subtree_area[i] = subtree_area[l] + subtree_area[r];
-      // SATO: the child with the larger occlusion chance per unit of traversal cost first. The
-      // chance that a random line through a box meets a triangle of area A in it is about
-      // 2 A / SA(box) (mean projected area A / 2 over SA / 4); capped at 1 (the areas overlap).
-      auto score = [&](std::size_t c) {
-        const double sa_c = std::max(1e-30, double(surface_area(node_boxes[c])));
-        return std::min(1.0, 2.0 * double(subtree_area[c]) / sa_c) /
-               std::max(1e-30, double(subtree_cost[c]));
-      };
-      const double score_l = score(l), score_r = score(r);
-      if (score_l >= score_r) nodes_[i].flags |= 4u | 8u;  // SRDH starts as SATO
+      return {options.cost_intersect * float(count_here), area};
     }
-  }
-  root.reset();
-  if (options.multi_index) {
-    build_ropes();
-    lift_primitives(options, subtree_cost, node_boxes, node_depth, parent);
-  } else {
-    leaf_boxes_.clear();
-    leaf_boxes_.shrink_to_fit();
-  }
+    Box bl = box, br = box;
+    bl.hi[axis] = n.split;
+    br.lo[axis] = n.split;
+    const Subtree l = self(self, i + 1, bl, depth + 1);
+    const Subtree r = self(self, n.a, br, depth + 1);
+    const float sa = surface_area(box), sa_l = surface_area(bl), sa_r = surface_area(br);
+    const float cost =
+        options.cost_traversal + (sa > 0 ? (sa_l * l.cost + sa_r * r.cost) / sa : l.cost + r.cost);
+    // SATO: the child with the larger occlusion chance per unit of traversal cost first. The
+    // chance that a random line through a box meets a triangle of area A in it is about
+    // 2 A / SA(box) (mean projected area A / 2 over SA / 4); capped at 1 (the areas overlap).
+    auto score = [](const Subtree& c, float sa_c) {
+      return std::min(1.0, 2.0 * double(c.area) / std::max(1e-30, double(sa_c))) /
+             std::max(1e-30, double(c.cost));
+    };
+    if (score(l, sa_l) >= score(r, sa_r)) n.flags |= 4u | 8u;  // SRDH starts as SATO
+    return {cost, l.area + r.area};
+  };
+  if (!nodes_.empty()) annotate(annotate, 0, bounds_, 0);
+  leaf_count_ = leaves;
+  if (options.multi_index) build_multi_index(options);
+}
+
+std::vector<float> KdTree::subtree_costs(const KdTreeOptions& options) const {
+  std::vector<float> cost(nodes_.size(), 0.0f);
+  auto rec = [&](auto&& self, std::uint32_t i, const Box& box) -> float {
+    const Node& n = nodes_[i];
+    const std::uint32_t axis = n.flags & 3u;
+    if (axis == kLeafAxis) return cost[i] = options.cost_intersect * float(n.flags >> 4);
+    Box bl = box, br = box;
+    bl.hi[axis] = n.split;
+    br.lo[axis] = n.split;
+    const float cl = self(self, i + 1, bl), cr = self(self, n.a, br);
+    const float sa = surface_area(box);
+    return cost[i] = options.cost_traversal +
+                     (sa > 0 ? (surface_area(bl) * cl + surface_area(br) * cr) / sa : cl + cr);
+  };
+  if (!nodes_.empty()) rec(rec, 0, bounds_);
+  return cost;
+}
+
+void KdTree::build_multi_index(const KdTreeOptions& options) {
+  // Lifting first: its temporary per-node costs are freed before the leaf boxes and ropes (24
+  // bytes per leaf each) are allocated, which lowers the peak.
+  lift_primitives(options);
+  leaf_boxes_.assign(leaf_count_, Box{});
+  auto rec = [&](auto&& self, std::uint32_t i, const Box& box) -> void {
+    const Node& n = nodes_[i];
+    const std::uint32_t axis = n.flags & 3u;
+    if (axis == kLeafAxis) {
+      leaf_boxes_[n.b] = box;
+      return;
+    }
+    Box bl = box, br = box;
+    bl.hi[axis] = n.split;
+    br.lo[axis] = n.split;
+    self(self, i + 1, bl);
+    self(self, n.a, br);
+  };
+  if (!nodes_.empty()) rec(rec, 0, bounds_);
+  build_ropes();
 }
 
 void KdTree::build_ropes() {
-  ropes_.assign(leaf_nodes_.size(), {kNone, kNone, kNone, kNone, kNone, kNone});
+  ropes_.assign(leaf_count_, {kNone, kNone, kNone, kNone, kNone, kNone});
   if (nodes_.empty()) return;
   struct Frame {
     std::uint32_t node;
@@ -402,74 +578,108 @@ void KdTree::build_ropes() {
   }
 }
 
-void KdTree::lift_primitives(const KdTreeOptions& options, const std::vector<float>& subtree_cost,
-                             const std::vector<Box>& node_boxes,
-                             const std::vector<int>& node_depth,
-                             const std::vector<std::uint32_t>& parent) {
+void KdTree::lift_primitives(const KdTreeOptions& options) {
+  lifted_ranges_.clear();
+  lifted_prims_.clear();
+  for (Node& n : nodes_)
+    if ((n.flags & 3u) != kLeafAxis) n.b = kNone;
   const std::size_t count = triangle_count();
-  if (count == 0) return;
-  std::vector<Box> boxes(count);
-  double mean_area = 0;
-  for (std::size_t t = 0; t < count; ++t) {
+  if (count == 0 || nodes_.empty()) return;
+  auto triangle_box = [&](std::size_t t) {
     const float* v = &triangles_[9 * t];
-    Box& b = boxes[t];
+    Box b;
     for (int k = 0; k < 3; ++k) {
       b.lo[k] = std::min({v[k], v[3 + k], v[6 + k]});
       b.hi[k] = std::max({v[k], v[3 + k], v[6 + k]});
     }
-    mean_area += surface_area(b);
-  }
+    return b;
+  };
+  double mean_area = 0;
+  for (std::size_t t = 0; t < count; ++t) mean_area += surface_area(triangle_box(t));
   mean_area /= double(count);
-  // One leaf per triangle (its first): the ancestors of that leaf are the candidate places.
-  std::vector<std::uint32_t> first_leaf(count, kNone);
-  for (std::uint32_t leaf = 0; leaf < leaf_nodes_.size(); ++leaf) {
-    const Node& n = nodes_[leaf_nodes_[leaf]];
-    for (std::uint32_t k = 0; k < (n.flags >> 4); ++k) {
-      std::uint32_t& f = first_leaf[refs_[n.a + k]];
-      if (f == kNone) f = leaf_nodes_[leaf];
-    }
-  }
+  const std::vector<float> subtree_cost = subtree_costs(options);
   struct Candidate {
+    std::uint32_t node;
     float gain;
     std::uint32_t triangle;
   };
-  std::vector<std::vector<Candidate>> per_node(nodes_.size());
-  for (std::size_t t = 0; t < count; ++t) {
-    if (first_leaf[t] == kNone || !(surface_area(boxes[t]) > options.lift_area_ratio * mean_area))
-      continue;
-    float best_gain = options.lift_min_gain;
-    std::uint32_t best = kNone;
-    for (std::uint32_t n = parent[first_leaf[t]]; n != kNone; n = parent[n]) {
-      const float sa = surface_area(node_boxes[n]);
-      if (!(sa > 0)) continue;
-      const float p_hit = std::min(1.0f, surface_area(clip(boxes[t], node_boxes[n])) / sa);
-      const float gain = (p_hit - options.cost_intersect / subtree_cost[n]) *
-                         (1.0f - std::exp(-options.lift_lambda * float(node_depth[n])));
-      if (gain > best_gain) {
-        best_gain = gain;
-        best = n;
+  std::vector<Candidate> candidates;
+  // Each triangle once, at its first leaf in pre-order: that leaf's ancestors (the recursion's
+  // path, deepest first) are the candidate places.
+  std::vector<bool> seen(count, false);
+  struct Ancestor {
+    std::uint32_t node;
+    int depth;
+    Box box;
+  };
+  std::vector<Ancestor> path;
+  auto rec = [&](auto&& self, std::uint32_t i, const Box& box, int depth) -> void {
+    const Node& n = nodes_[i];
+    const std::uint32_t axis = n.flags & 3u;
+    if (axis == kLeafAxis) {
+      for (std::uint32_t k = 0; k < (n.flags >> 4); ++k) {
+        const std::uint32_t t = refs_[n.a + k];
+        if (seen[t]) continue;
+        seen[t] = true;
+        const Box tb = triangle_box(t);
+        if (!(surface_area(tb) > options.lift_area_ratio * mean_area)) continue;
+        float best_gain = options.lift_min_gain;
+        std::uint32_t best = kNone;
+        for (std::size_t a = path.size(); a-- > 0;) {
+          const Ancestor& anc = path[a];
+          const float sa = surface_area(anc.box);
+          if (!(sa > 0)) continue;
+          const float p_hit = std::min(1.0f, surface_area(clip(tb, anc.box)) / sa);
+          const float gain = (p_hit - options.cost_intersect / subtree_cost[anc.node]) *
+                             (1.0f - std::exp(-options.lift_lambda * float(anc.depth)));
+          if (gain > best_gain) {
+            best_gain = gain;
+            best = anc.node;
+          }
+        }
+        if (best != kNone) candidates.push_back({best, best_gain, t});
       }
+      return;
     }
-    if (best != kNone) per_node[best].push_back({best_gain, std::uint32_t(t)});
+    Box bl = box, br = box;
+    bl.hi[axis] = n.split;
+    br.lo[axis] = n.split;
+    path.push_back({i, depth, box});
+    self(self, i + 1, bl, depth + 1);
+    self(self, n.a, br, depth + 1);
+    path.pop_back();
+  };
+  rec(rec, 0, bounds_, 0);
+  // Per node, the largest gains first (ties: the lower triangle index).
+  std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
+    if (a.node != b.node) return a.node < b.node;
+    return a.gain > b.gain || (a.gain == b.gain && a.triangle < b.triangle);
+  });
+  for (std::size_t i = 0; i < candidates.size();) {
+    const std::uint32_t n = candidates[i].node;
+    std::size_t end = i;
+    while (end < candidates.size() && candidates[end].node == n) ++end;
+    const std::size_t kept = std::min(end - i, std::size_t(std::max(0, options.lift_max_per_node)));
+    if (kept > 0) {
+      nodes_[n].b = std::uint32_t(lifted_ranges_.size());
+      lifted_ranges_.push_back({std::uint32_t(lifted_prims_.size()), std::uint32_t(kept)});
+      for (std::size_t k = i; k < i + kept; ++k) lifted_prims_.push_back(candidates[k].triangle);
+    }
+    i = end;
   }
-  for (std::size_t n = 0; n < nodes_.size(); ++n) {
-    auto& c = per_node[n];
-    if (c.empty()) continue;
-    std::sort(c.begin(), c.end(), [](const Candidate& a, const Candidate& b) {
-      return a.gain > b.gain || (a.gain == b.gain && a.triangle < b.triangle);
-    });
-    if (c.size() > std::size_t(options.lift_max_per_node)) c.resize(std::size_t(options.lift_max_per_node));
-    nodes_[n].b = std::uint32_t(lifted_ranges_.size());
-    lifted_ranges_.push_back({std::uint32_t(lifted_prims_.size()), std::uint32_t(c.size())});
-    for (const Candidate& k : c) lifted_prims_.push_back(k.triangle);
-  }
+}
+
+std::size_t KdTree::empty_leaf_count() const {
+  std::size_t empty = 0;
+  for (const Node& n : nodes_) empty += n.flags == kLeafAxis;  // a leaf of 0 triangles
+  return empty;
 }
 
 std::size_t KdTree::memory_bytes(bool multi_index_parts) const {
   std::size_t bytes = nodes_.size() * sizeof(Node) + refs_.size() * sizeof(std::uint32_t) +
                       triangles_.size() * sizeof(float);
   if (multi_index_parts)
-    bytes += leaf_boxes_.size() * sizeof(Box) + leaf_nodes_.size() * sizeof(std::uint32_t) +
+    bytes += leaf_boxes_.size() * sizeof(Box) +
              ropes_.size() * sizeof(ropes_[0]) + lifted_ranges_.size() * sizeof(lifted_ranges_[0]) +
              lifted_prims_.size() * sizeof(std::uint32_t);
   return bytes;
@@ -514,7 +724,8 @@ bool KdTree::stack_traverse(const Ray& ray, int order_bit, bool use_lifted, floa
       }
       const std::uint32_t left = node + 1, right = n->a;
       const float o = r.o[axis], d = r.d[axis], split = n->split;
-      // Child intervals along the ray. With d == 0 the ray stays on one side (both if on the plane).
+      // Child intervals along the ray. With d == 0 the ray stays on one side (both if on the
+      // plane).
       bool visit_left, visit_right;
       float left_min = t_min, left_max = t_max, right_min = t_min, right_max = t_max;
       if (d == 0.0f) {
@@ -722,8 +933,9 @@ bool KdTree::occluded_multi_index(const Ray& ray, bool predict_occluded,
 // SRDH's order from a sample ray set
 
 void KdTree::train_srdh(const std::vector<Ray>& sample_rays) {
-  struct Stats {
-    double entered[2] = {0, 0}, occluded[2] = {0, 0}, cost[2] = {0, 0};
+  struct Stats {  // compact: one per node of a tree of tens of millions of nodes
+    std::uint32_t entered[2] = {0, 0}, occluded[2] = {0, 0};
+    float cost[2] = {0, 0};
   };
   std::vector<Stats> stats(nodes_.size());
   struct Result {
@@ -768,7 +980,7 @@ void KdTree::train_srdh(const std::vector<Ray>& sample_rays) {
       res[c] = self(self, r, child[c], lo[c], hi[c]);
       s.entered[c] += 1;
       s.occluded[c] += res[c].hit ? 1 : 0;
-      s.cost[c] += res[c].cost;
+      s.cost[c] += float(res[c].cost);
     }
     const int first = d >= 0.0f ? 0 : 1;
     const double cost = 1 + res[first].cost + (res[first].hit ? 0 : res[1 - first].cost);
@@ -787,8 +999,8 @@ void KdTree::train_srdh(const std::vector<Ray>& sample_rays) {
     if ((nodes_[i].flags & 3u) == kLeafAxis || s.entered[0] + s.entered[1] == 0) continue;
     double score[2];
     for (int c = 0; c < 2; ++c) {
-      const double p = (s.occluded[c] + 1) / (s.entered[c] + 2);  // Laplace: unseen = 1/2
-      const double cost = s.entered[c] > 0 ? s.cost[c] / s.entered[c] : 1.0;
+      const double p = (s.occluded[c] + 1.0) / (s.entered[c] + 2.0);  // Laplace: unseen = 1/2
+      const double cost = s.entered[c] > 0 ? double(s.cost[c]) / s.entered[c] : 1.0;
       score[c] = p / cost;
     }
     if (score[0] >= score[1])

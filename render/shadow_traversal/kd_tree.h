@@ -1,10 +1,13 @@
 // Private to libmr: a kd-tree over a triangle mesh for shadow (any-hit) rays, with the traversal
 // orders seed 004 compares itself with and the seed's multi-index tree (issue 17).
 //
-//  * Build: binned SAH (32 planes per axis per node; triangle boxes clipped to the node's box;
-//    a triangle whose clipped box touches the plane goes to both sides), costs C_trav = 1,
-//    C_isect = 1.5, empty-space bonus 0.8 (leaf if no split is cheaper, at most 2 triangles or at
-//    depth 8 + 1.3 log2 N). Top levels built in parallel (TBB).
+//  * Build: binned SAH (32 planes per axis per node) over each reference's bounds *clipped to the
+//    node*: a triangle straddling a split plane is clipped (conservatively) to each child's box
+//    and rebounded, so a long diagonal triangle is not copied into every leaf its box overlaps
+//    (Wald & Havran 2006's "perfect splits", binned). Costs C_trav = 1, C_isect = 1.5,
+//    empty-space bonus 0.8 (leaf if no split is cheaper, at most 2 triangles or at depth
+//    8 + 1.3 log2 N). O(references) per node, no sorting, 28-byte references freed before the
+//    children are built; big subtrees at depths 2-6 are built as TBB tasks.
 //  * Triangle test: watertight (Woop, Benthin & Wald 2013, JCGT 2(1)), with the double-precision
 //    fallback for zero edge functions. A hit is t_near < t <= t_far (Embree's rule) with all three
 //    edge functions >= 0 or all <= 0: points on an edge or a vertex count, for both triangles
@@ -20,9 +23,9 @@
 //                   spirit of the paper's surface-area metrics; no ray set);
 //      srdh         Feltman, Lee & Fatahalian 2012's idea of specialising to a representative
 //                   shadow-ray set: the order per node from sample rays (the child with the
-//                   larger measured P(occluded | entered) / measured cost first). Simplified:
-//                   the tree itself is the SAH tree (SRDH also re-builds the tree with a
-//                   ray-set cost model; not done here).
+//                   larger measured P(occluded | entered) / measured cost first), on
+//                   the SAH tree or on SRDH's own tree (the constructor taking
+//                   sample rays: split costs from the rays' measured child-entry chances).
 //      multi-index  seed 004 (Liang & Huang 2019): (a) lifted primitive indices: triangles whose
 //                   box surface area exceeds `lift_area_ratio` x the mean are candidates; each
 //                   goes to the ancestor of its leaf with the largest gain
@@ -86,13 +89,17 @@ struct KindCounters {
 struct KdTreeOptions {
   float cost_traversal = 1.0f;
   float cost_intersect = 1.5f;
-  float empty_bonus = 0.8f;   ///< cost factor of a split with an empty side
-  int max_leaf_size = 2;      ///< at most this many triangles: always a leaf
-  bool multi_index = true;    ///< lifted indices and ropes (else only the plain tree)
-  float lift_area_ratio = 0.5f;  ///< candidate: triangle box area > this x the mean (seed: 0.45-0.6)
-  float lift_lambda = 0.6f;      ///< the seed's depth curve
+  float empty_bonus = 0.8f;  ///< cost factor of a split with an empty side
+  int max_leaf_size = 2;     ///< at most this many triangles: always a leaf
+  bool multi_index = true;   ///< lifted indices and ropes (else only the plain tree)
+  float lift_area_ratio =
+      0.5f;                  ///< candidate: triangle box area > this x the mean (seed: 0.45-0.6)
+  float lift_lambda = 0.6f;  ///< the seed's depth curve
   float lift_min_gain = 0.05f;
   int lift_max_per_node = 2;
+  /// SRDH build: the weight, in sample rays, of the surface-area prior in a node's measured
+  /// child-entry chances (few rays through a node: nearly the SAH).
+  float srdh_prior_rays = 8.0f;
 };
 
 struct Box {
@@ -105,6 +112,18 @@ class KdTree {
   /// carry OccluderScene's float of padding. Throws mr::Error(invalid_argument) for a malformed
   /// mesh (as OccluderScene does).
   explicit KdTree(const TriangleMesh& mesh, const KdTreeOptions& options = {});
+  /// SRDH's tree (Feltman, Lee & Fatahalian 2012, adapted to a kd-tree): the split costs use the
+  /// chance, measured on `srdh_rays` (a representative sample of the frame's shadow rays), that
+  /// a ray entering a node enters each child, blended with the surface-area ratio
+  /// (KdTreeOptions::srdh_prior_rays); SRDH's occlusion term (rays stopped in the first child
+  /// do not reach the second) is not modelled. With no rays it is the SAH tree above. Same
+  /// answers as any tree.
+  KdTree(const TriangleMesh& mesh, const std::vector<Ray>& srdh_rays,
+         const KdTreeOptions& options = {});
+  /// Adds the multi-index parts (leaf boxes, ropes, lifted indices) to a tree built without them
+  /// (the constructor calls it when options.multi_index; separate so that their cost can be
+  /// measured on its own).
+  void build_multi_index(const KdTreeOptions& options);
 
   /// Any hit with a stack traversal in the given order (the baseline and SATO; SRDH once
   /// train_srdh has run, else it behaves as SATO). `counters` may be null.
@@ -119,7 +138,10 @@ class KdTree {
 
   std::size_t triangle_count() const { return triangles_.size() / 9; }
   std::size_t node_count() const { return nodes_.size(); }
-  std::size_t leaf_count() const { return leaf_boxes_.size(); }
+  std::size_t leaf_count() const { return leaf_count_; }
+  std::size_t empty_leaf_count() const;
+  /// Leaf triangle references (a triangle is referenced by every leaf it touches).
+  std::size_t reference_count() const { return refs_.size(); }
   std::size_t lifted_count() const { return lifted_prims_.size(); }
   int max_depth() const { return max_depth_; }
   /// Bytes held: nodes, triangle references, triangles, and (multi-index) leaf boxes, ropes and
@@ -134,8 +156,6 @@ class KdTree {
   std::uint32_t rope_step(std::uint32_t leaf, int face, const std::array<float, 3>& p,
                           const std::array<float, 3>& direction) const;
   const Box& leaf_box(std::uint32_t leaf) const { return leaf_boxes_[leaf]; }
-  /// The node index of leaf number `leaf`.
-  std::uint32_t leaf_node(std::uint32_t leaf) const { return leaf_nodes_[leaf]; }
   const Box& bounds() const { return bounds_; }
 
   struct Node {
@@ -148,32 +168,30 @@ class KdTree {
   };
 
  private:
-  struct BuildNode;
-  struct Context;
+  struct Builder;
   template <bool kCount>
   bool stack_traverse(const Ray& ray, int order_bit, bool use_lifted, float t_start,
                       KindCounters* counters, std::uint64_t& nodes, std::uint64_t& prims) const;
   template <bool kCount>
   bool rope_walk(const Ray& ray, KindCounters* counters, std::uint64_t& nodes,
                  std::uint64_t& prims) const;
-  std::uint32_t flatten(BuildNode& node, int depth);
+  /// Every subtree's SAH cost (C_trav, C_isect of `options`), per node.
+  std::vector<float> subtree_costs(const KdTreeOptions& options) const;
   void build_ropes();
-  void lift_primitives(const KdTreeOptions& options, const std::vector<float>& subtree_cost,
-                       const std::vector<Box>& node_boxes, const std::vector<int>& node_depth,
-                       const std::vector<std::uint32_t>& parent);
+  void lift_primitives(const KdTreeOptions& options);
   std::uint32_t descend(std::uint32_t node, const std::array<float, 3>& p,
                         const std::array<float, 3>& direction, int entry_face,
                         std::uint64_t& visited) const;
 
-  std::vector<float> triangles_;        // 9 floats per triangle (v0, v1, v2)
-  std::vector<std::uint32_t> refs_;     // leaf triangle references
+  std::vector<float> triangles_;     // 9 floats per triangle (v0, v1, v2)
+  std::vector<std::uint32_t> refs_;  // leaf triangle references
   std::vector<Node> nodes_;
   Box bounds_{};
   int max_depth_ = 0;
+  std::size_t leaf_count_ = 0;
   // Multi-index parts.
-  std::vector<Box> leaf_boxes_;                        // per leaf number
-  std::vector<std::uint32_t> leaf_nodes_;              // leaf number -> node index
-  std::vector<std::array<std::uint32_t, 6>> ropes_;    // per leaf number: node index or ~0u
+  std::vector<Box> leaf_boxes_;                              // per leaf number
+  std::vector<std::array<std::uint32_t, 6>> ropes_;          // per leaf number: node index or ~0u
   std::vector<std::array<std::uint32_t, 2>> lifted_ranges_;  // (first, count) in lifted_prims_
   std::vector<std::uint32_t> lifted_prims_;
 };
