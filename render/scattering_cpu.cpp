@@ -674,7 +674,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   throw_if_stopped();
   exact_count += cx.size() * cy.size();
 
-  constexpr int kValues = physics::kResolveValues;  // R (3), camera optical depth (3), AO
+  constexpr int kValues = physics::kResolveValues;    // R (3), camera optical depth (3), AO
   using Gradients = std::array<double, 2 * kValues>;  // d/dx of each value, then d/dy
   auto values = [](const PixelSample& p, double v[kValues]) {
     for (int c = 0; c < 3; ++c) v[c] = p.inscatter[c];
@@ -848,8 +848,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           any_refined |= refine[b * ncx + a] != 0;
           any_agrees |= cell_disk(a, b) >= 0;
         });
-        if (!any_refined && any_agrees)
-          probe[j * nx + i] = core.sun_disk_visibility(gx[i], gy[j]);
+        if (!any_refined && any_agrees) probe[j * nx + i] = core.sun_disk_visibility(gx[i], gy[j]);
       }
     });
     throw_if_stopped();
@@ -978,24 +977,24 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           ++interpolated.local();
         }
     };
-    tbb::parallel_for(
-        tbb::blocked_range2d<std::size_t>(0, ncy, 0, ncx),
-        [&](const tbb::blocked_range2d<std::size_t>& r) {
-          for (std::size_t b = r.rows().begin(); b < r.rows().end(); ++b) {
-            if (stop()) return;
-            std::size_t work = 0;
-            for (std::size_t a = r.cols().begin(); a < r.cols().end(); ++a) {
-              work += (cx[a + 1] - cx[a]) * (cy[b + 1] - cy[b]) * kCellWork;
-              if (!refine[b * ncx + a] && k_coarse > 1) {
-                resolve_cell(cx[a], cx[a + 1], cy[b], cy[b + 1]);
-                continue;
-              }
-              for (std::size_t j = cy[b]; j < cy[b + 1]; ++j)
-                for (std::size_t i = cx[a]; i < cx[a + 1]; ++i) resolve_cell(i, i + 1, j, j + 1);
-            }
-            progress.add(work);
-          }
-        });
+    tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, ncy, 0, ncx),
+                      [&](const tbb::blocked_range2d<std::size_t>& r) {
+                        for (std::size_t b = r.rows().begin(); b < r.rows().end(); ++b) {
+                          if (stop()) return;
+                          std::size_t work = 0;
+                          for (std::size_t a = r.cols().begin(); a < r.cols().end(); ++a) {
+                            work += (cx[a + 1] - cx[a]) * (cy[b + 1] - cy[b]) * kCellWork;
+                            if (!refine[b * ncx + a] && k_coarse > 1) {
+                              resolve_cell(cx[a], cx[a + 1], cy[b], cy[b + 1]);
+                              continue;
+                            }
+                            for (std::size_t j = cy[b]; j < cy[b + 1]; ++j)
+                              for (std::size_t i = cx[a]; i < cx[a + 1]; ++i)
+                                resolve_cell(i, i + 1, j, j + 1);
+                          }
+                          progress.add(work);
+                        }
+                      });
   }
   throw_if_stopped();
   exact_count += exact_more.combine(std::plus<>());
@@ -1005,8 +1004,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // Pass 3: per pixel, the transmittance map T = tau(camera, surface) * S(surface) and the AOVs.
   // With the photo, every surface pixel's sun visibility first (the photo fallback compares a
   // pixel with its neighbours', see render/photo_fallback.h; the Vulkan backend asks the same).
-  const bool photo_fallback = PhotoFallback::wanted(*in.scene, in.distance_m, in.normals,
-                                                    in.photo, in.occluders != nullptr);
+  const bool photo_fallback = PhotoFallback::wanted(*in.scene, in.distance_m, in.normals, in.photo,
+                                                    in.occluders != nullptr);
   std::optional<PhotoFallback> fallback;
   std::vector<float> disk;
   if (photo_fallback) {
