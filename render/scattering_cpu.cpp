@@ -778,10 +778,10 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           // distance h apart along one axis, values v, slopes s along it): the Hermite curve
           // through both departs from the straight line by |sA - sB| h / 4 at the middle, and
           // the slopes' mean misses the secant by |vB - vA - (sA + sB) h / 2|; either, relative
-          // to the values, above kRefineTolerance refines. Checked on R, and on the camera's
-          // optical depth where it is interpolated (noise).
+          // to the values, above kRefineTolerance refines. Checked on R (the camera's optical
+          // depth is a closed form in pass 3: without noise, the only case with coarse cells).
           constexpr int kEdges[4][3] = {{0, 1, 0}, {2, 3, 0}, {0, 2, 1}, {1, 3, 1}};
-          const int checked = closed_form_camera ? 3 : 6;
+          constexpr int checked = 3;
           for (const auto& e : kEdges) {
             const int ka = e[0], kb = e[1];
             const bool along_x = e[2] == 0;
