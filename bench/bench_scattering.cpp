@@ -54,9 +54,13 @@ mr::FogScene scene(mr::Quality quality, bool accelerate) {
 }
 
 // Mean relative error of R with the acceleration against the same march without it (pixels
-// with R above 1 % of the mean), computed once per size and quality.
-double acceleration_error(const Inputs& in, mr::Quality q) {
-  static std::map<std::tuple<int, int, int>, double> cache;
+// with R above 1 % of the mean), and of T (pixels with T above 1 %), computed once per size and
+// quality.
+struct AccelerationError {
+  double r = 0, t = 0;
+};
+AccelerationError acceleration_error(const Inputs& in, mr::Quality q) {
+  static std::map<std::tuple<int, int, int>, AccelerationError> cache;
   const auto key = std::make_tuple(in.camera.width, in.camera.height, int(q));
   if (auto it = cache.find(key); it != cache.end()) return it->second;
   const auto fast = mr::render_scattering(in.photo, in.depth, in.camera, scene(q, true));
@@ -64,6 +68,7 @@ double acceleration_error(const Inputs& in, mr::Quality q) {
   double mean = 0;
   for (float v : exact.inscatter.pixels()) mean += v;
   mean /= double(exact.inscatter.pixels().size());
+  AccelerationError result;
   double err = 0;
   std::size_t n = 0;
   for (std::size_t i = 0; i < exact.inscatter.pixels().size(); ++i) {
@@ -72,7 +77,17 @@ double acceleration_error(const Inputs& in, mr::Quality q) {
     err += std::fabs(fast.inscatter.pixels()[i] - e) / e;
     ++n;
   }
-  return cache[key] = n ? err / double(n) : 0.0;
+  result.r = n ? err / double(n) : 0.0;
+  err = 0;
+  n = 0;
+  for (std::size_t i = 0; i < exact.transmittance.pixels().size(); ++i) {
+    const double e = exact.transmittance.pixels()[i];
+    if (e < 0.01) continue;
+    err += std::fabs(fast.transmittance.pixels()[i] - e) / e;
+    ++n;
+  }
+  result.t = n ? err / double(n) : 0.0;
+  return cache[key] = result;
 }
 
 void BM_Scattering(benchmark::State& state) {
@@ -102,8 +117,11 @@ void BM_Scattering(benchmark::State& state) {
   state.counters["scatter_ms"] = t.scatter_s * 1e3;
   state.counters["Mrays/s"] = double(t.shadow_rays) / t.scatter_s / 1e6;
   state.counters["exact_%"] = 100.0 * double(t.exact_pixels) / (double(width) * height);
-  if (accelerate && threads == 0)
-    state.counters["accel_err_%"] = 100.0 * acceleration_error(in, quality);
+  if (accelerate && threads == 0) {
+    const AccelerationError e = acceleration_error(in, quality);
+    state.counters["accel_err_%"] = 100.0 * e.r;
+    state.counters["accel_err_T_%"] = 100.0 * e.t;
+  }
 }
 
 // width, height, quality (0 draft, 1 normal, 2 final), acceleration, threads (0 = all), reuse
@@ -139,7 +157,10 @@ void BM_Stages(benchmark::State& state) {
   const int width = int(state.range(0)), height = int(state.range(1));
   const auto quality = mr::Quality(state.range(2));
   const Inputs& in = inputs(width, height);
-  mr::FogScene s = scene(quality, true);
+  // MR_BENCH_EXACT=1: without the gradient acceleration (with MR_BENCH_DUMP, the reference
+  // for the acceleration's error pixel by pixel).
+  const char* exact_env = std::getenv("MR_BENCH_EXACT");
+  mr::FogScene s = scene(quality, !(exact_env && *exact_env == '1'));
   s.lighting.sky_radiance = mr::estimate_airlight(in.photo);
   mr::Image transmittance = mr::Image::uninitialized(width, height, 3);
   mr::Image inscatter = mr::Image::uninitialized(width, height, 3);
@@ -214,6 +235,7 @@ void BM_Stages(benchmark::State& state) {
   state.counters["render_cpu_ms"] = render_cpu_s * 1e3;
   state.counters["Mtriangles"] = double(triangles) / 1e6;
   state.counters["Mrays"] = double(out.shadow_rays) / 1e6;
+  state.counters["exact_%"] = 100.0 * double(out.exact_pixels) / (double(width) * height);
 }
 
 BENCHMARK(BM_Stages)

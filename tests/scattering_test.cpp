@@ -489,6 +489,44 @@ TEST_F(Scattering, GradientAccelerationErrorIsSmall) {
   EXPECT_LT(worst, 5e-2);
 }
 
+#ifndef MR_SCATTERING_TEST_VULKAN  // the CPU core's adaptive grid (issue 12 item 4)
+// The CPU core traces its exact samples first on a grid twice as coarse as the preset's and
+// refines only where needed (render/scattering_cpu.cpp); the surface's sun visibility is taken
+// from the samples and probed at the skipped grid points. Thin posts' shadows on the ground
+// (1-3 px wide, narrower than a coarse cell): the pixels whose shadowing differs from the
+// unaccelerated render's are no more than with the full 3 px grid (82 of 231, measured on
+// e311055 with this scene: the grid's documented loss of shadows narrower than its spacing; the
+// adaptive grid gives the same 82). Measured also at sun azimuth -60 (51 / 19 at elevation 15 /
+// 30) and 60 (14): equal to the full grid's. Without the probes the count here is the same too
+// (the posts' cells are refined by their depth edges and AO): they guard other scenes.
+TEST_F(Scattering, AccelerationKeepsThinSurfaceShadows) {
+  const Camera cam = Camera::from_horizontal_fov(160, 120, 60);
+  FogScene s = base_scene();
+  s.pose.pitch_deg = -20;
+  s.lighting.sun = Sun{direction_from_azimuth_elevation(-90, 15), {3, 3, 3}, 0.27};
+  s.lighting.sky_radiance = Rgb{0.3f, 0.3f, 0.35f};
+  s.render.quality = Quality::normal;
+  Image depth = ground_depth(cam, s.pose);
+  for (int y = 10; y < cam.height; ++y)
+    for (const int x : {30, 31, 70, 71, 110, 111})
+      depth.at(x, y, 0) = std::min(depth.at(x, y, 0), 9.0f + 0.02f * float(x));
+  const ScatteringLayers fast = render(depth, cam, s);
+  s.render.gradient_acceleration = false;
+  const ScatteringLayers exact = render(depth, cam, s);
+  int shadowed = 0, differ = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const bool in_shadow = exact.sun_visibility.at(x, y, 0) < 0.5f;
+      shadowed += in_shadow;
+      differ += in_shadow != (fast.sun_visibility.at(x, y, 0) < 0.5f);
+    }
+  std::printf("[ Adaptive ] thin shadows: %d shadowed pixels, %d differ with acceleration\n",
+              shadowed, differ);
+  EXPECT_GT(shadowed, 200);
+  EXPECT_LE(differ, 82);
+}
+#endif
+
 TEST_F(Scattering, DeterministicForASeed) {
   const Camera cam = Camera::from_horizontal_fov(40, 30, 60);
   FogScene s = base_scene();
