@@ -10,16 +10,16 @@
 #include <optional>
 #include <string>
 
-#include "mr/error.h"
 #include "core/vec3.h"
+#include "mr/error.h"
 #include "photo/ceres_options.h"
 #include "photo/geometry.h"
 #include "photo/illumination.h"
 #include "render/depth_downsample.h"
 #include "render/embree_scene.h"
 #include "render/medium.h"
-#include "render/physics/scattering.h"
 #include "render/occluder_mesh.h"
+#include "render/physics/scattering.h"
 #include "render/surface_shading.h"
 
 namespace mr::photo {
@@ -632,14 +632,13 @@ ExposureRelativeLamp exposure_relative_lamp(const Image& photo, const Image& dis
   constexpr int kHeights = 33;
   for (int k = 0; k < kHeights; ++k) {
     const double dy = b_m * (2.0 * k / (kHeights - 1) - 1.0);
-    rho = std::max(rho, render::density_at(medium, render::Vec3d{lamp_position_m.x,
-                                                                 lamp_position_m.y + dy,
-                                                                 lamp_position_m.z}));
+    rho = std::max(
+        rho, render::density_at(medium, render::Vec3d{lamp_position_m.x, lamp_position_m.y + dy,
+                                                      lamp_position_m.z}));
   }
   if (!(rho > 0)) return out;
-  const double od_unit =
-      render::RayDensity(medium, render::vec(pose.position_m), render::vec(w))
-          .optical_depth(0, lamp_distance_m);
+  const double od_unit = render::RayDensity(medium, render::vec(pose.position_m), render::vec(w))
+                             .optical_depth(0, lamp_distance_m);
   const double j = lamp_glow_phase_integral(medium.g, alpha);
   // The glow's luminance at alpha per unit luminance intensity, in the lamp's colour.
   const double lum = luminance({colour[0], colour[1], colour[2]});
@@ -655,8 +654,8 @@ ExposureRelativeLamp exposure_relative_lamp(const Image& photo, const Image& dis
   glow_per_intensity *= rho * j / b_m;
   if (!(glow_per_intensity > 0) || !std::isfinite(glow_per_intensity)) return out;
   out.glow_bound_intensity = out.bright_surface_luminance / glow_per_intensity;
-  const double intensity = luminance({out.intensity_per_sr[0], out.intensity_per_sr[1],
-                                      out.intensity_per_sr[2]});
+  const double intensity =
+      luminance({out.intensity_per_sr[0], out.intensity_per_sr[1], out.intensity_per_sr[2]});
   if (intensity > out.glow_bound_intensity) {
     const double k = out.glow_bound_intensity / intensity;
     for (float& v : out.intensity_per_sr) v = float(v * k);

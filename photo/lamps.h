@@ -169,7 +169,8 @@ ExposureRelativeLamp exposure_relative_lamp(const Image& photo, const Image& dis
 /// the single-scattered glow of a point lamp on a view ray that passes it at the distance
 /// b = D sin(alpha) (D the lamp's distance from the camera, alpha the ray's angle from the
 /// lamp's direction) is, neglecting the extinction between lamp and fog,
-///   R(alpha) = T_cam sigma_s rho I J(alpha) / (D sin alpha),  J(alpha) = int_alpha^pi p(cos phi) dphi
+///   R(alpha) = T_cam sigma_s rho I J(alpha) / (D sin alpha),  J(alpha) = int_alpha^pi p(cos phi)
+///   dphi
 /// (p the Henyey-Greenstein phase of the medium's g; T_cam the camera-lamp transmittance, which
 /// bounds the extinction camera -> fog -> lamp in homogeneous fog as t + r >= D; rho
 /// the largest density within b of the lamp, sigma_s = albedo sigma_t), i.e. it grows with

@@ -237,10 +237,10 @@ class Core {
         sun_seen_fraction += physics::sun_seen_fraction(ta, tb, tl, tr, vis_prev, vis, vis_next);
         ++sun_samples;
         if (lit_weight.x + lit_weight.y + lit_weight.z > 0) {
-          const Vec3d tau_sun = light_path ? sun_path_transmittance(rd, w, ta, tb, xs, modulation)
-                                           : Vec3d{1, 1, 1};
-          inscatter += physics::sun_inscatter(lit_weight, m.g, w, sun_dir_, sun_irradiance_,
-                                              tau_sun);
+          const Vec3d tau_sun =
+              light_path ? sun_path_transmittance(rd, w, ta, tb, xs, modulation) : Vec3d{1, 1, 1};
+          inscatter +=
+              physics::sun_inscatter(lit_weight, m.g, w, sun_dir_, sun_irradiance_, tau_sun);
         }
       }
       for (std::size_t li = 0; li < scene_.lighting.lamps.size(); ++li) {
@@ -296,8 +296,7 @@ class Core {
     const double sigma_max = std::max({sigma3_.x, sigma3_.y, sigma3_.z});
     const double od_a = RayDensity(m, add(origin_, w, ta), sun_dir_).optical_depth(0, kInf);
     const double od_b = RayDensity(m, add(origin_, w, tb), sun_dir_).optical_depth(0, kInf);
-    if (!(sigma_max * std::fabs(od_a - od_b) > 0.01))
-      return physics::transmittance(sigma3_, od_xs);
+    if (!(sigma_max * std::fabs(od_a - od_b) > 0.01)) return physics::transmittance(sigma3_, od_xs);
     const double mid = 0.5 * (ta + tb), half = 0.5 * (tb - ta);
     Vec3d num{0, 0, 0}, den{0, 0, 0};
     for (int k = 0; k < 4; ++k) {

@@ -736,20 +736,22 @@ TEST(LampAuto, GlowCoreBoundedByThePhotosBrightSurfaces) {
   const ScatteringLayers unlit = render_scattering(photo, distance_m, camera, dark);
   const Vec3 to_lamp{lamp.position_m.x - pose.position_m.x, lamp.position_m.y - pose.position_m.y,
                      lamp.position_m.z - pose.position_m.z};
-  const double lamp_distance = std::sqrt(to_lamp.x * to_lamp.x + to_lamp.y * to_lamp.y +
-                                         to_lamp.z * to_lamp.z);
-  const double alpha_core = std::atan(kGlowCoreFraction * std::hypot(640.0, 480.0) / camera.focal_px);
+  const double lamp_distance =
+      std::sqrt(to_lamp.x * to_lamp.x + to_lamp.y * to_lamp.y + to_lamp.z * to_lamp.z);
+  const double alpha_core =
+      std::atan(kGlowCoreFraction * std::hypot(640.0, 480.0) / camera.focal_px);
   double ring_sum = 0, max_bright_angle = 0;
   int ring_count = 0;
   for (int y = 0; y < 480; ++y)
     for (int x = 0; x < 640; ++x) {
       const Vec3 d = pose.ray_direction(camera, x, y);
-      const double cos_a =
-          (d.x * to_lamp.x + d.y * to_lamp.y + d.z * to_lamp.z) / lamp_distance;
+      const double cos_a = (d.x * to_lamp.x + d.y * to_lamp.y + d.z * to_lamp.z) / lamp_distance;
       const double angle = std::acos(std::clamp(cos_a, -1.0, 1.0));
       double glow = 0;
       for (int c = 0; c < 3; ++c)
-        glow += (c == 0 ? 0.2126 : c == 1 ? 0.7152 : 0.0722) *
+        glow += (c == 0   ? 0.2126
+                 : c == 1 ? 0.7152
+                          : 0.0722) *
                 (lit.inscatter.at(x, y, c) - unlit.inscatter.at(x, y, c));
       if (std::fabs(angle - alpha_core) < 0.05 * alpha_core) {
         ring_sum += glow;
@@ -759,8 +761,8 @@ TEST(LampAuto, GlowCoreBoundedByThePhotosBrightSurfaces) {
     }
   ASSERT_GT(ring_count, 8);
   const double ring = ring_sum / ring_count;
-  std::printf("glow on the core ring %.4f L0, brighter than L0 out to %.2f core radii\n",
-              ring / l0, max_bright_angle / alpha_core);
+  std::printf("glow on the core ring %.4f L0, brighter than L0 out to %.2f core radii\n", ring / l0,
+              max_bright_angle / alpha_core);
   EXPECT_LE(ring, 1.03 * l0);
   EXPECT_GE(ring, 0.8 * l0);
   EXPECT_LE(max_bright_angle, alpha_core + 1.0 / camera.focal_px);
