@@ -43,6 +43,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <optional>
 #include <vector>
@@ -149,6 +150,10 @@ struct ExposureRelativeLamp {
   std::array<float, 3> intensity_per_sr{};
   double bright_surface_luminance = 0;  ///< L_bright
   double nearest_surface_m = 0;         ///< d_near
+  /// The glow bound's luminance intensity (per sr; +inf without a medium or without fog at the
+  /// lamp), and whether it, not the surface rule, set the intensity.
+  double glow_bound_intensity = INFINITY;
+  bool glow_limited = false;
 };
 
 /// `photo`: scene-linear RGB; `distance_m`: its distance map (1 channel, +inf = sky), of the
@@ -158,5 +163,36 @@ ExposureRelativeLamp exposure_relative_lamp(const Image& photo, const Image& dis
                                             const Camera& camera, const CameraPose& pose,
                                             const Vec3& lamp_position_m,
                                             const std::array<float, 3>& colour);
+
+/// The same, with the glow bound of the fog the lamp shines in (issue 11 item 5; what
+/// render_scattering uses). In fog the surface rule alone does not bound what the camera sees:
+/// the single-scattered glow of a point lamp on a view ray that passes it at the distance
+/// b = D sin(alpha) (D the lamp's distance from the camera, alpha the ray's angle from the
+/// lamp's direction) is, neglecting the extinction between lamp and fog,
+///   R(alpha) = T_cam sigma_s rho I J(alpha) / (D sin alpha),  J(alpha) = int_alpha^pi p(cos phi)
+///   dphi
+/// (p the Henyey-Greenstein phase of the medium's g; T_cam the camera-lamp transmittance, which
+/// bounds the extinction camera -> fog -> lamp in homogeneous fog as t + r >= D; rho
+/// the largest density within b of the lamp, sigma_s = albedo sigma_t), i.e. it grows with
+/// sigma_s d_near^2 under the surface rule: a lamp 20 m from the nearest surface in 70 m fog
+/// lit a glow brighter than the photo's bright surfaces over 5 degrees around it, and three of
+/// them washed a dusk photo out to yellow-white. Bound: the glow's core, where R exceeds
+/// L_bright, has an angular radius of at most kGlowCoreFraction of the frame's diagonal (as
+/// the camera's focal length turns pixels into angles): I is the smaller of the surface rule
+/// and the I for which R(alpha_core) = L_bright in luminance (a lamp outside the frame: at the
+/// angle of the frame's view ray nearest to it, when larger). Outside the core the glow falls
+/// as about alpha_core / alpha times L_bright; pure white (all channels past the highlight
+/// roll-off's 250/255, 1.49 linear) needs R >= 1.49 / L_bright times that in the colour's
+/// weakest channel, so at most a few core areas per lamp.
+inline constexpr double kGlowCoreFraction = 0.01;
+ExposureRelativeLamp exposure_relative_lamp(const Image& photo, const Image& distance_m,
+                                            const Camera& camera, const CameraPose& pose,
+                                            const Vec3& lamp_position_m,
+                                            const std::array<float, 3>& colour,
+                                            const Medium& medium);
+
+/// J(alpha) = int_alpha^pi p_HG(g, cos phi) dphi of the glow bound (numerical, relative error
+/// below 1e-6 for |g| <= 0.95 and alpha >= 1e-4 rad). Isotropic: (pi - alpha) / (4 pi).
+double lamp_glow_phase_integral(double g, double alpha_rad);
 
 }  // namespace mr::photo

@@ -94,9 +94,10 @@ InsertResult insert_objects(const Image& photo, const Image& distance_m, const C
   }
   for (Lamp& lamp : lighting.lamps)
     if (lamp.intensity_auto) {
-      lamp.intensity_per_sr = photo::exposure_relative_lamp(photo, distance_m, camera, scene.pose,
-                                                            lamp.position_m, lamp.intensity_per_sr)
-                                  .intensity_per_sr;
+      lamp.intensity_per_sr =
+          photo::exposure_relative_lamp(photo, distance_m, camera, scene.pose, lamp.position_m,
+                                        lamp.intensity_per_sr, scene.medium)
+              .intensity_per_sr;
       lamp.intensity_auto = false;
     }
 

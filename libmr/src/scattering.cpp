@@ -125,9 +125,10 @@ ScatteringLayers render_scattering(const Image& photo, const Image& distance_m,
   }
   for (Lamp& lamp : scene.lighting.lamps)  // issue 11 item 5: lamps relative to the exposure too
     if (lamp.intensity_auto) {
-      lamp.intensity_per_sr = photo::exposure_relative_lamp(photo, distance_m, camera, scene.pose,
-                                                            lamp.position_m, lamp.intensity_per_sr)
-                                  .intensity_per_sr;
+      lamp.intensity_per_sr =
+          photo::exposure_relative_lamp(photo, distance_m, camera, scene.pose, lamp.position_m,
+                                        lamp.intensity_per_sr, scene.medium)
+              .intensity_per_sr;
       lamp.intensity_auto = false;
     }
   const int w = camera.width, h = camera.height;
