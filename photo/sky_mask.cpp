@@ -295,7 +295,8 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     const int m = cv::connectedComponentsWithStats(rest, fl, fs, fc, 8, CV_32S);
     std::vector<std::uint8_t> grounded(std::size_t(m), 0);
     std::vector<double> sat_sum(std::size_t(m), 0.0), grad_sum(std::size_t(m), 0.0),
-        luma_sum(std::size_t(m), 0.0), sky_coloured(std::size_t(m), 0.0);
+        rough_sum(std::size_t(m), 0.0), luma_sum(std::size_t(m), 0.0),
+        sky_coloured(std::size_t(m), 0.0);
     std::vector<int> ring_sky(std::size_t(m), 0), ring_frame(std::size_t(m), 0);
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
@@ -304,6 +305,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
         if (y + 1 >= h || !above(x, y + 1)) grounded[l] = 1;
         sat_sum[l] += saturation.at<float>(y, x);
         grad_sum[l] += pixel_gradient.at<float>(y, x);
+        rough_sum[l] += roughness.at<float>(y, x);
         luma_sum[l] += luma.at<float>(y, x);
         sky_coloured[l] += colour.at<std::uint8_t>(y, x);
         const bool frame = x == 0 || y == 0 || x == w - 1;
@@ -329,7 +331,12 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       // Grey, or mostly of the sky's colours (blue seen through a gap in the cloud).
       const bool grey =
           sat_sum[i] <= o.floating_max_saturation * area || 2 * sky_coloured[i] > area;
-      cloud[i] = !grounded[i] && grey && (white || grad_sum[i] <= o.max_texture * area) &&
+      // Not textured like foliage or a lattice: a low mean gradient, or gradients that are
+      // smooth ramps (a dark cloud's soft edge against a bright sky near the sun, or its sunlit
+      // rim, is steep but coherent: its roughness is the sky core's, below min_core_texture).
+      const bool smooth =
+          grad_sum[i] <= o.max_texture * area || rough_sum[i] <= o.min_core_texture * area;
+      cloud[i] = !grounded[i] && grey && (white || smooth) &&
                  ring_sky[i] >= o.floating_min_sky_ring * (ring_sky[i] + ring_frame[i]);
       any_cloud |= cloud[i] != 0;
     }
@@ -627,30 +634,73 @@ GroundMask estimate_ground_mask(ConstImageView photo, const std::array<PixelPoin
   if (int(samples.size()) < o.min_samples) return out;
   cv::Vec3d mean;
   cv::Matx33d inverse;
-  std::vector<cv::Vec3d> kept = samples;
-  for (int pass = 0; pass < 4; ++pass) {
-    mean = cv::Vec3d(0, 0, 0);
-    for (const auto& v : kept) mean += v;
-    mean *= 1.0 / double(kept.size());
-    cv::Matx33d cov = cv::Matx33d::zeros();
-    for (const auto& v : kept) {
-      const cv::Vec3d d = v - mean;
-      cov += d * d.t();
+  const double limit = o.max_sigma * o.max_sigma;
+  auto fit = [&](const std::vector<cv::Vec3d>& all) {
+    std::vector<cv::Vec3d> kept = all;
+    for (int pass = 0; pass < 4; ++pass) {
+      mean = cv::Vec3d(0, 0, 0);
+      for (const auto& v : kept) mean += v;
+      mean *= 1.0 / double(kept.size());
+      cv::Matx33d cov = cv::Matx33d::zeros();
+      for (const auto& v : kept) {
+        const cv::Vec3d d = v - mean;
+        cov += d * d.t();
+      }
+      cov *= 1.0 / double(kept.size());
+      for (int k = 0; k < 3; ++k) cov(k, k) += o.min_sigma * o.min_sigma;
+      inverse = cov.inv(cv::DECOMP_CHOLESKY);
+      if (pass == 3) break;
+      std::vector<cv::Vec3d> inliers;
+      for (const auto& v : all) {
+        const cv::Vec3d d = v - mean;
+        if ((d.t() * inverse * d)(0) < 2.5 * 2.5) inliers.push_back(v);
+      }
+      if (int(inliers.size()) < o.min_samples) break;
+      kept = std::move(inliers);
     }
-    cov *= 1.0 / double(kept.size());
-    for (int k = 0; k < 3; ++k) cov(k, k) += o.min_sigma * o.min_sigma;
-    inverse = cov.inv(cv::DECOMP_CHOLESKY);
-    if (pass == 3) break;
-    std::vector<cv::Vec3d> inliers;
-    for (const auto& v : samples) {
-      const cv::Vec3d d = v - mean;
-      if ((d.t() * inverse * d)(0) < 2.5 * 2.5) inliers.push_back(v);
+  };
+  fit(samples);
+  auto ground_coloured = [&](int x, int y) {
+    const cv::Vec3f& p = rgb.at<cv::Vec3f>(y, x);
+    const cv::Vec3d d = cv::Vec3d(p[0], p[1], p[2]) - mean;
+    return (d.t() * inverse * d)(0) < limit;
+  };
+  // Issue 11 (a portrait: a person filling the middle of the bottom band): the ground is a
+  // plane below the horizon; it never rises above it. Where the modelled colour runs up a
+  // column from the frame's bottom, without a break, to well above the horizon, it is the
+  // colour of something standing in front of the camera (a coat, a trunk), not of the ground.
+  // When such columns are most of the band the model was taken from, the model is refit from
+  // the bottom band across the whole width, in the columns where the colour does not rise and
+  // without the subject's colour (the ground beside the subject), if there are enough such
+  // samples; otherwise it is kept.
+  if (o.max_subject_fraction < 1) {
+    const double rise_px = o.subject_min_rise_fraction * h;
+    std::vector<std::uint8_t> rises(std::size_t(w), 0);
+    for (int x = 0; x < w; ++x) {
+      int y = h - 1;
+      while (y >= 0 && !(have_sky && sky[std::size_t(y) * w + x]) && ground_coloured(x, y)) --y;
+      rises[std::size_t(x)] = double(y) < horizon_y(x) - rise_px;
     }
-    if (int(inliers.size()) < o.min_samples) break;
-    kept = std::move(inliers);
+    int middle_rising = 0, free_columns = 0;
+    for (int x = x_begin; x < x_end; ++x) middle_rising += rises[std::size_t(x)];
+    for (int x = 0; x < w; ++x) free_columns += !rises[std::size_t(x)];
+    if (middle_rising > o.max_subject_fraction * (x_end - x_begin) &&
+        free_columns >= o.min_ground_width_fraction * w) {
+      std::vector<cv::Vec3d> beside;
+      for (int y = band_top; y < h; ++y)
+        for (int x = (y * 7) % stride; x < w; x += stride) {
+          if (rises[std::size_t(x)] || y < horizon_y(x) + min_below) continue;
+          if ((have_sky && sky[std::size_t(y) * w + x]) || ground_coloured(x, y)) continue;
+          const cv::Vec3f& p = rgb.at<cv::Vec3f>(y, x);
+          beside.emplace_back(p[0], p[1], p[2]);
+        }
+      if (int(beside.size()) >= o.min_samples) {
+        fit(beside);
+        out.standing_subject = true;
+      }
+    }
   }
   cv::Mat not_ground(h, w, CV_8U, cv::Scalar(0));
-  const double limit = o.max_sigma * o.max_sigma;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       if (!(y > horizon_y(x))) continue;

@@ -132,12 +132,23 @@ struct GroundMaskOptions {
   double min_sigma = 0.03;
   double max_sigma = 4.0;
   int min_samples = 50;
+  /// A subject standing in the band (issue 11): a column "rises" when the modelled colour runs
+  /// up from the frame's bottom to more than `subject_min_rise_fraction` of the height above
+  /// the horizon. When more than `max_subject_fraction` of the band's columns rise and at least
+  /// `min_ground_width_fraction` of all columns do not, the model is refit from the bottom band
+  /// in the columns that do not rise. max_subject_fraction >= 1: off.
+  double subject_min_rise_fraction = 0.05;
+  double max_subject_fraction = 0.5;
+  double min_ground_width_fraction = 0.1;
 };
 
 struct GroundMask {
   bool valid = false;  ///< false: too few ground samples (ground then unknown: all 0)
   int width = 0, height = 0;
   std::vector<std::uint8_t> ground;  ///< row-major, 1 = ground-coloured, below the horizon
+  /// The band's colour rose above the horizon in most of its columns: a subject standing in
+  /// front of the camera filled it, and the model was refit from the ground beside it.
+  bool standing_subject = false;
 };
 
 /// Never throws for any image content; `sky` (row-major, the photo's size, or empty) is left out

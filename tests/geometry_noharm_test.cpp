@@ -386,5 +386,84 @@ TEST(GeometryNoHarm, PersonInFrontOfTheSkyIsNearNotOnTheFarBillboard) {
   EXPECT_GT(t[t.size() / 2], 0.6f);  // visible in dense fog (before: about 0.05)
 }
 
+// A portrait in the middle of the frame (class (b) of the held-out set at the end of the last
+// session, rebuilt here without looking at it): a person in a dark coat fills the middle of the
+// bottom of the frame and rises far into a pale sky; a meadow beside the coat, a low treeline on
+// the horizon; round shapes, so only a weak horizon (a level one through a horizontal vanishing
+// point, confidence 0.15). The coat covers the middle of the bottom band, where the ground's
+// colour is modelled: before, the coat was taken as the ground (its part below the horizon a
+// ground plane running to the horizon, its head and shoulders on the far billboard) and the
+// person faded in dense fog (measured with the two changes switched off: distance median 10.1 m,
+// 90th percentile 47 m, transmittance median 0.52, 10th percentile 0.05).
+TEST(GeometryNoHarm, PortraitFillingTheBottomBandStaysNear) {
+  cv::Mat m(kH, kW, CV_32FC3);
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
+  const int treeline = 262;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      if (y < treeline - 8 - 4 * std::sin(x / 23.0)) {
+        const float t = float(y) / treeline;
+        m.at<cv::Vec3f>(y, x) =
+            cv::Vec3f(0.52f, 0.66f, 0.88f) * (1 - t) + cv::Vec3f(0.78f, 0.82f, 0.88f) * t;
+      } else if (y < treeline) {
+        const float n = grain(rng);
+        m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.16f + n, 0.24f + n, 0.14f + n);  // far trees
+      } else {
+        const float n = grain(rng);
+        m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.36f + n, 0.50f + n, 0.22f + n);  // a meadow
+      }
+    }
+  cv::Mat person(kH, kW, CV_8U, cv::Scalar(0));
+  // Round shapes (shoulders, a head): no straight lines to measure a horizon from.
+  cv::ellipse(person, cv::Point(320, 520), cv::Size(175, 320), 0, 0, 360, cv::Scalar(255),
+              cv::FILLED);
+  cv::ellipse(person, cv::Point(320, 130), cv::Size(48, 60), 0, 0, 360, cv::Scalar(128),
+              cv::FILLED);
+  cv::ellipse(person, cv::Point(320, 200), cv::Size(22, 20), 0, 0, 360, cv::Scalar(128),
+              cv::FILLED);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const std::uint8_t p = person.at<std::uint8_t>(y, x);
+      const float n = 0.5f * grain(rng);
+      if (p == 255) m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.20f + n, 0.18f + n, 0.17f + n);
+      if (p == 128) m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.72f + n, 0.55f + n, 0.45f + n);
+    }
+  cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);  // a lens
+  const Image photo = to_photo(m);
+  dump("portrait_mid_photo", photo);
+  const SceneEstimate est = estimate_scene(photo, kCamera, Annotations{});
+  const GeometryEstimate& g = est.geometry;
+  dump("portrait_mid_depth", g.distance_m);
+  std::printf("horizon: %s, pitch %.2f deg\n", to_string(g.horizon_source), g.pose.pitch_deg);
+  std::vector<float> d;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      if (person.at<std::uint8_t>(y, x)) d.push_back(g.distance_m.at(x, y, 0));
+  std::sort(d.begin(), d.end());
+  const double bottom_m = g.pose.position_m.y / (0.5 * kH / kCamera.focal_px);
+  FogScene s = est.scene;
+  const float sigma = float(extinction_from_visibility(60));
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  s.medium.layer_top_m = 80;
+  s.render.backend = Backend::cpu;
+  const FogLayers f = fog(photo, g.distance_m, g.sky_alpha, kCamera, s);
+  dump("portrait_mid_dense", f.composite);
+  std::vector<float> t;
+  for (int y = 0; y < kH; y += 2)
+    for (int x = 0; x < kW; x += 2)
+      if (person.at<std::uint8_t>(y, x)) t.push_back(f.transmittance.at(x, y, 1));
+  std::sort(t.begin(), t.end());
+  std::printf(
+      "portrait (middle of the bottom band): person distance median %.2f m, 90th percentile %.2f m "
+      "(bottom row's ground %.2f m forward); dense fog transmittance median %.3f, 10th "
+      "percentile %.3f\n",
+      d[d.size() / 2], d[d.size() * 9 / 10], bottom_m, t[t.size() / 2], t[t.size() / 10]);
+  // As the portrait above: no farther than the bottom row's ground (with room for the
+  // refinement at the silhouette), visible in dense fog.
+  EXPECT_LT(d[d.size() / 2], 1.3 * bottom_m);
+  EXPECT_GT(t[t.size() / 2], 0.6f);
+}
+
 }  // namespace
 }  // namespace mr

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -16,6 +17,7 @@
 #include <random>
 
 #include "mr/error.h"
+#include "mr/estimate.h"
 #include "mr/fog.h"
 #include "mr/io.h"
 #include "mr/scattering.h"
@@ -292,6 +294,169 @@ TEST(SkyLight, SunsetGradientSurvivesHazeWithNoCreatedEdge) {
   std::printf("created-edge pixels in the sky by direction %.4f %%, uniform %.4f %%\n",
               100 * edges, 100 * created_edge_fraction(photo, uniform.composite, horizon_row - 1));
   EXPECT_LE(edges, 2e-4);
+}
+
+// The gallery's created-edge measure exactly (gallery/measures.py: display luma of the clamped,
+// gamma-2.2 values, Gaussian blur sigma 1 px (radius 3, edges replicated), central differences;
+// created where the fogged image's gradient is more than twice the photo's and above 0.01). With
+// `map`: the created pixels (1) for a picture to look at.
+double gallery_created_edges(const Image& photo, const Image& fogged, Image* map = nullptr) {
+  auto strength = [](const Image& img) {
+    cv::Mat l = test::display_luma(img), b, g(l.rows, l.cols, CV_32F);
+    cv::GaussianBlur(l, b, cv::Size(7, 7), 1.0, 1.0, cv::BORDER_REPLICATE);
+    for (int y = 0; y < l.rows; ++y)
+      for (int x = 0; x < l.cols; ++x) {
+        const int x0 = std::max(0, x - 1), x1 = std::min(l.cols - 1, x + 1);
+        const int y0 = std::max(0, y - 1), y1 = std::min(l.rows - 1, y + 1);
+        const float gx = 0.5f * (b.at<float>(y, x1) - b.at<float>(y, x0));
+        const float gy = 0.5f * (b.at<float>(y1, x) - b.at<float>(y0, x));
+        g.at<float>(y, x) = std::hypot(gx, gy);
+      }
+    return g;
+  };
+  const cv::Mat gp = strength(photo), gf = strength(fogged);
+  std::size_t created = 0;
+  if (map) *map = Image(photo.width(), photo.height(), 3);
+  for (int y = 0; y < gp.rows; ++y)
+    for (int x = 0; x < gp.cols; ++x) {
+      const bool c = gf.at<float>(y, x) > 2 * gp.at<float>(y, x) && gf.at<float>(y, x) > 0.01f;
+      created += c;
+      if (map)
+        for (int k = 0; k < 3; ++k)
+          map->at(x, y, k) = c ? float(k == 0) : 0.3f * std::min(1.0f, fogged.at(x, y, k));
+    }
+  return double(created) / double(gp.total());
+}
+
+// As `mr fog --depth auto` with a gallery look (gallery/looks: sky light 'auto', i.e. by
+// direction with the estimate's sky radiance): the automatic estimate, its matte, the fog.
+FogLayers fog_auto_look(const Image& photo, const Camera& camera, const SceneEstimate& est,
+                        double visibility_m, double top_m, double g) {
+  FogScene s = est.scene;
+  const float sigma = float(extinction_from_visibility(visibility_m));
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  s.medium.g = g;
+  s.medium.layer_top_m = top_m;
+  s.render.backend = Backend::cpu;
+  s.lighting.sky_by_direction = true;
+  if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
+  return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
+}
+
+// Backlit clouds (class (a) of the held-out set at the end of the last session, rebuilt here
+// without looking at it): an overcast sky with a bright region around a sun hidden behind dark
+// clouds, light rays fanning down from it, the clouds' edges soft (a few pixels to tens), a
+// dark land below. In haze the sky, seen through the whole layer, is the fog's own light (the
+// phase-lobe average of the sky); a cloud must not stay a sharp dark shape against it.
+constexpr int kBacklitW = 640, kBacklitH = 480;
+cv::Mat backlit_clouds_display() {
+  constexpr int w = kBacklitW, h = kBacklitH;
+  cv::Mat m(h, w, CV_32FC3);
+  // Dark clouds: ellipses with soft edges (blurred over ~6 px), one of them over the sun.
+  cv::Mat cover(h, w, CV_32F, cv::Scalar(0));
+  cv::ellipse(cover, cv::Point(110, 55), cv::Size(120, 34), 8, 0, 360, cv::Scalar(1), cv::FILLED);
+  cv::ellipse(cover, cv::Point(425, 100), cv::Size(80, 30), -5, 0, 360, cv::Scalar(1), cv::FILLED);
+  cv::ellipse(cover, cv::Point(585, 20), cv::Size(110, 34), 0, 0, 360, cv::Scalar(1), cv::FILLED);
+  cv::ellipse(cover, cv::Point(230, 168), cv::Size(150, 16), 3, 0, 360, cv::Scalar(1), cv::FILLED);
+  cv::GaussianBlur(cover, cover, cv::Size(0, 0), 6);
+  const double sun_x = 0.66 * w, sun_y = 0.21 * h;
+  const int ridge = int(0.48 * h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float t = float(y) / ridge;
+      cv::Vec3f c = cv::Vec3f(0.50f, 0.57f, 0.68f) * (1 - t) + cv::Vec3f(0.74f, 0.73f, 0.72f) * t;
+      const double dx = x - sun_x, dy = y - sun_y, r = std::hypot(dx, dy);
+      const double glow = 0.5 * std::exp(-r * r / (2 * 75.0 * 75.0));
+      // Rays: brighter spokes below the sun, fading with the distance from it.
+      const double angle = std::atan2(dy, dx);
+      const double rays = dy > 0 ? 0.10 * (0.5 + 0.5 * std::cos(14 * angle)) *
+                                       std::pow(std::sin(angle), 2) * std::exp(-r / 180.0) *
+                                       std::min(1.0, r / 40.0)
+                                 : 0.0;
+      c += cv::Vec3f(1.0f, 0.96f, 0.88f) * float(glow + rays);
+      // The cloud's rim near the sun is lit (silver lining), its body dark.
+      const float k = cover.at<float>(y, x);
+      const cv::Vec3f body(0.26f, 0.27f, 0.31f);
+      const cv::Vec3f rim = body + cv::Vec3f(0.6f, 0.58f, 0.5f) * float(std::exp(-r / 90.0));
+      const float edge = 4 * k * (1 - k);
+      const cv::Vec3f cloud = body * (1 - edge) + rim * edge;
+      m.at<cv::Vec3f>(y, x) = c * (1 - k) + cloud * k;
+    }
+  // Dark land: a ridge line a little below the middle, textured.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> grain(-0.04f, 0.04f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const double top = ridge + 8 * std::sin(x / 60.0) + 4 * std::sin(x / 17.0);
+      if (y < top) continue;
+      const float v = 0.12f + 0.03f * float(y - top) / h + grain(rng);
+      m.at<cv::Vec3f>(y, x) = cv::Vec3f(v + 0.02f, v + 0.03f, v);
+    }
+  cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);  // a lens
+  return m;
+}
+
+TEST(SkyLight, BacklitCloudsInHazeCreateNoEdge) {
+  const cv::Mat display = backlit_clouds_display();
+  constexpr int kW = kBacklitW, kH = kBacklitH;
+  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
+  Image photo(kW, kH, 3);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      for (int c = 0; c < 3; ++c)
+        photo.at(x, y, c) = linear(std::clamp(display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
+  // The horizon along the land's lowest dips (as a user marks it, or lines find it): the
+  // case is the clouds, not a misplaced horizon (a horizon estimated above the land's line puts
+  // the sky under it on the ground; see the report in gallery/results/sky11_tune.md).
+  Annotations horizon;
+  horizon.horizon =
+      std::array<PixelPoint, 2>{PixelPoint{0, 0.5 * kH}, PixelPoint{kW - 1.0, 0.5 * kH}};
+  const SceneEstimate est = estimate_scene(photo, camera, horizon);
+  std::size_t finite_above = 0;  // surfaces above the land: what the sky mask left out
+  for (int y = 0; y < int(0.5 * kH); ++y)
+    for (int x = 0; x < kW; ++x) finite_above += std::isfinite(est.geometry.distance_m.at(x, y, 0));
+  // The dark cloud over the sun, ringed by the glow, held up by nothing: a cloud, kilometres
+  // away, seen through the whole layer like the sky around it. Its sunlit rim makes its edge
+  // steep (a mean gradient above the sky mask's texture limit) but smooth (a coherent ramp).
+  std::size_t cloud = 0, cloud_sky = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      if (std::pow((x - 425.0) / 70, 2) + std::pow((y - 100.0) / 22, 2) < 1) {
+        ++cloud;
+        cloud_sky += std::isinf(est.geometry.distance_m.at(x, y, 0));
+      }
+  const FogLayers haze = fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
+  const FogLayers dense = fog_auto_look(photo, camera, est, 60, 80, 0.3);
+  Image haze_map, dense_map;
+  const double e_haze = gallery_created_edges(photo, haze.composite, &haze_map);
+  const double e_dense = gallery_created_edges(photo, dense.composite, &dense_map);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
+    const std::string f(folder);
+    write_image(f + "/backlit_photo.png", photo);
+    write_image(f + "/backlit_haze.png", haze.composite);
+    write_image(f + "/backlit_dense.png", dense.composite);
+    write_image(f + "/backlit_haze_edges.png", haze_map);
+    write_image(f + "/backlit_dense_edges.png", dense_map);
+    Image alpha(kW, kH, 3);
+    for (int y = 0; y < kH; ++y)
+      for (int x = 0; x < kW; ++x) {
+        const float d = est.geometry.distance_m.at(x, y, 0);
+        const float v = std::isfinite(d) ? float(-std::expm1(-d / 200.0)) : 1.0f;
+        alpha.at(x, y, 0) = v, alpha.at(x, y, 1) = est.geometry.sky_alpha.at(x, y, 0);
+        alpha.at(x, y, 2) = v;
+      }
+    write_image(f + "/backlit_depth_alpha.png", alpha);
+  }
+  std::printf(
+      "backlit clouds: %zu surface pixels in the upper half, the sun's cloud %.1f %% "
+      "sky; created-edge pixels haze %.4f %%, dense %.4f %%\n",
+      finite_above, 100.0 * double(cloud_sky) / double(cloud), 100 * e_haze, 100 * e_dense);
+  // Before (the texture test on the mean gradient alone): 0 % of it sky, on the far billboard
+  // 46 m away (haze transmittance 0.91: a dark shape under a veil that hides the sky around it).
+  EXPECT_GE(double(cloud_sky), 0.9 * double(cloud));
+  // The target for dense fog and haze: at most 0.02 % of the pixels.
+  EXPECT_LE(e_haze, 2e-4);
+  EXPECT_LE(e_dense, 2e-4);
 }
 
 TEST(SkyLight, NeedsThePhoto) {

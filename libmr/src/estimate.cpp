@@ -464,16 +464,23 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           // an upper bound (fog errs towards too much). Without it, such a subject went to the
           // far billboard and vanished in dense fog. Only with a measured horizon (annotated,
           // or from the photo's lines): under the level fall-back the bottom row may be above
-          // the true horizon (a camera looking up into a canopy), and there is no ground there.
+          // the true horizon (a camera looking up into a canopy), and there is no ground there;
+          // unless the ground's colour model found a subject standing in the bottom band (its
+          // colour rising from the bottom far above the horizon, photo/sky_mask.h): that is
+          // a subject in front of the camera, whatever the horizon.
           if (yc + 1 >= h) {
-            if (g.horizon_source == EstimateSource::fallback) continue;
+            if (g.horizon_source == EstimateSource::fallback && !ground.standing_subject) continue;
           } else if (!ground.ground[std::size_t(yc + 1) * w + x]) {
             continue;
           }
           // Issue 11 item 3: something standing on the ground rises above the horizon by a fair
           // part of what it spans below it; the sea up to a boat, a person or a low wall do not,
           // and made into a billboard they become a wall of columns with seams between them.
-          const double rise = horizon_y(x) - highest[offset[l] + k];
+          // Running off the frame's bottom, its span below the horizon is the frame's, not its
+          // own: what rises is the subject as a whole (a person's head, not each shoulder).
+          const double rise =
+              horizon_y(x) - (yc + 1 >= h ? double(stats.at<int>(l, cv::CC_STAT_TOP))
+                                          : double(highest[offset[l] + k]));
           if (!(rise >= options.min_rise_ratio * (yc + 0.5 - horizon_y(x)))) continue;
           const auto gp = photo::ground_point(camera, g.pose, {double(x), yc + 0.5});
           if (!gp) continue;
