@@ -6,10 +6,18 @@
 // occluder mesh, both BVHs and the render. Run:
 //   build/bench/mr_bench_insert --benchmark_repetitions=3
 // and read the CPU column (the machine is shared; wall times mean little there).
+//
+// mr-studio's preview is an mr::InsertPreview: the photo's part (normals, occluder mesh, BVH,
+// tile bounds) is made once per photo (BM_PreviewPrepare), then each frame builds the objects'
+// scene when they changed and shades only the screen tiles the objects and their shadows can
+// touch: BM_PreviewFirstFrame (the model dropped on a prepared photo), BM_PreviewDrag (a frame
+// of a drag: the model 5 cm further each frame, the draft settings), BM_PreviewRefine (the idle
+// refinement at the same placement: 2 x 2 camera rays, 8 sun and 32 sky rays).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "../tests/insert_test_meshes.h"
@@ -94,6 +102,74 @@ void BM_InsertPreview(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_InsertPreview)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+
+void BM_PreviewPrepare(benchmark::State& state) {
+  static const Photo p = make_photo(1000, 750);
+  const mr::FogScene scene = make_scene();
+  for (auto _ : state) {
+    mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
+    benchmark::DoNotOptimize(&preview);
+  }
+}
+BENCHMARK(BM_PreviewPrepare)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+
+void BM_PreviewFirstFrame(benchmark::State& state) {
+  static const Photo p = make_photo(1000, 750);
+  const mr::FogScene scene = make_scene();
+  const auto objects = model();
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto preview = std::make_unique<mr::InsertPreview>(p.photo, p.distance_m, p.camera, scene,
+                                                       mr::InsertOptions::preview());
+    state.ResumeTiming();
+    const mr::InsertResult& r = preview->render(objects, mr::InsertOptions::preview());
+    benchmark::DoNotOptimize(r.composite.data());
+    const auto& f = preview->last_frame();
+    state.counters["objects_s"] = f.objects_s;
+    state.counters["render_s"] = f.render_s;
+    state.counters["tiles"] = double(f.tiles_rendered);
+    state.counters["tiles_total"] = double(f.tiles_total);
+    state.PauseTiming();
+    preview.reset();
+    state.ResumeTiming();
+  }
+}
+BENCHMARK(BM_PreviewFirstFrame)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+
+void BM_PreviewDrag(benchmark::State& state) {
+  static const Photo p = make_photo(1000, 750);
+  const mr::FogScene scene = make_scene();
+  auto objects = model();
+  mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
+  preview.render(objects, mr::InsertOptions::preview());
+  int frame = 0;
+  for (auto _ : state) {
+    objects[0].placement.position_m.x = 0.5 + 0.05 * double(++frame % 40);
+    const mr::InsertResult& r = preview.render(objects, mr::InsertOptions::preview());
+    benchmark::DoNotOptimize(r.composite.data());
+    const auto& f = preview.last_frame();
+    state.counters["objects_s"] = f.objects_s;
+    state.counters["render_s"] = f.render_s;
+    state.counters["tiles"] = double(f.tiles_rendered);
+    state.counters["reset"] = double(f.tiles_reset);
+  }
+}
+BENCHMARK(BM_PreviewDrag)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+
+void BM_PreviewRefine(benchmark::State& state) {
+  static const Photo p = make_photo(1000, 750);
+  const mr::FogScene scene = make_scene();
+  const auto objects = model();
+  mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
+  preview.render(objects, mr::InsertOptions::preview());
+  for (auto _ : state) {
+    const mr::InsertResult& r = preview.render(objects, mr::InsertOptions::preview_refined());
+    benchmark::DoNotOptimize(r.composite.data());
+    state.counters["render_s"] = preview.last_frame().render_s;
+    state.counters["rebuilt"] = preview.last_frame().objects_rebuilt;
+  }
+}
+BENCHMARK(BM_PreviewRefine)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
 }  // namespace
 

@@ -165,6 +165,17 @@ bool ObjectsPanel::addPrimitive(const QString& name) {
 }
 
 bool ObjectsPanel::addModel(const QString& path) {
+  QString stored = QFileInfo(path).absoluteFilePath();
+  return addLoaded(path, newObject(stored.toStdString()));
+}
+
+bool ObjectsPanel::addModel(const QString& path, const mr::ObjectPlacement& placement) {
+  mr::SceneObject o;
+  o.placement = placement;
+  return addLoaded(path, std::move(o));
+}
+
+bool ObjectsPanel::addLoaded(const QString& path, mr::SceneObject object) {
   QStringList warnings;
   try {
     const mr::ObjectMesh mesh = mr::load_object_mesh(path.toStdString());
@@ -180,11 +191,44 @@ bool ObjectsPanel::addModel(const QString& path) {
     const QString relative = QDir(document_dir_).relativeFilePath(stored);
     if (!relative.startsWith("..")) stored = relative;
   }
+  object.mesh = stored.toStdString();
   std::vector<mr::SceneObject> candidate = objects_;
-  candidate.push_back(newObject(stored.toStdString()));
+  candidate.push_back(std::move(object));
   if (!tryApply(std::move(candidate), tr("Add %1").arg(QFileInfo(path).fileName()))) return false;
   message_->setText(warnings.join("\n"));
   return true;
+}
+
+void ObjectsPanel::applyLive(std::vector<mr::SceneObject> objects) {
+  try {
+    for (std::size_t i = 0; i < objects.size(); ++i)
+      mr::validate_scene_object(objects[i], "objects[" + std::to_string(i) + "]");
+  } catch (const mr::Error&) {
+    return;
+  }
+  const int keep = selected();
+  objects_ = std::move(objects);
+  // Only the labels and the selected object's values change during a drag.
+  updating_ = true;
+  for (int i = 0; i < list_->count() && i < int(objects_.size()); ++i)
+    list_->item(i)->setText(label_of(objects_[std::size_t(i)]));
+  if (keep >= 0) list_->setCurrentRow(keep);
+  updating_ = false;
+  showSelected();
+  emit changed();
+}
+
+bool ObjectsPanel::commitLive(std::vector<mr::SceneObject> before, const QString& what) {
+  std::vector<mr::SceneObject> after = objects_;
+  const int keep = selected();
+  objects_ = std::move(before);  // the command goes from here
+  if (tryApply(std::move(after), what)) return true;
+  applyFromCommand(objects_, keep);
+  return false;
+}
+
+void ObjectsPanel::select(int index) {
+  if (index >= 0 && index < int(objects_.size()) && index != selected()) list_->setCurrentRow(index);
 }
 
 bool ObjectsPanel::tryApply(std::vector<mr::SceneObject> candidate, const QString& what,
@@ -253,6 +297,7 @@ void ObjectsPanel::applySelected(int field) {
   p.yaw_deg = yaw_->value();
   static const char* const kWhat[5] = {"Move object", "Move object", "Move object",
                                        "Scale object", "Turn object"};
+  static_assert(1600 + 3 == kMergeScale && 1600 + 4 == kMergeYaw);
   // Merge id: one per field, so a run of steps of one field is one undo step.
   tryApply(std::move(candidate), tr(kWhat[field]), 1600 + field);
 }

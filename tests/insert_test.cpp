@@ -303,5 +303,125 @@ TEST(InsertObjects, BadMeshesGiveErrorsNamingTheSource) {
   EXPECT_THROW(insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)), Error);
 }
 
+// The interactive preview (mr::InsertPreview) renders only the screen tiles the objects, their
+// shadows and their sky occlusion can touch, and resets the tiles a previous frame touched: its
+// frames must equal insert_objects' image with the same options exactly (bit for bit), through a
+// drag (the object moved, the stale shadow gone), a change of options, and no objects at all.
+TEST(InsertPreview, FramesEqualTheFullRenderThroughADrag) {
+  const InsertScene s = make_scene();
+  const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
+  const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
+  InsertPreview preview(photo, distance, s.camera, s.scene, InsertOptions::preview());
+  auto expect_same = [&](const InsertResult& got, const std::vector<InsertObject>& objects,
+                         const InsertOptions& options, const char* what) {
+    const InsertResult want = insert_objects(photo, distance, s.camera, s.scene, objects, options);
+    std::size_t differ = 0, changed = 0;
+    for (std::size_t i = 0; i < want.composite.pixels().size(); ++i) {
+      differ += got.composite.pixels()[i] != want.composite.pixels()[i];
+      changed += want.composite.pixels()[i] != photo.pixels()[i];
+    }
+    for (std::size_t i = 0; i < want.matte.pixels().size(); ++i) {
+      differ += got.matte.pixels()[i] != want.matte.pixels()[i];
+      differ += got.distance_m.pixels()[i] != want.distance_m.pixels()[i];
+    }
+    EXPECT_EQ(differ, 0u) << what;
+    return changed;
+  };
+  std::vector<InsertObject> objects = s.objects;
+  const std::size_t changed_first =
+      expect_same(preview.render(objects, InsertOptions::preview()), objects, InsertOptions::preview(), "first");
+  EXPECT_GT(changed_first, 500u);  // the objects and their shadows are there
+  const auto first = preview.last_frame();
+  EXPECT_TRUE(first.objects_rebuilt);
+  EXPECT_GT(first.tiles_rendered, 0u);
+  EXPECT_LT(first.tiles_rendered, first.tiles_total);
+  std::printf("first frame: %zu of %zu tiles\n", first.tiles_rendered, first.tiles_total);
+  // A drag: the sphere 1.5 m to the left and nearer, the box turned.
+  objects[0].placement.position_m.x -= 1.5;
+  objects[0].placement.position_m.z -= 1.0;
+  objects[1].placement.yaw_deg = 30;
+  expect_same(preview.render(objects, InsertOptions::preview()), objects, InsertOptions::preview(), "moved");
+  EXPECT_TRUE(preview.last_frame().objects_rebuilt);
+  // The idle refinement at the same placement reuses the objects' scene.
+  expect_same(preview.render(objects, InsertOptions::preview_refined()), objects, InsertOptions::preview_refined(),
+              "refined");
+  EXPECT_FALSE(preview.last_frame().objects_rebuilt);
+  // The full quality's settings through the preview, too (its hashed pattern; mesh_step is the
+  // preview's).
+  InsertOptions full;
+  full.mesh_step = InsertOptions::preview().mesh_step;
+  expect_same(preview.render(objects, full), objects, full, "full settings");
+  // All objects removed: the photo again, exactly.
+  const std::size_t last_rendered = preview.last_frame().tiles_rendered;
+  const InsertResult& none = preview.render({}, InsertOptions::preview());
+  EXPECT_EQ(preview.last_frame().tiles_reset, last_rendered);
+  for (std::size_t i = 0; i < photo.pixels().size(); ++i) ASSERT_EQ(none.composite.pixels()[i], photo.pixels()[i]);
+  for (float m : none.matte.pixels()) ASSERT_EQ(m, 0.0f);
+  EXPECT_EQ(preview.last_frame().tiles_rendered, 0u);
+}
+
+// A cancelled frame leaves the preview consistent: the next frame is exact.
+TEST(InsertPreview, CancelledFrameThenExactFrame) {
+  const InsertScene s = make_scene();
+  const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
+  const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
+  InsertPreview preview(photo, distance, s.camera, s.scene, InsertOptions::preview());
+  preview.render(s.objects, InsertOptions::preview());
+  std::vector<InsertObject> moved = s.objects;
+  moved[0].placement.position_m.x += 1.0;
+  CancelToken cancel;
+  cancel.request();
+  EXPECT_THROW(preview.render(moved, InsertOptions::preview(), &cancel), Error);
+  moved[0].placement.position_m.x += 0.5;
+  const InsertResult& got = preview.render(moved, InsertOptions::preview());
+  const InsertResult want = insert_objects(photo, distance, s.camera, s.scene, moved, InsertOptions::preview());
+  for (std::size_t i = 0; i < want.composite.pixels().size(); ++i)
+    ASSERT_EQ(got.composite.pixels()[i], want.composite.pixels()[i]) << i;
+  InsertOptions fogged = InsertOptions::preview();
+  fogged.fog = true;
+  EXPECT_THROW(preview.render(moved, fogged), Error);
+}
+
+// The preview's fixed sample pattern has no salt-and-pepper speckle: a speckle is a pixel of the
+// composite, inside an object or on the photo's surfaces the objects shade, that differs from
+// the median of its 3 x 3 block by more than 10 % (measured: hashed 59, fixed 8, which are the
+// test photo's texture and shadow edges). The hashed (per-pixel rotated) pattern with the same
+// few rays has many; the fixed one at most a fifth of them.
+TEST(InsertPreview, FixedPatternHasNoSpeckle) {
+  const InsertScene s = make_scene();
+  const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
+  const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
+  const float kSpeckle = 0.1f;  // relative to the block's median
+  auto speckles = [&](bool fixed) {
+    InsertOptions o = InsertOptions::preview();
+    o.fixed_pattern = fixed;
+    const InsertResult r = insert_objects(photo, distance, s.camera, s.scene, s.objects, o);
+    std::size_t count = 0;
+    for (int y = 1; y + 1 < s.camera.height; ++y)
+      for (int x = 1; x + 1 < s.camera.width; ++x) {
+        // Inside the objects (every neighbour fully covered) or off them (none covered): the
+        // composite's green relative to the median of the 3 x 3 block.
+        int covered = 0;
+        float v[9];
+        int k = 0;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            covered += r.matte.at(x + dx, y + dy, 0) == 1.0f;
+            v[k++] = r.composite.at(x + dx, y + dy, 1);
+          }
+        if (covered != 0 && covered != 9) continue;
+        if (covered == 0 && r.shadow.at(x, y, 1) == 1.0f) continue;  // untouched photo
+        const float c = r.composite.at(x, y, 1);
+        std::nth_element(v, v + 4, v + 9);
+        count += std::fabs(c - v[4]) > kSpeckle * v[4];
+      }
+    return count;
+  };
+  const std::size_t hashed = speckles(false), fixed = speckles(true);
+  std::printf("speckles: hashed pattern %zu, fixed pattern %zu\n", hashed, fixed);
+  EXPECT_GT(hashed, 30u);
+  EXPECT_LE(fixed * 5, hashed);
+}
+
 }  // namespace
 }  // namespace mr
