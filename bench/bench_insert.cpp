@@ -156,6 +156,23 @@ void BM_PreviewDrag(benchmark::State& state) {
 }
 BENCHMARK(BM_PreviewDrag)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
+// A frame at an unchanged placement with the draft settings (the objects' scene reused): the
+// tiles' shading alone.
+void BM_PreviewStill(benchmark::State& state) {
+  static const Photo p = make_photo(1000, 750);
+  const mr::FogScene scene = make_scene();
+  const auto objects = model();
+  mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
+  preview.render(objects, mr::InsertOptions::preview());
+  for (auto _ : state) {
+    const mr::InsertResult& r = preview.render(objects, mr::InsertOptions::preview());
+    benchmark::DoNotOptimize(r.composite.data());
+    state.counters["shadow_rays"] = double(r.timings.shadow_rays);
+    state.counters["camera_rays"] = double(r.timings.camera_rays);
+  }
+}
+BENCHMARK(BM_PreviewStill)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+
 void BM_PreviewRefine(benchmark::State& state) {
   static const Photo p = make_photo(1000, 750);
   const mr::FogScene scene = make_scene();

@@ -44,6 +44,7 @@ InsertOptions InsertOptions::preview() {
   o.mesh_step = 2;
   o.sky_influence_radii = 4;
   o.fixed_pattern = true;
+  o.sky_influence_tight = true;
   return o;
 }
 
@@ -152,6 +153,7 @@ render::insertion::InsertionSettings settings_of(const InsertOptions& options) {
     throw Error(ErrorCode::invalid_argument, "insert objects: sky_influence_radii must be >= 1");
   settings.sky_influence_radii = options.sky_influence_radii;
   settings.fixed_pattern = options.fixed_pattern;
+  settings.sky_influence_tight = options.sky_influence_tight;
   settings.threads = options.threads;
   return settings;
 }
@@ -369,7 +371,7 @@ const InsertResult& InsertPreview::render(std::span<const InsertObject> objects,
   if (!m.have_objects || !same_objects(objects, m.objects)) {
     auto world = std::make_unique<render::insertion::WorldObjects>();
     for (const InsertObject& o : objects) render::insertion::append_object(*world, o.mesh, o.placement, o.material);
-    auto scene = std::make_unique<render::insertion::ObjectScene>(*world);
+    auto scene = std::make_unique<render::insertion::ObjectScene>(*world, /*fast_build=*/true);
     m.object_scene = std::move(scene);
     m.world = std::move(world);
     m.objects.assign(objects.begin(), objects.end());

@@ -23,6 +23,7 @@ namespace {
 
 constexpr float kPi = 3.14159265358979323846f;
 constexpr int kMaxRays = 256;
+constexpr float kFixedRotation = 0.5f;  // the fixed pattern's rotation (any pixel's would do)
 
 Vec3f add3(const Vec3f& a, const Vec3f& b, float s = 1) {
   return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]};
@@ -46,6 +47,12 @@ struct Lights {
   Lighting sun_sky;                   // sun and sky only (lamps shadowed separately)
   std::vector<Lighting> single_lamp;  // one lamp each
   std::vector<Vec3f> lamp_position;
+  // With a fixed pattern (every pixel the same rotation) the directions are computed once: the
+  // sun's, and the sky's in the local frame (tangent, bitangent, normal coefficients).
+  float fixed_rotation = -1;  // < 0: none
+  std::vector<Vec3f> fixed_sun;
+  std::vector<Vec3f> fixed_sky;
+  int fixed_sky_total = 0;
 };
 
 // Direction i of `count` over the sun's disk: stratified in radius, golden-angle spiral in
@@ -60,14 +67,21 @@ Vec3f sun_direction(const Lights& L, int i, int count, float rotation) {
                     L.sun_dir[2] + r * (c * L.sun_u[2] + s * L.sun_v[2])});
 }
 
-// Cosine-weighted direction i of `count` about n (Hammersley, Cranley-Patterson rotated).
-Vec3f sky_direction(const Vec3f& n, const Vec3f& t, const Vec3f& b, int i, int count, float rotation) {
+// Cosine-weighted direction i of `count` about n (Hammersley, Cranley-Patterson rotated): its
+// coefficients along the tangent, bitangent and normal, then the direction.
+Vec3f sky_local(int i, int count, float rotation) {
   const float u1 = (float(i) + 0.5f) / float(count);
   float u2 = float(radical_inverse_base2(std::uint32_t(i))) + rotation;
   u2 -= std::floor(u2);
   const float rad = std::sqrt(u1), phi = 2 * kPi * u2;
-  const float a = rad * std::cos(phi), c = rad * std::sin(phi), z = std::sqrt(std::max(0.0f, 1 - u1));
+  return {rad * std::cos(phi), rad * std::sin(phi), std::sqrt(std::max(0.0f, 1 - u1))};
+}
+Vec3f sky_world(const Vec3f& n, const Vec3f& t, const Vec3f& b, const Vec3f& k) {
+  const float a = k[0], c = k[1], z = k[2];
   return {a * t[0] + c * b[0] + z * n[0], a * t[1] + c * b[1] + z * n[1], a * t[2] + c * b[2] + z * n[2]};
+}
+Vec3f sky_direction(const Vec3f& n, const Vec3f& t, const Vec3f& b, int i, int count, float rotation) {
+  return sky_world(n, t, b, sky_local(i, count, rotation));
 }
 
 // The rays of one shading point: sun directions, upward sky directions, lamp segments.
@@ -95,7 +109,7 @@ void build_rays(RaySet& set, const Lights& L, const Vec3f* origins, int origin_c
   if (L.sun) {
     for (int j = 0; j < sun_n; ++j) {
       const int i = (sun_start + j * sun_stride) % L.sun_rays;
-      const Vec3f s = sun_direction(L, i, L.sun_rays, rotation);
+      const Vec3f s = rotation == L.fixed_rotation ? L.fixed_sun[std::size_t(i)] : sun_direction(L, i, L.sun_rays, rotation);
       ++set.sun_total;
       if (dot(n, s) > 0) set.rays[set.size++] = ShadowRay{origins[j % origin_count], s, 0.0f};
     }
@@ -107,7 +121,9 @@ void build_rays(RaySet& set, const Lights& L, const Vec3f* origins, int origin_c
     frame(n, t, b);
     for (int j = 0; j < sky_n; ++j) {
       const int i = (sky_start + j * sky_stride) % sky_total;
-      const Vec3f d = sky_direction(n, t, b, i, sky_total, rotation);
+      const Vec3f d = rotation == L.fixed_rotation && sky_total == L.fixed_sky_total
+                          ? sky_world(n, t, b, L.fixed_sky[std::size_t(i)])
+                          : sky_direction(n, t, b, i, sky_total, rotation);
       if (d[1] > 0) set.rays[set.size++] = ShadowRay{origins[j % origin_count], d, 0.0f};
     }
   }
@@ -204,6 +220,19 @@ struct Rect {
   int x0, y0, x1, y1;
 };
 
+// Whether a shadow ray (origin + t direction, t in [t_near, t_far]) can meet any of the spheres.
+bool ray_may_hit(const ShadowRay& ray, const std::vector<std::array<float, 4>>& spheres) {
+  const Vec3f o = {ray.origin[0], ray.origin[1], ray.origin[2]};
+  Vec3f d = {ray.direction[0], ray.direction[1], ray.direction[2]};
+  const float len = std::sqrt(dot(d, d));
+  if (!(len > 0)) return true;
+  d = {d[0] / len, d[1] / len, d[2] / len};
+  const float t_max = std::isfinite(ray.t_far) ? ray.t_far * len : std::numeric_limits<float>::infinity();
+  for (const auto& s : spheres)
+    if (may_hit_sphere(o, d, 0, s, t_max)) return true;
+  return false;
+}
+
 // Point-to-segment distance (the lamps' tile test).
 float segment_distance(const Vec3f& s, const Vec3f& a, const Vec3f& b) {
   const Vec3f ab = sub3(b, a), as = sub3(s, a);
@@ -221,6 +250,9 @@ class Renderer {
   struct Scratch {
     RaySet set;
     bool blocked_objects[kMaxRays], blocked_photo[kMaxRays], blocked_any[kMaxRays];
+    ShadowRay compact[kMaxRays];  // the rays traced against the objects
+    int index[kMaxRays];
+    bool blocked_compact[kMaxRays];
     std::size_t shadow_rays = 0, camera_rays = 0;
   };
 
@@ -314,6 +346,12 @@ Renderer::Renderer(const InsertionInputs& in_, const InsertionSettings& settings
     L_.single_lamp.push_back(one);
     L_.lamp_position.push_back(to_f(lamp.position_m));
   }
+  if (settings.fixed_pattern) {
+    L_.fixed_rotation = kFixedRotation;
+    for (int i = 0; i < L_.sun_rays; ++i) L_.fixed_sun.push_back(sun_direction(L_, i, L_.sun_rays, kFixedRotation));
+    L_.fixed_sky_total = std::max(settings.sky_rays, 1);
+    for (int i = 0; i < L_.fixed_sky_total; ++i) L_.fixed_sky.push_back(sky_local(i, L_.fixed_sky_total, kFixedRotation));
+  }
 
   S_ = settings.samples_per_axis;
   S2_ = S_ * S_;
@@ -326,7 +364,7 @@ Renderer::Renderer(const InsertionInputs& in_, const InsertionSettings& settings
   // Screen rectangles that may show an object (its bounding sphere's box projected), so pixels
   // elsewhere trace no camera rays.
   const auto [forward, right, up] = in.pose.axes();
-  for (const auto& s : world_.bounds) {
+  for (const auto& s : world_.tight_bounds) {
     double xmin = 1e30, xmax = -1e30, ymin = 1e30, ymax = -1e30;
     bool behind = false;
     for (int k = 0; k < 8; ++k) {
@@ -374,14 +412,16 @@ bool Renderer::tile_influenced(const std::array<float, 5>& bound, const Rect& ti
   // shade() tests each pixel's shadow-ray origin o against each object's sphere; every o of the
   // tile lies within rt of c, so these tests, widened by rt (twice where the ray's closest
   // approach moves with o) and a millimetre for rounding, pass whenever one of the pixel's does.
-  for (const auto& s : world_.bounds) {
+  for (std::size_t k = 0; k < world_.tight_bounds.size(); ++k) {
+    const auto& s = world_.tight_bounds[k];
+    const float sky_radius = (settings.sky_influence_tight ? world_.tight_bounds : world_.bounds)[k][3];
     if (L_.sun) {
       const float spread = L_.sun_tan_radius * 1.01f;
       if (may_hit_sphere(c, L_.sun_dir, spread, {s[0], s[1], s[2], s[3] + bound[4] + rt * (2 + spread) + 1e-3f}))
         return true;
     }
     const Vec3f q = {s[0] - c[0], s[1] - c[1], s[2] - c[2]};
-    const float sky_r = float(settings.sky_influence_radii) * s[3] + rt + 1e-3f;
+    const float sky_r = float(settings.sky_influence_radii) * sky_radius + rt + 1e-3f;
     if (dot(q, q) < sky_r * sky_r) return true;
     for (const Vec3f& lp : L_.lamp_position)
       if (segment_distance({s[0], s[1], s[2]}, c, lp) < s[3] + rt + 1e-3f) return true;
@@ -403,7 +443,7 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
   const std::uint32_t seed = physics::hash32(std::uint32_t(y) * 73856093u ^ std::uint32_t(x));
   // A fixed pattern (the preview): every pixel draws the same directions, so neighbours agree
   // (no salt-and-pepper speckle) and nothing shimmers between frames.
-  const float rotation = st.fixed_pattern ? 0.5f : float(seed >> 8) * (1.0f / 16777216.0f);
+  const float rotation = st.fixed_pattern ? kFixedRotation : float(seed >> 8) * (1.0f / 16777216.0f);
   const float d = in.distance_m.at(x, y, 0);
   const float* I = in.photo.pixel(x, y);
 
@@ -417,11 +457,13 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
     const Vec3f origin = add3(p, n, lift);
     const float footprint = 2.0f * d / float(in.camera.focal_px);
     bool sun_maybe = false, sky_maybe = false, lamp_maybe = false;
-    for (const auto& s : world.bounds) {
+    for (std::size_t k = 0; k < world.tight_bounds.size(); ++k) {
+      const auto& s = world.tight_bounds[k];
+      const float sky_radius = (st.sky_influence_tight ? world.tight_bounds : world.bounds)[k][3];
       if (L.sun && dot(n, L.sun_dir) > -L.sun_tan_radius)
         sun_maybe = sun_maybe || may_hit_sphere(origin, L.sun_dir, L.sun_tan_radius * 1.01f, {s[0], s[1], s[2], s[3] + footprint});
       const Vec3f q = {s[0] - origin[0], s[1] - origin[1], s[2] - origin[2]};
-      sky_maybe = sky_maybe || dot(q, q) < float(st.sky_influence_radii * st.sky_influence_radii) * s[3] * s[3];
+      sky_maybe = sky_maybe || dot(q, q) < float(st.sky_influence_radii * st.sky_influence_radii) * sky_radius * sky_radius;
       for (const Vec3f& lp : L.lamp_position) {
         const Vec3f to = sub3(lp, origin);
         const float len = std::sqrt(dot(to, to));
@@ -443,10 +485,24 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
       build_rays(set, L, origins, origin_count, n, rotation, 0, 1, L.sun ? L.sun_rays : 0, 0, 1, sky_total,
                  std::max(sky_total, 1));
       const std::span<const ShadowRay> rays(set.rays, std::size_t(set.size));
-      in.visibility->occluded(Geometry::objects, rays, blocked_objects);
-      scratch.shadow_rays += std::size_t(set.size);
-      if (!sky_maybe)  // the sky rays could not meet an object (see sky_influence_radii)
-        for (int i = 0; i < set.sky_count; ++i) blocked_objects[set.sky_first + i] = false;
+      // Against the objects, only the rays that can meet one's bounding sphere are traced: the
+      // others cannot be blocked by them (an exact cull, far cheaper than the BVH's traversal).
+      // Sky rays beyond the sky influence count as unblocked (see sky_influence_radii).
+      int traced = 0;
+      for (int i = 0; i < set.size; ++i) {
+        blocked_objects[i] = false;
+        const bool sky_ray = i >= set.sky_first && i < set.sky_first + set.sky_count;
+        if (sky_ray && !sky_maybe) continue;
+        if (!ray_may_hit(set.rays[i], world.tight_bounds)) continue;
+        scratch.index[traced] = i;
+        scratch.compact[traced++] = set.rays[i];
+      }
+      if (traced > 0) {
+        in.visibility->occluded(Geometry::objects, std::span<const ShadowRay>(scratch.compact, std::size_t(traced)),
+                                scratch.blocked_compact);
+        for (int k = 0; k < traced; ++k) blocked_objects[scratch.index[k]] = scratch.blocked_compact[k];
+      }
+      scratch.shadow_rays += std::size_t(traced);
       bool any = false;
       for (int i = 0; i < set.size; ++i) any = any || blocked_objects[i];
       if (any) {

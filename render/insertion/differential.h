@@ -90,6 +90,10 @@ struct InsertionSettings {
   /// against the objects: an object of radius r at distance D hides at most (r / D)^2 of the
   /// cosine-weighted sky (0.4 % at 16).
   double sky_influence_radii = 16;
+  /// The sky influence counts the objects' tight bounding radius (the farthest vertex from the
+  /// box's centre) instead of the box's half-diagonal (up to sqrt(3) larger for round objects):
+  /// the preview's choice (a third of the area to shade for a sphere).
+  bool sky_influence_tight = false;
   /// Relative depth tolerance of the occlusion test: an object sample is in front of the
   /// photo's surface when its distance < d (1 + tolerance).
   double depth_tolerance = 2e-3;
@@ -141,12 +145,12 @@ InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSetti
 /// they are conservative (rendering only the influenced tiles gives render_insertion's image
 /// exactly; tests/insert_test.cpp checks it).
 struct PhotoTiles {
-  int tile_px = 16;
+  int tile_px = 8;
   int tiles_x = 0, tiles_y = 0;
   /// Per tile, row-major: centre x, y, z, radius (< 0: no pixel with a surface), footprint (m).
   std::vector<std::array<float, 5>> bounds;
 };
-PhotoTiles photo_tiles(const InsertionInputs& in, int tile_px = 16);
+PhotoTiles photo_tiles(const InsertionInputs& in, int tile_px = 8);
 /// 1 for every tile the objects of `in` may change (a few microseconds per tile).
 std::vector<std::uint8_t> influenced_tiles(const InsertionInputs& in, const InsertionSettings& settings,
                                            const PhotoTiles& tiles);

@@ -193,6 +193,14 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
     const Vec3d centre = {(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
     world.bounds.push_back({float(centre.x), float(centre.y), float(centre.z),
                             float(length(hi - centre) * 1.0001 + 1e-6)});
+    double r2 = 0;
+    for (std::size_t i = 0; i < nv; ++i) {
+      const float* q = &world.positions[3 * std::size_t(vertex_base + i)];
+      const double dx = q[0] - centre.x, dy = q[1] - centre.y, dz = q[2] - centre.z;
+      r2 = std::max(r2, dx * dx + dy * dy + dz * dz);
+    }
+    world.tight_bounds.push_back({float(centre.x), float(centre.y), float(centre.z),
+                                  float(std::sqrt(r2) * 1.0001 + 1e-6)});
   }
 }
 
@@ -235,13 +243,13 @@ SurfaceReflectance reflectance_at(const WorldObjects& world, std::uint32_t prim,
   return r;
 }
 
-ObjectScene::ObjectScene(const WorldObjects& world) : world_(world) {
+ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build) : world_(world) {
   if (world.triangle_count() == 0) return;
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw Error(ErrorCode::internal, "Embree: cannot create a device for the objects");
   rtcSetDeviceErrorFunction(device_, &embree_error, nullptr);
   scene_ = rtcNewScene(device_);
-  rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_MEDIUM);
+  rtcSetSceneBuildQuality(scene_, fast_build ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_MEDIUM);
   rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
   RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,

@@ -38,6 +38,9 @@ struct MR_API InsertOptions {
   /// Photo pixels farther than this many bounding radii from every object trace no sky rays
   /// against the objects (an object hides at most (1 / this)^2 of their sky: 0.4 % at 16).
   double sky_influence_radii = 16;
+  /// Count those radii in the objects' tight bounding radius (the farthest vertex from their
+  /// box's centre) instead of the box's half-diagonal (up to sqrt(3) larger for round objects).
+  bool sky_influence_tight = false;
   /// Relative tolerance of the depth test against the photo's distance map.
   double depth_tolerance = 2e-3;
   /// The photo's occluder mesh at one vertex row per mesh_step pixel rows (1 = full resolution;
@@ -54,8 +57,8 @@ struct MR_API InsertOptions {
   int threads = 0;  ///< 0: all cores
 
   /// Interactive preview settings: 1 camera ray, 4 sun and 8 sky rays per pixel in a fixed
-  /// pattern, mesh_step 2, sky influence 4 radii (objects' ambient occlusion cut where it is below
-  /// 6 %).
+  /// pattern, mesh_step 2, sky influence 4 tight radii (objects' ambient occlusion cut where it is
+  /// below 6 %).
   static InsertOptions preview();
   /// The preview's refinement when the user stops (mr-studio's idle pass, InsertPreview):
   /// 2 x 2 camera rays (anti-aliased edges), 8 sun and 32 sky rays, still a fixed pattern.
@@ -97,7 +100,7 @@ MR_API InsertResult insert_objects(const Image& photo, const Image& distance_m,
 /// An interactive preview of objects in one photo (mr-studio's insertion tool, issue 16). The
 /// constructor does once what does not depend on the objects: the light resolved (as
 /// insert_objects does), the photo's normals, its occluder mesh (at options.mesh_step) and Embree
-/// scene, and the bounds of its surface in 16 x 16-pixel screen tiles. Each render() then
+/// scene, and the bounds of its surface in 8 x 8-pixel screen tiles. Each render() then
 /// rebuilds only the objects' scene (and only when the objects or their placements changed) and
 /// re-renders only the tiles the objects, their shadows, their sky occlusion or their lamp
 /// shadows can touch (the tile tests are conservative: the frame equals insert_objects' composite
