@@ -454,8 +454,8 @@ void MainWindow::openPhoto(const QString& path) {
           syncBlockersContext();
           pending_scene_.reset();
           pending_annotations_.reset();
-          stacked_annotations_.clear();  // the reset's index change re-estimates, as before
           editor_->reset(doc->annotations);
+          stacked_annotations_ = mr::annotations_to_json(editor_->annotations());
           scene_modified_ = false;
           addRecentFile(from_project ? project_path_ : doc->photo_path);
           updateTitle();
