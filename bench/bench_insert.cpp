@@ -12,7 +12,9 @@
 // scene when they changed and shades only the screen tiles the objects and their shadows can
 // touch: BM_PreviewFirstFrame (the model dropped on a prepared photo), BM_PreviewDrag (a frame
 // of a drag: the model 5 cm further each frame, the draft settings), BM_PreviewRefine (the idle
-// refinement at the same placement: 2 x 2 camera rays, 8 sun and 32 sky rays).
+// refinement at the same placement: 2 x 2 camera rays, 8 sun and 32 sky rays). The frames run at
+// the bench's preview size (1000 x 750) and at mr-studio's draft size (577 x 433 = 0.25 MP, what
+// a drag shows there).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
@@ -114,7 +116,7 @@ void BM_PreviewPrepare(benchmark::State& state) {
 BENCHMARK(BM_PreviewPrepare)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
 void BM_PreviewFirstFrame(benchmark::State& state) {
-  static const Photo p = make_photo(1000, 750);
+  const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
   const mr::FogScene scene = make_scene();
   const auto objects = model();
   for (auto _ : state) {
@@ -134,10 +136,10 @@ void BM_PreviewFirstFrame(benchmark::State& state) {
     state.ResumeTiming();
   }
 }
-BENCHMARK(BM_PreviewFirstFrame)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+BENCHMARK(BM_PreviewFirstFrame)->Args({1000, 750})->Args({577, 433})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
 void BM_PreviewDrag(benchmark::State& state) {
-  static const Photo p = make_photo(1000, 750);
+  const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
   const mr::FogScene scene = make_scene();
   auto objects = model();
   mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
@@ -154,12 +156,12 @@ void BM_PreviewDrag(benchmark::State& state) {
     state.counters["reset"] = double(f.tiles_reset);
   }
 }
-BENCHMARK(BM_PreviewDrag)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+BENCHMARK(BM_PreviewDrag)->Args({1000, 750})->Args({577, 433})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
 // A frame at an unchanged placement with the draft settings (the objects' scene reused): the
 // tiles' shading alone.
 void BM_PreviewStill(benchmark::State& state) {
-  static const Photo p = make_photo(1000, 750);
+  const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
   const mr::FogScene scene = make_scene();
   const auto objects = model();
   mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
@@ -171,7 +173,7 @@ void BM_PreviewStill(benchmark::State& state) {
     state.counters["camera_rays"] = double(r.timings.camera_rays);
   }
 }
-BENCHMARK(BM_PreviewStill)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+BENCHMARK(BM_PreviewStill)->Args({1000, 750})->Args({577, 433})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
 void BM_PreviewRefine(benchmark::State& state) {
   static const Photo p = make_photo(1000, 750);

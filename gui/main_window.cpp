@@ -300,8 +300,14 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
     updateTitle();
     // The stack also holds the objects' edits (issue 16): those do not change what the
     // estimate sees, and a drag must not re-estimate (and re-pose) the scene under the object.
-    const std::string annotations = mr::annotations_to_json(editor_->annotations());
-    if (annotations == stacked_annotations_) return;
+    std::string annotations;
+    try {
+      annotations = mr::annotations_to_json(editor_->annotations());
+    } catch (const mr::Error&) {
+      // Annotations between two clicks need not be a valid document (a lamp without its
+      // patch yet): they count as changed.
+    }
+    if (!annotations.empty() && annotations == stacked_annotations_) return;
     stacked_annotations_ = annotations;
     if (document_ && auto_estimate_->isChecked()) estimate_timer_.start();
   });
@@ -455,7 +461,11 @@ void MainWindow::openPhoto(const QString& path) {
           pending_scene_.reset();
           pending_annotations_.reset();
           editor_->reset(doc->annotations);
-          stacked_annotations_ = mr::annotations_to_json(editor_->annotations());
+          try {
+            stacked_annotations_ = mr::annotations_to_json(editor_->annotations());
+          } catch (const mr::Error&) {
+            stacked_annotations_.clear();
+          }
           scene_modified_ = false;
           addRecentFile(from_project ? project_path_ : doc->photo_path);
           updateTitle();
