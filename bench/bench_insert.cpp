@@ -2,8 +2,8 @@
 // into a 12 MP photo (4000 x 3000; ground, a side wall, a back wall at 30 m) under sun and sky:
 // the full-quality render (16 camera rays, 16 sun and 64 sky rays per pixel, full-resolution
 // occluder mesh) and the interactive preview at preview resolution (1000 x 750: 1 camera ray,
-// 4 sun and 8 sky rays, occluder mesh at half that). Each iteration is a first frame: normals,
-// occluder mesh, both BVHs and the render. Run:
+// 1 sun and 8 sky rays in a fixed pattern, occluder mesh at half that) through insert_objects.
+// Each iteration is a first frame: normals, occluder mesh, both BVHs and the render. Run:
 //   build/bench/mr_bench_insert --benchmark_repetitions=3
 // and read the CPU column (the machine is shared; wall times mean little there).
 //

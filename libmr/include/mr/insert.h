@@ -56,7 +56,8 @@ struct MR_API InsertOptions {
   bool fixed_pattern = false;
   int threads = 0;  ///< 0: all cores
 
-  /// Interactive preview settings: 1 camera ray, 4 sun and 8 sky rays per pixel in a fixed
+  /// Interactive preview settings: 1 camera ray, 1 sun ray (the sun's centre: a hard shadow;
+  /// the real sun's penumbra is below a preview pixel) and 8 sky rays per pixel in a fixed
   /// pattern, mesh_step 2, sky influence 4 tight radii (objects' ambient occlusion cut where it is
   /// below 6 %).
   static InsertOptions preview();
