@@ -579,9 +579,33 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
       build_rays(set, L, &origin, 1, ns, rotation, k % std::max(L.sun_rays, 1), S2, sun_n, k % std::max(sky_total, 1),
                  S2, sky_n, std::max(sky_total, 1));
       const std::span<const ShadowRay> rays(set.rays, std::size_t(set.size));
-      in.visibility->occluded(Geometry::objects, rays, blocked_objects);
+      if (st.fixed_pattern) {
+        // A fixed pattern would turn the facets' self-shadowing (directions above the smooth
+        // shading normal's horizon but below the flat triangle's, which meet the neighbouring
+        // triangles) into facet-shaped patches on curved objects: those directions count as
+        // open to the objects, as on the smooth surface the normals describe. (The hashed
+        // pattern averages them into the smooth result over many rays.)
+        int traced = 0;
+        for (int i = 0; i < set.size; ++i) {
+          blocked_objects[i] = false;
+          const ShadowRay& r = set.rays[i];
+          if (i < set.lamp_first && r.direction[0] * ng[0] + r.direction[1] * ng[1] + r.direction[2] * ng[2] <= 0)
+            continue;
+          scratch.index[traced] = i;
+          scratch.compact[traced++] = r;
+        }
+        if (traced > 0) {
+          in.visibility->occluded(Geometry::objects, std::span<const ShadowRay>(scratch.compact, std::size_t(traced)),
+                                  scratch.blocked_compact);
+          for (int k = 0; k < traced; ++k) blocked_objects[scratch.index[k]] = scratch.blocked_compact[k];
+        }
+        scratch.shadow_rays += std::size_t(traced);
+      } else {
+        in.visibility->occluded(Geometry::objects, rays, blocked_objects);
+        scratch.shadow_rays += std::size_t(set.size);
+      }
       in.visibility->occluded(Geometry::photo, rays, blocked_photo);
-      scratch.shadow_rays += 2 * std::size_t(set.size);
+      scratch.shadow_rays += std::size_t(set.size);
       for (int i = 0; i < set.size; ++i) blocked_any[i] = blocked_photo[i] || blocked_objects[i];
       const SurfaceReflectance refl = reflectance_at(world, hit.prim, hit.u, hit.v);
       SurfacePoint sp;
