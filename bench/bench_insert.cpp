@@ -106,14 +106,14 @@ void BM_InsertPreview(benchmark::State& state) {
 BENCHMARK(BM_InsertPreview)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
 void BM_PreviewPrepare(benchmark::State& state) {
-  static const Photo p = make_photo(1000, 750);
+  const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
   const mr::FogScene scene = make_scene();
   for (auto _ : state) {
     mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
     benchmark::DoNotOptimize(&preview);
   }
 }
-BENCHMARK(BM_PreviewPrepare)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+BENCHMARK(BM_PreviewPrepare)->Args({1000, 750})->Args({577, 433})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
 void BM_PreviewFirstFrame(benchmark::State& state) {
   const Photo p = make_photo(int(state.range(0)), int(state.range(1)));

@@ -528,6 +528,7 @@ void MainWindow::startRender(mr::Quality quality) {
   } else {
     const QSize display = view_->displayPixels();
     request.max_pixels = std::max(kDraftPixels, double(display.width()) * display.height());
+    request.prepare_insert_pixels = kDraftPixels;  // the insertion tool's first drop is then quick
   }
   request.cancel = std::make_shared<mr::CancelToken>();
   render_cancel_ = request.cancel;

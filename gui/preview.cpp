@@ -356,6 +356,17 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   }
   result->depth = inputs->depth;
   result->total_s = seconds_since(start);
+  if (request.prepare_insert_pixels > 0) {
+    // Idle work for the insertion tool; a failure here is the first drop's to report.
+    try {
+      const std::shared_ptr<const PreviewInputs> draft =
+          preview_inputs(*request.document, request.prepare_insert_pixels, color);
+      double prepare_s = 0;
+      insert_session(*request.document, *draft, request.scene, request.cancel.get(), prepare_s);
+    } catch (const mr::Error& e) {
+      if (e.code() == mr::ErrorCode::cancelled) throw;
+    }
+  }
   return result;
 }
 

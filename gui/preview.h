@@ -120,6 +120,10 @@ struct PreviewRequest {
   std::shared_ptr<mr::CancelToken> cancel;
   /// Where the scene's relative model paths start (the project's folder; empty: absolute).
   QString document_dir;
+  /// > 0: after rendering, also prepare the document's insertion preview at this size (the
+  /// photo's geometry for mr::InsertPreview) if it is not yet, so that the first model dropped
+  /// on the photo pays only its frame. mr-studio asks for the draft's size in normal passes.
+  double prepare_insert_pixels = 0;
 };
 
 struct PreviewResult {
