@@ -55,7 +55,8 @@ Photo make_photo(int width, int height) {
       }
       p.distance_m.view().at(x, y, 0) = float(t);
       for (int c = 0; c < 3; ++c)
-        p.photo.view().at(x, y, c) = 0.2f + 0.1f * float(c) + 0.05f * std::sin(0.01f * float(x + y));
+        p.photo.view().at(x, y, c) =
+            0.2f + 0.1f * float(c) + 0.05f * std::sin(0.01f * float(x + y));
     }
   return p;
 }
@@ -82,7 +83,8 @@ void BM_InsertFull12MP(benchmark::State& state) {
   const auto objects = model();
   mr::InsertOptions options;
   for (auto _ : state) {
-    mr::InsertResult r = mr::insert_objects(p.photo, p.distance_m, p.camera, scene, objects, options);
+    mr::InsertResult r =
+        mr::insert_objects(p.photo, p.distance_m, p.camera, scene, objects, options);
     benchmark::DoNotOptimize(r.composite.data());
     state.counters["mesh_s"] = r.timings.mesh_s;
     state.counters["render_s"] = r.timings.render_s;
@@ -97,7 +99,8 @@ void BM_InsertPreview(benchmark::State& state) {
   const auto objects = model();
   const mr::InsertOptions options = mr::InsertOptions::preview();
   for (auto _ : state) {
-    mr::InsertResult r = mr::insert_objects(p.photo, p.distance_m, p.camera, scene, objects, options);
+    mr::InsertResult r =
+        mr::insert_objects(p.photo, p.distance_m, p.camera, scene, objects, options);
     benchmark::DoNotOptimize(r.composite.data());
     state.counters["mesh_s"] = r.timings.mesh_s;
     state.counters["render_s"] = r.timings.render_s;
@@ -113,7 +116,11 @@ void BM_PreviewPrepare(benchmark::State& state) {
     benchmark::DoNotOptimize(&preview);
   }
 }
-BENCHMARK(BM_PreviewPrepare)->Args({1000, 750})->Args({577, 433})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+BENCHMARK(BM_PreviewPrepare)
+    ->Args({1000, 750})
+    ->Args({577, 433})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime();
 
 void BM_PreviewFirstFrame(benchmark::State& state) {
   const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
@@ -136,7 +143,11 @@ void BM_PreviewFirstFrame(benchmark::State& state) {
     state.ResumeTiming();
   }
 }
-BENCHMARK(BM_PreviewFirstFrame)->Args({1000, 750})->Args({577, 433})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+BENCHMARK(BM_PreviewFirstFrame)
+    ->Args({1000, 750})
+    ->Args({577, 433})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime();
 
 void BM_PreviewDrag(benchmark::State& state) {
   const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
@@ -156,7 +167,11 @@ void BM_PreviewDrag(benchmark::State& state) {
     state.counters["reset"] = double(f.tiles_reset);
   }
 }
-BENCHMARK(BM_PreviewDrag)->Args({1000, 750})->Args({577, 433})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+BENCHMARK(BM_PreviewDrag)
+    ->Args({1000, 750})
+    ->Args({577, 433})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime();
 
 // A frame at an unchanged placement with the draft settings (the objects' scene reused): the
 // tiles' shading alone.
@@ -173,7 +188,11 @@ void BM_PreviewStill(benchmark::State& state) {
     state.counters["camera_rays"] = double(r.timings.camera_rays);
   }
 }
-BENCHMARK(BM_PreviewStill)->Args({1000, 750})->Args({577, 433})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+BENCHMARK(BM_PreviewStill)
+    ->Args({1000, 750})
+    ->Args({577, 433})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime();
 
 void BM_PreviewRefine(benchmark::State& state) {
   static const Photo p = make_photo(1000, 750);

@@ -182,7 +182,8 @@ bool ImageView::objectToolActive() const {
 
 void ImageView::wheelEvent(QWheelEvent* event) {
   if (objectToolActive() &&
-      object_tool_->wheel(imageFromView(event->position()), event->angleDelta().y() / 120.0, event->modifiers())) {
+      object_tool_->wheel(imageFromView(event->position()), event->angleDelta().y() / 120.0,
+                          event->modifiers())) {
     event->accept();
     return;
   }

@@ -44,13 +44,13 @@
 #include <optional>
 
 #include "blockers_panel.h"
-#include "object_tool.h"
-#include "objects_panel.h"
 #include "export_dialog.h"
 #include "fog_panel.h"
 #include "grabcut_assist.h"
 #include "image_convert.h"
 #include "image_view.h"
+#include "object_tool.h"
+#include "objects_panel.h"
 
 namespace mrstudio {
 
@@ -497,8 +497,9 @@ void MainWindow::syncBlockersContext() {
   const double hfov = document_ ? document_->camera.horizontal_fov_deg() : 60.0;
   blockers_panel_->setContext(scene.pose, hfov, sun_azimuth);
   objects_panel_->setCameraPose(scene.pose);
-  object_tool_->setContext(document_, scene.pose,
-                           project_path_.isEmpty() ? QString() : QFileInfo(project_path_).absolutePath());
+  object_tool_->setContext(
+      document_, scene.pose,
+      project_path_.isEmpty() ? QString() : QFileInfo(project_path_).absolutePath());
 }
 
 void MainWindow::requestPreview() {
@@ -519,7 +520,8 @@ void MainWindow::startRender(mr::Quality quality) {
   request.document = document_;
   request.scene = fog_panel_->scene();
   request.quality = quality;
-  request.document_dir = project_path_.isEmpty() ? QString() : QFileInfo(project_path_).absolutePath();
+  request.document_dir =
+      project_path_.isEmpty() ? QString() : QFileInfo(project_path_).absolutePath();
   request.generation = generation_;
   const Layer shown = Layer(layer_box_->currentData().toInt());
   request.display_aovs = shown == Layer::transmittance || shown == Layer::inscatter;
@@ -580,10 +582,11 @@ void MainWindow::onRenderDone(std::shared_ptr<PreviewResult> result, QString err
             .arg(QString::fromStdString(result->backend))
             .arg(result->backend_notice.empty() ? QString() : tr(" (fall-back)")));
     backend_label_->setToolTip(QString::fromStdString(result->backend_notice));
-    const QString insert =
-        result->matte.empty()
-            ? QString()
-            : tr("objects %1 (%2/%3 tiles), ").arg(ms(result->insert_s)).arg(result->insert_tiles).arg(result->insert_tiles_total);
+    const QString insert = result->matte.empty() ? QString()
+                                                 : tr("objects %1 (%2/%3 tiles), ")
+                                                       .arg(ms(result->insert_s))
+                                                       .arg(result->insert_tiles)
+                                                       .arg(result->insert_tiles_total);
     timing_label_->setText(tr("%1 %2 x %3: %4fog %5, total %6")
                                .arg(to_string(result->quality))
                                .arg(result->photo.width())

@@ -247,7 +247,8 @@ class MainWindow : public QMainWindow {
   QString unpaired_note_;
   /// The annotations as of the undo stack's last index change (JSON): an index change that
   /// leaves them alone (an object edit) does not re-estimate.
-  std::string stacked_annotations_;  ///< what the running estimate leaves out (lamps without a patch)
+  std::string
+      stacked_annotations_;  ///< what the running estimate leaves out (lamps without a patch)
 
   bool scene_modified_ = false;
   QMessageBox::StandardButton prompt_answer_ = QMessageBox::NoButton;

@@ -66,9 +66,11 @@ std::optional<std::pair<mr::Vec3, double>> ObjectTool::bounds(int index) const {
   if (it == mesh_bounds_.end()) {
     try {
       const mr::Bounds3 b = mr::mesh_bounds(*object_mesh(*document_, o, document_dir_));
-      const mr::Vec3 c = {(b.min.x + b.max.x) / 2, (b.min.y + b.max.y) / 2, (b.min.z + b.max.z) / 2};
-      const double r = std::sqrt((b.max.x - c.x) * (b.max.x - c.x) + (b.max.y - c.y) * (b.max.y - c.y) +
-                                 (b.max.z - c.z) * (b.max.z - c.z));
+      const mr::Vec3 c = {(b.min.x + b.max.x) / 2, (b.min.y + b.max.y) / 2,
+                          (b.min.z + b.max.z) / 2};
+      const double r =
+          std::sqrt((b.max.x - c.x) * (b.max.x - c.x) + (b.max.y - c.y) * (b.max.y - c.y) +
+                    (b.max.z - c.z) * (b.max.z - c.z));
       it = mesh_bounds_.emplace(o.mesh, std::make_pair(c, r)).first;
     } catch (const mr::Error&) {
       return std::nullopt;  // a model that cannot be loaded: the preview reports it
@@ -76,7 +78,8 @@ std::optional<std::pair<mr::Vec3, double>> ObjectTool::bounds(int index) const {
   }
   const mr::Mat4 m = mr::placement_matrix(o.placement);
   const mr::Vec3& c = it->second.first;
-  const mr::Vec3 w = {m[0] * c.x + m[1] * c.y + m[2] * c.z + m[3], m[4] * c.x + m[5] * c.y + m[6] * c.z + m[7],
+  const mr::Vec3 w = {m[0] * c.x + m[1] * c.y + m[2] * c.z + m[3],
+                      m[4] * c.x + m[5] * c.y + m[6] * c.z + m[7],
                       m[8] * c.x + m[9] * c.y + m[10] * c.z + m[11]};
   return std::make_pair(w, it->second.second * o.placement.scale);
 }
@@ -101,13 +104,16 @@ int ObjectTool::objectAt(const mr::PixelPoint& p) const {
   return best;
 }
 
-mr::ObjectPlacement ObjectTool::placeAt(const mr::PixelPoint& p, const mr::ObjectPlacement& like) const {
+mr::ObjectPlacement ObjectTool::placeAt(const mr::PixelPoint& p,
+                                        const mr::ObjectPlacement& like) const {
   mr::PlaceAtPixelOptions options;
-  options.up = world_up(like) ? mr::PlaceAtPixelOptions::Up::world : mr::PlaceAtPixelOptions::Up::surface_normal;
+  options.up = world_up(like) ? mr::PlaceAtPixelOptions::Up::world
+                              : mr::PlaceAtPixelOptions::Up::surface_normal;
   options.yaw_deg = like.yaw_deg;
   options.scale = like.scale;
   // place_at_pixel takes continuous coordinates (pixel i covers [i, i + 1)).
-  return mr::place_at_pixel(document_->camera, pose_, document_->distance_m, p[0] + 0.5, p[1] + 0.5, options);
+  return mr::place_at_pixel(document_->camera, pose_, document_->distance_m, p[0] + 0.5, p[1] + 0.5,
+                            options);
 }
 
 bool ObjectTool::press(const mr::PixelPoint& p, Qt::KeyboardModifiers modifiers) {
@@ -142,10 +148,12 @@ bool ObjectTool::move(const mr::PixelPoint& p) {
       }
       break;
     case Mode::rotate:
-      placement.yaw_deg = std::remainder(start.yaw_deg + kTurnDegPerPixel * (p[0] - press_[0]), 360.0);
+      placement.yaw_deg =
+          std::remainder(start.yaw_deg + kTurnDegPerPixel * (p[0] - press_[0]), 360.0);
       break;
     case Mode::scale:
-      placement.scale = std::clamp(start.scale * std::exp2(-(p[1] - press_[1]) / kScalePixelsPerDoubling), 1e-3, 1e4);
+      placement.scale = std::clamp(
+          start.scale * std::exp2(-(p[1] - press_[1]) / kScalePixelsPerDoubling), 1e-3, 1e4);
       break;
     case Mode::none:
       break;
@@ -191,7 +199,8 @@ bool ObjectTool::dropModel(const QString& path, const mr::PixelPoint& p) {
   try {
     placement = placeAt(p, mr::ObjectPlacement{});
   } catch (const mr::Error& e) {
-    emit message(tr("Cannot stand %1 there: %2").arg(QFileInfo(path).fileName(), QString::fromUtf8(e.what())));
+    emit message(tr("Cannot stand %1 there: %2")
+                     .arg(QFileInfo(path).fileName(), QString::fromUtf8(e.what())));
     return false;
   }
   const bool ok = panel_->addModel(path, placement);

@@ -78,9 +78,9 @@ class ObjectsPanel : public QWidget {
   void rejected(const QString& message);  ///< an edit was refused (the library's message)
 
  private:
-  void refresh(int select);          ///< the list and the selected object's controls
-  void showSelected();               ///< the selected object's values into its controls
-  void applySelected(int field);     ///< the controls into the selected object
+  void refresh(int select);       ///< the list and the selected object's controls
+  void showSelected();            ///< the selected object's values into its controls
+  void applySelected(int field);  ///< the controls into the selected object
   mr::SceneObject newObject(const std::string& mesh) const;
   bool addLoaded(const QString& path, mr::SceneObject object);
 

@@ -224,7 +224,8 @@ const QImage& PreviewResult::displayLayer(Layer layer, const mr::ColorConfig& co
   }
 }
 
-std::shared_ptr<const mr::ObjectMesh> object_mesh(const Document& document, const mr::SceneObject& object,
+std::shared_ptr<const mr::ObjectMesh> object_mesh(const Document& document,
+                                                  const mr::SceneObject& object,
                                                   const QString& document_dir) {
   mr::SceneObject plain = object;
   plain.material.reset();  // the override goes with the InsertObject, not into the cached mesh
@@ -261,8 +262,8 @@ std::string lighting_key(const mr::FogScene& scene) {
 // The document's insertion preview at the inputs' size for `scene` (made, and kept, when there
 // is none yet: the photo's normals, occluder mesh and BVH at that size).
 std::shared_ptr<InsertSession> insert_session(const Document& document, const PreviewInputs& inputs,
-                                              const mr::FogScene& scene, const mr::CancelToken* cancel,
-                                              double& prepare_s) {
+                                              const mr::FogScene& scene,
+                                              const mr::CancelToken* cancel, double& prepare_s) {
   const std::string key = geometry_key(scene);
   const int w = inputs.photo.width(), h = inputs.photo.height();
   {
@@ -275,12 +276,13 @@ std::shared_ptr<InsertSession> insert_session(const Document& document, const Pr
   session->height = h;
   session->geometry_key = key;
   session->lighting_key = lighting_key(scene);
-  session->preview = std::make_unique<mr::InsertPreview>(inputs.photo, inputs.distance_m, inputs.camera, scene,
-                                                         mr::InsertOptions::preview(), cancel);
+  session->preview = std::make_unique<mr::InsertPreview>(
+      inputs.photo, inputs.distance_m, inputs.camera, scene, mr::InsertOptions::preview(), cancel);
   prepare_s = session->preview->prepare_seconds();
   const std::lock_guard<std::mutex> lock(document.insert_mutex);
   constexpr std::size_t kSessions = 3;  // the draft's size, the view's, one more
-  if (document.insert_sessions.size() >= kSessions) document.insert_sessions.erase(document.insert_sessions.begin());
+  if (document.insert_sessions.size() >= kSessions)
+    document.insert_sessions.erase(document.insert_sessions.begin());
   document.insert_sessions.push_back(session);
   return session;
 }
@@ -314,8 +316,8 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
       o.material = so.material;
       objects.push_back(std::move(o));
     }
-    const std::shared_ptr<InsertSession> session =
-        insert_session(*request.document, *inputs, request.scene, request.cancel.get(), result->insert_prepare_s);
+    const std::shared_ptr<InsertSession> session = insert_session(
+        *request.document, *inputs, request.scene, request.cancel.get(), result->insert_prepare_s);
     const std::lock_guard<std::mutex> lock(session->mutex);
     const std::string light = lighting_key(request.scene);
     if (light != session->lighting_key) {
@@ -324,7 +326,8 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
     }
     const bool draft = request.quality == mr::Quality::draft;
     const mr::InsertResult& inserted = session->preview->render(
-        objects, draft ? mr::InsertOptions::preview() : mr::InsertOptions::preview_refined(), request.cancel.get());
+        objects, draft ? mr::InsertOptions::preview() : mr::InsertOptions::preview_refined(),
+        request.cancel.get());
     result->photo = inserted.composite;
     result->distance_m = inserted.distance_m;
     result->matte = inserted.matte;
@@ -339,7 +342,8 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
         fog_scene.blockers.polygons.push_back(std::move(p));
     result->insert_tiles = session->preview->last_frame().tiles_rendered;
     result->insert_tiles_total = session->preview->last_frame().tiles_total;
-    result->insert_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - insert_start).count();
+    result->insert_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - insert_start).count();
   }
   const auto render_start = std::chrono::steady_clock::now();
   mr::ScatteringLayers aovs;

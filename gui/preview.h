@@ -67,7 +67,8 @@ struct Document {
 
 /// The mesh of a scene object (without its material override), loaded once per document and
 /// model path. Thread-safe. Throws mr::Error naming the file.
-std::shared_ptr<const mr::ObjectMesh> object_mesh(const Document& document, const mr::SceneObject& object,
+std::shared_ptr<const mr::ObjectMesh> object_mesh(const Document& document,
+                                                  const mr::SceneObject& object,
                                                   const QString& document_dir);
 
 /// Reads the photo, its depth ({stem}_depth.{exr,tif,tiff,pfm,png} next to it, as `mr fog`
@@ -149,7 +150,7 @@ struct PreviewResult {
   /// InsertOptions::preview() and leave the objects out of the fog's shadow casters; normal
   /// passes use InsertOptions::preview_refined() and let the objects cast shafts.
   mr::Image matte;
-  double insert_s = 0;  ///< the insertion frame (objects' scene, tiles), 0 without objects
+  double insert_s = 0;          ///< the insertion frame (objects' scene, tiles), 0 without objects
   double insert_prepare_s = 0;  ///< the photo's geometry, when this pass had to prepare it
   std::size_t insert_tiles = 0, insert_tiles_total = 0;
 };

@@ -28,16 +28,14 @@
 #include <QTemporaryDir>
 #include <QThread>
 #include <QUndoStack>
-#include <QtTest>
 #include <QUrl>
+#include <QtTest>
 #include <cmath>
 #include <limits>
 #include <numeric>
 
 #include "annotation_editor.h"
 #include "blockers_panel.h"
-#include "object_tool.h"
-#include "objects_panel.h"
 #include "export_dialog.h"
 #include "fog_panel.h"
 #include "grabcut_assist.h"
@@ -45,6 +43,8 @@
 #include "image_view.h"
 #include "main_window.h"
 #include "mr/mr.h"
+#include "object_tool.h"
+#include "objects_panel.h"
 #include "sun_dial.h"
 
 using namespace mrstudio;
@@ -1473,7 +1473,8 @@ static void dragWidget(QWidget* w, const QPointF& a, const QPointF& b) {
 // changes where the shadow was and where it went, and is neither black nor blank. PNGs of the
 // previews before and after the drag go to out/gui/insert_*.png.
 void GuiTest::insertionToolDropDragTurnScaleUndo() {
-  const QString model = QStringLiteral("/usr/share/assimp/models/glTF2/BoxTextured-glTF-Binary/BoxTextured.glb");
+  const QString model =
+      QStringLiteral("/usr/share/assimp/models/glTF2/BoxTextured-glTF-Binary/BoxTextured.glb");
   if (!QFile::exists(model)) QSKIP("assimp-testmodels is not installed");
   QTemporaryDir dir;
   QVERIFY(dir.isValid());
@@ -1504,7 +1505,8 @@ void GuiTest::insertionToolDropDragTurnScaleUndo() {
   QUndoStack* undo = w.annotationEditor()->undoStack();
 
   // Drop the model on the street, left of the centre, near the bottom.
-  const QPoint drop_view = view->viewFromImage({doc->photo.width() * 0.45, doc->photo.height() * 0.78}).toPoint();
+  const QPoint drop_view =
+      view->viewFromImage({doc->photo.width() * 0.45, doc->photo.height() * 0.78}).toPoint();
   const mr::PixelPoint drop_image = view->imageFromView(drop_view);
   QMimeData mime;
   mime.setUrls({QUrl::fromLocalFile(model)});
@@ -1514,8 +1516,8 @@ void GuiTest::insertionToolDropDragTurnScaleUndo() {
   QDropEvent drop(QPointF(drop_window), Qt::CopyAction, &mime, Qt::LeftButton, Qt::NoModifier);
   QApplication::sendEvent(&w, &drop);
   QCOMPARE(int(w.objectsPanel()->objects().size()), 1);
-  const mr::ObjectPlacement dropped =
-      mr::place_at_pixel(doc->camera, pose, doc->distance_m, drop_image[0] + 0.5, drop_image[1] + 0.5);
+  const mr::ObjectPlacement dropped = mr::place_at_pixel(doc->camera, pose, doc->distance_m,
+                                                         drop_image[0] + 0.5, drop_image[1] + 0.5);
   auto near = [](const mr::Vec3& a, const mr::Vec3& b) {
     return std::abs(a.x - b.x) < 1e-9 && std::abs(a.y - b.y) < 1e-9 && std::abs(a.z - b.z) < 1e-9;
   };
@@ -1543,19 +1545,22 @@ void GuiTest::insertionToolDropDragTurnScaleUndo() {
   // The mean display code over a 5 x 5 block of a preview around a full-resolution point.
   auto block = [&](const QImage& image, const mr::PixelPoint& p) {
     const double k = double(image.width()) / doc->photo.width();
-    const int cx = int(std::lround((p[0] + 0.5) * k - 0.5)), cy = int(std::lround((p[1] + 0.5) * k - 0.5));
+    const int cx = int(std::lround((p[0] + 0.5) * k - 0.5)),
+              cy = int(std::lround((p[1] + 0.5) * k - 0.5));
     double sum = 0;
     for (int y = cy - 2; y <= cy + 2; ++y)
       for (int x = cx - 2; x <= cx + 2; ++x) {
-        const QRgb c = image.pixel(std::clamp(x, 0, image.width() - 1), std::clamp(y, 0, image.height() - 1));
+        const QRgb c =
+            image.pixel(std::clamp(x, 0, image.width() - 1), std::clamp(y, 0, image.height() - 1));
         sum += qRed(c) + qGreen(c) + qBlue(c);
       }
     return sum / 75;
   };
   const auto old_shadow = shadow_point(dropped.position_m);
   QVERIFY(old_shadow);
-  QVERIFY2(block(before, *old_shadow) < block(plain, *old_shadow) - 3,
-           qPrintable(QString("%1 %2").arg(block(before, *old_shadow)).arg(block(plain, *old_shadow))));
+  QVERIFY2(
+      block(before, *old_shadow) < block(plain, *old_shadow) - 3,
+      qPrintable(QString("%1 %2").arg(block(before, *old_shadow)).arg(block(plain, *old_shadow))));
 
   // Drag it by its middle, 120 photo pixels to the right and 20 down.
   const auto b = tool->bounds(0);
@@ -1571,9 +1576,9 @@ void GuiTest::insertionToolDropDragTurnScaleUndo() {
   const mr::PixelPoint press = view->imageFromView(press_view.toPoint());
   const mr::PixelPoint release = view->imageFromView(release_view.toPoint());
   const auto foot = tool->project(dropped.position_m);
-  const mr::ObjectPlacement moved = mr::place_at_pixel(
-      doc->camera, pose, doc->distance_m, release[0] + ((*foot)[0] - press[0]) + 0.5,
-      release[1] + ((*foot)[1] - press[1]) + 0.5);
+  const mr::ObjectPlacement moved = mr::place_at_pixel(doc->camera, pose, doc->distance_m,
+                                                       release[0] + ((*foot)[0] - press[0]) + 0.5,
+                                                       release[1] + ((*foot)[1] - press[1]) + 0.5);
   QVERIFY(near(w.objectsPanel()->objects()[0].placement.position_m, moved.position_m));
   QVERIFY(!near(moved.position_m, dropped.position_m));
   QCOMPARE(undo->undoText(), QStringLiteral("Move object"));
@@ -1585,12 +1590,15 @@ void GuiTest::insertionToolDropDragTurnScaleUndo() {
   // The old shadow is gone (back to the photo), the new one is there.
   const auto new_shadow = shadow_point(moved.position_m);
   QVERIFY(new_shadow);
-  QVERIFY2(block(after, *old_shadow) > block(before, *old_shadow) + 3,
-           qPrintable(QString("%1 %2").arg(block(after, *old_shadow)).arg(block(before, *old_shadow))));
-  QVERIFY2(std::abs(block(after, *old_shadow) - block(plain, *old_shadow)) < 2,
-           qPrintable(QString("%1 %2").arg(block(after, *old_shadow)).arg(block(plain, *old_shadow))));
-  QVERIFY2(block(after, *new_shadow) < block(before, *new_shadow) - 3,
-           qPrintable(QString("%1 %2").arg(block(after, *new_shadow)).arg(block(before, *new_shadow))));
+  QVERIFY2(
+      block(after, *old_shadow) > block(before, *old_shadow) + 3,
+      qPrintable(QString("%1 %2").arg(block(after, *old_shadow)).arg(block(before, *old_shadow))));
+  QVERIFY2(
+      std::abs(block(after, *old_shadow) - block(plain, *old_shadow)) < 2,
+      qPrintable(QString("%1 %2").arg(block(after, *old_shadow)).arg(block(plain, *old_shadow))));
+  QVERIFY2(
+      block(after, *new_shadow) < block(before, *new_shadow) - 3,
+      qPrintable(QString("%1 %2").arg(block(after, *new_shadow)).arg(block(before, *new_shadow))));
 
   // Undo: back where it was dropped (and the preview follows); redo: moved again.
   undo->undo();
@@ -1610,14 +1618,15 @@ void GuiTest::insertionToolDropDragTurnScaleUndo() {
   QApplication::sendEvent(view, &turn);
   QTest::mouseRelease(view, Qt::LeftButton, Qt::ShiftModifier, turn_to.toPoint());
   const double turned = w.objectsPanel()->objects()[0].placement.yaw_deg;
-  const double dx = view->imageFromView(turn_to.toPoint())[0] - view->imageFromView(turn_from.toPoint())[0];
+  const double dx =
+      view->imageFromView(turn_to.toPoint())[0] - view->imageFromView(turn_from.toPoint())[0];
   QVERIFY2(std::abs(turned - 0.5 * dx) < 1e-9, qPrintable(QString("%1 %2").arg(turned).arg(dx)));
   QVERIFY(near(w.objectsPanel()->objects()[0].placement.position_m, moved.position_m));
   QCOMPARE(undo->undoText(), QStringLiteral("Turn object"));
   // Ctrl+wheel scales it by 10 % a notch; two notches are one undo step.
   for (int k = 0; k < 2; ++k) {
-    QWheelEvent wheel(turn_from, QPointF(view->mapToGlobal(turn_from.toPoint())), QPoint(), QPoint(0, 120), Qt::NoButton,
-                      Qt::ControlModifier, Qt::NoScrollPhase, false);
+    QWheelEvent wheel(turn_from, QPointF(view->mapToGlobal(turn_from.toPoint())), QPoint(),
+                      QPoint(0, 120), Qt::NoButton, Qt::ControlModifier, Qt::NoScrollPhase, false);
     QApplication::sendEvent(view, &wheel);
   }
   QVERIFY(std::abs(w.objectsPanel()->objects()[0].placement.scale - 1.21) < 1e-9);

@@ -47,8 +47,8 @@ InsertScene make_scene() {
   // real photos), which the reference's 3.5 m wall does not have.
   s.scene.blockers.completion.enabled = false;
   s.photo_geometry.ground = true;
-  s.photo_geometry.boxes = {Box{{3.5, 0, 5}, {4.5, 3.5, 20}},     // side wall (right)
-                            Box{{-10, 0, 20}, {10, 6, 21}},       // back wall
+  s.photo_geometry.boxes = {Box{{3.5, 0, 5}, {4.5, 3.5, 20}},      // side wall (right)
+                            Box{{-10, 0, 20}, {10, 6, 21}},        // back wall
                             Box{{-2.4, 0, 5}, {-1.9, 2.2, 5.5}}};  // pillar (left foreground)
   SurfaceMaterial ground, wall, pillar;
   ground.diffuse_albedo = {0.40, 0.38, 0.35};
@@ -91,7 +91,8 @@ void save_png(const Image& img, const std::string& name) {
     Image rgb(img.width(), img.height(), 3);
     for (int y = 0; y < img.height(); ++y)
       for (int x = 0; x < img.width(); ++x)
-        for (int c = 0; c < 3; ++c) rgb.view().at(x, y, c) = img.at(x, y, std::min(c, img.channels() - 1));
+        for (int c = 0; c < 3; ++c)
+          rgb.view().at(x, y, c) = img.at(x, y, std::min(c, img.channels() - 1));
     write_image(std::string(dir) + "/" + name + ".png", rgb);
   }
 }
@@ -103,10 +104,10 @@ TEST(InsertObjects, MatchesMonteCarloReference) {
   st.sun_samples = 16;
   st.sky_samples = test::kMcSlowBuild ? 64 : 256;
   st.seed = 7;
-  const Image photo = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting, s.photo_geometry,
-                                              s.photo_materials, st);
-  const Image want = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting, s.full_geometry,
-                                             s.full_materials, st);
+  const Image photo = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting,
+                                              s.photo_geometry, s.photo_materials, st);
+  const Image want = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting,
+                                             s.full_geometry, s.full_materials, st);
   const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
   const Image full_distance = mcref::distance_map(s.camera, s.scene.pose, s.full_geometry);
 
@@ -133,7 +134,8 @@ TEST(InsertObjects, MatchesMonteCarloReference) {
           near_object = near_object || object_pixel(xx, yy);
         }
       bool shadowed = false;
-      for (int c = 0; c < 3; ++c) shadowed = shadowed || want.at(x, y, c) < 0.97f * photo.at(x, y, c);
+      for (int c = 0; c < 3; ++c)
+        shadowed = shadowed || want.at(x, y, c) < 0.97f * photo.at(x, y, c);
       for (int c = 0; c < 3; ++c) {
         const double ref = want.at(x, y, c);
         if (!(ref > 1e-4)) continue;
@@ -149,13 +151,16 @@ TEST(InsertObjects, MatchesMonteCarloReference) {
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x)
         for (int c = 0; c < 3; ++c)
-          err.view().at(x, y, c) = 5 * std::fabs(got.composite.at(x, y, c) - want.at(x, y, c)) / std::max(want.at(x, y, c), 1e-4f);
+          err.view().at(x, y, c) = 5 * std::fabs(got.composite.at(x, y, c) - want.at(x, y, c)) /
+                                   std::max(want.at(x, y, c), 1e-4f);
     save_png(err, "error_x5");
   }
   const double mean = sum / double(n), mean_shadow = sum_shadow / double(n_shadow),
                mean_objects = sum_objects / double(n_objects);
-  std::printf("composite mean rel error %.4f (n %zu); object pixels %.4f (n %zu); object-shadow region %.4f (n %zu)\n",
-              mean, n, mean_objects, n_objects, mean_shadow, n_shadow);
+  std::printf(
+      "composite mean rel error %.4f (n %zu); object pixels %.4f (n %zu); object-shadow region "
+      "%.4f (n %zu)\n",
+      mean, n, mean_objects, n_objects, mean_shadow, n_shadow);
   ASSERT_GT(n_shadow, 300u);  // the shadows are there to test
   ASSERT_GT(n_objects, 600u);
   EXPECT_LT(mean, 0.02);
@@ -172,7 +177,8 @@ TEST(InsertObjects, NoObjectsLeavesThePhotoUnchanged) {
   const InsertScene s = make_scene();
   const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
   const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
-  const InsertResult r = insert_objects(photo, distance, s.camera, s.scene, {}, InsertOptions::preview());
+  const InsertResult r =
+      insert_objects(photo, distance, s.camera, s.scene, {}, InsertOptions::preview());
   for (std::size_t i = 0; i < photo.pixels().size(); ++i)
     ASSERT_EQ(r.composite.pixels()[i], photo.pixels()[i]);
   for (float m : r.matte.pixels()) ASSERT_EQ(m, 0.0f);
@@ -261,7 +267,8 @@ TEST(InsertObjects, FogTakesTheObjectsDepthAndShadows) {
     for (int y = 0; y < s.camera.height; ++y)
       for (int x = 0; x < s.camera.width; ++x)
         if (r.distance_m.at(x, y, 0) < distance.at(x, y, 0)) {
-          EXPECT_NEAR(r.transmittance.at(x, y, 1), std::exp(-0.05f * r.distance_m.at(x, y, 0)), 1e-4f);
+          EXPECT_NEAR(r.transmittance.at(x, y, 1), std::exp(-0.05f * r.distance_m.at(x, y, 0)),
+                      1e-4f);
           checked += r.distance_m.at(x, y, 0) < distance.at(x, y, 0) - 3;
         }
     EXPECT_GT(checked, 50);
@@ -271,7 +278,8 @@ TEST(InsertObjects, FogTakesTheObjectsDepthAndShadows) {
   double darker = 0;
   for (int y = 0; y < s.camera.height; ++y)
     for (int x = 0; x < s.camera.width; ++x) {
-      if (with.matte.at(x, y, 0) > 0 || with.distance_m.at(x, y, 0) != distance.at(x, y, 0)) continue;
+      if (with.matte.at(x, y, 0) > 0 || with.distance_m.at(x, y, 0) != distance.at(x, y, 0))
+        continue;
       const float a = with.inscatter.at(x, y, 1), b = without.inscatter.at(x, y, 1);
       // (The core's sparse-grid interpolation moves by up to ~1 % where the depth changed.)
       EXPECT_LE(a, b * 1.02f + 1e-6f) << x << "," << y;
@@ -297,10 +305,14 @@ TEST(InsertObjects, BadMeshesGiveErrorsNamingTheSource) {
   }
   o.mesh.triangles.pop_back();
   o.mesh.positions[0][1] = std::nanf("");
-  EXPECT_THROW(insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)), Error);
+  EXPECT_THROW(
+      insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)),
+      Error);
   o.mesh.positions[0][1] = 0;
   o.placement.scale = -1;
-  EXPECT_THROW(insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)), Error);
+  EXPECT_THROW(
+      insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)),
+      Error);
 }
 
 // The interactive preview (mr::InsertPreview) renders only the screen tiles the objects, their
@@ -328,8 +340,8 @@ TEST(InsertPreview, FramesEqualTheFullRenderThroughADrag) {
     return changed;
   };
   std::vector<InsertObject> objects = s.objects;
-  const std::size_t changed_first =
-      expect_same(preview.render(objects, InsertOptions::preview()), objects, InsertOptions::preview(), "first");
+  const std::size_t changed_first = expect_same(preview.render(objects, InsertOptions::preview()),
+                                                objects, InsertOptions::preview(), "first");
   EXPECT_GT(changed_first, 500u);  // the objects and their shadows are there
   const auto first = preview.last_frame();
   EXPECT_TRUE(first.objects_rebuilt);
@@ -340,11 +352,12 @@ TEST(InsertPreview, FramesEqualTheFullRenderThroughADrag) {
   objects[0].placement.position_m.x -= 1.5;
   objects[0].placement.position_m.z -= 1.0;
   objects[1].placement.yaw_deg = 30;
-  expect_same(preview.render(objects, InsertOptions::preview()), objects, InsertOptions::preview(), "moved");
+  expect_same(preview.render(objects, InsertOptions::preview()), objects, InsertOptions::preview(),
+              "moved");
   EXPECT_TRUE(preview.last_frame().objects_rebuilt);
   // The idle refinement at the same placement reuses the objects' scene.
-  expect_same(preview.render(objects, InsertOptions::preview_refined()), objects, InsertOptions::preview_refined(),
-              "refined");
+  expect_same(preview.render(objects, InsertOptions::preview_refined()), objects,
+              InsertOptions::preview_refined(), "refined");
   EXPECT_FALSE(preview.last_frame().objects_rebuilt);
   // The full quality's settings through the preview, too (its hashed pattern; mesh_step is the
   // preview's).
@@ -355,7 +368,8 @@ TEST(InsertPreview, FramesEqualTheFullRenderThroughADrag) {
   const std::size_t last_rendered = preview.last_frame().tiles_rendered;
   const InsertResult& none = preview.render({}, InsertOptions::preview());
   EXPECT_EQ(preview.last_frame().tiles_reset, last_rendered);
-  for (std::size_t i = 0; i < photo.pixels().size(); ++i) ASSERT_EQ(none.composite.pixels()[i], photo.pixels()[i]);
+  for (std::size_t i = 0; i < photo.pixels().size(); ++i)
+    ASSERT_EQ(none.composite.pixels()[i], photo.pixels()[i]);
   for (float m : none.matte.pixels()) ASSERT_EQ(m, 0.0f);
   EXPECT_EQ(preview.last_frame().tiles_rendered, 0u);
 }
@@ -374,7 +388,8 @@ TEST(InsertPreview, CancelledFrameThenExactFrame) {
   EXPECT_THROW(preview.render(moved, InsertOptions::preview(), &cancel), Error);
   moved[0].placement.position_m.x += 0.5;
   const InsertResult& got = preview.render(moved, InsertOptions::preview());
-  const InsertResult want = insert_objects(photo, distance, s.camera, s.scene, moved, InsertOptions::preview());
+  const InsertResult want =
+      insert_objects(photo, distance, s.camera, s.scene, moved, InsertOptions::preview());
   for (std::size_t i = 0; i < want.composite.pixels().size(); ++i)
     ASSERT_EQ(got.composite.pixels()[i], want.composite.pixels()[i]) << i;
   InsertOptions fogged = InsertOptions::preview();

@@ -60,7 +60,8 @@ InsertOptions InsertOptions::preview_refined() {
 
 std::vector<Blockers::Polygon> object_shadow_polygons(std::span<const InsertObject> objects) {
   render::insertion::WorldObjects world;
-  for (const InsertObject& o : objects) render::insertion::append_object(world, o.mesh, o.placement, o.material);
+  for (const InsertObject& o : objects)
+    render::insertion::append_object(world, o.mesh, o.placement, o.material);
   std::vector<Blockers::Polygon> polygons;
   polygons.reserve(world.triangle_count());
   for (std::size_t t = 0; t < world.triangle_count(); ++t) {
@@ -84,35 +85,41 @@ struct PreparedPhoto {
   std::optional<render::OccluderScene> photo_scene;
 };
 
-void check_inputs(const Image& photo, const Image& distance_m, const Camera& camera, const FogScene& scene_given,
-                  const InsertOptions& options) {
+void check_inputs(const Image& photo, const Image& distance_m, const Camera& camera,
+                  const FogScene& scene_given, const InsertOptions& options) {
   validate_scene(scene_given);
   if (photo.empty() || photo.channels() < 3)
-    throw Error(ErrorCode::invalid_argument, "insert objects: the photo must have at least 3 channels");
+    throw Error(ErrorCode::invalid_argument,
+                "insert objects: the photo must have at least 3 channels");
   if (distance_m.empty() || distance_m.channels() != 1)
     throw Error(ErrorCode::invalid_argument, "insert objects: the depth map must have 1 channel");
   if (photo.width() != camera.width || photo.height() != camera.height ||
       distance_m.width() != camera.width || distance_m.height() != camera.height)
-    throw Error(ErrorCode::size_mismatch,
-                "insert objects: photo " + std::to_string(photo.width()) + "x" + std::to_string(photo.height()) +
-                    ", depth map " + std::to_string(distance_m.width()) + "x" +
-                    std::to_string(distance_m.height()) + " and camera " + std::to_string(camera.width) +
-                    "x" + std::to_string(camera.height) + " must agree");
+    throw Error(ErrorCode::size_mismatch, "insert objects: photo " + std::to_string(photo.width()) +
+                                              "x" + std::to_string(photo.height()) +
+                                              ", depth map " + std::to_string(distance_m.width()) +
+                                              "x" + std::to_string(distance_m.height()) +
+                                              " and camera " + std::to_string(camera.width) + "x" +
+                                              std::to_string(camera.height) + " must agree");
   for (float d : distance_m.pixels())
     if (std::isnan(d) || d <= 0)
-      throw Error(ErrorCode::invalid_argument,
-                  "insert objects: the distance map holds NaN, zero or negative values (+inf = sky)");
+      throw Error(
+          ErrorCode::invalid_argument,
+          "insert objects: the distance map holds NaN, zero or negative values (+inf = sky)");
   if (options.mesh_step < 1 || options.mesh_step > 16)
-    throw Error(ErrorCode::invalid_argument,
-                "insert objects: mesh_step must be in 1..16, got " + std::to_string(options.mesh_step));
+    throw Error(ErrorCode::invalid_argument, "insert objects: mesh_step must be in 1..16, got " +
+                                                 std::to_string(options.mesh_step));
 }
 
-Lighting resolve_lighting(const Image& photo, const Image& distance_m, const Camera& camera, const FogScene& scene) {
+Lighting resolve_lighting(const Image& photo, const Image& distance_m, const Camera& camera,
+                          const FogScene& scene) {
   Lighting lighting = scene.lighting;
-  if (!lighting.sky_radiance) lighting.sky_radiance = photo::estimate_airlight_dark_channel(photo.view());
+  if (!lighting.sky_radiance)
+    lighting.sky_radiance = photo::estimate_airlight_dark_channel(photo.view());
   if (lighting.sun && lighting.sun->irradiance_auto) {
     lighting.sun->irradiance =
-        photo::exposure_relative_sun(photo.view(), distance_m.view(), *lighting.sky_radiance).irradiance;
+        photo::exposure_relative_sun(photo.view(), distance_m.view(), *lighting.sky_radiance)
+            .irradiance;
     lighting.sun->irradiance_auto = false;
   }
   for (Lamp& lamp : lighting.lamps)
@@ -138,9 +145,11 @@ void build_photo_geometry(PreparedPhoto& prep, const Image& distance_m, const Ca
           render::downsample_distance_nearest(distance_m.view(), camera, step);
       mesh = render::reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, scene.pose);
     } else {
-      mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose, {}, prep.normals.view());
+      mesh = render::reconstruct_occluder_mesh(distance_m.view(), camera, scene.pose, {},
+                                               prep.normals.view());
     }
-    render::append_blockers(mesh, distance_m.view(), prep.normals.view(), camera, scene.pose, scene.blockers);
+    render::append_blockers(mesh, distance_m.view(), prep.normals.view(), camera, scene.pose,
+                            scene.blockers);
     if (mesh.triangle_count() > 0) prep.photo_scene.emplace(std::move(mesh));
   }
 }
@@ -181,7 +190,8 @@ InsertResult insert_objects(const Image& photo, const Image& distance_m, const C
 
   // The objects in world space.
   render::insertion::WorldObjects world;
-  for (const InsertObject& o : objects) render::insertion::append_object(world, o.mesh, o.placement, o.material);
+  for (const InsertObject& o : objects)
+    render::insertion::append_object(world, o.mesh, o.placement, o.material);
   result.timings.triangles = world.triangle_count();
 
   // The photo's geometry.
@@ -191,7 +201,8 @@ InsertResult insert_objects(const Image& photo, const Image& distance_m, const C
   std::optional<render::OccluderScene>& photo_scene = prep.photo_scene;
   throw_if_cancelled(cancel, "insert objects");
   const render::insertion::ObjectScene object_scene(world);
-  const render::insertion::EmbreeVisibility visibility(photo_scene ? &*photo_scene : nullptr, object_scene);
+  const render::insertion::EmbreeVisibility visibility(photo_scene ? &*photo_scene : nullptr,
+                                                       object_scene);
   result.timings.mesh_s = seconds_since(mesh_start);
 
   const auto render_start = Clock::now();
@@ -231,7 +242,8 @@ InsertResult insert_objects(const Image& photo, const Image& distance_m, const C
       }
       fog_scene.blockers.polygons.push_back(std::move(p));
     }
-    FogLayers fogged = fog(result.clear_composite, result.distance_m, camera, fog_scene, nullptr, cancel);
+    FogLayers fogged =
+        fog(result.clear_composite, result.distance_m, camera, fog_scene, nullptr, cancel);
     result.composite = std::move(fogged.composite);
     result.transmittance = std::move(fogged.transmittance);
     result.inscatter = std::move(fogged.inscatter);
@@ -256,13 +268,14 @@ bool same_objects(std::span<const InsertObject> a, std::span<const InsertObject>
     const InsertObject &x = a[i], &y = b[i];
     if (x.material || y.material) return false;
     const ObjectPlacement &p = x.placement, &q = y.placement;
-    if (p.position_m.x != q.position_m.x || p.position_m.y != q.position_m.y || p.position_m.z != q.position_m.z ||
-        p.up.x != q.up.x || p.up.y != q.up.y || p.up.z != q.up.z || p.yaw_deg != q.yaw_deg || p.scale != q.scale)
+    if (p.position_m.x != q.position_m.x || p.position_m.y != q.position_m.y ||
+        p.position_m.z != q.position_m.z || p.up.x != q.up.x || p.up.y != q.up.y ||
+        p.up.z != q.up.z || p.yaw_deg != q.yaw_deg || p.scale != q.scale)
       return false;
     const ObjectMesh &m = x.mesh, &n = y.mesh;
-    if (m.source != n.source || m.positions != n.positions || m.triangles != n.triangles || m.normals != n.normals ||
-        m.uvs != n.uvs || m.triangle_material != n.triangle_material || m.materials.size() != n.materials.size() ||
-        m.textures.size() != n.textures.size())
+    if (m.source != n.source || m.positions != n.positions || m.triangles != n.triangles ||
+        m.normals != n.normals || m.uvs != n.uvs || m.triangle_material != n.triangle_material ||
+        m.materials.size() != n.materials.size() || m.textures.size() != n.textures.size())
       return false;
     for (std::size_t k = 0; k < m.materials.size(); ++k) {
       const ObjectMaterial &u = m.materials[k], &v = n.materials[k];
@@ -320,7 +333,8 @@ struct InsertPreview::Impl {
 };
 
 InsertPreview::InsertPreview(const Image& photo, const Image& distance_m, const Camera& camera,
-                             const FogScene& scene, const InsertOptions& options, const CancelToken* cancel)
+                             const FogScene& scene, const InsertOptions& options,
+                             const CancelToken* cancel)
     : impl_(std::make_unique<Impl>()) {
   const auto start = Clock::now();
   throw_if_cancelled(cancel, "insert objects");
@@ -356,8 +370,8 @@ InsertPreview::~InsertPreview() = default;
 InsertPreview::InsertPreview(InsertPreview&&) noexcept = default;
 InsertPreview& InsertPreview::operator=(InsertPreview&&) noexcept = default;
 
-const InsertResult& InsertPreview::render(std::span<const InsertObject> objects, const InsertOptions& options,
-                                          const CancelToken* cancel) {
+const InsertResult& InsertPreview::render(std::span<const InsertObject> objects,
+                                          const InsertOptions& options, const CancelToken* cancel) {
   const auto start = Clock::now();
   throw_if_cancelled(cancel, "insert objects");
   if (options.fog)
@@ -372,7 +386,8 @@ const InsertResult& InsertPreview::render(std::span<const InsertObject> objects,
   const auto objects_start = Clock::now();
   if (!m.have_objects || !same_objects(objects, m.objects)) {
     auto world = std::make_unique<render::insertion::WorldObjects>();
-    for (const InsertObject& o : objects) render::insertion::append_object(*world, o.mesh, o.placement, o.material);
+    for (const InsertObject& o : objects)
+      render::insertion::append_object(*world, o.mesh, o.placement, o.material);
     auto scene = std::make_unique<render::insertion::ObjectScene>(*world, /*fast_build=*/true);
     m.object_scene = std::move(scene);
     m.world = std::move(world);
@@ -384,10 +399,11 @@ const InsertResult& InsertPreview::render(std::span<const InsertObject> objects,
   m.result.timings.triangles = m.world->triangle_count();
 
   const auto render_start = Clock::now();
-  const render::insertion::EmbreeVisibility visibility(m.prep.photo_scene ? &*m.prep.photo_scene : nullptr,
-                                                       *m.object_scene);
+  const render::insertion::EmbreeVisibility visibility(
+      m.prep.photo_scene ? &*m.prep.photo_scene : nullptr, *m.object_scene);
   const render::insertion::InsertionInputs in = m.inputs(&visibility, cancel);
-  const std::vector<std::uint8_t> touched = render::insertion::influenced_tiles(in, settings, m.tiles);
+  const std::vector<std::uint8_t> touched =
+      render::insertion::influenced_tiles(in, settings, m.tiles);
   std::vector<std::uint8_t> reset(touched.size(), 0);
   for (std::size_t i = 0; i < touched.size(); ++i) {
     reset[i] = m.dirty[i] && !touched[i];
@@ -439,9 +455,17 @@ void InsertPreview::set_lighting(const Lighting& lighting) {
   m.result.lighting = m.prep.scene.lighting;
 }
 
-const InsertPreview::FrameStats& InsertPreview::last_frame() const { return impl_->stats; }
-double InsertPreview::prepare_seconds() const { return impl_->prepare_s; }
-const Lighting& InsertPreview::lighting() const { return impl_->prep.scene.lighting; }
-const Camera& InsertPreview::camera() const { return impl_->camera; }
+const InsertPreview::FrameStats& InsertPreview::last_frame() const {
+  return impl_->stats;
+}
+double InsertPreview::prepare_seconds() const {
+  return impl_->prepare_s;
+}
+const Lighting& InsertPreview::lighting() const {
+  return impl_->prep.scene.lighting;
+}
+const Camera& InsertPreview::camera() const {
+  return impl_->camera;
+}
 
 }  // namespace mr

@@ -78,9 +78,11 @@ Vec3f sky_local(int i, int count, float rotation) {
 }
 Vec3f sky_world(const Vec3f& n, const Vec3f& t, const Vec3f& b, const Vec3f& k) {
   const float a = k[0], c = k[1], z = k[2];
-  return {a * t[0] + c * b[0] + z * n[0], a * t[1] + c * b[1] + z * n[1], a * t[2] + c * b[2] + z * n[2]};
+  return {a * t[0] + c * b[0] + z * n[0], a * t[1] + c * b[1] + z * n[1],
+          a * t[2] + c * b[2] + z * n[2]};
 }
-Vec3f sky_direction(const Vec3f& n, const Vec3f& t, const Vec3f& b, int i, int count, float rotation) {
+Vec3f sky_direction(const Vec3f& n, const Vec3f& t, const Vec3f& b, int i, int count,
+                    float rotation) {
   return sky_world(n, t, b, sky_local(i, count, rotation));
 }
 
@@ -98,9 +100,9 @@ struct RaySet {
 // With several origins (points spread over the pixel's footprint), ray j of each kind starts at
 // origins[j % origin_count], so the shadow is anti-aliased like the camera's samples; lamps start
 // at origins[0].
-void build_rays(RaySet& set, const Lights& L, const Vec3f* origins, int origin_count, const Vec3f& n,
-                float rotation, int sun_start, int sun_stride, int sun_n, int sky_start, int sky_stride,
-                int sky_n, int sky_total) {
+void build_rays(RaySet& set, const Lights& L, const Vec3f* origins, int origin_count,
+                const Vec3f& n, float rotation, int sun_start, int sun_stride, int sun_n,
+                int sky_start, int sky_stride, int sky_n, int sky_total) {
   const Vec3f& origin = origins[0];
   set.size = 0;
   set.sun_first = 0;
@@ -109,7 +111,8 @@ void build_rays(RaySet& set, const Lights& L, const Vec3f* origins, int origin_c
   if (L.sun) {
     for (int j = 0; j < sun_n; ++j) {
       const int i = (sun_start + j * sun_stride) % L.sun_rays;
-      const Vec3f s = rotation == L.fixed_rotation ? L.fixed_sun[std::size_t(i)] : sun_direction(L, i, L.sun_rays, rotation);
+      const Vec3f s = rotation == L.fixed_rotation ? L.fixed_sun[std::size_t(i)]
+                                                   : sun_direction(L, i, L.sun_rays, rotation);
       ++set.sun_total;
       if (dot(n, s) > 0) set.rays[set.size++] = ShadowRay{origins[j % origin_count], s, 0.0f};
     }
@@ -153,13 +156,15 @@ Visibility visibility_of(const RaySet& set, const bool* blocked) {
     for (int i = 0; i < set.sky_count; ++i) seen += !blocked[set.sky_first + i];
     v.sky_share = float(seen) / float(set.sky_count);
   }
-  for (int i = 0; i < set.lamp_count && i < 16; ++i) v.lamp[i] = blocked[set.lamp_first + i] ? 0.0f : 1.0f;
+  for (int i = 0; i < set.lamp_count && i < 16; ++i)
+    v.lamp[i] = blocked[set.lamp_first + i] ? 0.0f : 1.0f;
   return v;
 }
 
 // The shading terms of a point under the lights with the given visibilities (the one call into
 // the shared BRDF code; an alternative shading path replaces this function).
-ShadingTerms terms_at(const Lights& L, const SurfacePoint& base, const Visibility& vis, float roughness) {
+ShadingTerms terms_at(const Lights& L, const SurfacePoint& base, const Visibility& vis,
+                      float roughness) {
   SurfacePoint p = base;
   p.sun_visibility = vis.sun;
   p.sky_visibility = 0.5f * (1 + p.normal[1]) * vis.sky_share;
@@ -178,7 +183,8 @@ ShadingTerms terms_at(const Lights& L, const SurfacePoint& base, const Visibilit
 
 // Whether a ray from `origin` along unit `dir` (spreading by tan_spread per metre) can pass
 // within the bounding sphere (centre c, radius r) at t > 0, before t_max.
-bool may_hit_sphere(const Vec3f& origin, const Vec3f& dir, float tan_spread, const std::array<float, 4>& s,
+bool may_hit_sphere(const Vec3f& origin, const Vec3f& dir, float tan_spread,
+                    const std::array<float, 4>& s,
                     float t_max = std::numeric_limits<float>::infinity()) {
   const Vec3f q = {s[0] - origin[0], s[1] - origin[1], s[2] - origin[2]};
   const float along = dot(q, dir);
@@ -193,7 +199,8 @@ bool may_hit_sphere(const Vec3f& origin, const Vec3f& dir, float tan_spread, con
 
 }  // namespace
 
-void EmbreeVisibility::occluded(Geometry which, std::span<const ShadowRay> rays, bool* blocked) const {
+void EmbreeVisibility::occluded(Geometry which, std::span<const ShadowRay> rays,
+                                bool* blocked) const {
   if (which == Geometry::objects) {
     objects_.occluded(rays, blocked);
     return;
@@ -227,7 +234,8 @@ bool ray_may_hit(const ShadowRay& ray, const std::vector<std::array<float, 4>>& 
   const float len = std::sqrt(dot(d, d));
   if (!(len > 0)) return true;
   d = {d[0] / len, d[1] / len, d[2] / len};
-  const float t_max = std::isfinite(ray.t_far) ? ray.t_far * len : std::numeric_limits<float>::infinity();
+  const float t_max =
+      std::isfinite(ray.t_far) ? ray.t_far * len : std::numeric_limits<float>::infinity();
   for (const auto& s : spheres)
     if (may_hit_sphere(o, d, 0, s, t_max)) return true;
   return false;
@@ -268,11 +276,13 @@ class Renderer {
 
  private:
   Vec3f ray_direction(double x, double y) const {
-    const double u = (x + 0.5 - in.camera.cx) / in.camera.focal_px, v = (y + 0.5 - in.camera.cy) / in.camera.focal_px;
+    const double u = (x + 0.5 - in.camera.cx) / in.camera.focal_px,
+                 v = (y + 0.5 - in.camera.cy) / in.camera.focal_px;
     const Vec3& f = cam_axes_[0];
     const Vec3& r = cam_axes_[1];
     const Vec3& up = cam_axes_[2];
-    const double dx = u * r.x - v * up.x + f.x, dy = u * r.y - v * up.y + f.y, dz = u * r.z - v * up.z + f.z;
+    const double dx = u * r.x - v * up.x + f.x, dy = u * r.y - v * up.y + f.y,
+                 dz = u * r.z - v * up.z + f.z;
     const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
     return Vec3f{float(dx / len), float(dy / len), float(dz / len)};
   }
@@ -304,24 +314,32 @@ class Renderer {
 };
 
 Renderer::Renderer(const InsertionInputs& in_, const InsertionSettings& settings_)
-    : in(in_), settings(settings_), w_(in_.camera.width), h_(in_.camera.height), world_(check_objects(in_)) {
+    : in(in_),
+      settings(settings_),
+      w_(in_.camera.width),
+      h_(in_.camera.height),
+      world_(check_objects(in_)) {
   const int w = w_, h = h_;
   auto check = [&](ConstImageView v, int channels_min, int channels_max, const char* what) {
     if (v.width != w || v.height != h)
       throw Error(ErrorCode::size_mismatch, std::string("insert objects: the ") + what + " is " +
-                                                std::to_string(v.width) + "x" + std::to_string(v.height) +
-                                                ", the camera " + std::to_string(w) + "x" + std::to_string(h));
+                                                std::to_string(v.width) + "x" +
+                                                std::to_string(v.height) + ", the camera " +
+                                                std::to_string(w) + "x" + std::to_string(h));
     if (v.channels < channels_min || v.channels > channels_max)
-      throw Error(ErrorCode::invalid_argument, std::string("insert objects: the ") + what + " has " +
-                                                   std::to_string(v.channels) + " channels");
+      throw Error(ErrorCode::invalid_argument, std::string("insert objects: the ") + what +
+                                                   " has " + std::to_string(v.channels) +
+                                                   " channels");
   };
   check(in.photo, 3, 64, "photo");
   check(in.distance_m, 1, 1, "distance map");
   check(in.normals, 3, 3, "normal map");
   if (settings.samples_per_axis < 1 || settings.samples_per_axis > 8)
-    throw Error(ErrorCode::invalid_argument, "insert objects: samples_per_axis must be in 1..8, got " +
-                                                 std::to_string(settings.samples_per_axis));
-  if (settings.sun_rays < 1 || settings.sun_rays > 64 || settings.sky_rays < 0 || settings.sky_rays > 128)
+    throw Error(ErrorCode::invalid_argument,
+                "insert objects: samples_per_axis must be in 1..8, got " +
+                    std::to_string(settings.samples_per_axis));
+  if (settings.sun_rays < 1 || settings.sun_rays > 64 || settings.sky_rays < 0 ||
+      settings.sky_rays > 128)
     throw Error(ErrorCode::invalid_argument,
                 "insert objects: sun_rays must be in 1..64 and sky_rays in 0..128");
   if (in.lighting.lamps.size() > 16)
@@ -348,9 +366,11 @@ Renderer::Renderer(const InsertionInputs& in_, const InsertionSettings& settings
   }
   if (settings.fixed_pattern) {
     L_.fixed_rotation = kFixedRotation;
-    for (int i = 0; i < L_.sun_rays; ++i) L_.fixed_sun.push_back(sun_direction(L_, i, L_.sun_rays, kFixedRotation));
+    for (int i = 0; i < L_.sun_rays; ++i)
+      L_.fixed_sun.push_back(sun_direction(L_, i, L_.sun_rays, kFixedRotation));
     L_.fixed_sky_total = std::max(settings.sky_rays, 1);
-    for (int i = 0; i < L_.fixed_sky_total; ++i) L_.fixed_sky.push_back(sky_local(i, L_.fixed_sky_total, kFixedRotation));
+    for (int i = 0; i < L_.fixed_sky_total; ++i)
+      L_.fixed_sky.push_back(sky_local(i, L_.fixed_sky_total, kFixedRotation));
   }
 
   S_ = settings.samples_per_axis;
@@ -378,13 +398,16 @@ Renderer::Renderer(const InsertionInputs& in_, const InsertionSettings& settings
       }
       const double u = (c.x * right.x + c.y * right.y + c.z * right.z) / z;
       const double v = -(c.x * up.x + c.y * up.y + c.z * up.z) / z;
-      const double px = in.camera.cx + u * in.camera.focal_px, py = in.camera.cy + v * in.camera.focal_px;
-      xmin = std::min(xmin, px), xmax = std::max(xmax, px), ymin = std::min(ymin, py), ymax = std::max(ymax, py);
+      const double px = in.camera.cx + u * in.camera.focal_px,
+                   py = in.camera.cy + v * in.camera.focal_px;
+      xmin = std::min(xmin, px), xmax = std::max(xmax, px), ymin = std::min(ymin, py),
+      ymax = std::max(ymax, py);
     }
     if (behind)
       rects_.push_back({0, 0, w - 1, h - 1});
     else
-      rects_.push_back({int(std::max(0.0, std::floor(xmin) - 1)), int(std::max(0.0, std::floor(ymin) - 1)),
+      rects_.push_back({int(std::max(0.0, std::floor(xmin) - 1)),
+                        int(std::max(0.0, std::floor(ymin) - 1)),
                         int(std::min(double(w - 1), std::ceil(xmax) + 1)),
                         int(std::min(double(h - 1), std::ceil(ymax) + 1))});
   }
@@ -414,10 +437,12 @@ bool Renderer::tile_influenced(const std::array<float, 5>& bound, const Rect& ti
   // approach moves with o) and a millimetre for rounding, pass whenever one of the pixel's does.
   for (std::size_t k = 0; k < world_.tight_bounds.size(); ++k) {
     const auto& s = world_.tight_bounds[k];
-    const float sky_radius = (settings.sky_influence_tight ? world_.tight_bounds : world_.bounds)[k][3];
+    const float sky_radius =
+        (settings.sky_influence_tight ? world_.tight_bounds : world_.bounds)[k][3];
     if (L_.sun) {
       const float spread = L_.sun_tan_radius * 1.01f;
-      if (may_hit_sphere(c, L_.sun_dir, spread, {s[0], s[1], s[2], s[3] + bound[4] + rt * (2 + spread) + 1e-3f}))
+      if (may_hit_sphere(c, L_.sun_dir, spread,
+                         {s[0], s[1], s[2], s[3] + bound[4] + rt * (2 + spread) + 1e-3f}))
         return true;
     }
     const Vec3f q = {s[0] - c[0], s[1] - c[1], s[2] - c[2]};
@@ -443,7 +468,8 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
   const std::uint32_t seed = physics::hash32(std::uint32_t(y) * 73856093u ^ std::uint32_t(x));
   // A fixed pattern (the preview): every pixel draws the same directions, so neighbours agree
   // (no salt-and-pepper speckle) and nothing shimmers between frames.
-  const float rotation = st.fixed_pattern ? kFixedRotation : float(seed >> 8) * (1.0f / 16777216.0f);
+  const float rotation =
+      st.fixed_pattern ? kFixedRotation : float(seed >> 8) * (1.0f / 16777216.0f);
   const float d = in.distance_m.at(x, y, 0);
   const float* I = in.photo.pixel(x, y);
 
@@ -461,13 +487,17 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
       const auto& s = world.tight_bounds[k];
       const float sky_radius = (st.sky_influence_tight ? world.tight_bounds : world.bounds)[k][3];
       if (L.sun && dot(n, L.sun_dir) > -L.sun_tan_radius)
-        sun_maybe = sun_maybe || may_hit_sphere(origin, L.sun_dir, L.sun_tan_radius * 1.01f, {s[0], s[1], s[2], s[3] + footprint});
+        sun_maybe = sun_maybe || may_hit_sphere(origin, L.sun_dir, L.sun_tan_radius * 1.01f,
+                                                {s[0], s[1], s[2], s[3] + footprint});
       const Vec3f q = {s[0] - origin[0], s[1] - origin[1], s[2] - origin[2]};
-      sky_maybe = sky_maybe || dot(q, q) < float(st.sky_influence_radii * st.sky_influence_radii) * sky_radius * sky_radius;
+      sky_maybe = sky_maybe || dot(q, q) < float(st.sky_influence_radii * st.sky_influence_radii) *
+                                               sky_radius * sky_radius;
       for (const Vec3f& lp : L.lamp_position) {
         const Vec3f to = sub3(lp, origin);
         const float len = std::sqrt(dot(to, to));
-        if (len > 0) lamp_maybe = lamp_maybe || may_hit_sphere(origin, {to[0] / len, to[1] / len, to[2] / len}, 0, s, len);
+        if (len > 0)
+          lamp_maybe = lamp_maybe ||
+                       may_hit_sphere(origin, {to[0] / len, to[1] / len, to[2] / len}, 0, s, len);
       }
     }
     if (sun_maybe || sky_maybe || lamp_maybe) {
@@ -476,14 +506,16 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
       Vec3f origins[64];
       int origin_count = 0;
       for (int k = 0; k < S2; ++k) {
-        const float sx = float(x) + (float(k % S) + 0.5f) / float(S), sy = float(y) + (float(k / S) + 0.5f) / float(S);
+        const float sx = float(x) + (float(k % S) + 0.5f) / float(S),
+                    sy = float(y) + (float(k / S) + 0.5f) / float(S);
         const Vec3f r = ray_direction(double(sx) - 0.5, double(sy) - 0.5);
         const float denom = dot(r, n);
         const float t = denom < -1e-3f ? dot(sub3(p, eye), n) / denom : -1.0f;
-        origins[origin_count++] = (t > 0.9f * d && t < 1.1f * d) ? add3(add3(eye, r, t), n, lift) : origin;
+        origins[origin_count++] =
+            (t > 0.9f * d && t < 1.1f * d) ? add3(add3(eye, r, t), n, lift) : origin;
       }
-      build_rays(set, L, origins, origin_count, n, rotation, 0, 1, L.sun ? L.sun_rays : 0, 0, 1, sky_total,
-                 std::max(sky_total, 1));
+      build_rays(set, L, origins, origin_count, n, rotation, 0, 1, L.sun ? L.sun_rays : 0, 0, 1,
+                 sky_total, std::max(sky_total, 1));
       const std::span<const ShadowRay> rays(set.rays, std::size_t(set.size));
       // Against the objects, only the rays that can meet one's bounding sphere are traced: the
       // others cannot be blocked by them (an exact cull, far cheaper than the BVH's traversal).
@@ -498,9 +530,11 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
         scratch.compact[traced++] = set.rays[i];
       }
       if (traced > 0) {
-        in.visibility->occluded(Geometry::objects, std::span<const ShadowRay>(scratch.compact, std::size_t(traced)),
+        in.visibility->occluded(Geometry::objects,
+                                std::span<const ShadowRay>(scratch.compact, std::size_t(traced)),
                                 scratch.blocked_compact);
-        for (int k = 0; k < traced; ++k) blocked_objects[scratch.index[k]] = scratch.blocked_compact[k];
+        for (int k = 0; k < traced; ++k)
+          blocked_objects[scratch.index[k]] = scratch.blocked_compact[k];
       }
       scratch.shadow_rays += std::size_t(traced);
       bool any = false;
@@ -524,7 +558,8 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
 
   // ---- The objects: sub-pixel camera rays, occlusion, shading --------------------
   bool in_rect = false;
-  for (const Rect& r : rects_) in_rect = in_rect || (x >= r.x0 && x <= r.x1 && y >= r.y0 && y <= r.y1);
+  for (const Rect& r : rects_)
+    in_rect = in_rect || (x >= r.x0 && x <= r.x1 && y >= r.y0 && y <= r.y1);
   float coverage = 0;
   Rgb radiance = {0, 0, 0};
   float new_distance = d;
@@ -542,10 +577,14 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
       const std::uint32_t hk = physics::hash32(seed ^ (0x9E3779B9u * std::uint32_t(k + 1)));
       const float jx = st.fixed_pattern ? 0.5f : float(hk & 0xFFFF) / 65536.0f;
       const float jy = st.fixed_pattern ? 0.5f : float(hk >> 16) / 65536.0f;
-      const float sx = float(x) + (float(si) + jx) / float(S), sy = float(y) + (float(sj) + jy) / float(S);
+      const float sx = float(x) + (float(si) + jx) / float(S),
+                  sy = float(y) + (float(sj) + jy) / float(S);
       // One sample at the pixel's centre is the centre ray itself.
-      const Vec3f dir = S == 1 && st.fixed_pattern ? centre_ray : ray_direction(double(sx) - 0.5, double(sy) - 0.5);
-      const ObjectHit hit = S == 1 && st.fixed_pattern ? centre : in.objects->intersect(eye, dir, 0.0f);
+      const Vec3f dir = S == 1 && st.fixed_pattern
+                            ? centre_ray
+                            : ray_direction(double(sx) - 0.5, double(sy) - 0.5);
+      const ObjectHit hit =
+          S == 1 && st.fixed_pattern ? centre : in.objects->intersect(eye, dir, 0.0f);
       if (!(S == 1 && st.fixed_pattern)) ++scratch.camera_rays;
       if (!hit.hit()) continue;
       const float vis = depth_visibility(sx, sy, hit.t);
@@ -566,7 +605,8 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
         Vec3f m{0, 0, 0};
         const float bw[3] = {1 - hit.u - hit.v, hit.u, hit.v};
         for (int k2 = 0; k2 < 3; ++k2)
-          for (int cc = 0; cc < 3; ++cc) m[cc] += bw[k2] * world.normals[3 * std::size_t(tri[k2]) + cc];
+          for (int cc = 0; cc < 3; ++cc)
+            m[cc] += bw[k2] * world.normals[3 * std::size_t(tri[k2]) + cc];
         m = unit(m);
         if (dot(m, ng) < 0) m = {-m[0], -m[1], -m[2]};
         ns = m;
@@ -576,8 +616,8 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
       if (nv < 0.02f) ns = unit(add3(ns, view, 0.02f - nv));
       const Vec3f hp = add3(eye, dir, hit.t);
       const Vec3f origin = add3(hp, ng, 1e-4f + 2e-5f * hit.t);
-      build_rays(set, L, &origin, 1, ns, rotation, k % std::max(L.sun_rays, 1), S2, sun_n, k % std::max(sky_total, 1),
-                 S2, sky_n, std::max(sky_total, 1));
+      build_rays(set, L, &origin, 1, ns, rotation, k % std::max(L.sun_rays, 1), S2, sun_n,
+                 k % std::max(sky_total, 1), S2, sky_n, std::max(sky_total, 1));
       const std::span<const ShadowRay> rays(set.rays, std::size_t(set.size));
       if (st.fixed_pattern) {
         // A fixed pattern would turn the facets' self-shadowing (directions above the smooth
@@ -589,15 +629,18 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
         for (int i = 0; i < set.size; ++i) {
           blocked_objects[i] = false;
           const ShadowRay& r = set.rays[i];
-          if (i < set.lamp_first && r.direction[0] * ng[0] + r.direction[1] * ng[1] + r.direction[2] * ng[2] <= 0)
+          if (i < set.lamp_first &&
+              r.direction[0] * ng[0] + r.direction[1] * ng[1] + r.direction[2] * ng[2] <= 0)
             continue;
           scratch.index[traced] = i;
           scratch.compact[traced++] = r;
         }
         if (traced > 0) {
-          in.visibility->occluded(Geometry::objects, std::span<const ShadowRay>(scratch.compact, std::size_t(traced)),
+          in.visibility->occluded(Geometry::objects,
+                                  std::span<const ShadowRay>(scratch.compact, std::size_t(traced)),
                                   scratch.blocked_compact);
-          for (int k = 0; k < traced; ++k) blocked_objects[scratch.index[k]] = scratch.blocked_compact[k];
+          for (int k = 0; k < traced; ++k)
+            blocked_objects[scratch.index[k]] = scratch.blocked_compact[k];
         }
         scratch.shadow_rays += std::size_t(traced);
       } else {
@@ -615,8 +658,8 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
       sp.position_m = hp;
       const ShadingTerms t = terms_at(L, sp, visibility_of(set, blocked_any), refl.roughness);
       for (int cc = 0; cc < 3; ++cc)
-        radiance[cc] += vis * (refl.diffuse_albedo[cc] * t.diffuse[cc] + refl.f0[cc] * t.specular_f0[cc] +
-                               t.specular_bias[cc]);
+        radiance[cc] += vis * (refl.diffuse_albedo[cc] * t.diffuse[cc] +
+                               refl.f0[cc] * t.specular_f0[cc] + t.specular_bias[cc]);
       coverage += vis;
     }
     coverage /= float(S2);
@@ -673,10 +716,13 @@ InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSetti
 }
 
 PhotoTiles photo_tiles(const InsertionInputs& in, int tile_px) {
-  if (tile_px < 1) throw Error(ErrorCode::invalid_argument, "insert objects: tile size must be >= 1");
+  if (tile_px < 1)
+    throw Error(ErrorCode::invalid_argument, "insert objects: tile size must be >= 1");
   const int w = in.camera.width, h = in.camera.height;
-  if (in.distance_m.width != w || in.distance_m.height != h || in.normals.width != w || in.normals.height != h)
-    throw Error(ErrorCode::size_mismatch, "insert objects: the distance and normal maps must be the camera's size");
+  if (in.distance_m.width != w || in.distance_m.height != h || in.normals.width != w ||
+      in.normals.height != h)
+    throw Error(ErrorCode::size_mismatch,
+                "insert objects: the distance and normal maps must be the camera's size");
   PhotoTiles tiles;
   tiles.tile_px = tile_px;
   tiles.tiles_x = (w + tile_px - 1) / tile_px;
@@ -695,8 +741,10 @@ PhotoTiles photo_tiles(const InsertionInputs& in, int tile_px) {
           const Vec3f n = {in.normals.at(x, y, 0), in.normals.at(x, y, 1), in.normals.at(x, y, 2)};
           if (!(std::isfinite(d) && d > 0 && dot(n, n) > 0.5f)) continue;
           // The shadow rays' origin exactly as Renderer::shade computes it.
-          const double u = (x + 0.5 - in.camera.cx) / in.camera.focal_px, v = (y + 0.5 - in.camera.cy) / in.camera.focal_px;
-          const double dx = u * axes[1].x - v * axes[2].x + axes[0].x, dy = u * axes[1].y - v * axes[2].y + axes[0].y,
+          const double u = (x + 0.5 - in.camera.cx) / in.camera.focal_px,
+                       v = (y + 0.5 - in.camera.cy) / in.camera.focal_px;
+          const double dx = u * axes[1].x - v * axes[2].x + axes[0].x,
+                       dy = u * axes[1].y - v * axes[2].y + axes[0].y,
                        dz = u * axes[1].z - v * axes[2].z + axes[0].z;
           const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
           const Vec3f ray{float(dx / len), float(dy / len), float(dz / len)};
@@ -716,14 +764,16 @@ PhotoTiles photo_tiles(const InsertionInputs& in, int tile_px) {
   return tiles;
 }
 
-std::vector<std::uint8_t> influenced_tiles(const InsertionInputs& in, const InsertionSettings& settings,
+std::vector<std::uint8_t> influenced_tiles(const InsertionInputs& in,
+                                           const InsertionSettings& settings,
                                            const PhotoTiles& tiles) {
   const Renderer renderer(in, settings);
   std::vector<std::uint8_t> mask(tiles.bounds.size(), 0);
   const int w = in.camera.width, h = in.camera.height;
   for (int ty = 0; ty < tiles.tiles_y; ++ty)
     for (int tx = 0; tx < tiles.tiles_x; ++tx) {
-      const Rect r = {tx * tiles.tile_px, ty * tiles.tile_px, std::min(w, (tx + 1) * tiles.tile_px) - 1,
+      const Rect r = {tx * tiles.tile_px, ty * tiles.tile_px,
+                      std::min(w, (tx + 1) * tiles.tile_px) - 1,
                       std::min(h, (ty + 1) * tiles.tile_px) - 1};
       const std::size_t i = std::size_t(ty) * std::size_t(tiles.tiles_x) + std::size_t(tx);
       mask[i] = renderer.tile_influenced(tiles.bounds[i], r) ? 1 : 0;
@@ -731,14 +781,16 @@ std::vector<std::uint8_t> influenced_tiles(const InsertionInputs& in, const Inse
   return mask;
 }
 
-void render_insertion_tiles(const InsertionInputs& in, const InsertionSettings& settings, const PhotoTiles& tiles,
-                            std::span<const std::uint8_t> render_mask, std::span<const std::uint8_t> clean_mask,
-                            InsertionLayers& out) {
+void render_insertion_tiles(const InsertionInputs& in, const InsertionSettings& settings,
+                            const PhotoTiles& tiles, std::span<const std::uint8_t> render_mask,
+                            std::span<const std::uint8_t> clean_mask, InsertionLayers& out) {
   const Renderer renderer(in, settings);
   const int w = in.camera.width, h = in.camera.height;
-  if (out.composite.width() != w || out.composite.height() != h || out.composite.channels() != in.photo.channels)
+  if (out.composite.width() != w || out.composite.height() != h ||
+      out.composite.channels() != in.photo.channels)
     out = allocate_layers(w, h, in.photo.channels);
-  if (render_mask.size() != tiles.bounds.size() || (!clean_mask.empty() && clean_mask.size() != tiles.bounds.size()))
+  if (render_mask.size() != tiles.bounds.size() ||
+      (!clean_mask.empty() && clean_mask.size() != tiles.bounds.size()))
     throw Error(ErrorCode::invalid_argument, "insert objects: a tile mask of the wrong size");
   std::vector<int> todo;
   for (std::size_t i = 0; i < tiles.bounds.size(); ++i)
@@ -746,20 +798,22 @@ void render_insertion_tiles(const InsertionInputs& in, const InsertionSettings& 
   std::atomic<std::size_t> shadow_rays{0}, camera_rays{0};
   tbb::task_arena arena(settings.threads > 0 ? settings.threads : tbb::task_arena::automatic);
   arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size()), [&](const tbb::blocked_range<std::size_t>& r) {
-      Renderer::Scratch scratch;
-      for (std::size_t k = r.begin(); k != r.end(); ++k) {
-        throw_if_cancelled(in.cancel, "insert objects");
-        const int i = todo[k];
-        const int tx = i % tiles.tiles_x, ty = i / tiles.tiles_x;
-        const bool render = render_mask[std::size_t(i)] != 0;
-        for (int y = ty * tiles.tile_px; y < std::min(h, (ty + 1) * tiles.tile_px); ++y)
-          for (int x = tx * tiles.tile_px; x < std::min(w, (tx + 1) * tiles.tile_px); ++x)
-            render ? renderer.shade(x, y, out, scratch) : renderer.clean(x, y, out);
-      }
-      shadow_rays += scratch.shadow_rays;
-      camera_rays += scratch.camera_rays;
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, todo.size()),
+        [&](const tbb::blocked_range<std::size_t>& r) {
+          Renderer::Scratch scratch;
+          for (std::size_t k = r.begin(); k != r.end(); ++k) {
+            throw_if_cancelled(in.cancel, "insert objects");
+            const int i = todo[k];
+            const int tx = i % tiles.tiles_x, ty = i / tiles.tiles_x;
+            const bool render = render_mask[std::size_t(i)] != 0;
+            for (int y = ty * tiles.tile_px; y < std::min(h, (ty + 1) * tiles.tile_px); ++y)
+              for (int x = tx * tiles.tile_px; x < std::min(w, (tx + 1) * tiles.tile_px); ++x)
+                render ? renderer.shade(x, y, out, scratch) : renderer.clean(x, y, out);
+          }
+          shadow_rays += scratch.shadow_rays;
+          camera_rays += scratch.camera_rays;
+        });
   });
   out.shadow_rays = shadow_rays;
   out.camera_rays = camera_rays;

@@ -152,14 +152,15 @@ struct PhotoTiles {
 };
 PhotoTiles photo_tiles(const InsertionInputs& in, int tile_px = 8);
 /// 1 for every tile the objects of `in` may change (a few microseconds per tile).
-std::vector<std::uint8_t> influenced_tiles(const InsertionInputs& in, const InsertionSettings& settings,
+std::vector<std::uint8_t> influenced_tiles(const InsertionInputs& in,
+                                           const InsertionSettings& settings,
                                            const PhotoTiles& tiles);
 /// Renders the tiles with render_mask[i] != 0 into `out` (allocated at the camera's size when it
 /// is not) and resets those with clean_mask[i] != 0 (and not rendered) to the photo's own values
 /// (the composite = the photo, shadow 1, matte 0, the photo's distance); others are left alone.
 /// clean_mask may be empty. out's ray counts are this call's.
-void render_insertion_tiles(const InsertionInputs& in, const InsertionSettings& settings, const PhotoTiles& tiles,
-                            std::span<const std::uint8_t> render_mask, std::span<const std::uint8_t> clean_mask,
-                            InsertionLayers& out);
+void render_insertion_tiles(const InsertionInputs& in, const InsertionSettings& settings,
+                            const PhotoTiles& tiles, std::span<const std::uint8_t> render_mask,
+                            std::span<const std::uint8_t> clean_mask, InsertionLayers& out);
 
 }  // namespace mr::render::insertion

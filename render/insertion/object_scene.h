@@ -44,10 +44,10 @@ struct SurfaceReflectance {
 /// Every inserted object's triangles in world metres (placement applied), with what shading
 /// needs per vertex and per triangle. Holds copies of the meshes' textures.
 struct WorldObjects {
-  std::vector<float> positions;   ///< x, y, z per vertex (plus one float of padding at the end)
-  std::vector<float> normals;     ///< x, y, z per vertex (unit; zero where the mesh had none)
-  std::vector<float> uvs;         ///< u, v per vertex (0 where the mesh had none)
-  std::vector<std::uint32_t> indices;         ///< 3 per triangle
+  std::vector<float> positions;  ///< x, y, z per vertex (plus one float of padding at the end)
+  std::vector<float> normals;    ///< x, y, z per vertex (unit; zero where the mesh had none)
+  std::vector<float> uvs;        ///< u, v per vertex (0 where the mesh had none)
+  std::vector<std::uint32_t> indices;            ///< 3 per triangle
   std::vector<std::uint32_t> triangle_material;  ///< per triangle, index into materials
   std::vector<std::uint8_t> smooth;  ///< per triangle: 1 = interpolate vertex normals, 0 = flat
   std::vector<ShadingMaterial> materials;

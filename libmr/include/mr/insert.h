@@ -68,11 +68,11 @@ struct MR_API InsertOptions {
 
 /// The layers of a photo with inserted objects, all the photo's size, scene-linear float.
 struct MR_API InsertResult {
-  Image composite;  ///< the photo with the objects (fogged when InsertOptions::fog)
+  Image composite;        ///< the photo with the objects (fogged when InsertOptions::fog)
   Image clear_composite;  ///< the composite before fog (= composite without fog)
-  Image matte;       ///< 1 channel: the objects' coverage after occlusion, in [0, 1]
-  Image shadow;      ///< R,G,B: the photo's shading with / without the objects (1: unchanged)
-  Image difference;  ///< R,G,B: clear_composite - photo
+  Image matte;            ///< 1 channel: the objects' coverage after occlusion, in [0, 1]
+  Image shadow;           ///< R,G,B: the photo's shading with / without the objects (1: unchanged)
+  Image difference;       ///< R,G,B: clear_composite - photo
   Image distance_m;  ///< 1 channel: the objects' distance where they are in front, else the photo's
   Image transmittance, inscatter;  ///< the fog's T and R (empty without fog)
   Lighting lighting;  ///< the light used, resolved (sky radiance and automatic strengths set)
@@ -110,8 +110,9 @@ MR_API InsertResult insert_objects(const Image& photo, const Image& distance_m,
 class MR_API InsertPreview {
  public:
   /// Throws as insert_objects does for bad inputs; mr::Error(cancelled).
-  InsertPreview(const Image& photo, const Image& distance_m, const Camera& camera, const FogScene& scene,
-                const InsertOptions& options = InsertOptions::preview(), const CancelToken* cancel = nullptr);
+  InsertPreview(const Image& photo, const Image& distance_m, const Camera& camera,
+                const FogScene& scene, const InsertOptions& options = InsertOptions::preview(),
+                const CancelToken* cancel = nullptr);
   ~InsertPreview();
   InsertPreview(InsertPreview&&) noexcept;
   InsertPreview& operator=(InsertPreview&&) noexcept;
@@ -125,7 +126,8 @@ class MR_API InsertPreview {
   /// are the photo's size; clear_composite, transmittance and inscatter stay empty. The
   /// reference is valid until the next render() or the preview's destruction. Cancelled
   /// (mr::Error cancelled): the next frame is still right.
-  const InsertResult& render(std::span<const InsertObject> objects, const InsertOptions& options = InsertOptions::preview(),
+  const InsertResult& render(std::span<const InsertObject> objects,
+                             const InsertOptions& options = InsertOptions::preview(),
                              const CancelToken* cancel = nullptr);
 
   /// Replaces the light (sun, sky, lamps; automatic strengths resolved against the photo as the
