@@ -2,14 +2,24 @@
 // into a 12 MP photo (4000 x 3000; ground, a side wall, a back wall at 30 m) under sun and sky:
 // the full-quality render (16 camera rays, 16 sun and 64 sky rays per pixel, full-resolution
 // occluder mesh) and the interactive preview at preview resolution (1000 x 750: 1 camera ray,
-// 4 sun and 8 sky rays, occluder mesh at half that). Each iteration is a first frame: normals,
-// occluder mesh, both BVHs and the render. Run:
+// 1 sun and 8 sky rays in a fixed pattern, occluder mesh at half that) through insert_objects.
+// Each iteration is a first frame: normals, occluder mesh, both BVHs and the render. Run:
 //   build/bench/mr_bench_insert --benchmark_repetitions=3
 // and read the CPU column (the machine is shared; wall times mean little there).
+//
+// mr-studio's preview is an mr::InsertPreview: the photo's part (normals, occluder mesh, BVH,
+// tile bounds) is made once per photo (BM_PreviewPrepare), then each frame builds the objects'
+// scene when they changed and shades only the screen tiles the objects and their shadows can
+// touch: BM_PreviewFirstFrame (the model dropped on a prepared photo), BM_PreviewDrag (a frame
+// of a drag: the model 5 cm further each frame, the draft settings), BM_PreviewRefine (the idle
+// refinement at the same placement: 2 x 2 camera rays, 8 sun and 32 sky rays). The frames run at
+// the bench's preview size (1000 x 750) and at mr-studio's draft size (577 x 433 = 0.25 MP, what
+// a drag shows there).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "../tests/insert_test_meshes.h"
@@ -45,7 +55,8 @@ Photo make_photo(int width, int height) {
       }
       p.distance_m.view().at(x, y, 0) = float(t);
       for (int c = 0; c < 3; ++c)
-        p.photo.view().at(x, y, c) = 0.2f + 0.1f * float(c) + 0.05f * std::sin(0.01f * float(x + y));
+        p.photo.view().at(x, y, c) =
+            0.2f + 0.1f * float(c) + 0.05f * std::sin(0.01f * float(x + y));
     }
   return p;
 }
@@ -72,7 +83,8 @@ void BM_InsertFull12MP(benchmark::State& state) {
   const auto objects = model();
   mr::InsertOptions options;
   for (auto _ : state) {
-    mr::InsertResult r = mr::insert_objects(p.photo, p.distance_m, p.camera, scene, objects, options);
+    mr::InsertResult r =
+        mr::insert_objects(p.photo, p.distance_m, p.camera, scene, objects, options);
     benchmark::DoNotOptimize(r.composite.data());
     state.counters["mesh_s"] = r.timings.mesh_s;
     state.counters["render_s"] = r.timings.render_s;
@@ -87,13 +99,115 @@ void BM_InsertPreview(benchmark::State& state) {
   const auto objects = model();
   const mr::InsertOptions options = mr::InsertOptions::preview();
   for (auto _ : state) {
-    mr::InsertResult r = mr::insert_objects(p.photo, p.distance_m, p.camera, scene, objects, options);
+    mr::InsertResult r =
+        mr::insert_objects(p.photo, p.distance_m, p.camera, scene, objects, options);
     benchmark::DoNotOptimize(r.composite.data());
     state.counters["mesh_s"] = r.timings.mesh_s;
     state.counters["render_s"] = r.timings.render_s;
   }
 }
 BENCHMARK(BM_InsertPreview)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
+
+void BM_PreviewPrepare(benchmark::State& state) {
+  const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
+  const mr::FogScene scene = make_scene();
+  for (auto _ : state) {
+    mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
+    benchmark::DoNotOptimize(&preview);
+  }
+}
+BENCHMARK(BM_PreviewPrepare)
+    ->Args({1000, 750})
+    ->Args({577, 433})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime();
+
+void BM_PreviewFirstFrame(benchmark::State& state) {
+  const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
+  const mr::FogScene scene = make_scene();
+  const auto objects = model();
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto preview = std::make_unique<mr::InsertPreview>(p.photo, p.distance_m, p.camera, scene,
+                                                       mr::InsertOptions::preview());
+    state.ResumeTiming();
+    const mr::InsertResult& r = preview->render(objects, mr::InsertOptions::preview());
+    benchmark::DoNotOptimize(r.composite.data());
+    const auto& f = preview->last_frame();
+    state.counters["objects_s"] = f.objects_s;
+    state.counters["render_s"] = f.render_s;
+    state.counters["tiles"] = double(f.tiles_rendered);
+    state.counters["tiles_total"] = double(f.tiles_total);
+    state.PauseTiming();
+    preview.reset();
+    state.ResumeTiming();
+  }
+}
+BENCHMARK(BM_PreviewFirstFrame)
+    ->Args({1000, 750})
+    ->Args({577, 433})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime();
+
+void BM_PreviewDrag(benchmark::State& state) {
+  const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
+  const mr::FogScene scene = make_scene();
+  auto objects = model();
+  mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
+  preview.render(objects, mr::InsertOptions::preview());
+  int frame = 0;
+  for (auto _ : state) {
+    objects[0].placement.position_m.x = 0.5 + 0.05 * double(++frame % 40);
+    const mr::InsertResult& r = preview.render(objects, mr::InsertOptions::preview());
+    benchmark::DoNotOptimize(r.composite.data());
+    const auto& f = preview.last_frame();
+    state.counters["objects_s"] = f.objects_s;
+    state.counters["render_s"] = f.render_s;
+    state.counters["tiles"] = double(f.tiles_rendered);
+    state.counters["reset"] = double(f.tiles_reset);
+  }
+}
+BENCHMARK(BM_PreviewDrag)
+    ->Args({1000, 750})
+    ->Args({577, 433})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime();
+
+// A frame at an unchanged placement with the draft settings (the objects' scene reused): the
+// tiles' shading alone.
+void BM_PreviewStill(benchmark::State& state) {
+  const Photo p = make_photo(int(state.range(0)), int(state.range(1)));
+  const mr::FogScene scene = make_scene();
+  const auto objects = model();
+  mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
+  preview.render(objects, mr::InsertOptions::preview());
+  for (auto _ : state) {
+    const mr::InsertResult& r = preview.render(objects, mr::InsertOptions::preview());
+    benchmark::DoNotOptimize(r.composite.data());
+    state.counters["shadow_rays"] = double(r.timings.shadow_rays);
+    state.counters["camera_rays"] = double(r.timings.camera_rays);
+  }
+}
+BENCHMARK(BM_PreviewStill)
+    ->Args({1000, 750})
+    ->Args({577, 433})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime();
+
+void BM_PreviewRefine(benchmark::State& state) {
+  static const Photo p = make_photo(1000, 750);
+  const mr::FogScene scene = make_scene();
+  const auto objects = model();
+  mr::InsertPreview preview(p.photo, p.distance_m, p.camera, scene, mr::InsertOptions::preview());
+  preview.render(objects, mr::InsertOptions::preview());
+  for (auto _ : state) {
+    const mr::InsertResult& r = preview.render(objects, mr::InsertOptions::preview_refined());
+    benchmark::DoNotOptimize(r.composite.data());
+    state.counters["render_s"] = preview.last_frame().render_s;
+    state.counters["rebuilt"] = preview.last_frame().objects_rebuilt;
+  }
+}
+BENCHMARK(BM_PreviewRefine)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime();
 
 }  // namespace
 

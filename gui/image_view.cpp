@@ -8,6 +8,7 @@
 #include <cmath>
 
 #include "annotation_editor.h"
+#include "object_tool.h"
 
 namespace mrstudio {
 
@@ -153,6 +154,13 @@ void ImageView::paintEvent(QPaintEvent*) {
     to_view.translate(0.5, 0.5);
     editor_->paint(painter, to_view);
   }
+  if (object_tool_) {
+    QTransform to_view;
+    to_view.translate(offset_.x(), offset_.y());
+    to_view.scale(zoom_, zoom_);
+    to_view.translate(0.5, 0.5);
+    object_tool_->paint(painter, to_view);
+  }
 }
 
 void ImageView::resizeEvent(QResizeEvent*) {
@@ -162,7 +170,23 @@ void ImageView::resizeEvent(QResizeEvent*) {
     clampOffset();
 }
 
+void ImageView::setObjectTool(ObjectTool* tool) {
+  object_tool_ = tool;
+  connect(tool, &ObjectTool::changed, this, qOverload<>(&QWidget::update));
+}
+
+bool ImageView::objectToolActive() const {
+  return object_tool_ && !before_.isNull() &&
+         (!editor_ || editor_->tool() == Tool::navigate || editor_->tool() == Tool::select);
+}
+
 void ImageView::wheelEvent(QWheelEvent* event) {
+  if (objectToolActive() &&
+      object_tool_->wheel(imageFromView(event->position()), event->angleDelta().y() / 120.0,
+                          event->modifiers())) {
+    event->accept();
+    return;
+  }
   const double steps = event->angleDelta().y() / 120.0;
   setZoom(zoom_ * std::pow(1.25, steps), event->position());
   event->accept();
@@ -170,6 +194,9 @@ void ImageView::wheelEvent(QWheelEvent* event) {
 
 void ImageView::mousePressEvent(QMouseEvent* event) {
   setFocus(Qt::MouseFocusReason);
+  if (event->button() == Qt::LeftButton && objectToolActive() &&
+      object_tool_->press(imageFromView(event->pos()), event->modifiers()))
+    return;
   if (event->button() == Qt::LeftButton && editor_ && !before_.isNull() &&
       editor_->press(imageFromView(event->pos()), zoom_))
     return;
@@ -181,6 +208,10 @@ void ImageView::mousePressEvent(QMouseEvent* event) {
 }
 
 void ImageView::mouseMoveEvent(QMouseEvent* event) {
+  if (object_tool_ && object_tool_->dragging()) {
+    object_tool_->move(imageFromView(event->pos()));
+    return;
+  }
   if (!panning_) {
     if (editor_ && !before_.isNull()) editor_->move(imageFromView(event->pos()), zoom_);
     return;
@@ -193,6 +224,10 @@ void ImageView::mouseMoveEvent(QMouseEvent* event) {
 }
 
 void ImageView::mouseReleaseEvent(QMouseEvent* event) {
+  if (object_tool_ && object_tool_->dragging() && event->button() == Qt::LeftButton) {
+    object_tool_->release(imageFromView(event->pos()));
+    return;
+  }
   if (panning_) {
     panning_ = false;
     if (editor_ && editor_->tool() != Tool::navigate)

@@ -10,6 +10,7 @@
 namespace mrstudio {
 
 class AnnotationEditor;
+class ObjectTool;
 
 class ImageView : public QWidget {
   Q_OBJECT
@@ -39,6 +40,10 @@ class ImageView : public QWidget {
   /// Annotations drawn over the photo and edited with the left button (its tool decides; the
   /// navigate tool pans). The middle button always pans. Not owned.
   void setEditor(AnnotationEditor* editor);
+  /// The insertion tool (object_tool.h): it gets left-button drags that start on an object and
+  /// modifier+wheel over one, in the navigate and select tools, before panning and the editor.
+  /// Not owned.
+  void setObjectTool(ObjectTool* tool);
   /// Draw the annotations (editing works either way).
   void setShowAnnotations(bool show);
   bool showAnnotations() const { return show_annotations_; }
@@ -72,6 +77,9 @@ class ImageView : public QWidget {
   bool panning_ = false;
   QPointF last_mouse_;
   AnnotationEditor* editor_ = nullptr;
+  ObjectTool* object_tool_ = nullptr;
+  /// Whether the insertion tool may take the mouse (the annotation tool is navigate or select).
+  bool objectToolActive() const;
   bool show_annotations_ = true;
 };
 

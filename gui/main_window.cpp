@@ -44,12 +44,13 @@
 #include <optional>
 
 #include "blockers_panel.h"
-#include "objects_panel.h"
 #include "export_dialog.h"
 #include "fog_panel.h"
 #include "grabcut_assist.h"
 #include "image_convert.h"
 #include "image_view.h"
+#include "object_tool.h"
+#include "objects_panel.h"
 
 namespace mrstudio {
 
@@ -139,6 +140,11 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
   objects_dock_->setWidget(objects_scroll);
   addDockWidget(Qt::RightDockWidgetArea, objects_dock_);
   tabifyDockWidget(blockers_dock_, objects_dock_);
+  // The insertion tool over the view: drop a model on the photo, drag / turn / scale objects.
+  object_tool_ = new ObjectTool(objects_panel_, this);
+  view_->setObjectTool(object_tool_);
+  connect(object_tool_, &ObjectTool::message, this,
+          [this](const QString& m) { statusBar()->showMessage(tr("Objects: %1").arg(m), 10000); });
   fog_dock_->raise();
 
   layer_box_ = new QComboBox;
@@ -282,6 +288,7 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
     fog_panel_->setScene(scene);
     scene_modified_ = true;
     updateTitle();
+    view_->update();  // the objects' marks
     requestPreview();
   });
   connect(objects_panel_, &ObjectsPanel::rejected, this,
@@ -291,6 +298,17 @@ MainWindow::MainWindow(QWidget* parent) : QMainWindow(parent), color_(mr::ColorC
   connect(&estimate_timer_, &QTimer::timeout, this, [this] { reestimate(true); });
   connect(editor_->undoStack(), &QUndoStack::indexChanged, this, [this] {
     updateTitle();
+    // The stack also holds the objects' edits (issue 16): those do not change what the
+    // estimate sees, and a drag must not re-estimate (and re-pose) the scene under the object.
+    std::string annotations;
+    try {
+      annotations = mr::annotations_to_json(editor_->annotations());
+    } catch (const mr::Error&) {
+      // Annotations between two clicks need not be a valid document (a lamp without its
+      // patch yet): they count as changed.
+    }
+    if (!annotations.empty() && annotations == stacked_annotations_) return;
+    stacked_annotations_ = annotations;
     if (document_ && auto_estimate_->isChecked()) estimate_timer_.start();
   });
   connect(editor_, &AnnotationEditor::changed, this, &MainWindow::refreshAnnotationList);
@@ -443,6 +461,11 @@ void MainWindow::openPhoto(const QString& path) {
           pending_scene_.reset();
           pending_annotations_.reset();
           editor_->reset(doc->annotations);
+          try {
+            stacked_annotations_ = mr::annotations_to_json(editor_->annotations());
+          } catch (const mr::Error&) {
+            stacked_annotations_.clear();
+          }
           scene_modified_ = false;
           addRecentFile(from_project ? project_path_ : doc->photo_path);
           updateTitle();
@@ -474,6 +497,9 @@ void MainWindow::syncBlockersContext() {
   const double hfov = document_ ? document_->camera.horizontal_fov_deg() : 60.0;
   blockers_panel_->setContext(scene.pose, hfov, sun_azimuth);
   objects_panel_->setCameraPose(scene.pose);
+  object_tool_->setContext(
+      document_, scene.pose,
+      project_path_.isEmpty() ? QString() : QFileInfo(project_path_).absolutePath());
 }
 
 void MainWindow::requestPreview() {
@@ -494,6 +520,8 @@ void MainWindow::startRender(mr::Quality quality) {
   request.document = document_;
   request.scene = fog_panel_->scene();
   request.quality = quality;
+  request.document_dir =
+      project_path_.isEmpty() ? QString() : QFileInfo(project_path_).absolutePath();
   request.generation = generation_;
   const Layer shown = Layer(layer_box_->currentData().toInt());
   request.display_aovs = shown == Layer::transmittance || shown == Layer::inscatter;
@@ -502,6 +530,7 @@ void MainWindow::startRender(mr::Quality quality) {
   } else {
     const QSize display = view_->displayPixels();
     request.max_pixels = std::max(kDraftPixels, double(display.width()) * display.height());
+    request.prepare_insert_pixels = kDraftPixels;  // the insertion tool's first drop is then quick
   }
   request.cancel = std::make_shared<mr::CancelToken>();
   render_cancel_ = request.cancel;
@@ -553,10 +582,16 @@ void MainWindow::onRenderDone(std::shared_ptr<PreviewResult> result, QString err
             .arg(QString::fromStdString(result->backend))
             .arg(result->backend_notice.empty() ? QString() : tr(" (fall-back)")));
     backend_label_->setToolTip(QString::fromStdString(result->backend_notice));
-    timing_label_->setText(tr("%1 %2 x %3: fog %4, total %5")
+    const QString insert = result->matte.empty() ? QString()
+                                                 : tr("objects %1 (%2/%3 tiles), ")
+                                                       .arg(ms(result->insert_s))
+                                                       .arg(result->insert_tiles)
+                                                       .arg(result->insert_tiles_total);
+    timing_label_->setText(tr("%1 %2 x %3: %4fog %5, total %6")
                                .arg(to_string(result->quality))
                                .arg(result->photo.width())
                                .arg(result->photo.height())
+                               .arg(insert)
                                .arg(ms(result->render_s))
                                .arg(ms(result->total_s)));
     // Warnings are long sentences: the label shows the first clause, its tooltip all of them.
@@ -691,6 +726,16 @@ void MainWindow::dragEnterEvent(QDragEnterEvent* event) {
 void MainWindow::dropEvent(QDropEvent* event) {
   const QString path = event->mimeData()->urls().first().toLocalFile();
   event->acceptProposedAction();
+  // A model dropped on the photo stands where it was dropped (issue 16); anything else opens.
+  if (ObjectTool::isModelFile(path)) {
+    const QPoint in_view = view_->mapFrom(this, event->pos());
+    if (!document_ || !view_->rect().contains(in_view)) {
+      statusBar()->showMessage(tr("Drop a model on the photo to insert it"), 10000);
+      return;
+    }
+    object_tool_->dropModel(path, view_->imageFromView(in_view));
+    return;
+  }
   openAny(path);
 }
 

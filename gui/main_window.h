@@ -42,6 +42,7 @@ namespace mrstudio {
 class BlockersPanel;
 class FogPanel;
 class ObjectsPanel;
+class ObjectTool;
 class ImageView;
 
 /// Measures how long the event loop goes without running a 10 ms timer (the longest gap).
@@ -118,6 +119,8 @@ class MainWindow : public QMainWindow {
   BlockersPanel* blockersPanel() const { return blockers_panel_; }
   QDockWidget* blockersDock() const { return blockers_dock_; }
   ObjectsPanel* objectsPanel() const { return objects_panel_; }
+  /// The insertion tool over the view (drop a model, drag / turn / scale objects).
+  ObjectTool* objectTool() const { return object_tool_; }
   QDockWidget* objectsDock() const { return objects_dock_; }
   ImageView* imageView() const { return view_; }
   QComboBox* layerBox() const { return layer_box_; }
@@ -200,6 +203,7 @@ class MainWindow : public QMainWindow {
   QDockWidget* blockers_dock_;
   ObjectsPanel* objects_panel_;  // issue 16: inserted 3D objects (the scene's objects list)
   QDockWidget* objects_dock_;
+  ObjectTool* object_tool_;
   QComboBox* layer_box_;
   QSlider* split_slider_;
   QLabel* backend_label_;
@@ -240,7 +244,11 @@ class MainWindow : public QMainWindow {
   bool estimating_ = false;
   bool estimate_pending_ = false;
   bool estimate_pending_apply_ = false;
-  QString unpaired_note_;  ///< what the running estimate leaves out (lamps without a patch)
+  QString unpaired_note_;
+  /// The annotations as of the undo stack's last index change (JSON): an index change that
+  /// leaves them alone (an object edit) does not re-estimate.
+  std::string
+      stacked_annotations_;  ///< what the running estimate leaves out (lamps without a patch)
 
   bool scene_modified_ = false;
   QMessageBox::StandardButton prompt_answer_ = QMessageBox::NoButton;

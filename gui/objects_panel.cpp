@@ -81,7 +81,8 @@ ObjectsPanel::ObjectsPanel(QWidget* parent) : QWidget(parent) {
 
   auto* add_row = new QHBoxLayout;
   primitive_box_ = new QComboBox;
-  for (const std::string& n : mr::primitive_names()) primitive_box_->addItem(QString::fromStdString(n));
+  for (const std::string& n : mr::primitive_names())
+    primitive_box_->addItem(QString::fromStdString(n));
   add_primitive_ = new QPushButton(tr("Add"));
   add_primitive_->setToolTip(tr("Add the primitive on the ground 5 m ahead of the camera"));
   load_model_ = new QPushButton(tr("Load model..."));
@@ -98,7 +99,8 @@ ObjectsPanel::ObjectsPanel(QWidget* parent) : QWidget(parent) {
                                    tr("The object's origin in the world (y up, the ground at 0)"));
     form->addRow(tr("Position %1").arg(axes[i]), position_[i]);
   }
-  scale_ = double_spin_box(0.001, 10000, 1, 3, QString(), 0.1, tr("Uniform scale (1: the model's metres)"));
+  scale_ = double_spin_box(0.001, 10000, 1, 3, QString(), 0.1,
+                           tr("Uniform scale (1: the model's metres)"));
   yaw_ = double_spin_box(-360, 360, 0, 1, tr(" deg"), 5, tr("Turn about the object's up axis"));
   form->addRow(tr("Scale"), scale_);
   form->addRow(tr("Yaw"), yaw_);
@@ -113,8 +115,8 @@ ObjectsPanel::ObjectsPanel(QWidget* parent) : QWidget(parent) {
   connect(add_primitive_, &QPushButton::clicked, this,
           [this] { addPrimitive(primitive_box_->currentText()); });
   connect(load_model_, &QPushButton::clicked, this, [this] {
-    const QString path = QFileDialog::getOpenFileName(
-        this, tr("Load a model"), document_dir_, tr("Models (*.gltf *.glb *.obj)"));
+    const QString path = QFileDialog::getOpenFileName(this, tr("Load a model"), document_dir_,
+                                                      tr("Models (*.gltf *.glb *.obj)"));
     if (!path.isEmpty()) addModel(path);
   });
   connect(remove_, &QPushButton::clicked, this, [this] {
@@ -165,6 +167,17 @@ bool ObjectsPanel::addPrimitive(const QString& name) {
 }
 
 bool ObjectsPanel::addModel(const QString& path) {
+  QString stored = QFileInfo(path).absoluteFilePath();
+  return addLoaded(path, newObject(stored.toStdString()));
+}
+
+bool ObjectsPanel::addModel(const QString& path, const mr::ObjectPlacement& placement) {
+  mr::SceneObject o;
+  o.placement = placement;
+  return addLoaded(path, std::move(o));
+}
+
+bool ObjectsPanel::addLoaded(const QString& path, mr::SceneObject object) {
   QStringList warnings;
   try {
     const mr::ObjectMesh mesh = mr::load_object_mesh(path.toStdString());
@@ -180,11 +193,45 @@ bool ObjectsPanel::addModel(const QString& path) {
     const QString relative = QDir(document_dir_).relativeFilePath(stored);
     if (!relative.startsWith("..")) stored = relative;
   }
+  object.mesh = stored.toStdString();
   std::vector<mr::SceneObject> candidate = objects_;
-  candidate.push_back(newObject(stored.toStdString()));
+  candidate.push_back(std::move(object));
   if (!tryApply(std::move(candidate), tr("Add %1").arg(QFileInfo(path).fileName()))) return false;
   message_->setText(warnings.join("\n"));
   return true;
+}
+
+void ObjectsPanel::applyLive(std::vector<mr::SceneObject> objects) {
+  try {
+    for (std::size_t i = 0; i < objects.size(); ++i)
+      mr::validate_scene_object(objects[i], "objects[" + std::to_string(i) + "]");
+  } catch (const mr::Error&) {
+    return;
+  }
+  const int keep = selected();
+  objects_ = std::move(objects);
+  // Only the labels and the selected object's values change during a drag.
+  updating_ = true;
+  for (int i = 0; i < list_->count() && i < int(objects_.size()); ++i)
+    list_->item(i)->setText(label_of(objects_[std::size_t(i)]));
+  if (keep >= 0) list_->setCurrentRow(keep);
+  updating_ = false;
+  showSelected();
+  emit changed();
+}
+
+bool ObjectsPanel::commitLive(std::vector<mr::SceneObject> before, const QString& what) {
+  std::vector<mr::SceneObject> after = objects_;
+  const int keep = selected();
+  objects_ = std::move(before);  // the command goes from here
+  if (tryApply(std::move(after), what)) return true;
+  applyFromCommand(objects_, keep);
+  return false;
+}
+
+void ObjectsPanel::select(int index) {
+  if (index >= 0 && index < int(objects_.size()) && index != selected())
+    list_->setCurrentRow(index);
 }
 
 bool ObjectsPanel::tryApply(std::vector<mr::SceneObject> candidate, const QString& what,
@@ -230,7 +277,8 @@ void ObjectsPanel::showSelected() {
   const int row = selected();
   const bool any = row >= 0;
   updating_ = true;
-  for (QDoubleSpinBox* s : {position_[0], position_[1], position_[2], scale_, yaw_}) s->setEnabled(any);
+  for (QDoubleSpinBox* s : {position_[0], position_[1], position_[2], scale_, yaw_})
+    s->setEnabled(any);
   remove_->setEnabled(any);
   if (any) {
     const mr::ObjectPlacement& p = objects_[std::size_t(row)].placement;
@@ -251,8 +299,9 @@ void ObjectsPanel::applySelected(int field) {
   p.position_m = {position_[0]->value(), position_[1]->value(), position_[2]->value()};
   p.scale = scale_->value();
   p.yaw_deg = yaw_->value();
-  static const char* const kWhat[5] = {"Move object", "Move object", "Move object",
-                                       "Scale object", "Turn object"};
+  static const char* const kWhat[5] = {"Move object", "Move object", "Move object", "Scale object",
+                                       "Turn object"};
+  static_assert(1600 + 3 == kMergeScale && 1600 + 4 == kMergeYaw);
   // Merge id: one per field, so a run of steps of one field is one undo step.
   tryApply(std::move(candidate), tr(kWhat[field]), 1600 + field);
 }

@@ -43,6 +43,18 @@ class ObjectsPanel : public QWidget {
   /// Loads the model file to check it, then adds it (selected); false and rejected if it cannot
   /// be loaded.
   bool addModel(const QString& path);
+  /// The same, standing where `placement` says (the insertion tool's drop: mr::place_at_pixel).
+  bool addModel(const QString& path, const mr::ObjectPlacement& placement);
+  /// A drag in progress (the insertion tool): sets the objects and emits changed (the preview
+  /// re-renders) without an undo step. Invalid objects are ignored.
+  void applyLive(std::vector<mr::SceneObject> objects);
+  /// The drag ended: one undoable step from `before` (the objects when it started) to the
+  /// objects now. false (and the objects go back to `before`) when they are invalid.
+  bool commitLive(std::vector<mr::SceneObject> before, const QString& what);
+  /// Selects object `index` in the list (and its controls).
+  void select(int index);
+  /// Merge ids of the scale and yaw edits (the spin boxes' and the tool's wheel notches).
+  static constexpr int kMergeScale = 1603, kMergeYaw = 1604;
   /// Replaces the objects when every one passes mr::validate_scene_object: pushes an undoable
   /// command (or applies it without a stack) and emits changed; else emits rejected.
   bool tryApply(std::vector<mr::SceneObject> candidate, const QString& what, int merge_id = -1);
@@ -66,10 +78,11 @@ class ObjectsPanel : public QWidget {
   void rejected(const QString& message);  ///< an edit was refused (the library's message)
 
  private:
-  void refresh(int select);          ///< the list and the selected object's controls
-  void showSelected();               ///< the selected object's values into its controls
-  void applySelected(int field);     ///< the controls into the selected object
+  void refresh(int select);       ///< the list and the selected object's controls
+  void showSelected();            ///< the selected object's values into its controls
+  void applySelected(int field);  ///< the controls into the selected object
   mr::SceneObject newObject(const std::string& mesh) const;
+  bool addLoaded(const QString& path, mr::SceneObject object);
 
   std::vector<mr::SceneObject> objects_;
   QUndoStack* undo_ = nullptr;

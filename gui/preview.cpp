@@ -224,6 +224,71 @@ const QImage& PreviewResult::displayLayer(Layer layer, const mr::ColorConfig& co
   }
 }
 
+std::shared_ptr<const mr::ObjectMesh> object_mesh(const Document& document,
+                                                  const mr::SceneObject& object,
+                                                  const QString& document_dir) {
+  mr::SceneObject plain = object;
+  plain.material.reset();  // the override goes with the InsertObject, not into the cached mesh
+  const fs::path dir = document_dir.toStdString();
+  const fs::path path = mr::object_mesh_path(plain, dir);
+  const std::string key = path.empty() ? plain.mesh : path.lexically_normal().string();
+  {
+    const std::lock_guard<std::mutex> lock(document.insert_mutex);
+    const auto it = document.meshes.find(key);
+    if (it != document.meshes.end()) return it->second;
+  }
+  auto mesh = std::make_shared<const mr::ObjectMesh>(mr::resolve_object_mesh(plain, dir));
+  const std::lock_guard<std::mutex> lock(document.insert_mutex);
+  document.meshes.emplace(key, mesh);
+  return mesh;
+}
+
+namespace {
+
+// The parts of a scene the photo's insertion geometry depends on, and its light, as keys.
+std::string geometry_key(const mr::FogScene& scene) {
+  mr::FogScene s;
+  s.pose = scene.pose;
+  s.blockers = scene.blockers;
+  s.render.volumetric_shadows = scene.render.volumetric_shadows;
+  return mr::scene_to_json(s);
+}
+std::string lighting_key(const mr::FogScene& scene) {
+  mr::FogScene s;
+  s.lighting = scene.lighting;
+  return mr::scene_to_json(s);
+}
+
+// The document's insertion preview at the inputs' size for `scene` (made, and kept, when there
+// is none yet: the photo's normals, occluder mesh and BVH at that size).
+std::shared_ptr<InsertSession> insert_session(const Document& document, const PreviewInputs& inputs,
+                                              const mr::FogScene& scene,
+                                              const mr::CancelToken* cancel, double& prepare_s) {
+  const std::string key = geometry_key(scene);
+  const int w = inputs.photo.width(), h = inputs.photo.height();
+  {
+    const std::lock_guard<std::mutex> lock(document.insert_mutex);
+    for (const auto& s : document.insert_sessions)
+      if (s->width == w && s->height == h && s->geometry_key == key) return s;
+  }
+  auto session = std::make_shared<InsertSession>();
+  session->width = w;
+  session->height = h;
+  session->geometry_key = key;
+  session->lighting_key = lighting_key(scene);
+  session->preview = std::make_unique<mr::InsertPreview>(
+      inputs.photo, inputs.distance_m, inputs.camera, scene, mr::InsertOptions::preview(), cancel);
+  prepare_s = session->preview->prepare_seconds();
+  const std::lock_guard<std::mutex> lock(document.insert_mutex);
+  constexpr std::size_t kSessions = 3;  // the draft's size, the view's, one more
+  if (document.insert_sessions.size() >= kSessions)
+    document.insert_sessions.erase(document.insert_sessions.begin());
+  document.insert_sessions.push_back(session);
+  return session;
+}
+
+}  // namespace
+
 std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
                                               const mr::ColorConfig& color) {
   const auto start = std::chrono::steady_clock::now();
@@ -238,10 +303,52 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   result->camera = inputs->camera;
   result->scene = request.scene;
   result->scene.render.quality = request.quality;
+  mr::FogScene fog_scene = result->scene;
+  if (!request.scene.objects.empty()) {
+    // Issue 16: the objects go into the photo first (differential rendering), then the fog
+    // takes the composite and the objects' depth like a photo of its own.
+    const auto insert_start = std::chrono::steady_clock::now();
+    std::vector<mr::InsertObject> objects;
+    for (const mr::SceneObject& so : request.scene.objects) {
+      mr::InsertObject o;
+      o.mesh = *object_mesh(*request.document, so, request.document_dir);
+      o.placement = so.placement;
+      o.material = so.material;
+      objects.push_back(std::move(o));
+    }
+    const std::shared_ptr<InsertSession> session = insert_session(
+        *request.document, *inputs, request.scene, request.cancel.get(), result->insert_prepare_s);
+    const std::lock_guard<std::mutex> lock(session->mutex);
+    const std::string light = lighting_key(request.scene);
+    if (light != session->lighting_key) {
+      session->preview->set_lighting(request.scene.lighting);
+      session->lighting_key = light;
+    }
+    const bool draft = request.quality == mr::Quality::draft;
+    const mr::InsertResult& inserted = session->preview->render(
+        objects, draft ? mr::InsertOptions::preview() : mr::InsertOptions::preview_refined(),
+        request.cancel.get());
+    result->photo = inserted.composite;
+    result->distance_m = inserted.distance_m;
+    result->matte = inserted.matte;
+    // The objects cover the sky where they stand in front of it: they are not fogged as sky.
+    if (!result->sky_alpha.empty())
+      for (std::size_t i = 0; i < result->sky_alpha.pixels().size(); ++i)
+        result->sky_alpha.pixels()[i] *= 1.0f - result->matte.pixels()[i];
+    // The objects' shafts in the fog: in the idle (normal) pass only; a drag's drafts skip the
+    // fog core's occluder rebuild that their triangles would cost.
+    if (!draft)
+      for (mr::Blockers::Polygon& p : mr::object_shadow_polygons(objects))
+        fog_scene.blockers.polygons.push_back(std::move(p));
+    result->insert_tiles = session->preview->last_frame().tiles_rendered;
+    result->insert_tiles_total = session->preview->last_frame().tiles_total;
+    result->insert_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - insert_start).count();
+  }
   const auto render_start = std::chrono::steady_clock::now();
   mr::ScatteringLayers aovs;
   result->layers = mr::fog(result->photo, result->distance_m, result->sky_alpha, result->camera,
-                           result->scene, &aovs, request.cancel.get());
+                           fog_scene, &aovs, request.cancel.get());
   result->render_s = seconds_since(render_start);
   result->backend = aovs.backend;
   result->backend_notice = aovs.backend_notice;
@@ -253,6 +360,17 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   }
   result->depth = inputs->depth;
   result->total_s = seconds_since(start);
+  if (request.prepare_insert_pixels > 0) {
+    // Idle work for the insertion tool; a failure here is the first drop's to report.
+    try {
+      const std::shared_ptr<const PreviewInputs> draft =
+          preview_inputs(*request.document, request.prepare_insert_pixels, color);
+      double prepare_s = 0;
+      insert_session(*request.document, *draft, request.scene, request.cancel.get(), prepare_s);
+    } catch (const mr::Error& e) {
+      if (e.code() == mr::ErrorCode::cancelled) throw;
+    }
+  }
   return result;
 }
 

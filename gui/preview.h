@@ -6,6 +6,7 @@
 #include <QSize>
 #include <QString>
 #include <QStringList>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -22,6 +23,17 @@ struct PreviewInputs {
   mr::Image sky_alpha;  ///< the document's sky matte at this size (area average); may be empty
   mr::Camera camera;
   QImage photo_image, depth;  ///< 8-bit sRGB photo; depth colour map
+};
+
+/// A photo's interactive insertion preview at one size (mr::InsertPreview: the photo's geometry
+/// prepared once, then frames that re-render only the tiles the objects touch), with what it was
+/// made for. One render at a time (mutex).
+struct InsertSession {
+  int width = 0, height = 0;
+  std::string geometry_key;  ///< the pose, blockers and shadow settings it was prepared with
+  std::string lighting_key;  ///< the light it renders with now
+  std::mutex mutex;
+  std::unique_ptr<mr::InsertPreview> preview;
 };
 
 struct Document {
@@ -45,7 +57,19 @@ struct Document {
   /// re-renders without resizing the full-resolution photo again. Filled by preview_inputs.
   mutable std::mutex inputs_mutex;
   mutable std::vector<std::shared_ptr<const PreviewInputs>> inputs_cache;
+  /// Insertion previews made so far (the draft's size, the view's), newest last; and the object
+  /// meshes loaded so far (by model path or primitive name), so that a drag neither reloads a
+  /// model nor rebuilds the photo's geometry.
+  mutable std::mutex insert_mutex;
+  mutable std::vector<std::shared_ptr<InsertSession>> insert_sessions;
+  mutable std::map<std::string, std::shared_ptr<const mr::ObjectMesh>> meshes;
 };
+
+/// The mesh of a scene object (without its material override), loaded once per document and
+/// model path. Thread-safe. Throws mr::Error naming the file.
+std::shared_ptr<const mr::ObjectMesh> object_mesh(const Document& document,
+                                                  const mr::SceneObject& object,
+                                                  const QString& document_dir);
 
 /// Reads the photo, its depth ({stem}_depth.{exr,tif,tiff,pfm,png} next to it, as `mr fog`
 /// finds it) or, without one, the geometry from mr::estimate_scene (automatic; with
@@ -95,6 +119,12 @@ struct PreviewRequest {
   /// a row and render_preview throws mr::Error(cancelled). Its progress callback (when set)
   /// hears mr::fog's stages. May be null.
   std::shared_ptr<mr::CancelToken> cancel;
+  /// Where the scene's relative model paths start (the project's folder; empty: absolute).
+  QString document_dir;
+  /// > 0: after rendering, also prepare the document's insertion preview at this size (the
+  /// photo's geometry for mr::InsertPreview) if it is not yet, so that the first model dropped
+  /// on the photo pays only its frame. mr-studio asks for the draft's size in normal passes.
+  double prepare_insert_pixels = 0;
 };
 
 struct PreviewResult {
@@ -114,6 +144,15 @@ struct PreviewResult {
   const QImage& displayLayer(Layer layer, const mr::ColorConfig& color) const;
   std::string backend, backend_notice;
   double render_s = 0, total_s = 0;  ///< mr::fog alone; everything (downscale, display)
+  /// The scene's objects (issue 16), inserted before the fog by the document's mr::InsertPreview
+  /// at this size: `photo` and `distance_m` above are then the insertion's composite and depth,
+  /// `matte` the objects' coverage (empty without objects). Draft passes use
+  /// InsertOptions::preview() and leave the objects out of the fog's shadow casters; normal
+  /// passes use InsertOptions::preview_refined() and let the objects cast shafts.
+  mr::Image matte;
+  double insert_s = 0;          ///< the insertion frame (objects' scene, tiles), 0 without objects
+  double insert_prepare_s = 0;  ///< the photo's geometry, when this pass had to prepare it
+  std::size_t insert_tiles = 0, insert_tiles_total = 0;
 };
 
 /// The downscaled inputs of a request at fit_pixels(photo, max_pixels): from the document's

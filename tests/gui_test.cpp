@@ -28,6 +28,7 @@
 #include <QTemporaryDir>
 #include <QThread>
 #include <QUndoStack>
+#include <QUrl>
 #include <QtTest>
 #include <cmath>
 #include <limits>
@@ -35,7 +36,6 @@
 
 #include "annotation_editor.h"
 #include "blockers_panel.h"
-#include "objects_panel.h"
 #include "export_dialog.h"
 #include "fog_panel.h"
 #include "grabcut_assist.h"
@@ -43,6 +43,8 @@
 #include "image_view.h"
 #include "main_window.h"
 #include "mr/mr.h"
+#include "object_tool.h"
+#include "objects_panel.h"
 #include "sun_dial.h"
 
 using namespace mrstudio;
@@ -240,6 +242,7 @@ class GuiTest : public QObject {
   void fogPanelRoundTripEveryParameter();
   void blockersPanelEditsValidatesAndRoundTrips();
   void objectsPanelAddsEditsAndUndoes();
+  void insertionToolDropDragTurnScaleUndo();
   void blockersShadeTheSunnyPreview();
   void blockersFromThePhotosAnnotations();
   void statusBarShowsProgress();
@@ -1461,6 +1464,186 @@ static void dragWidget(QWidget* w, const QPointF& a, const QPointF& b) {
     QApplication::sendEvent(w, &move);
   }
   QTest::mouseRelease(w, Qt::LeftButton, Qt::NoModifier, b.toPoint());
+}
+
+// Issue 16, the insertion tool: a model file dropped on the photo stands where it was dropped
+// (mr::place_at_pixel at the drop point); dragging it moves its foot as place_at_pixel says for
+// the pointer (plus the foot's offset from the press point), with live previews that show it
+// and its shadow; Shift+drag turns it, Ctrl+wheel scales it; each is one undo step. The preview
+// changes where the shadow was and where it went, and is neither black nor blank. PNGs of the
+// previews before and after the drag go to out/gui/insert_*.png.
+void GuiTest::insertionToolDropDragTurnScaleUndo() {
+  const QString model =
+      QStringLiteral("/usr/share/assimp/models/glTF2/BoxTextured-glTF-Binary/BoxTextured.glb");
+  if (!QFile::exists(model)) QSKIP("assimp-testmodels is not installed");
+  QTemporaryDir dir;
+  QVERIFY(dir.isValid());
+  MainWindow w;
+  w.setAutosave(dir.filePath("recovery.mrstudio"), 3600000);
+  w.resize(1366, 900);
+  w.show();
+  QVERIFY(QTest::qWaitForWindowExposed(&w));
+  openAndSettle(w, leuvenCopy(dir));
+  QTRY_VERIFY_WITH_TIMEOUT(!w.estimating(), 60000);  // the load's estimate sets the pose first
+  // A low sun to the right, a light haze: long, clear shadows.
+  mr::FogScene scene = w.fogPanel()->scene();
+  mr::Sun sun;
+  sun.direction_to_sun = mr::direction_from_azimuth_elevation(70, 30);
+  sun.irradiance = {6, 5.6f, 5};
+  sun.irradiance_auto = false;
+  scene.lighting.sun = sun;
+  scene.lighting.sky_radiance = mr::Rgb{0.25f, 0.27f, 0.3f};
+  w.fogPanel()->setScene(scene);
+  w.fogPanel()->setVisibility(2000);
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+  const QImage plain = w.preview()->composite;
+
+  ImageView* view = w.imageView();
+  ObjectTool* tool = w.objectTool();
+  const Document* doc = w.document();
+  const mr::CameraPose pose = w.fogPanel()->scene().pose;
+  QUndoStack* undo = w.annotationEditor()->undoStack();
+
+  // Drop the model on the street, left of the centre, near the bottom.
+  const QPoint drop_view =
+      view->viewFromImage({doc->photo.width() * 0.45, doc->photo.height() * 0.78}).toPoint();
+  const mr::PixelPoint drop_image = view->imageFromView(drop_view);
+  QMimeData mime;
+  mime.setUrls({QUrl::fromLocalFile(model)});
+  const QPoint drop_window = view->mapTo(&w, drop_view);
+  QDragEnterEvent enter(drop_window, Qt::CopyAction, &mime, Qt::LeftButton, Qt::NoModifier);
+  QApplication::sendEvent(&w, &enter);
+  QDropEvent drop(QPointF(drop_window), Qt::CopyAction, &mime, Qt::LeftButton, Qt::NoModifier);
+  QApplication::sendEvent(&w, &drop);
+  QCOMPARE(int(w.objectsPanel()->objects().size()), 1);
+  const mr::ObjectPlacement dropped = mr::place_at_pixel(doc->camera, pose, doc->distance_m,
+                                                         drop_image[0] + 0.5, drop_image[1] + 0.5);
+  auto near = [](const mr::Vec3& a, const mr::Vec3& b) {
+    return std::abs(a.x - b.x) < 1e-9 && std::abs(a.y - b.y) < 1e-9 && std::abs(a.z - b.z) < 1e-9;
+  };
+  QVERIFY(near(w.objectsPanel()->objects()[0].placement.position_m, dropped.position_m));
+  QCOMPARE(w.fogPanel()->scene().objects.size(), std::size_t(1));
+  QCOMPARE(undo->undoText(), QStringLiteral("Add BoxTextured.glb"));
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w) && !w.preview()->matte.empty(), 120000);
+  const std::shared_ptr<const PreviewResult> first = w.preview();
+  const QImage before = first->composite;
+  QVERIFY(before.save(outDir() + "/insert_0_dropped.png"));
+  // Not black, not blank, and the object is in it.
+  const double mean = meanCode(before);
+  QVERIFY2(mean > 20 && mean < 235, qPrintable(QString::number(mean)));
+  double coverage = 0;
+  for (float m : first->matte.pixels()) coverage += m;
+  QVERIFY2(coverage > 50, qPrintable(QString::number(coverage)));  // preview pixels
+  QVERIFY(meanAbsDiff(before, plain) > 0.05);
+  QVERIFY(first->insert_tiles > 0 && first->insert_tiles < first->insert_tiles_total);
+
+  // Where the box's shadow falls: 1 m from its foot, away from the sun, on the ground.
+  const double sx = -sun.direction_to_sun.x, sz = -sun.direction_to_sun.z, sl = std::hypot(sx, sz);
+  auto shadow_point = [&](const mr::Vec3& foot) {
+    return tool->project({foot.x + 1.0 * sx / sl, foot.y, foot.z + 1.0 * sz / sl});
+  };
+  // The mean display code over a 5 x 5 block of a preview around a full-resolution point.
+  auto block = [&](const QImage& image, const mr::PixelPoint& p) {
+    const double k = double(image.width()) / doc->photo.width();
+    const int cx = int(std::lround((p[0] + 0.5) * k - 0.5)),
+              cy = int(std::lround((p[1] + 0.5) * k - 0.5));
+    double sum = 0;
+    for (int y = cy - 2; y <= cy + 2; ++y)
+      for (int x = cx - 2; x <= cx + 2; ++x) {
+        const QRgb c =
+            image.pixel(std::clamp(x, 0, image.width() - 1), std::clamp(y, 0, image.height() - 1));
+        sum += qRed(c) + qGreen(c) + qBlue(c);
+      }
+    return sum / 75;
+  };
+  const auto old_shadow = shadow_point(dropped.position_m);
+  QVERIFY(old_shadow);
+  QVERIFY2(
+      block(before, *old_shadow) < block(plain, *old_shadow) - 3,
+      qPrintable(QString("%1 %2").arg(block(before, *old_shadow)).arg(block(plain, *old_shadow))));
+
+  // Drag it by its middle, 120 photo pixels to the right and 20 down.
+  const auto b = tool->bounds(0);
+  QVERIFY(b);
+  const auto centre = tool->project(b->first);
+  QVERIFY(centre);
+  const QPointF press_view = view->viewFromImage(*centre);
+  const QPointF release_view = view->viewFromImage({(*centre)[0] + 120, (*centre)[1] + 20});
+  QCOMPARE(tool->objectAt(view->imageFromView(press_view.toPoint())), 0);
+  const int generation = w.generation();
+  dragWidget(view, press_view, release_view);
+  QVERIFY(w.generation() >= generation + 4);  // every move asked for a live preview
+  const mr::PixelPoint press = view->imageFromView(press_view.toPoint());
+  const mr::PixelPoint release = view->imageFromView(release_view.toPoint());
+  const auto foot = tool->project(dropped.position_m);
+  const mr::ObjectPlacement moved = mr::place_at_pixel(doc->camera, pose, doc->distance_m,
+                                                       release[0] + ((*foot)[0] - press[0]) + 0.5,
+                                                       release[1] + ((*foot)[1] - press[1]) + 0.5);
+  QVERIFY(near(w.objectsPanel()->objects()[0].placement.position_m, moved.position_m));
+  QVERIFY(!near(moved.position_m, dropped.position_m));
+  QCOMPARE(undo->undoText(), QStringLiteral("Move object"));
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+  const QImage after = w.preview()->composite;
+  QVERIFY(after.save(outDir() + "/insert_1_dragged.png"));
+  QVERIFY(w.grab().save(outDir() + "/insert_main_window.png"));
+  QVERIFY(meanCode(after) > 20 && meanCode(after) < 235);
+  // The old shadow is gone (back to the photo), the new one is there.
+  const auto new_shadow = shadow_point(moved.position_m);
+  QVERIFY(new_shadow);
+  QVERIFY2(
+      block(after, *old_shadow) > block(before, *old_shadow) + 3,
+      qPrintable(QString("%1 %2").arg(block(after, *old_shadow)).arg(block(before, *old_shadow))));
+  QVERIFY2(
+      std::abs(block(after, *old_shadow) - block(plain, *old_shadow)) < 2,
+      qPrintable(QString("%1 %2").arg(block(after, *old_shadow)).arg(block(plain, *old_shadow))));
+  QVERIFY2(
+      block(after, *new_shadow) < block(before, *new_shadow) - 3,
+      qPrintable(QString("%1 %2").arg(block(after, *new_shadow)).arg(block(before, *new_shadow))));
+
+  // Undo: back where it was dropped (and the preview follows); redo: moved again.
+  undo->undo();
+  QVERIFY(near(w.objectsPanel()->objects()[0].placement.position_m, dropped.position_m));
+  QVERIFY(near(w.fogPanel()->scene().objects[0].placement.position_m, dropped.position_m));
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+  QVERIFY(meanAbsDiff(w.preview()->composite, before) < 0.01);
+  undo->redo();
+  QVERIFY(near(w.objectsPanel()->objects()[0].placement.position_m, moved.position_m));
+
+  // Shift+drag turns it (0.5 degrees per pixel to the right), one undo step.
+  const auto b2 = tool->bounds(0);
+  const QPointF turn_from = view->viewFromImage(*tool->project(b2->first));
+  const QPointF turn_to = turn_from + QPointF(40, 0);
+  QTest::mousePress(view, Qt::LeftButton, Qt::ShiftModifier, turn_from.toPoint());
+  QMouseEvent turn(QEvent::MouseMove, turn_to, Qt::NoButton, Qt::LeftButton, Qt::ShiftModifier);
+  QApplication::sendEvent(view, &turn);
+  QTest::mouseRelease(view, Qt::LeftButton, Qt::ShiftModifier, turn_to.toPoint());
+  const double turned = w.objectsPanel()->objects()[0].placement.yaw_deg;
+  const double dx =
+      view->imageFromView(turn_to.toPoint())[0] - view->imageFromView(turn_from.toPoint())[0];
+  QVERIFY2(std::abs(turned - 0.5 * dx) < 1e-9, qPrintable(QString("%1 %2").arg(turned).arg(dx)));
+  QVERIFY(near(w.objectsPanel()->objects()[0].placement.position_m, moved.position_m));
+  QCOMPARE(undo->undoText(), QStringLiteral("Turn object"));
+  // Ctrl+wheel scales it by 10 % a notch; two notches are one undo step.
+  for (int k = 0; k < 2; ++k) {
+    QWheelEvent wheel(turn_from, QPointF(view->mapToGlobal(turn_from.toPoint())), QPoint(),
+                      QPoint(0, 120), Qt::NoButton, Qt::ControlModifier, Qt::NoScrollPhase, false);
+    QApplication::sendEvent(view, &wheel);
+  }
+  QVERIFY(std::abs(w.objectsPanel()->objects()[0].placement.scale - 1.21) < 1e-9);
+  QCOMPARE(undo->undoText(), QStringLiteral("Scale object"));
+  undo->undo();
+  QCOMPARE(w.objectsPanel()->objects()[0].placement.scale, 1.0);
+  undo->undo();
+  QCOMPARE(w.objectsPanel()->objects()[0].placement.yaw_deg, 0.0);
+  undo->undo();
+  QVERIFY(near(w.objectsPanel()->objects()[0].placement.position_m, dropped.position_m));
+  undo->undo();
+  QVERIFY(w.objectsPanel()->objects().empty());
+  QVERIFY(!w.estimating());  // object edits do not re-estimate the scene
+  QVERIFY(near(w.fogPanel()->scene().pose.position_m, pose.position_m));
+  QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
+  QVERIFY(w.preview()->matte.empty());
+  QVERIFY(meanAbsDiff(w.preview()->composite, plain) < 0.01);
 }
 
 // Issue 16: the Objects dock adds primitives and models, edits placements and removes objects,

@@ -32,7 +32,8 @@ void save_png(const Image& img, const std::string& name) {
     Image rgb(img.width(), img.height(), 3);
     for (int y = 0; y < img.height(); ++y)
       for (int x = 0; x < img.width(); ++x)
-        for (int c = 0; c < 3; ++c) rgb.view().at(x, y, c) = img.at(x, y, std::min(c, img.channels() - 1));
+        for (int c = 0; c < 3; ++c)
+          rgb.view().at(x, y, c) = img.at(x, y, std::min(c, img.channels() - 1));
     write_image(std::string(dir) + "/" + name + ".png", rgb);
   }
 }
@@ -44,10 +45,10 @@ TEST(InsertObjects, MatchesMonteCarloReference) {
   st.sun_samples = 16;
   st.sky_samples = test::kMcSlowBuild ? 64 : 256;
   st.seed = 7;
-  const Image photo = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting, s.photo_geometry,
-                                              s.photo_materials, st);
-  const Image want = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting, s.full_geometry,
-                                             s.full_materials, st);
+  const Image photo = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting,
+                                              s.photo_geometry, s.photo_materials, st);
+  const Image want = mcref::surface_radiance(s.camera, s.scene.pose, s.scene.lighting,
+                                             s.full_geometry, s.full_materials, st);
   const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
   const Image full_distance = mcref::distance_map(s.camera, s.scene.pose, s.full_geometry);
 
@@ -64,7 +65,8 @@ TEST(InsertObjects, MatchesMonteCarloReference) {
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x)
         for (int c = 0; c < 3; ++c)
-          err.view().at(x, y, c) = 5 * std::fabs(got.composite.at(x, y, c) - want.at(x, y, c)) / std::max(want.at(x, y, c), 1e-4f);
+          err.view().at(x, y, c) = 5 * std::fabs(got.composite.at(x, y, c) - want.at(x, y, c)) /
+                                   std::max(want.at(x, y, c), 1e-4f);
     save_png(err, "error_x5");
   }
   const test::CompositeError e = test::composite_error(photo, want, got.composite, distance, full_distance);
@@ -86,7 +88,8 @@ TEST(InsertObjects, NoObjectsLeavesThePhotoUnchanged) {
   const InsertScene s = make_scene();
   const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
   const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
-  const InsertResult r = insert_objects(photo, distance, s.camera, s.scene, {}, InsertOptions::preview());
+  const InsertResult r =
+      insert_objects(photo, distance, s.camera, s.scene, {}, InsertOptions::preview());
   for (std::size_t i = 0; i < photo.pixels().size(); ++i)
     ASSERT_EQ(r.composite.pixels()[i], photo.pixels()[i]);
   for (float m : r.matte.pixels()) ASSERT_EQ(m, 0.0f);
@@ -175,7 +178,8 @@ TEST(InsertObjects, FogTakesTheObjectsDepthAndShadows) {
     for (int y = 0; y < s.camera.height; ++y)
       for (int x = 0; x < s.camera.width; ++x)
         if (r.distance_m.at(x, y, 0) < distance.at(x, y, 0)) {
-          EXPECT_NEAR(r.transmittance.at(x, y, 1), std::exp(-0.05f * r.distance_m.at(x, y, 0)), 1e-4f);
+          EXPECT_NEAR(r.transmittance.at(x, y, 1), std::exp(-0.05f * r.distance_m.at(x, y, 0)),
+                      1e-4f);
           checked += r.distance_m.at(x, y, 0) < distance.at(x, y, 0) - 3;
         }
     EXPECT_GT(checked, 50);
@@ -185,7 +189,8 @@ TEST(InsertObjects, FogTakesTheObjectsDepthAndShadows) {
   double darker = 0;
   for (int y = 0; y < s.camera.height; ++y)
     for (int x = 0; x < s.camera.width; ++x) {
-      if (with.matte.at(x, y, 0) > 0 || with.distance_m.at(x, y, 0) != distance.at(x, y, 0)) continue;
+      if (with.matte.at(x, y, 0) > 0 || with.distance_m.at(x, y, 0) != distance.at(x, y, 0))
+        continue;
       const float a = with.inscatter.at(x, y, 1), b = without.inscatter.at(x, y, 1);
       // (The core's sparse-grid interpolation moves by up to ~1 % where the depth changed.)
       EXPECT_LE(a, b * 1.02f + 1e-6f) << x << "," << y;
@@ -211,10 +216,137 @@ TEST(InsertObjects, BadMeshesGiveErrorsNamingTheSource) {
   }
   o.mesh.triangles.pop_back();
   o.mesh.positions[0][1] = std::nanf("");
-  EXPECT_THROW(insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)), Error);
+  EXPECT_THROW(
+      insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)),
+      Error);
   o.mesh.positions[0][1] = 0;
   o.placement.scale = -1;
-  EXPECT_THROW(insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)), Error);
+  EXPECT_THROW(
+      insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1)),
+      Error);
+}
+
+// The interactive preview (mr::InsertPreview) renders only the screen tiles the objects, their
+// shadows and their sky occlusion can touch, and resets the tiles a previous frame touched: its
+// frames must equal insert_objects' image with the same options exactly (bit for bit), through a
+// drag (the object moved, the stale shadow gone), a change of options, and no objects at all.
+TEST(InsertPreview, FramesEqualTheFullRenderThroughADrag) {
+  const InsertScene s = make_scene();
+  const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
+  const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
+  InsertPreview preview(photo, distance, s.camera, s.scene, InsertOptions::preview());
+  auto expect_same = [&](const InsertResult& got, const std::vector<InsertObject>& objects,
+                         const InsertOptions& options, const char* what) {
+    const InsertResult want = insert_objects(photo, distance, s.camera, s.scene, objects, options);
+    std::size_t differ = 0, changed = 0;
+    for (std::size_t i = 0; i < want.composite.pixels().size(); ++i) {
+      differ += got.composite.pixels()[i] != want.composite.pixels()[i];
+      changed += want.composite.pixels()[i] != photo.pixels()[i];
+    }
+    for (std::size_t i = 0; i < want.matte.pixels().size(); ++i) {
+      differ += got.matte.pixels()[i] != want.matte.pixels()[i];
+      differ += got.distance_m.pixels()[i] != want.distance_m.pixels()[i];
+    }
+    EXPECT_EQ(differ, 0u) << what;
+    return changed;
+  };
+  std::vector<InsertObject> objects = s.objects;
+  const std::size_t changed_first = expect_same(preview.render(objects, InsertOptions::preview()),
+                                                objects, InsertOptions::preview(), "first");
+  EXPECT_GT(changed_first, 500u);  // the objects and their shadows are there
+  const auto first = preview.last_frame();
+  EXPECT_TRUE(first.objects_rebuilt);
+  EXPECT_GT(first.tiles_rendered, 0u);
+  EXPECT_LT(first.tiles_rendered, first.tiles_total);
+  std::printf("first frame: %zu of %zu tiles\n", first.tiles_rendered, first.tiles_total);
+  // A drag: the sphere 1.5 m to the left and nearer, the box turned.
+  objects[0].placement.position_m.x -= 1.5;
+  objects[0].placement.position_m.z -= 1.0;
+  objects[1].placement.yaw_deg = 30;
+  expect_same(preview.render(objects, InsertOptions::preview()), objects, InsertOptions::preview(),
+              "moved");
+  EXPECT_TRUE(preview.last_frame().objects_rebuilt);
+  // The idle refinement at the same placement reuses the objects' scene.
+  expect_same(preview.render(objects, InsertOptions::preview_refined()), objects,
+              InsertOptions::preview_refined(), "refined");
+  EXPECT_FALSE(preview.last_frame().objects_rebuilt);
+  // The full quality's settings through the preview, too (its hashed pattern; mesh_step is the
+  // preview's).
+  InsertOptions full;
+  full.mesh_step = InsertOptions::preview().mesh_step;
+  expect_same(preview.render(objects, full), objects, full, "full settings");
+  // All objects removed: the photo again, exactly.
+  const std::size_t last_rendered = preview.last_frame().tiles_rendered;
+  const InsertResult& none = preview.render({}, InsertOptions::preview());
+  EXPECT_EQ(preview.last_frame().tiles_reset, last_rendered);
+  for (std::size_t i = 0; i < photo.pixels().size(); ++i)
+    ASSERT_EQ(none.composite.pixels()[i], photo.pixels()[i]);
+  for (float m : none.matte.pixels()) ASSERT_EQ(m, 0.0f);
+  EXPECT_EQ(preview.last_frame().tiles_rendered, 0u);
+}
+
+// A cancelled frame leaves the preview consistent: the next frame is exact.
+TEST(InsertPreview, CancelledFrameThenExactFrame) {
+  const InsertScene s = make_scene();
+  const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
+  const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
+  InsertPreview preview(photo, distance, s.camera, s.scene, InsertOptions::preview());
+  preview.render(s.objects, InsertOptions::preview());
+  std::vector<InsertObject> moved = s.objects;
+  moved[0].placement.position_m.x += 1.0;
+  CancelToken cancel;
+  cancel.request();
+  EXPECT_THROW(preview.render(moved, InsertOptions::preview(), &cancel), Error);
+  moved[0].placement.position_m.x += 0.5;
+  const InsertResult& got = preview.render(moved, InsertOptions::preview());
+  const InsertResult want =
+      insert_objects(photo, distance, s.camera, s.scene, moved, InsertOptions::preview());
+  for (std::size_t i = 0; i < want.composite.pixels().size(); ++i)
+    ASSERT_EQ(got.composite.pixels()[i], want.composite.pixels()[i]) << i;
+  InsertOptions fogged = InsertOptions::preview();
+  fogged.fog = true;
+  EXPECT_THROW(preview.render(moved, fogged), Error);
+}
+
+// The preview's fixed sample pattern has no salt-and-pepper speckle: a speckle is a pixel of the
+// composite, inside an object or on the photo's surfaces the objects shade, that differs from
+// the median of its 3 x 3 block by more than 10 % (measured: hashed 59, fixed 8, which are the
+// test photo's texture and shadow edges). The hashed (per-pixel rotated) pattern with the same
+// few rays has many; the fixed one at most a fifth of them.
+TEST(InsertPreview, FixedPatternHasNoSpeckle) {
+  const InsertScene s = make_scene();
+  const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
+  const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
+  const float kSpeckle = 0.1f;  // relative to the block's median
+  auto speckles = [&](bool fixed) {
+    InsertOptions o = InsertOptions::preview();
+    o.fixed_pattern = fixed;
+    const InsertResult r = insert_objects(photo, distance, s.camera, s.scene, s.objects, o);
+    std::size_t count = 0;
+    for (int y = 1; y + 1 < s.camera.height; ++y)
+      for (int x = 1; x + 1 < s.camera.width; ++x) {
+        // Inside the objects (every neighbour fully covered) or off them (none covered): the
+        // composite's green relative to the median of the 3 x 3 block.
+        int covered = 0;
+        float v[9];
+        int k = 0;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            covered += r.matte.at(x + dx, y + dy, 0) == 1.0f;
+            v[k++] = r.composite.at(x + dx, y + dy, 1);
+          }
+        if (covered != 0 && covered != 9) continue;
+        if (covered == 0 && r.shadow.at(x, y, 1) == 1.0f) continue;  // untouched photo
+        const float c = r.composite.at(x, y, 1);
+        std::nth_element(v, v + 4, v + 9);
+        count += std::fabs(c - v[4]) > kSpeckle * v[4];
+      }
+    return count;
+  };
+  const std::size_t hashed = speckles(false), fixed = speckles(true);
+  std::printf("speckles: hashed pattern %zu, fixed pattern %zu\n", hashed, fixed);
+  EXPECT_GT(hashed, 30u);
+  EXPECT_LE(fixed * 5, hashed);
 }
 
 }  // namespace

@@ -39,9 +39,12 @@
 // evaluation (e.g. prefiltered environment lighting) replaces that one call.
 #pragma once
 
+#include <array>
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "mr/camera.h"
 #include "mr/cancel.h"
@@ -87,9 +90,20 @@ struct InsertionSettings {
   /// against the objects: an object of radius r at distance D hides at most (r / D)^2 of the
   /// cosine-weighted sky (0.4 % at 16).
   double sky_influence_radii = 16;
+  /// The sky influence counts the objects' tight bounding radius (the farthest vertex from the
+  /// box's centre) instead of the box's half-diagonal (up to sqrt(3) larger for round objects):
+  /// the preview's choice (a third of the area to shade for a sphere).
+  bool sky_influence_tight = false;
   /// Relative depth tolerance of the occlusion test: an object sample is in front of the
   /// photo's surface when its distance < d (1 + tolerance).
   double depth_tolerance = 2e-3;
+  /// The interactive preview's pattern: every pixel draws the same sun, sky and sub-pixel
+  /// directions (stratum centres, no per-pixel rotation), so neighbouring pixels agree (no
+  /// salt-and-pepper speckle: a few directions give smooth, slightly banded penumbrae and
+  /// contact shadows instead) and a pixel's samples do not change between frames (no shimmer
+  /// while an object is dragged). Off: each pixel's pattern is rotated by a hash of the pixel
+  /// (noise instead of bands; what the full-quality render converges with).
+  bool fixed_pattern = false;
   int threads = 0;  ///< 0: all cores
 };
 
@@ -121,5 +135,32 @@ struct InsertionLayers {
 /// Renders the layers. Deterministic. Throws mr::Error(invalid_argument / size_mismatch) for bad
 /// inputs, mr::Error(cancelled).
 InsertionLayers render_insertion(const InsertionInputs& in, const InsertionSettings& settings);
+
+/// The interactive preview's region rendering. The photo in square screen tiles, each with the
+/// bounding sphere of its pixels' shadow-ray origins (the photo's surface points, lifted as the
+/// renderer lifts them) and its widest pixel footprint: what does not depend on the objects, made
+/// once per photo. A tile whose sphere no object's shadow cone, sky-influence sphere or lamp
+/// segment can reach, and that no object's screen rectangle overlaps, holds the photo unchanged:
+/// the tile tests are the per-pixel tests of render_insertion widened by the tile's radius, so
+/// they are conservative (rendering only the influenced tiles gives render_insertion's image
+/// exactly; tests/insert_test.cpp checks it).
+struct PhotoTiles {
+  int tile_px = 8;
+  int tiles_x = 0, tiles_y = 0;
+  /// Per tile, row-major: centre x, y, z, radius (< 0: no pixel with a surface), footprint (m).
+  std::vector<std::array<float, 5>> bounds;
+};
+PhotoTiles photo_tiles(const InsertionInputs& in, int tile_px = 8);
+/// 1 for every tile the objects of `in` may change (a few microseconds per tile).
+std::vector<std::uint8_t> influenced_tiles(const InsertionInputs& in,
+                                           const InsertionSettings& settings,
+                                           const PhotoTiles& tiles);
+/// Renders the tiles with render_mask[i] != 0 into `out` (allocated at the camera's size when it
+/// is not) and resets those with clean_mask[i] != 0 (and not rendered) to the photo's own values
+/// (the composite = the photo, shadow 1, matte 0, the photo's distance); others are left alone.
+/// clean_mask may be empty. out's ray counts are this call's.
+void render_insertion_tiles(const InsertionInputs& in, const InsertionSettings& settings,
+                            const PhotoTiles& tiles, std::span<const std::uint8_t> render_mask,
+                            std::span<const std::uint8_t> clean_mask, InsertionLayers& out);
 
 }  // namespace mr::render::insertion

@@ -14,8 +14,9 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 [[noreturn]] void fail(const ObjectMesh& mesh, const std::string& what) {
-  throw Error(ErrorCode::invalid_argument,
-              "object '" + (mesh.source.empty() ? std::string("<unnamed>") : mesh.source) + "': " + what);
+  throw Error(
+      ErrorCode::invalid_argument,
+      "object '" + (mesh.source.empty() ? std::string("<unnamed>") : mesh.source) + "': " + what);
 }
 
 void embree_error(void*, RTCError code, const char* message) {
@@ -27,7 +28,8 @@ void embree_error(void*, RTCError code, const char* message) {
 // Bilinear lookup with repeat wrapping; returns the first `n` channels (missing ones = 1).
 void sample_bilinear(const Image& image, float u, float v, int n, float* out) {
   const int w = image.width(), h = image.height();
-  const float fx = (u - std::floor(u)) * float(w) - 0.5f, fy = (v - std::floor(v)) * float(h) - 0.5f;
+  const float fx = (u - std::floor(u)) * float(w) - 0.5f,
+              fy = (v - std::floor(v)) * float(h) - 0.5f;
   const int x0 = int(std::floor(fx)), y0 = int(std::floor(fy));
   const float ax = fx - float(x0), ay = fy - float(y0);
   auto wrap = [](int i, int size) { return ((i % size) + size) % size; };
@@ -101,7 +103,8 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
     fail(mesh, "placement position and yaw must be finite");
   const std::size_t nv = mesh.positions.size();
   if (!mesh.normals.empty() && mesh.normals.size() != nv)
-    fail(mesh, std::to_string(mesh.normals.size()) + " normals for " + std::to_string(nv) + " vertices");
+    fail(mesh,
+         std::to_string(mesh.normals.size()) + " normals for " + std::to_string(nv) + " vertices");
   if (!mesh.uvs.empty() && mesh.uvs.size() != nv)
     fail(mesh, std::to_string(mesh.uvs.size()) + " uvs for " + std::to_string(nv) + " vertices");
   if (mesh.materials.empty()) fail(mesh, "has no material");
@@ -180,7 +183,8 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
     const Vec3d a = pos(tri[0]), b = pos(tri[1]), c = pos(tri[2]);
     const double area2 = length(cross(b - a, c - a));
     if (!(area2 > 1e-14)) continue;  // degenerate: hits nothing, and casts nothing
-    world.indices.insert(world.indices.end(), {vertex_base + tri[0], vertex_base + tri[1], vertex_base + tri[2]});
+    world.indices.insert(world.indices.end(),
+                         {vertex_base + tri[0], vertex_base + tri[1], vertex_base + tri[2]});
     world.triangle_material.push_back(std::uint32_t(material_base + material));
     bool smooth = !mesh.normals.empty();
     for (int k = 0; k < 3 && smooth; ++k) {
@@ -193,6 +197,14 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
     const Vec3d centre = {(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
     world.bounds.push_back({float(centre.x), float(centre.y), float(centre.z),
                             float(length(hi - centre) * 1.0001 + 1e-6)});
+    double r2 = 0;
+    for (std::size_t i = 0; i < nv; ++i) {
+      const float* q = &world.positions[3 * std::size_t(vertex_base + i)];
+      const double dx = q[0] - centre.x, dy = q[1] - centre.y, dz = q[2] - centre.z;
+      r2 = std::max(r2, dx * dx + dy * dy + dz * dz);
+    }
+    world.tight_bounds.push_back(
+        {float(centre.x), float(centre.y), float(centre.z), float(std::sqrt(r2) * 1.0001 + 1e-6)});
   }
 }
 
@@ -211,7 +223,8 @@ SurfaceReflectance reflectance_at(const WorldObjects& world, std::uint32_t prim,
     const std::uint32_t* tri = &world.indices[3 * std::size_t(prim)];
     float uv[2];
     for (int k = 0; k < 2; ++k)
-      uv[k] = (1 - u - v) * world.uvs[2 * std::size_t(tri[0]) + k] + u * world.uvs[2 * std::size_t(tri[1]) + k] +
+      uv[k] = (1 - u - v) * world.uvs[2 * std::size_t(tri[0]) + k] +
+              u * world.uvs[2 * std::size_t(tri[1]) + k] +
               v * world.uvs[2 * std::size_t(tri[2]) + k];
     if (m.base_color_texture) {
       float t[3];
@@ -235,19 +248,20 @@ SurfaceReflectance reflectance_at(const WorldObjects& world, std::uint32_t prim,
   return r;
 }
 
-ObjectScene::ObjectScene(const WorldObjects& world) : world_(world) {
+ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build) : world_(world) {
   if (world.triangle_count() == 0) return;
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw Error(ErrorCode::internal, "Embree: cannot create a device for the objects");
   rtcSetDeviceErrorFunction(device_, &embree_error, nullptr);
   scene_ = rtcNewScene(device_);
-  rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_MEDIUM);
+  rtcSetSceneBuildQuality(scene_, fast_build ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_MEDIUM);
   rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
   RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                              world.positions.data(), 0, 3 * sizeof(float), world.vertex_count());
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                             world.indices.data(), 0, 3 * sizeof(std::uint32_t), world.triangle_count());
+                             world.indices.data(), 0, 3 * sizeof(std::uint32_t),
+                             world.triangle_count());
   rtcCommitGeometry(geometry);
   rtcAttachGeometry(scene_, geometry);
   rtcReleaseGeometry(geometry);
