@@ -84,21 +84,27 @@ std::optional<std::pair<mr::Vec3, double>> ObjectTool::bounds(int index) const {
   return std::make_pair(w, it->second.second * o.placement.scale);
 }
 
+std::optional<std::pair<mr::PixelPoint, double>> ObjectTool::screenCircle(int index) const {
+  const auto b = bounds(index);
+  if (!b) return std::nullopt;
+  const auto centre = project(b->first);
+  if (!centre) return std::nullopt;
+  const auto [forward, right, up] = pose_.axes();
+  const mr::Vec3 c = {b->first.x - pose_.position_m.x, b->first.y - pose_.position_m.y,
+                      b->first.z - pose_.position_m.z};
+  const double z = c.x * forward.x + c.y * forward.y + c.z * forward.z;
+  return std::make_pair(*centre, document_->camera.focal_px * b->second / z);
+}
+
 int ObjectTool::objectAt(const mr::PixelPoint& p) const {
   if (!document_) return -1;
   int best = -1;
   double best_d = 1e300;
   for (int i = 0; i < int(panel_->objects().size()); ++i) {
-    const auto b = bounds(i);
-    if (!b) continue;
-    const auto centre = project(b->first);
-    if (!centre) continue;
-    const auto [forward, right, up] = pose_.axes();
-    const mr::Vec3 c = {b->first.x - pose_.position_m.x, b->first.y - pose_.position_m.y,
-                        b->first.z - pose_.position_m.z};
-    const double z = c.x * forward.x + c.y * forward.y + c.z * forward.z;
-    const double radius_px = document_->camera.focal_px * b->second / z;
-    const double d = std::hypot(p[0] - (*centre)[0], p[1] - (*centre)[1]);
+    const auto circle = screenCircle(i);
+    if (!circle) continue;
+    const auto& [centre, radius_px] = *circle;
+    const double d = std::hypot(p[0] - centre[0], p[1] - centre[1]);
     if (d <= radius_px && d < best_d) best = i, best_d = d;
   }
   return best;
@@ -221,16 +227,10 @@ void ObjectTool::paint(QPainter& painter, const QTransform& to_view) const {
     painter.drawLine(f + QPointF(-5, 0), f + QPointF(5, 0));
     painter.drawLine(f + QPointF(0, -5), f + QPointF(0, 5));
     if (i != selected) continue;
-    const auto b = bounds(i);
-    if (!b) continue;
-    const auto centre = project(b->first);
-    if (!centre) continue;
-    const auto [forward, right, up] = pose_.axes();
-    const mr::Vec3 c = {b->first.x - pose_.position_m.x, b->first.y - pose_.position_m.y,
-                        b->first.z - pose_.position_m.z};
-    const double z = c.x * forward.x + c.y * forward.y + c.z * forward.z;
-    const double radius = document_->camera.focal_px * b->second / z;
-    const QPointF cv = to_view.map(QPointF((*centre)[0], (*centre)[1]));
+    const auto circle = screenCircle(i);
+    if (!circle) continue;
+    const auto& [centre, radius] = *circle;
+    const QPointF cv = to_view.map(QPointF(centre[0], centre[1]));
     const double rv = radius * std::hypot(to_view.m11(), to_view.m12());
     painter.setPen(QPen(QColor(255, 200, 40, 200), 1.2, Qt::DashLine));
     painter.drawEllipse(cv, rv, rv);

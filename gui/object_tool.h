@@ -61,6 +61,8 @@ class ObjectTool : public QObject {
   std::optional<mr::PixelPoint> project(const mr::Vec3& world) const;
   /// The object's bounding sphere in the world (centre, radius), from its mesh.
   std::optional<std::pair<mr::Vec3, double>> bounds(int index) const;
+  /// The object's bounding sphere on screen: its projected centre and radius in photo pixels.
+  std::optional<std::pair<mr::PixelPoint, double>> screenCircle(int index) const;
 
   void paint(QPainter& painter, const QTransform& to_view) const;
 
