@@ -15,9 +15,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <string>
 #include <limits>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "mr/estimate.h"
@@ -70,7 +70,8 @@ using mr::test::display_luma;  // tests/display_luma.h
 cv::Mat edge_near(const Image& photo, int reach, float contrast) {
   const cv::Mat l = display_luma(photo);
   cv::Mat hi, lo;
-  const cv::Mat k = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * reach + 1, 2 * reach + 1));
+  const cv::Mat k =
+      cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * reach + 1, 2 * reach + 1));
   cv::dilate(l, hi, k);
   cv::erode(l, lo, k);
   cv::Mat out = (hi - lo) >= contrast;
@@ -145,9 +146,10 @@ TEST(GeometryNoHarm, SnowFieldFromAboveHasNoDepthColumns) {
   EXPECT_EQ(g.contact_pixels, 0u);  // no structure stands on a guessed horizon
   const std::size_t seams =
       vertical_seams_off_edges(photo, g.distance_m, far_billboard_m(g), "snow_seams");
-  std::printf("snow field: %zu vertical depth seams (> 5 %%) off the photo's edges; "
-              "structures %zu px, scale: %s\n",
-              seams, g.contact_pixels, g.scale_cue.c_str());
+  std::printf(
+      "snow field: %zu vertical depth seams (> 5 %%) off the photo's edges; "
+      "structures %zu px, scale: %s\n",
+      seams, g.contact_pixels, g.scale_cue.c_str());
   // Bar: a few isolated pixels where the ground's confidence ramp meets the far billboard
   // in the grain (0.05 % of the frame; the gallery's created-edge target is 0.02 % of the
   // frame for a whole fogged image), against 2.5 % of the frame in columns before.
@@ -295,18 +297,51 @@ TEST(GeometryNoHarm, RobustInverseLine) {
       global_face = std::max(global_face, std::abs(global[std::size_t(k)] * q_box(k) - 1));
     }
     if (k > 0)
-      worst_step = std::max(worst_step, std::abs(local[std::size_t(k)] / local[std::size_t(k - 1)] - 1));
+      worst_step =
+          std::max(worst_step, std::abs(local[std::size_t(k)] / local[std::size_t(k - 1)] - 1));
   }
   std::printf("two faces: worst face error local %.3f, one line %.3f; largest step %.4f\n",
               local_face, global_face, worst_step);
   EXPECT_LT(local_face, 0.75 * global_face);  // measured 0.181 vs 0.298
-  EXPECT_LT(worst_step, 0.03);  // the faces' own slope is up to 2 % per column
+  EXPECT_LT(worst_step, 0.03);                // the faces' own slope is up to 2 % per column
   // One measured column: its value everywhere; none: +inf.
   std::vector<double> one(10, 0.0);
   one[4] = 7;
   for (const double v : photo::robust_inverse_line(one, 10)) EXPECT_NEAR(v, 7, 1e-12);
   for (const double v : photo::robust_inverse_line(std::vector<double>(5, 0.0), 5))
     EXPECT_TRUE(std::isinf(v));
+}
+
+// A portrait's person (mask > 0) in its estimated depth and in dense fog (visibility 60 m, a
+// layer 80 m deep): the person's distances and transmittances sorted, and the bottom row's
+// ground distance (1.6 m / tan(the bottom edge's angle below the horizon)).
+struct PortraitInFog {
+  std::vector<float> distance_m, transmittance;
+  double bottom_row_ground_m = 0;
+};
+
+PortraitInFog portrait_in_dense_fog(const Image& photo, const cv::Mat& person,
+                                    const SceneEstimate& est, const std::string& name) {
+  const GeometryEstimate& g = est.geometry;
+  dump(name + "_depth", g.distance_m);
+  PortraitInFog r;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      if (person.at<std::uint8_t>(y, x)) r.distance_m.push_back(g.distance_m.at(x, y, 0));
+  std::sort(r.distance_m.begin(), r.distance_m.end());
+  r.bottom_row_ground_m = g.pose.position_m.y / (0.5 * kH / kCamera.focal_px);
+  FogScene s = est.scene;
+  const float sigma = float(extinction_from_visibility(60));
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  s.medium.layer_top_m = 80;
+  s.render.backend = Backend::cpu;
+  const FogLayers f = fog(photo, g.distance_m, g.sky_alpha, kCamera, s);
+  dump(name + "_dense", f.composite);
+  for (int y = 0; y < kH; y += 2)
+    for (int x = 0; x < kW; x += 2)
+      if (person.at<std::uint8_t>(y, x)) r.transmittance.push_back(f.transmittance.at(x, y, 1));
+  std::sort(r.transmittance.begin(), r.transmittance.end());
+  return r;
 }
 
 // A portrait with sky (the tuning half's cameraman, a person in front of the sky on a lawn):
@@ -323,8 +358,8 @@ TEST(GeometryNoHarm, PersonInFrontOfTheSkyIsNearNotOnTheFarBillboard) {
     for (int x = 0; x < kW; ++x) {
       if (y < kH / 2) {
         const float t = float(y) / (kH / 2);
-        m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.45f, 0.62f, 0.88f) * (1 - t) +
-                                cv::Vec3f(0.72f, 0.78f, 0.86f) * t;
+        m.at<cv::Vec3f>(y, x) =
+            cv::Vec3f(0.45f, 0.62f, 0.88f) * (1 - t) + cv::Vec3f(0.72f, 0.78f, 0.86f) * t;
       } else {
         const float n = grain(rng);
         m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.30f + n, 0.45f + n, 0.20f + n);
@@ -334,8 +369,8 @@ TEST(GeometryNoHarm, PersonInFrontOfTheSkyIsNearNotOnTheFarBillboard) {
   // (Its foot stays left of the middle half of the bottom band, where the ground's colour is
   // modelled: a dark subject covering much of it makes the mean-started model take it as
   // ground; see gallery/results/skymask_tune.md.)
-  std::vector<cv::Point> coat = {{10, 479}, {40, 210}, {90, 155}, {190, 150},
-                                 {230, 210}, {150, 479}};
+  std::vector<cv::Point> coat = {{10, 479},  {40, 210},  {90, 155},
+                                 {190, 150}, {230, 210}, {150, 479}};
   cv::fillPoly(person, std::vector<std::vector<cv::Point>>{coat}, cv::Scalar(255));
   cv::circle(person, cv::Point(140, 95), 50, cv::Scalar(128), cv::FILLED);
   cv::rectangle(person, cv::Point(125, 135), cv::Point(155, 155), cv::Scalar(128), cv::FILLED);
@@ -355,27 +390,9 @@ TEST(GeometryNoHarm, PersonInFrontOfTheSkyIsNearNotOnTheFarBillboard) {
   horizon.horizon = std::array<PixelPoint, 2>{PixelPoint{0, kH / 2.0 - 0.5},
                                               PixelPoint{kW - 1.0, kH / 2.0 - 0.5}};
   const SceneEstimate est = estimate_scene(photo, kCamera, horizon);
-  const GeometryEstimate& g = est.geometry;
-  dump("portrait_depth", g.distance_m);
-  std::vector<float> d;
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x)
-      if (person.at<std::uint8_t>(y, x)) d.push_back(g.distance_m.at(x, y, 0));
-  std::sort(d.begin(), d.end());
-  // The bottom row's ground: 1.6 m / tan(the bottom edge's angle below the horizon).
-  const double bottom_m = g.pose.position_m.y / (0.5 * kH / kCamera.focal_px);
-  FogScene s = est.scene;
-  const float sigma = float(extinction_from_visibility(60));
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.layer_top_m = 80;
-  s.render.backend = Backend::cpu;
-  const FogLayers f = fog(photo, g.distance_m, g.sky_alpha, kCamera, s);
-  dump("portrait_dense", f.composite);
-  std::vector<float> t;
-  for (int y = 0; y < kH; y += 2)
-    for (int x = 0; x < kW; x += 2)
-      if (person.at<std::uint8_t>(y, x)) t.push_back(f.transmittance.at(x, y, 1));
-  std::sort(t.begin(), t.end());
+  const PortraitInFog r = portrait_in_dense_fog(photo, person, est, "portrait");
+  const std::vector<float>&d = r.distance_m, &t = r.transmittance;
+  const double bottom_m = r.bottom_row_ground_m;
   std::printf(
       "portrait: person distance median %.2f m, 90th percentile %.2f m (bottom row's ground "
       "%.2f m forward); dense fog transmittance median %.3f\n",
@@ -433,27 +450,11 @@ TEST(GeometryNoHarm, PortraitFillingTheBottomBandStaysNear) {
   const Image photo = to_photo(m);
   dump("portrait_mid_photo", photo);
   const SceneEstimate est = estimate_scene(photo, kCamera, Annotations{});
-  const GeometryEstimate& g = est.geometry;
-  dump("portrait_mid_depth", g.distance_m);
-  std::printf("horizon: %s, pitch %.2f deg\n", to_string(g.horizon_source), g.pose.pitch_deg);
-  std::vector<float> d;
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x)
-      if (person.at<std::uint8_t>(y, x)) d.push_back(g.distance_m.at(x, y, 0));
-  std::sort(d.begin(), d.end());
-  const double bottom_m = g.pose.position_m.y / (0.5 * kH / kCamera.focal_px);
-  FogScene s = est.scene;
-  const float sigma = float(extinction_from_visibility(60));
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.layer_top_m = 80;
-  s.render.backend = Backend::cpu;
-  const FogLayers f = fog(photo, g.distance_m, g.sky_alpha, kCamera, s);
-  dump("portrait_mid_dense", f.composite);
-  std::vector<float> t;
-  for (int y = 0; y < kH; y += 2)
-    for (int x = 0; x < kW; x += 2)
-      if (person.at<std::uint8_t>(y, x)) t.push_back(f.transmittance.at(x, y, 1));
-  std::sort(t.begin(), t.end());
+  std::printf("horizon: %s, pitch %.2f deg\n", to_string(est.geometry.horizon_source),
+              est.geometry.pose.pitch_deg);
+  const PortraitInFog r = portrait_in_dense_fog(photo, person, est, "portrait_mid");
+  const std::vector<float>&d = r.distance_m, &t = r.transmittance;
+  const double bottom_m = r.bottom_row_ground_m;
   std::printf(
       "portrait (middle of the bottom band): person distance median %.2f m, 90th percentile %.2f m "
       "(bottom row's ground %.2f m forward); dense fog transmittance median %.3f, 10th "
