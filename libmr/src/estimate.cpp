@@ -464,12 +464,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           // an upper bound (fog errs towards too much). Without it, such a subject went to the
           // far billboard and vanished in dense fog. Only with a measured horizon (annotated,
           // or from the photo's lines): under the level fall-back the bottom row may be above
-          // the true horizon (a camera looking up into a canopy), and there is no ground there;
-          // unless the ground's colour model found a subject standing in the bottom band (its
-          // colour rising from the bottom far above the horizon, photo/sky_mask.h): that is
-          // a subject in front of the camera, whatever the horizon.
+          // the true horizon (a camera looking up into a canopy), and there is no ground there.
+          // (Also not when the ground's colour model found a subject standing in the bottom
+          // band: under the fall-back, a backlit cloud bank reaching the bottom of a sky photo
+          // passed for such a subject and stood on the bottom edge, a flat near patch in haze.)
           if (yc + 1 >= h) {
-            if (g.horizon_source == EstimateSource::fallback && !ground.standing_subject) continue;
+            if (g.horizon_source == EstimateSource::fallback) continue;
           } else if (!ground.ground[std::size_t(yc + 1) * w + x]) {
             continue;
           }
