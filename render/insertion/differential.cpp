@@ -262,6 +262,18 @@ class Renderer {
     int index[kMaxRays];
     bool blocked_compact[kMaxRays];
     std::size_t shadow_rays = 0, camera_rays = 0;
+
+    /// Traces the first `traced` compacted rays against the objects and scatters the answers
+    /// back to their indices in `blocked` (which holds false for the rays not traced).
+    void trace_compacted_objects(const VisibilityPath& visibility, int traced, bool* blocked) {
+      if (traced > 0) {
+        visibility.occluded(Geometry::objects,
+                            std::span<const ShadowRay>(compact, std::size_t(traced)),
+                            blocked_compact);
+        for (int k = 0; k < traced; ++k) blocked[index[k]] = blocked_compact[k];
+      }
+      shadow_rays += std::size_t(traced);
+    }
   };
 
   Renderer(const InsertionInputs& in, const InsertionSettings& settings);
@@ -529,14 +541,7 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
         scratch.index[traced] = i;
         scratch.compact[traced++] = set.rays[i];
       }
-      if (traced > 0) {
-        in.visibility->occluded(Geometry::objects,
-                                std::span<const ShadowRay>(scratch.compact, std::size_t(traced)),
-                                scratch.blocked_compact);
-        for (int k = 0; k < traced; ++k)
-          blocked_objects[scratch.index[k]] = scratch.blocked_compact[k];
-      }
-      scratch.shadow_rays += std::size_t(traced);
+      scratch.trace_compacted_objects(*in.visibility, traced, blocked_objects);
       bool any = false;
       for (int i = 0; i < set.size; ++i) any = any || blocked_objects[i];
       if (any) {
@@ -635,14 +640,7 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
           scratch.index[traced] = i;
           scratch.compact[traced++] = r;
         }
-        if (traced > 0) {
-          in.visibility->occluded(Geometry::objects,
-                                  std::span<const ShadowRay>(scratch.compact, std::size_t(traced)),
-                                  scratch.blocked_compact);
-          for (int k = 0; k < traced; ++k)
-            blocked_objects[scratch.index[k]] = scratch.blocked_compact[k];
-        }
-        scratch.shadow_rays += std::size_t(traced);
+        scratch.trace_compacted_objects(*in.visibility, traced, blocked_objects);
       } else {
         in.visibility->occluded(Geometry::objects, rays, blocked_objects);
         scratch.shadow_rays += std::size_t(set.size);
