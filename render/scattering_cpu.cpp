@@ -78,6 +78,7 @@ class Core {
     for (int c = 0; c < 3; ++c) sigma_[c] = m.sigma_t_per_m[c];
     sigma3_ = {sigma_[0], sigma_[1], sigma_[2]};
     albedo_ = rgb(m.albedo);
+    shape_ = medium_shape(m);
     sky_ = rgb(in.sky_radiance);
     sigma_mean_ = (sigma_[0] + sigma_[1] + sigma_[2]) / 3.0;
     sigma_min_ = std::min({sigma_[0], sigma_[1], sigma_[2]});
@@ -282,8 +283,10 @@ class Core {
         sun_seen_fraction += physics::sun_seen_fraction(ta, tb, tl, tr, vis_prev, vis, vis_next);
         ++sun_samples;
         if (lit_weight.x + lit_weight.y + lit_weight.z > 0) {
-          const Vec3d tau_sun =
-              light_path ? sun_path_transmittance(rd, w, ta, tb, xs, modulation) : Vec3d{1, 1, 1};
+          const Vec3d tau_sun = light_path ? physics::sun_path_transmittance(
+                                                 shape_, rd.shared(), origin_, w, sun_dir_, ta, tb,
+                                                 xs, modulation, sigma3_)
+                                           : Vec3d{1, 1, 1};
           inscatter +=
               physics::sun_inscatter(lit_weight, m.g, w, sun_dir_, sun_irradiance_, tau_sun);
         }
@@ -319,45 +322,6 @@ class Core {
     s.shaft = sun_samples ? sun_seen_fraction / sun_samples : 1.0;
     rays_.local() += rays;
     return s;
-  }
-
-  // The sun's light-path transmittance over segment [ta, tb] of view ray w, averaged with the
-  // segment's in-scatter weight rho(t) tau_camera(t) by 4-point Gauss-Legendre quadrature
-  // (closed-form optical depths, no rays). One value at the jittered sample xs instead (as
-  // before, and as the GPU still does) is exact in expectation but, in height fog under a low
-  // sun, varies by orders of magnitude across a long sky segment (od_sun = sigma H e^(-y/H) /
-  // sin(elevation)), which the per-pixel jitter turned into a grainy sky (issue 11, sun bank).
-  Vec3d sun_path_transmittance(const RayDensity& rd, const Vec3d& w, double ta, double tb,
-                               const Vec3d& xs, double modulation) const {
-    constexpr double kNode[4] = {-0.8611363115940526, -0.3399810435848563, 0.3399810435848563,
-                                 0.8611363115940526};
-    constexpr double kWeight[4] = {0.3478548451374538, 0.6521451548625461, 0.6521451548625461,
-                                   0.3478548451374538};
-    const Medium& m = scene_.medium;
-    const double od_xs = RayDensity(m, xs, sun_dir_).optical_depth(0, kInf);
-    // Where the sun's optical depth changes by less than 0.01 (times the largest sigma_t) over
-    // the segment, its transmittance varies by under 1 % there: the point value is as good and
-    // four times cheaper (homogeneous fog under a layer top, short segments).
-    const double sigma_max = std::max({sigma3_.x, sigma3_.y, sigma3_.z});
-    const double od_a = RayDensity(m, add(origin_, w, ta), sun_dir_).optical_depth(0, kInf);
-    const double od_b = RayDensity(m, add(origin_, w, tb), sun_dir_).optical_depth(0, kInf);
-    if (!(sigma_max * std::fabs(od_a - od_b) > 0.01)) return physics::transmittance(sigma3_, od_xs);
-    const double mid = 0.5 * (ta + tb), half = 0.5 * (tb - ta);
-    Vec3d num{0, 0, 0}, den{0, 0, 0};
-    for (int k = 0; k < 4; ++k) {
-      const double t = mid + half * kNode[k];
-      const double rho = rd.density(t);
-      if (!(rho > 0)) continue;
-      const Vec3d camera_tau =
-          physics::transmittance(sigma3_, rd.optical_depth(ta, t) * modulation);
-      const Vec3d sun_tau = physics::transmittance(
-          sigma3_, RayDensity(m, add(origin_, w, t), sun_dir_).optical_depth(0, kInf));
-      const Vec3d weight = camera_tau * (kWeight[k] * rho);
-      num += weight * sun_tau;
-      den += weight;
-    }
-    if (!(den.x > 0 && den.y > 0 && den.z > 0)) return physics::transmittance(sigma3_, od_xs);
-    return {num.x / den.x, num.y / den.y, num.z / den.z};
   }
 
   // Where a surface pixel's shadow and AO rays start: its point moved onto the occluder mesh
@@ -479,7 +443,8 @@ class Core {
         visible = known_sun_disk >= 0 ? known_sun_disk : sun_disk_visibility(x, y);
       }
       *sun_visibility = float(visible);
-      const double od_sun = light_path ? RayDensity(m, x0, sun_dir_).optical_depth(0, kInf) : 0.0;
+      const double od_sun =
+          light_path ? physics::sun_path_optical_depth(shape_, x0, sun_dir_) : 0.0;
       physics::add_surface_light(direct, direct_fogged,
                                  sun_irradiance_ * std::max(0.0, cos_i) * visible,
                                  physics::transmittance(sigma3_, od_sun));
@@ -530,6 +495,7 @@ class Core {
   const FogScene& scene_;
   double sigma_[3];
   Vec3d sigma3_, albedo_, sky_, sun_irradiance_;
+  physics::MediumShape shape_{};  // the medium's smooth density, for the shared physics
   double sigma_mean_ = 0, sigma_min_ = 0;
   bool grey_ = false;
   Vec3d sun_dir_{0, 1, 0}, sun_u_{1, 0, 0}, sun_v_{0, 0, 1};

@@ -84,7 +84,7 @@ void surface_term(int x, int y, float ao, float known_sun_disk, out vec3 S, out 
     float visible = 0.0;
     if (cos_i > 0.0) visible = known_sun_disk >= 0.0 ? known_sun_disk : sun_disk_visibility(x, y);
     sun_visibility = visible;
-    const float od_sun = lpa ? optical_depth(ray_density(x0, P.sun_dir.xyz), 0.0, INF) : 0.0;
+    const float od_sun = lpa ? sun_path_optical_depth(medium_shape(), x0, P.sun_dir.xyz) : 0.0;
     const vec3 tau_sun = transmittance(sigma, od_sun);
     const vec3 e_seen = P.sun_irradiance.xyz * max(0.0, cos_i);
     add_surface_light(direct, direct_fogged, e_seen * visible, tau_sun);

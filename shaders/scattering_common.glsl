@@ -280,9 +280,12 @@ PixelSample march(int x, int y, int steps) {
         sun_seen += sun_seen_fraction(ta, tb, tl, tr, vis_prev, vis, vis_n);
         ++sun_samples;
         if (lit_weight.x + lit_weight.y + lit_weight.z > 0.0) {
-          const float od_sun = lpa ? optical_depth(ray_density(xs, P.sun_dir.xyz), 0.0, INF) : 0.0;
+          const vec3 tau_sun = lpa ? sun_path_transmittance(medium_shape(), m.rd, origin, w,
+                                                            P.sun_dir.xyz, ta, tb, xs, modulation,
+                                                            sigma)
+                                   : vec3(1.0);
           s.inscatter += sun_inscatter(lit_weight, g, w, P.sun_dir.xyz, P.sun_irradiance.xyz,
-                                       transmittance(sigma, od_sun));
+                                       tau_sun);
         }
       }
       for (int l = 0; l < n_lamps; ++l) {

@@ -87,4 +87,22 @@ inline FogScene base_scene() {
   return s;
 }
 
+/// Issue 11's sun bank look: height fog (90 m visibility at the ground, scale height 12 m, top
+/// 40 m, g 0.6) under a low sun (elevation 8 deg, azimuth 20), sky light, a level camera 1.6 m
+/// above the ground (ground_depth), normal quality.
+inline FogScene low_sun_height_fog_scene() {
+  FogScene s = base_scene();
+  s.pose.position_m = {0, 1.6, 0};
+  const float sigma = float(3.912 / 90);
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  s.medium.albedo = {1, 1, 1};
+  s.medium.g = 0.6;
+  s.medium.height_fog = Medium::HeightFog{0.0, 12.0};
+  s.medium.layer_top_m = 40;
+  s.lighting.sky_radiance = Rgb{0.3f, 0.32f, 0.36f};
+  s.lighting.sun = Sun{direction_from_azimuth_elevation(20, 8), {3, 3, 3}, 0.27};
+  s.render.quality = Quality::normal;
+  return s;
+}
+
 }  // namespace mr::test

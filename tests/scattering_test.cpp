@@ -122,31 +122,20 @@ TEST_F(Scattering, SunThroughAFogLayerWithLightPathAttenuation) {
   EXPECT_LT(worst, 1e-3);
 }
 
-#ifndef MR_SCATTERING_TEST_VULKAN
 // Issue 11 (sun bank look: a grainy, speckled sky). Height fog (90 m visibility at the ground,
 // scale height 12 m, top 40 m, g 0.6) under a low sun (elevation 8 degrees, azimuth 20), a
 // level camera over a flat ground, sky above the horizon: nothing occludes the sun, so the sky's
 // in-scatter is smooth. The sun's light-path optical depth, sigma H e^(-y/H) / sin(8 deg), varies
 // by orders of magnitude along a long sky segment; taken at one jittered point per segment it
-// dithered the sky (grain below 0.0068 relative on the kite photo at 640 px). It is now the
-// segment's weighted average by quadrature (render/scattering_cpu.cpp). Measured on the sky rows
-// with fog (rows 0..59 of 160x120, normal quality): grain = mean |R - its 5x5 box mean| / mean R
-// (luminance), bar 0.002; accuracy against the same render at 2048 march steps (where the point
-// estimate has converged too): mean |R - R_ref| / mean R_ref, bar 0.3 %. The GPU backend still
-// takes the point estimate (its shader is unchanged), hence CPU only.
+// dithered the sky (grain below 0.0068 relative on the kite photo at 640 px). It is the
+// segment's weighted average by quadrature (physics::sun_path_transmittance, shared by both
+// backends). Measured on the sky rows with fog (rows 0..59 of 160x120, normal quality): grain =
+// mean |R - its 5x5 box mean| / mean R (luminance), bar 0.002; accuracy against the same render
+// at 2048 march steps (where the point estimate has converged too): mean |R - R_ref| / mean
+// R_ref, bar 0.3 %. Same bars on the Vulkan backend.
 TEST_F(Scattering, LowSunInHeightFogGivesASmoothSky) {
   const Camera cam = Camera::from_horizontal_fov(160, 120, 60);
-  FogScene s = base_scene();
-  s.pose.position_m = {0, 1.6, 0};
-  const float sigma = float(3.912 / 90);
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.albedo = {1, 1, 1};
-  s.medium.g = 0.6;
-  s.medium.height_fog = Medium::HeightFog{0.0, 12.0};
-  s.medium.layer_top_m = 40;
-  s.lighting.sky_radiance = Rgb{0.3f, 0.32f, 0.36f};
-  s.lighting.sun = Sun{direction_from_azimuth_elevation(20, 8), {3, 3, 3}, 0.27};
-  s.render.quality = Quality::normal;
+  const FogScene s = test::low_sun_height_fog_scene();
   const Image depth = ground_depth(cam, s.pose);
   const ScatteringLayers out = render(depth, cam, s);
   FogScene fine = s;
@@ -176,7 +165,6 @@ TEST_F(Scattering, LowSunInHeightFogGivesASmoothSky) {
   EXPECT_LT(grain / sum, 0.002);
   EXPECT_LT(diff / ref_sum, 0.003);
 }
-#endif
 
 // Issue 11 item 4: sky pixels are seen through a fog layer with a top, a finite path, not
 // painted over. Against numerical integration along the ray (Simpson, independent of

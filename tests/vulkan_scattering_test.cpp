@@ -152,6 +152,15 @@ TEST_F(VulkanScattering, MatchesCpuWithNoiseAndSky) {
   expect_matches_cpu("noise_sky", street_depth(cam, s.pose), cam, s);
 }
 
+// Issue 11's sun bank (the scene of Scattering.LowSunInHeightFogGivesASmoothSky, whose grain and
+// accuracy bars both backends pass): the sun's light-path transmittance of each segment is the
+// same shared quadrature (physics::sun_path_transmittance) on the GPU as on the CPU.
+TEST_F(VulkanScattering, MatchesCpuUnderALowSunInHeightFog) {
+  const Camera cam = Camera::from_horizontal_fov(160, 120, 60);
+  const FogScene s = test::low_sun_height_fog_scene();
+  expect_matches_cpu("low_sun_height_fog", ground_depth(cam, s.pose), cam, s);
+}
+
 // ---- tiling
 // ---------------------------------------------------------------------------------------
 
