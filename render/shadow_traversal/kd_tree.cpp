@@ -12,8 +12,16 @@
 
 #include "mr/error.h"
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+// The packet traversal is compiled for AVX2 (8 floats per register; GCC lowers 8-wide vector
+// comparisons lane by lane with scalar code on plain x86-64) and runs where the CPU has it;
+// elsewhere occluded8 answers ray by ray. AVX2 does not include FMA: no fused operations.
+#define MR_PACKET_TARGET __attribute__((target("avx2")))
+#define MR_PACKET_ISA_PRESENT() __builtin_cpu_supports("avx2")
+#else
+#define MR_PACKET_TARGET
+#define MR_PACKET_ISA_PRESENT() true
 #endif
 
 namespace mr::render::shadow {
@@ -946,12 +954,9 @@ namespace {
 using F8 = float __attribute__((vector_size(32)));
 using I8 = std::int32_t __attribute__((vector_size(32)));
 
-inline unsigned bits(const I8& m) {
-#if defined(__SSE2__)
-  __m128 lo, hi;
-  std::memcpy(&lo, &m, 16);
-  std::memcpy(&hi, reinterpret_cast<const char*>(&m) + 16, 16);
-  return unsigned(_mm_movemask_ps(lo)) | (unsigned(_mm_movemask_ps(hi)) << 4);
+MR_PACKET_TARGET inline unsigned bits(const I8& m) {
+#if defined(__x86_64__) && defined(__GNUC__)
+  return unsigned(_mm256_movemask_ps(reinterpret_cast<__m256>(m)));
 #else
   unsigned r = 0;
   for (int k = 0; k < 8; ++k) r |= unsigned(m[k] < 0) << k;
@@ -959,14 +964,26 @@ inline unsigned bits(const I8& m) {
 #endif
 }
 
+// Lane-wise choices as bit operations (and a vector ?: is lowered lane by lane with branches
+// wherever the vectors are wider than the target's).
+MR_PACKET_TARGET inline void blend(const I8& m, const F8& a, const F8& b, F8& out) {  // m ? a : b
+  out = reinterpret_cast<F8>((m & reinterpret_cast<I8>(a)) | (~m & reinterpret_cast<I8>(b)));
+}
+MR_PACKET_TARGET inline void blend(const I8& m, const I8& a, const I8& b, I8& out) {
+  out = (m & a) | (~m & b);
+}
+MR_PACKET_TARGET inline void vabs(const F8& a, F8& out) {  // std::fabs
+  out = reinterpret_cast<F8>(reinterpret_cast<I8>(a) & 0x7fffffff);
+}
 // std::max(a, b) and std::min(a, b) lane by lane, NaNs included.
-inline void vmax(const F8& a, const F8& b, F8& out) { out = (a < b) ? b : a; }
-inline void vmin(const F8& a, const F8& b, F8& out) { out = (b < a) ? b : a; }
+MR_PACKET_TARGET inline void vmax(const F8& a, const F8& b, F8& out) { blend(a < b, b, a, out); }
+MR_PACKET_TARGET inline void vmin(const F8& a, const F8& b, F8& out) { blend(b < a, b, a, out); }
 
 // a[k] for k given per lane by the masks (k == 0: is0, k == 1: is1, else k == 2).
-inline void select3(const I8& is0, const I8& is1, const F8& a0, const F8& a1, const F8& a2,
+MR_PACKET_TARGET inline void select3(const I8& is0, const I8& is1, const F8& a0, const F8& a1, const F8& a2,
                     F8& out) {
-  out = is0 ? a0 : (is1 ? a1 : a2);
+  out = reinterpret_cast<F8>((is0 & reinterpret_cast<I8>(a0)) | (is1 & reinterpret_cast<I8>(a1)) |
+                             (~(is0 | is1) & reinterpret_cast<I8>(a2)));
 }
 
 struct alignas(32) Packet {
@@ -977,7 +994,7 @@ struct alignas(32) Packet {
 };
 
 // hit_triangle for the lanes of `active`, 8 at once: the lanes whose answer is a hit.
-unsigned hit_triangle8(const Packet& p, const float* v, unsigned active) {
+MR_PACKET_TARGET unsigned hit_triangle8(const Packet& p, const float* v, unsigned active) {
   F8 a[3], b[3], c[3];
   for (int k = 0; k < 3; ++k) {
     a[k] = v[k] - p.o[k];
@@ -1018,7 +1035,8 @@ unsigned hit_triangle8(const Packet& p, const float* v, unsigned active) {
 }  // namespace
 
 template <bool kCount>
-unsigned KdTree::packet_traverse(const Ray* rays, unsigned lanes, KindCounters* counters) const {
+MR_PACKET_TARGET unsigned KdTree::packet_traverse(const Ray* rays, unsigned lanes,
+                                                  KindCounters* counters) const {
   Packet p;
   alignas(32) float t0s[8] = {}, t1s[8] = {};
   std::uint64_t lane_nodes[8] = {}, lane_prims[8] = {};
@@ -1082,19 +1100,26 @@ unsigned KdTree::packet_traverse(const Ray* rays, unsigned lanes, KindCounters* 
         const I8 left_first = d > zero;
         const F8 t_split = (split - o) * p.inv[axis];
         F8 e, first_max, second_min;
-        vmax(t_min < zero ? -t_min : t_min, t_max < zero ? -t_max : t_max, e);
+        F8 abs_min, abs_max;
+        vabs(t_min, abs_min);
+        vabs(t_max, abs_max);
+        vmax(abs_min, abs_max, e);
         e = 1e-6f * e;
         vmin(t_max, t_split + e, first_max);
         vmax(t_min, t_split - e, second_min);
         const I8 visit_first = t_min <= first_max, visit_second = second_min <= t_max;
-        const I8 visit_left = flat ? (o <= split) : (left_first ? visit_first : visit_second);
-        const I8 visit_right = flat ? (o >= split) : (left_first ? visit_second : visit_first);
+        I8 crossing_left, crossing_right, visit_left, visit_right;
+        blend(left_first, visit_first, visit_second, crossing_left);
+        blend(left_first, visit_second, visit_first, crossing_right);
+        blend(flat, o <= split, crossing_left, visit_left);
+        blend(flat, o >= split, crossing_right, visit_right);
         const I8 cut_left = ~flat & left_first, cut_right = ~flat & ~left_first;
         const unsigned to_left = bits(visit_left) & mask, to_right = bits(visit_right) & mask;
-        const F8 left_min = cut_right ? second_min : t_min;
-        const F8 left_max = cut_left ? first_max : t_max;
-        const F8 right_min = cut_left ? second_min : t_min;
-        const F8 right_max = cut_right ? first_max : t_max;
+        F8 left_min, left_max, right_min, right_max;
+        blend(cut_right, second_min, t_min, left_min);
+        blend(cut_left, first_max, t_max, left_max);
+        blend(cut_left, second_min, t_min, right_min);
+        blend(cut_right, first_max, t_max, right_max);
         const std::uint32_t left = node + 1, right = n->a;
         if (to_left != 0 && to_right != 0) {
           if (top >= kStackSize) {  // never at the depths the build allows: finish ray by ray
@@ -1163,6 +1188,15 @@ unsigned KdTree::packet_traverse(const Ray* rays, unsigned lanes, KindCounters* 
 
 unsigned KdTree::occluded8(const Ray* rays, unsigned lanes, KindCounters* counters) const {
   lanes &= 0xffu;
+  static const bool packet_isa = MR_PACKET_ISA_PRESENT();
+  if (!packet_isa) {  // the same answers and counts, ray by ray
+    unsigned hits = 0;
+    for (unsigned m = lanes; m != 0; m &= m - 1) {
+      const int k = __builtin_ctz(m);
+      if (occluded(rays[k], Order::standard, counters)) hits |= 1u << k;
+    }
+    return hits;
+  }
   return counters ? packet_traverse<true>(rays, lanes, counters)
                   : packet_traverse<false>(rays, lanes, nullptr);
 }
