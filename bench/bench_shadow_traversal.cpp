@@ -536,12 +536,13 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
   }
   for (const Row& r : rows)
     if (r.counters.packets)
-      std::printf("\n%s: %.1f node fetches per packet of 8 (%.2f per ray; the per-ray columns count "
-                  "a node for every ray active there)\n",
-                  r.name.c_str(), double(r.counters.packet_nodes) / double(r.counters.packets),
-                  double(r.counters.packet_nodes) /
-                      double(std::max<std::uint64_t>(
-                          1, r.counters.occluded.rays + r.counters.unoccluded.rays)));
+      std::printf(
+          "\n%s: %.1f node fetches per packet of 8 (%.2f per ray; the per-ray columns count "
+          "a node for every ray active there)\n",
+          r.name.c_str(), double(r.counters.packet_nodes) / double(r.counters.packets),
+          double(r.counters.packet_nodes) /
+              double(std::max<std::uint64_t>(
+                  1, r.counters.occluded.rays + r.counters.unoccluded.rays)));
   for (const Row& r : rows)
     if (r.has_counters && r.counters.rope_fallbacks)
       std::printf("\n%s: %llu rope walks fell back to a root descent\n", r.name.c_str(),
@@ -670,10 +671,11 @@ int main(int argc, char** argv) {
           "  --rays-file PATH    leuven's rays (default shadow_rays_leuven_1080p.bin)\n"
           "  --build-only        only build the kd-tree per scene: CPU time, nodes, memory\n"
           "  --explain           only list the rays where the kd-tree and Embree disagree, with\n"
-          "                      brute-force and robust-Embree answers (seed's scenes)\n"
+          "                      brute-force and robust-Embree answers\n"
           "  --max-rays N        replay about N of leuven's rays: every k-th block of 1024 (0: "
           "all)\n"
-          "  --packets-only      no SATO/SRDH rows or builds, no ablations: standard, multi-index,\n"
+          "  --packets-only      no SATO/SRDH rows or builds, no ablations: standard, "
+          "multi-index,\n"
           "                      kd 8-wide packets and Embree only\n"
           "  --cost-intersect C  kd-tree SAH: triangle test cost, node step = 1 (default 1.5)\n"
           "  --max-leaf N        kd-tree: always a leaf at N triangles or fewer (default 2)\n"
@@ -693,6 +695,13 @@ int main(int argc, char** argv) {
       if (!wants(s.name)) continue;
       const mr::render::OccluderScene embree{mr::render::TriangleMesh(s.mesh)};
       explain(s.name, s.mesh, scene_rays(s, embree, size));
+    }
+    if (wants("leuven")) {  // the recorded rays (--rays-file)
+      std::uint64_t total = 0;
+      const std::vector<Ray> rays = load_rays(rays_file, total);
+      const mr::bench::Inputs& in = mr::bench::leuven_inputs(1920, 1080);
+      const LeuvenGeometry g = leuven_geometry(in, leuven_scene_for_rays(in));
+      explain("leuven 1080p sun", g.mesh, rays);
     }
     return 0;
   }

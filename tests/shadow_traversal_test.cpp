@@ -88,8 +88,8 @@ struct Agreement {
 };
 
 /// Every kd traversal (and SRDH's ray-set-built tree; single rays and 8-wide packets) against
-/// the standard one (must agree exactly: one triangle test) and the standard one against Embree (disagreements must be
-/// measure-zero cases).
+/// the standard one (must agree exactly: one triangle test) and the standard one against Embree
+/// (disagreements must be measure-zero cases).
 Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays,
                           bool robust_embree) {
   Agreement a;
@@ -116,7 +116,8 @@ Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays
       lanes |= 1u << k;
     }
     const unsigned some = lanes & unsigned(lane_rng());
-    const unsigned hits = tree.occluded8(group, lanes), hits_srdh = srdh_tree.occluded8(group, lanes),
+    const unsigned hits = tree.occluded8(group, lanes),
+                   hits_srdh = srdh_tree.occluded8(group, lanes),
                    hits_some = tree.occluded8(group, some);
     EXPECT_EQ(hits & ~lanes, 0u);
     EXPECT_EQ(hits_some & ~some, 0u);
@@ -130,12 +131,15 @@ Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays
   for (std::size_t i = 0; i < rays.size(); ++i) {
     const Ray& r = rays[i];
     const bool standard = tree.occluded(r, Order::standard);
-    const bool answers[] = {
-        tree.occluded(r, Order::sato),          tree.occluded(r, Order::srdh),
-        tree.occluded_multi_index(r, true),     tree.occluded_multi_index(r, false),
-        tree.occluded_multi_index(r, previous), srdh_tree.occluded(r, Order::standard),
-        srdh_tree.occluded(r, Order::srdh),     bool(packet[i]),
-        bool(packet_srdh[i])};
+    const bool answers[] = {tree.occluded(r, Order::sato),
+                            tree.occluded(r, Order::srdh),
+                            tree.occluded_multi_index(r, true),
+                            tree.occluded_multi_index(r, false),
+                            tree.occluded_multi_index(r, previous),
+                            srdh_tree.occluded(r, Order::standard),
+                            srdh_tree.occluded(r, Order::srdh),
+                            bool(packet[i]),
+                            bool(packet_srdh[i])};
     for (bool b : answers) a.kd_disagreements += b != standard;
     if (packet_some[i] != 2) a.kd_disagreements += bool(packet_some[i]) != standard;
     previous = standard;
@@ -451,8 +455,9 @@ TEST(ShadowTraversal, SceneDocumentCarriesTheTraversal) {
             ShadowTraversal::multi_index);
   for (int v : {1, 2, 3}) {
     try {
-      scene_from_json(head + std::to_string(v) + ", \"render\": {\"shadow_traversal\": \"embree\"}}",
-                      "old.json");
+      scene_from_json(
+          head + std::to_string(v) + ", \"render\": {\"shadow_traversal\": \"embree\"}}",
+          "old.json");
       ADD_FAILURE() << "no error for shadow_traversal in a version-" << v << " document";
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find(

@@ -216,11 +216,10 @@ CameraPose read_pose(const Json& j, const std::string& p, const Reader& r) {
 RenderSettings read_render(const Json& j, const std::string& p, long long version,
                            const Reader& r) {
   r.object(j, p);
-  r.check_keys(
-      j, p,
-      {"quality", "backend", "march_steps", "grid_step", "gradient_acceleration",
-       "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads",
-       "shadow_traversal"});
+  r.check_keys(j, p,
+               {"quality", "backend", "march_steps", "grid_step", "gradient_acceleration",
+                "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads",
+                "shadow_traversal"});
   constexpr long long kIntMin = std::numeric_limits<int>::min();
   constexpr long long kIntMax = std::numeric_limits<int>::max();
   RenderSettings s;
@@ -644,23 +643,23 @@ Json to_document(const FogScene& s) {
 
   const RenderSettings& r = s.render;
   static constexpr const char* kQuality[] = {"draft", "normal", "final"};
-  doc["render"] = Json{{"quality", kQuality[static_cast<int>(r.quality)]},
-                       {"backend", r.backend == Backend::cpu      ? "cpu"
-                                   : r.backend == Backend::vulkan ? "vulkan"
-                                                                  : "auto"},
-                       {"march_steps", r.march_steps},
-                       {"grid_step", r.grid_step},
-                       {"gradient_acceleration", r.gradient_acceleration},
-                       {"volumetric_shadows", r.volumetric_shadows},
-                       {"light_path_attenuation", r.light_path_attenuation},
-                       {"max_distance_m", r.max_distance_m},
-                       {"seed", r.seed},
-                       {"threads", r.threads},
-                       // Issue 17, version 5: written always, like every key (a version-4
-                       // reader refuses the whole document for its version anyway).
-                       {"shadow_traversal", r.shadow_traversal == ShadowTraversal::multi_index
-                                                ? "multi-index"
-                                                : "embree"}};
+  doc["render"] =
+      Json{{"quality", kQuality[static_cast<int>(r.quality)]},
+           {"backend", r.backend == Backend::cpu      ? "cpu"
+                       : r.backend == Backend::vulkan ? "vulkan"
+                                                      : "auto"},
+           {"march_steps", r.march_steps},
+           {"grid_step", r.grid_step},
+           {"gradient_acceleration", r.gradient_acceleration},
+           {"volumetric_shadows", r.volumetric_shadows},
+           {"light_path_attenuation", r.light_path_attenuation},
+           {"max_distance_m", r.max_distance_m},
+           {"seed", r.seed},
+           {"threads", r.threads},
+           // Issue 17, version 5: written always, like every key (a version-4
+           // reader refuses the whole document for its version anyway).
+           {"shadow_traversal",
+            r.shadow_traversal == ShadowTraversal::multi_index ? "multi-index" : "embree"}};
   if (s.camera) {  // optional: documents without it read as before
     Json camera = Json{
         {"width", s.camera->width}, {"height", s.camera->height}, {"focal_px", s.camera->focal_px}};

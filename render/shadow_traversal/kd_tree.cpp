@@ -947,7 +947,7 @@ bool KdTree::occluded_multi_index(const Ray& ray, bool predict_occluded,
 
 namespace {
 
-// GCC/Clang vector extensions: one op per 8 lanes, two SSE2 ops on plain x86-64. The operations
+// GCC/Clang vector extensions: one AVX2 op per 8 lanes (MR_PACKET_TARGET). The operations
 // below are the scalar traversal's, lane by lane, in the same order and rounding (kd_tree.cpp is
 // compiled with -ffp-contract=off: no fused multiply-adds on either side), so each lane's answer
 // is the single-ray answer bit for bit.
@@ -976,12 +976,16 @@ MR_PACKET_TARGET inline void vabs(const F8& a, F8& out) {  // std::fabs
   out = reinterpret_cast<F8>(reinterpret_cast<I8>(a) & 0x7fffffff);
 }
 // std::max(a, b) and std::min(a, b) lane by lane, NaNs included.
-MR_PACKET_TARGET inline void vmax(const F8& a, const F8& b, F8& out) { blend(a < b, b, a, out); }
-MR_PACKET_TARGET inline void vmin(const F8& a, const F8& b, F8& out) { blend(b < a, b, a, out); }
+MR_PACKET_TARGET inline void vmax(const F8& a, const F8& b, F8& out) {
+  blend(a < b, b, a, out);
+}
+MR_PACKET_TARGET inline void vmin(const F8& a, const F8& b, F8& out) {
+  blend(b < a, b, a, out);
+}
 
 // a[k] for k given per lane by the masks (k == 0: is0, k == 1: is1, else k == 2).
-MR_PACKET_TARGET inline void select3(const I8& is0, const I8& is1, const F8& a0, const F8& a1, const F8& a2,
-                    F8& out) {
+MR_PACKET_TARGET inline void select3(const I8& is0, const I8& is1, const F8& a0, const F8& a1,
+                                     const F8& a2, F8& out) {
   out = reinterpret_cast<F8>((is0 & reinterpret_cast<I8>(a0)) | (is1 & reinterpret_cast<I8>(a1)) |
                              (~(is0 | is1) & reinterpret_cast<I8>(a2)));
 }
@@ -1019,7 +1023,8 @@ MR_PACKET_TARGET unsigned hit_triangle8(const Packet& p, const float* v, unsigne
   const F8 w = bx * ay - by * ax;
   const F8 zero = {};
   const unsigned exact = bits((u == zero) | (vv == zero) | (w == zero)) & active;
-  const I8 outside = ((u < zero) | (vv < zero) | (w < zero)) & ((u > zero) | (vv > zero) | (w > zero));
+  const I8 outside =
+      ((u < zero) | (vv < zero) | (w < zero)) & ((u > zero) | (vv > zero) | (w > zero));
   const F8 det = u + vv + w;
   const F8 az = p.sz * akz, bz = p.sz * bkz, cz = p.sz * ckz;
   const F8 t = (u * az + vv * bz + w * cz) / det;

@@ -139,7 +139,8 @@ class KdTree {
                             KindCounters* counters = nullptr) const;
   /// Up to eight rays traced together (the CPU core's 8-wide shadow packets): the standard
   /// front-to-back stack traversal, one node fetch per packet, 8-wide SIMD interval and
-  /// watertight triangle tests (GCC/Clang vector extensions: SSE2 pairs on plain x86-64). Each
+  /// watertight triangle tests (GCC/Clang vector extensions compiled for AVX2 on x86-64, checked
+  /// at run time; without AVX2 the rays are traced one by one, same answers). Each
   /// ray's interval at a node is computed exactly as occluded(ray, Order::standard) computes it,
   /// and a ray is tested only against the leaves whose interval it enters, with the same float
   /// operations: its answer is that traversal's, bit for bit (only the visiting order differs).
