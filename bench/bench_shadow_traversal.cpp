@@ -61,6 +61,9 @@ using Clock = std::chrono::steady_clock;
 
 // The kd-tree's build options (--cost-intersect, --max-leaf, --empty-bonus override them).
 KdTreeOptions g_tree_options;
+// --packets-only: no SRDH tree or training and only the rows that compare the 8-wide packet
+// traversal with the single-ray ones and Embree (standard, multi-index, packets, Embree).
+bool g_packets_only = false;
 
 double now_s() {
   return std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
@@ -338,6 +341,7 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
   // SRDH's representative ray set: every 16th ray of the frame.
   std::vector<Ray> sample;
   for (std::size_t i = 0; i < rays.size(); i += 16) sample.push_back(rays[i]);
+  if (g_packets_only) sample.clear();  // no SRDH: its order and tree are those of the SAH
   t0 = now_s();
   c0 = process_cpu_s();
   trained.train_srdh(sample);
@@ -345,7 +349,12 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
   // SRDH's own tree: split costs from the same sample rays (then its order, trained on them).
   t0 = now_s();
   c0 = process_cpu_s();
-  KdTree srdh_tree(mesh, sample, plain_options);
+  // (--packets-only: a one-triangle stand-in, not reported.)
+  mr::render::TriangleMesh stand_in;
+  stand_in.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  stand_in.indices = {0, 1, 2};
+  stand_in.surface_triangle_count = 1;
+  KdTree srdh_tree(g_packets_only ? stand_in : mesh, sample, plain_options);
   srdh_tree.train_srdh(sample);
   const double srdh_build = now_s() - t0, srdh_build_cpu = process_cpu_s() - c0;
 
@@ -431,6 +440,22 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
         });
     return hits;
   };
+  // The CPU core's packet path: 8 consecutive rays per packet (render::occluded_rays), the
+  // kd-tree's 8-wide traversal (what MultiIndexShadowQuery::occluded8 now does).
+  auto packet_method = [](const KdTree& tree) -> Method {
+    return [&tree](const std::vector<Ray>& r, std::size_t a, std::size_t b, KindCounters* c,
+                   std::vector<char>* out) {
+      std::uint64_t hits = 0;
+      for (std::size_t first = a; first < b; first += 8) {
+        const std::size_t n = std::min<std::size_t>(8, b - first);
+        const unsigned h = tree.occluded8(&r[first], (1u << n) - 1u, c);
+        hits += unsigned(__builtin_popcount(h));
+        if (out)
+          for (std::size_t k = 0; k < n; ++k) out->push_back(char((h >> k) & 1u));
+      }
+      return hits;
+    };
+  };
   char buf[256];
   std::vector<Row> rows;
   auto add = [&](const std::string& label, const Method& m, bool counters, const std::string& build,
@@ -445,20 +470,26 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
   std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", plain_cpu,
                 double(plain.memory_bytes(false)) / 1048576.0);
   add("standard", ordered(plain, Order::standard), true, buf);
-  add("SATO", ordered(plain, Order::sato), true, buf);
-  std::snprintf(buf, sizeof buf, "%.2f + %.2f s, %.0f MB", plain_cpu, srdh_cpu,
-                double(plain.memory_bytes(false)) / 1048576.0);
-  add("SRDH (order only)", ordered(plain, Order::srdh), true, buf);
-  std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", srdh_build_cpu,
-                double(srdh_tree.memory_bytes(false)) / 1048576.0);
-  add("SRDH (ray-set build + order)", ordered(srdh_tree, Order::srdh), true, buf);
+  if (!g_packets_only) {
+    add("SATO", ordered(plain, Order::sato), true, buf);
+    std::snprintf(buf, sizeof buf, "%.2f + %.2f s, %.0f MB", plain_cpu, srdh_cpu,
+                  double(plain.memory_bytes(false)) / 1048576.0);
+    add("SRDH (order only)", ordered(plain, Order::srdh), true, buf);
+    std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", srdh_build_cpu,
+                  double(srdh_tree.memory_bytes(false)) / 1048576.0);
+    add("SRDH (ray-set build + order)", ordered(srdh_tree, Order::srdh), true, buf);
+  }
   std::snprintf(buf, sizeof buf, "%.2f s, %.0f MB", multi_cpu,
                 double(multi.memory_bytes(true)) / 1048576.0);
   add("multi-index", multi_method(multi, 0), true, buf);
-  // Ablations: counts only (not timed, to save the machine's time).
-  add("multi-index, oracle prediction", multi_method(multi, 3), true, buf, false);
-  add("lifted indices only", multi_method(multi, 1), true, buf, false);
-  add("ropes only", multi_method(multi, 2), true, buf, false);
+  if (!g_packets_only) {
+    // Ablations: counts only (not timed, to save the machine's time).
+    add("multi-index, oracle prediction", multi_method(multi, 3), true, buf, false);
+    add("lifted indices only", multi_method(multi, 1), true, buf, false);
+    add("ropes only", multi_method(multi, 2), true, buf, false);
+  }
+  // The same tree (the plain tree's nodes; the multi-index parts unused), 8-wide packets.
+  add("kd 8-wide packets (product path)", packet_method(multi), true, buf);
   std::snprintf(buf, sizeof buf, "%.2f s, ~%.0f MB", embree_cpu, embree_mb);
   add("Embree rtcOccluded1", embree1, false, buf);
   add("Embree 8-wide (product)", embree8, false, buf);
@@ -503,6 +534,15 @@ void run_scene(const std::string& name, const mr::render::TriangleMesh& mesh,
     else
       std::printf(" - | - | - | - | %s | %zu |\n", r.build.c_str(), r.disagreements);
   }
+  for (const Row& r : rows)
+    if (r.counters.packets)
+      std::printf(
+          "\n%s: %.1f node fetches per packet of 8 (%.2f per ray; the per-ray columns count "
+          "a node for every ray active there)\n",
+          r.name.c_str(), double(r.counters.packet_nodes) / double(r.counters.packets),
+          double(r.counters.packet_nodes) /
+              double(std::max<std::uint64_t>(
+                  1, r.counters.occluded.rays + r.counters.unoccluded.rays)));
   for (const Row& r : rows)
     if (r.has_counters && r.counters.rope_fallbacks)
       std::printf("\n%s: %llu rope walks fell back to a root descent\n", r.name.c_str(),
@@ -615,6 +655,8 @@ int main(int argc, char** argv) {
       g_tree_options.max_leaf_size = std::atoi(next().c_str());
     else if (a == "--empty-bonus")
       g_tree_options.empty_bonus = float(std::atof(next().c_str()));
+    else if (a == "--packets-only")
+      g_packets_only = true;
     else if (a == "--max-rays")
       max_rays = std::size_t(std::atoll(next().c_str()));
     else if (a == "--help" || a == "-h") {
@@ -629,9 +671,12 @@ int main(int argc, char** argv) {
           "  --rays-file PATH    leuven's rays (default shadow_rays_leuven_1080p.bin)\n"
           "  --build-only        only build the kd-tree per scene: CPU time, nodes, memory\n"
           "  --explain           only list the rays where the kd-tree and Embree disagree, with\n"
-          "                      brute-force and robust-Embree answers (seed's scenes)\n"
+          "                      brute-force and robust-Embree answers\n"
           "  --max-rays N        replay about N of leuven's rays: every k-th block of 1024 (0: "
           "all)\n"
+          "  --packets-only      no SATO/SRDH rows or builds, no ablations: standard, "
+          "multi-index,\n"
+          "                      kd 8-wide packets and Embree only\n"
           "  --cost-intersect C  kd-tree SAH: triangle test cost, node step = 1 (default 1.5)\n"
           "  --max-leaf N        kd-tree: always a leaf at N triangles or fewer (default 2)\n"
           "  --empty-bonus F     kd-tree SAH: cost factor of a split with an empty side (0.8)\n");
@@ -650,6 +695,13 @@ int main(int argc, char** argv) {
       if (!wants(s.name)) continue;
       const mr::render::OccluderScene embree{mr::render::TriangleMesh(s.mesh)};
       explain(s.name, s.mesh, scene_rays(s, embree, size));
+    }
+    if (wants("leuven")) {  // the recorded rays (--rays-file)
+      std::uint64_t total = 0;
+      const std::vector<Ray> rays = load_rays(rays_file, total);
+      const mr::bench::Inputs& in = mr::bench::leuven_inputs(1920, 1080);
+      const LeuvenGeometry g = leuven_geometry(in, leuven_scene_for_rays(in));
+      explain("leuven 1080p sun", g.mesh, rays);
     }
     return 0;
   }

@@ -344,7 +344,7 @@ TEST_F(CliScene, BadSceneFilesAreUsageErrorsNamingTheValue) {
       {head + R"("lighting": {"lamps": [{"position_m": [0, "up", 0]}]}})",
        {"/lighting/lamps/0/position_m"}},
       {head + R"("lighting": {"sun": {"azimuth_deg": 10}}})", {"/lighting/sun", "elevation_deg"}},
-      {R"({"format": "libmr-scene", "version": 5})", {"/version", "version 5"}},
+      {R"({"format": "libmr-scene", "version": 6})", {"/version", "version 6"}},
   };
   const auto inputs_before = checksums(in);
   for (const Case& c : cases) {

@@ -62,7 +62,7 @@ TEST(SceneObjectsJson, RoundTripIsExact) {
   chair.material = Material{{0.2f, 0.3f, 0.1234567f}, 0.04f, 0.35f};
   s.objects = {sphere, chair};
   const std::string text = scene_to_json(s);
-  EXPECT_CONTAINS(text, "\"version\": 4");
+  EXPECT_CONTAINS(text, "\"version\": 5");
   EXPECT_CONTAINS(text, "\"mesh\": \"models/chair.glb\"");
   const FogScene back = scene_from_json(text, "round.json");
   ASSERT_EQ(back.objects.size(), 2u);

@@ -87,6 +87,7 @@ void expect_scene_eq(const FogScene& a, const FogScene& b) {
   EXPECT_EQ(a.render.max_distance_m, b.render.max_distance_m);
   EXPECT_EQ(a.render.seed, b.render.seed);
   EXPECT_EQ(a.render.threads, b.render.threads);
+  EXPECT_EQ(a.render.shadow_traversal, b.render.shadow_traversal);
 
   ASSERT_EQ(a.camera.has_value(), b.camera.has_value());
   if (a.camera) {
@@ -142,6 +143,7 @@ FogScene every_field_set() {
   s.render.max_distance_m = 123456.789;
   s.render.seed = 0;
   s.render.threads = 7;
+  s.render.shadow_traversal = ShadowTraversal::multi_index;
   return s;
 }
 
@@ -255,7 +257,7 @@ TEST(SceneJson, RoundTripOfDefaultsAndUnboundedLayer) {
 
 TEST(SceneJson, WritesEveryKeyPrettyAndReadably) {
   const std::string text = scene_to_json(every_field_set());
-  EXPECT_EQ(text.rfind("{\n  \"format\": \"libmr-scene\",\n  \"version\": 4,\n", 0), 0u) << text;
+  EXPECT_EQ(text.rfind("{\n  \"format\": \"libmr-scene\",\n  \"version\": 5,\n", 0), 0u) << text;
   for (const char* key : {"camera_pose",
                           "position_m",
                           "yaw_deg",
@@ -296,6 +298,7 @@ TEST(SceneJson, WritesEveryKeyPrettyAndReadably) {
                           "light_path_attenuation",
                           "max_distance_m",
                           "threads",
+                          "shadow_traversal",
                           "camera",
                           "width",
                           "height",
@@ -357,6 +360,7 @@ TEST(SceneJson, Version1DefaultsArePinned) {
   EXPECT_EQ(s.render.max_distance_m, 0);
   EXPECT_EQ(s.render.seed, 1u);
   EXPECT_EQ(s.render.threads, 0);
+  EXPECT_EQ(s.render.shadow_traversal, ShadowTraversal::embree);
   // Defaults of the optional parts, taken when their object is given empty.
   const FogScene t = scene_from_json(
       doc("\"medium\": {\"height_fog\": {}}, \"lighting\": {\"sun\": {}, \"lamps\": [{}]}"), "t");
@@ -578,9 +582,9 @@ TEST(SceneJson, BadEnumStrings) {
 }
 
 TEST(SceneJson, FormatAndVersion) {
-  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 5}"),
-                  "scene.json: /version: version 5 is newer than this libmr supports (it reads "
-                  "versions 1 to 4); upgrade libmr");
+  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 6}"),
+                  "scene.json: /version: version 6 is newer than this libmr supports (it reads "
+                  "versions 1 to 5); upgrade libmr");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 0}"),
                   "scene.json: /version: version 0 does not exist");
   EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\"}"), "scene.json: /version: missing");
@@ -588,8 +592,8 @@ TEST(SceneJson, FormatAndVersion) {
   EXPECT_CONTAINS(parse_error("{\"format\": \"gltf\", \"version\": 1}"),
                   "scene.json: /format: expected \"libmr-scene\", found a string (\"gltf\")");
   // A newer document is refused for its version, not for the keys this libmr does not know.
-  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 5, \"depth\": {}}"),
-                  "/version: version 5 is newer");
+  EXPECT_CONTAINS(parse_error("{\"format\": \"libmr-scene\", \"version\": 6, \"depth\": {}}"),
+                  "/version: version 6 is newer");
 }
 
 // ---- the camera (format version 2) ----
@@ -603,7 +607,7 @@ TEST(SceneJson, CameraRoundTripsAndIsOptional) {
   FogScene s;
   s.camera = SceneCamera{1600, 1200, 1234.5678901234567, std::nullopt};
   const std::string text = scene_to_json(s);
-  EXPECT_CONTAINS(text, "\"version\": 4");
+  EXPECT_CONTAINS(text, "\"version\": 5");
   EXPECT_CONTAINS(text, "\"camera\": {");
   EXPECT_EQ(text.find("principal_point_px"), std::string::npos);  // the centre: left out
   const FogScene back = scene_from_json(text, "cam.json");

@@ -3,6 +3,7 @@
 // the counters' bookkeeping, and renders through the CPU core with either traversal.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -86,9 +87,9 @@ struct Agreement {
   int rays = 0, hits = 0, embree_disagreements = 0, unexplained = 0, kd_disagreements = 0;
 };
 
-/// Every kd traversal (and SRDH's ray-set-built tree) against the standard one (must agree
-/// exactly: one triangle test) and the standard one against Embree (disagreements must be
-/// measure-zero cases).
+/// Every kd traversal (and SRDH's ray-set-built tree; single rays and 8-wide packets) against
+/// the standard one (must agree exactly: one triangle test) and the standard one against Embree
+/// (disagreements must be measure-zero cases).
 Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays,
                           bool robust_embree) {
   Agreement a;
@@ -102,15 +103,45 @@ Agreement check_agreement(const TriangleMesh& mesh, const std::vector<Ray>& rays
   // SRDH's own tree, its split costs measured on the sample rays.
   KdTree srdh_tree(mesh, sample);
   srdh_tree.train_srdh(sample);
+  // The 8-wide packet traversal on both trees: packets of 8 consecutive rays (as the CPU core's
+  // shadow loops make them), and again with a random subset of each packet's lanes (the others
+  // must come back unoccluded). 2 = lane left out.
+  std::vector<char> packet(rays.size()), packet_srdh(rays.size()), packet_some(rays.size(), 2);
+  std::mt19937 lane_rng(std::uint32_t(rays.size()));
+  for (std::size_t first = 0; first < rays.size(); first += 8) {
+    Ray group[8] = {};
+    unsigned lanes = 0;
+    for (std::size_t k = 0; k < 8 && first + k < rays.size(); ++k) {
+      group[k] = rays[first + k];
+      lanes |= 1u << k;
+    }
+    const unsigned some = lanes & unsigned(lane_rng());
+    const unsigned hits = tree.occluded8(group, lanes),
+                   hits_srdh = srdh_tree.occluded8(group, lanes),
+                   hits_some = tree.occluded8(group, some);
+    EXPECT_EQ(hits & ~lanes, 0u);
+    EXPECT_EQ(hits_some & ~some, 0u);
+    for (std::size_t k = 0; k < 8 && first + k < rays.size(); ++k) {
+      packet[first + k] = char((hits >> k) & 1u);
+      packet_srdh[first + k] = char((hits_srdh >> k) & 1u);
+      if ((some >> k) & 1u) packet_some[first + k] = char((hits_some >> k) & 1u);
+    }
+  }
   bool previous = false;
-  for (const Ray& r : rays) {
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Ray& r = rays[i];
     const bool standard = tree.occluded(r, Order::standard);
-    const bool answers[] = {
-        tree.occluded(r, Order::sato),          tree.occluded(r, Order::srdh),
-        tree.occluded_multi_index(r, true),     tree.occluded_multi_index(r, false),
-        tree.occluded_multi_index(r, previous), srdh_tree.occluded(r, Order::standard),
-        srdh_tree.occluded(r, Order::srdh)};
+    const bool answers[] = {tree.occluded(r, Order::sato),
+                            tree.occluded(r, Order::srdh),
+                            tree.occluded_multi_index(r, true),
+                            tree.occluded_multi_index(r, false),
+                            tree.occluded_multi_index(r, previous),
+                            srdh_tree.occluded(r, Order::standard),
+                            srdh_tree.occluded(r, Order::srdh),
+                            bool(packet[i]),
+                            bool(packet_srdh[i])};
     for (bool b : answers) a.kd_disagreements += b != standard;
+    if (packet_some[i] != 2) a.kd_disagreements += bool(packet_some[i]) != standard;
     previous = standard;
     const bool reference = embree.occluded(r.origin, r.direction, r.t_near, r.t_far);
     ++a.rays;
@@ -346,6 +377,27 @@ TEST(ShadowTraversal, CountersAreConsistent) {
             standard.unoccluded.primitives +
                 lifted.unoccluded.rays * 2 * std::uint64_t(tree.max_depth()));
   EXPECT_EQ(lifted.unoccluded.nodes, standard.unoccluded.nodes);
+  // 8-wide packets of consecutive rays: a ray is active at exactly the nodes its own interval
+  // enters (the standard traversal's), so unoccluded rays count the same nodes and triangle
+  // tests as there; a node fetched for a packet serves its active rays at once.
+  shadow::KindCounters packets;
+  int packet_occluded = 0;
+  for (std::size_t first = 0; first < rays.size(); first += 8) {
+    const unsigned lanes = (1u << std::min<std::size_t>(8, rays.size() - first)) - 1u;
+    packet_occluded += __builtin_popcount(tree.occluded8(&rays[first], lanes, &packets));
+  }
+  EXPECT_EQ(packet_occluded, occluded);
+  EXPECT_EQ(packets.occluded.rays, std::uint64_t(occluded));
+  EXPECT_EQ(packets.unoccluded.rays, rays.size() - std::uint64_t(occluded));
+  EXPECT_EQ(packets.packets, (rays.size() + 7) / 8);
+  EXPECT_EQ(packets.unoccluded.nodes, standard.unoccluded.nodes);
+  EXPECT_EQ(packets.unoccluded.primitives, standard.unoccluded.primitives);
+  EXPECT_GE(packets.occluded.primitives, packets.occluded.rays);
+  EXPECT_LE(packets.packet_nodes, packets.occluded.nodes + packets.unoccluded.nodes);
+  EXPECT_GE(packets.packet_nodes * 8, packets.occluded.nodes + packets.unoccluded.nodes);
+  std::printf("8-wide packets of random rays: %.1f node fetches per packet, %.1f per ray\n",
+              double(packets.packet_nodes) / double(packets.packets),
+              double(packets.occluded.nodes + packets.unoccluded.nodes) / double(rays.size()));
   // The rope walk tests the triangles of the leaves along the ray: no more than the stack
   // traversal (which may also enter leaves the ray only grazes within its rounding slack).
   EXPECT_LE(roped.unoccluded.primitives, standard.unoccluded.primitives);
@@ -384,15 +436,37 @@ TEST(ShadowTraversal, QueryInterfaceMatchesEmbreeInPackets) {
   EXPECT_EQ(moved.shadow_query(), query.get());
 }
 
-// The traversal is a render option of the scene document too ("render": {"shadow_traversal"}):
-// read back exactly; written only when not the default (Embree), so documents that do not use it
-// read as before everywhere; optional when read; any other value is an error naming the key.
+// The traversal is a render option of the scene document too ("render": {"shadow_traversal"},
+// format version 5): read back exactly; written always, like every key; optional when read
+// (absent: Embree); read in version-4 documents too (the builds before the version bump wrote it
+// there), refused in versions 1-3; any other value is an error naming the key.
 TEST(ShadowTraversal, SceneDocumentCarriesTheTraversal) {
   FogScene s;
   s.render.shadow_traversal = ShadowTraversal::embree;
   const std::string plain = scene_to_json(s);
-  EXPECT_EQ(plain.find("shadow_traversal"), std::string::npos) << plain;
+  EXPECT_NE(plain.find("\"version\": 5"), std::string::npos) << plain;
+  EXPECT_NE(plain.find("\"shadow_traversal\": \"embree\""), std::string::npos) << plain;
   EXPECT_EQ(scene_from_json(plain).render.shadow_traversal, ShadowTraversal::embree);
+  const std::string head = "{\"format\": \"libmr-scene\", \"version\": ";
+  EXPECT_EQ(scene_from_json(head + "5, \"render\": {}}").render.shadow_traversal,
+            ShadowTraversal::embree);
+  EXPECT_EQ(scene_from_json(head + "4, \"render\": {\"shadow_traversal\": \"multi-index\"}}")
+                .render.shadow_traversal,
+            ShadowTraversal::multi_index);
+  for (int v : {1, 2, 3}) {
+    try {
+      scene_from_json(
+          head + std::to_string(v) + ", \"render\": {\"shadow_traversal\": \"embree\"}}",
+          "old.json");
+      ADD_FAILURE() << "no error for shadow_traversal in a version-" << v << " document";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(
+                    "old.json: /render/shadow_traversal: shadow_traversal is part of the format "
+                    "from version 5 on"),
+                std::string::npos)
+          << e.what();
+    }
+  }
   s.render.shadow_traversal = ShadowTraversal::multi_index;
   const std::string text = scene_to_json(s);
   const std::string key = "\"shadow_traversal\": \"multi-index\"";

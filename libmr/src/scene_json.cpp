@@ -213,13 +213,13 @@ CameraPose read_pose(const Json& j, const std::string& p, const Reader& r) {
   return pose;
 }
 
-RenderSettings read_render(const Json& j, const std::string& p, const Reader& r) {
+RenderSettings read_render(const Json& j, const std::string& p, long long version,
+                           const Reader& r) {
   r.object(j, p);
-  r.check_keys(
-      j, p,
-      {"quality", "backend", "march_steps", "grid_step", "gradient_acceleration",
-       "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads",
-       "shadow_traversal"});
+  r.check_keys(j, p,
+               {"quality", "backend", "march_steps", "grid_step", "gradient_acceleration",
+                "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads",
+                "shadow_traversal"});
   constexpr long long kIntMin = std::numeric_limits<int>::min();
   constexpr long long kIntMax = std::numeric_limits<int>::max();
   RenderSettings s;
@@ -244,9 +244,17 @@ RenderSettings read_render(const Json& j, const std::string& p, const Reader& r)
         r.integer(*v, p + "/seed", 0, std::numeric_limits<std::uint32_t>::max()));
   if (const Json* v = member(j, "threads"))
     s.threads = static_cast<int>(r.integer(*v, p + "/threads", kIntMin, kIntMax));
-  if (const Json* v = member(j, "shadow_traversal"))  // issue 17; absent: Embree
+  // Issue 17, version 5; absent: Embree. Version-4 documents may hold it too: the builds that
+  // added it before the version went up wrote it there when it was not "embree".
+  if (const Json* v = member(j, "shadow_traversal")) {
+    if (version < 4)
+      r.fail(p + "/shadow_traversal",
+             "shadow_traversal is part of the format from version 5 on (read in version 4 "
+             "too); this document is version " +
+                 std::to_string(version));
     s.shadow_traversal = static_cast<ShadowTraversal>(
         r.choice(*v, p + "/shadow_traversal", {"embree", "multi-index"}));
+  }
   return s;
 }
 
@@ -461,7 +469,7 @@ FogScene read_document(const Json& doc, const Reader& r) {
   if (const Json* j = member(doc, "camera_pose")) s.pose = read_pose(*j, "/camera_pose", r);
   if (const Json* j = member(doc, "medium")) s.medium = read_medium(*j, "/medium", r);
   if (const Json* j = member(doc, "lighting")) s.lighting = read_lighting(*j, "/lighting", r);
-  if (const Json* j = member(doc, "render")) s.render = read_render(*j, "/render", r);
+  if (const Json* j = member(doc, "render")) s.render = read_render(*j, "/render", v, r);
   if (const Json* j = member(doc, "camera"); j && !j->is_null()) {
     if (v < 2)
       r.fail("/camera",
@@ -635,22 +643,23 @@ Json to_document(const FogScene& s) {
 
   const RenderSettings& r = s.render;
   static constexpr const char* kQuality[] = {"draft", "normal", "final"};
-  doc["render"] = Json{{"quality", kQuality[static_cast<int>(r.quality)]},
-                       {"backend", r.backend == Backend::cpu      ? "cpu"
-                                   : r.backend == Backend::vulkan ? "vulkan"
-                                                                  : "auto"},
-                       {"march_steps", r.march_steps},
-                       {"grid_step", r.grid_step},
-                       {"gradient_acceleration", r.gradient_acceleration},
-                       {"volumetric_shadows", r.volumetric_shadows},
-                       {"light_path_attenuation", r.light_path_attenuation},
-                       {"max_distance_m", r.max_distance_m},
-                       {"seed", r.seed},
-                       {"threads", r.threads}};
-  // Issue 17, added within version 4: written only when not the default, so that documents
-  // which do not use it stay readable by the libmr builds before it (which reject unknown keys).
-  if (r.shadow_traversal == ShadowTraversal::multi_index)
-    doc["render"]["shadow_traversal"] = "multi-index";
+  doc["render"] =
+      Json{{"quality", kQuality[static_cast<int>(r.quality)]},
+           {"backend", r.backend == Backend::cpu      ? "cpu"
+                       : r.backend == Backend::vulkan ? "vulkan"
+                                                      : "auto"},
+           {"march_steps", r.march_steps},
+           {"grid_step", r.grid_step},
+           {"gradient_acceleration", r.gradient_acceleration},
+           {"volumetric_shadows", r.volumetric_shadows},
+           {"light_path_attenuation", r.light_path_attenuation},
+           {"max_distance_m", r.max_distance_m},
+           {"seed", r.seed},
+           {"threads", r.threads},
+           // Issue 17, version 5: written always, like every key (a version-4
+           // reader refuses the whole document for its version anyway).
+           {"shadow_traversal",
+            r.shadow_traversal == ShadowTraversal::multi_index ? "multi-index" : "embree"}};
   if (s.camera) {  // optional: documents without it read as before
     Json camera = Json{
         {"width", s.camera->width}, {"height", s.camera->height}, {"focal_px", s.camera->focal_px}};

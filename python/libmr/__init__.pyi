@@ -247,6 +247,10 @@ class Backend(enum.IntEnum):
     cpu = 1
     vulkan = 2
 
+class ShadowTraversal(enum.IntEnum):
+    embree = 0
+    multi_index = 1
+
 class RenderSettings:
     quality: Quality
     backend: Backend
@@ -258,6 +262,7 @@ class RenderSettings:
     max_distance_m: float
     seed: int
     threads: int
+    shadow_traversal: ShadowTraversal
     def __init__(self, **fields: Any) -> None: ...
 
 class Blockers:

@@ -307,6 +307,13 @@ void bind_scene(py::module_& m) {
       .value("automatic", mr::Backend::automatic)
       .value("cpu", mr::Backend::cpu)
       .value("vulkan", mr::Backend::vulkan);
+  py::enum_<mr::ShadowTraversal>(
+      m, "ShadowTraversal",
+      "How the CPU backend answers shadow rays (issue 17; same answers): embree (Embree's BVH, "
+      "the default and faster, README 'Shadow-ray traversal') or multi_index (seed 004's "
+      "multi-index kd-tree). Scene documents spell them \"embree\" and \"multi-index\".")
+      .value("embree", mr::ShadowTraversal::embree)
+      .value("multi_index", mr::ShadowTraversal::multi_index);
   py::class_<mr::RenderSettings> render(m, "RenderSettings",
                                         "How the core renders; 0 fields come from the preset.");
   render.def(kwargs_init<mr::RenderSettings>())
@@ -320,10 +327,13 @@ void bind_scene(py::module_& m) {
       .def_readwrite("max_distance_m", &mr::RenderSettings::max_distance_m,
                      "how far sky rays march, metres; 0 = automatic")
       .def_readwrite("seed", &mr::RenderSettings::seed)
-      .def_readwrite("threads", &mr::RenderSettings::threads, "0: all cores");
+      .def_readwrite("threads", &mr::RenderSettings::threads, "0: all cores")
+      .def_readwrite("shadow_traversal", &mr::RenderSettings::shadow_traversal,
+                     "ShadowTraversal; the CPU backend only");
   def_fields(render, "RenderSettings",
              {"quality", "backend", "march_steps", "grid_step", "gradient_acceleration",
-              "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads"});
+              "volumetric_shadows", "light_path_attenuation", "max_distance_m", "seed", "threads",
+              "shadow_traversal"});
 
   // --- blockers (docs/scene.md "blockers") ---
   py::class_<mr::Blockers> blockers(m, "Blockers",

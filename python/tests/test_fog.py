@@ -90,3 +90,24 @@ def test_fog_with_sun_runs_the_core_and_is_deterministic():
     assert a.warnings == []
     # fog dims what it covers and brightens nothing past the photo plus in-scatter
     np.testing.assert_allclose(a.composite, photo * a.transmittance + a.inscatter, rtol=1e-5, atol=1e-6)
+
+
+def test_shadow_traversals_render_identically(rng):
+    # Issue 17: the multi-index kd-tree answers every shadow ray as Embree does, so a sunlit CPU
+    # render is bit-identical with either (the sun casts shadows of the depth map's relief).
+    photo = rng.random((48, 64, 3), dtype=np.float32)
+    depth = rng.uniform(3.0, 30.0, (48, 64)).astype(np.float32)
+    s = libmr.Scene()
+    s.lighting.sun = libmr.Sun(direction_to_sun=(0.6, 0.3, 0.4), irradiance=(3, 3, 3))
+    s.lighting.sky_radiance = (0.5, 0.5, 0.5)
+    s.render.quality = libmr.Quality.draft
+    s.render.backend = libmr.Backend.cpu
+    a = libmr.fog(photo, depth, s)
+    s.render.shadow_traversal = libmr.ShadowTraversal.multi_index
+    b = libmr.fog(photo, depth, s)
+    assert a.backend == "cpu" and b.backend == "cpu"
+    for name in ("inscatter", "transmittance", "sun_visibility"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    # not trivial: some pixels see the sun, some are in the relief's shadow
+    shadowed = float((a.sun_visibility < 0.5).mean())
+    assert 0.01 < shadowed < 0.99

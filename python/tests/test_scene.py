@@ -111,3 +111,26 @@ def test_scene_warnings():
     assert any("sun" in w for w in s.warnings())  # homogeneous fog with no top: no sunlight
     s.medium.layer_top_m = 50.0
     assert s.warnings() == []
+
+
+def test_shadow_traversal_is_a_render_option():
+    # Issue 17 (format version 5): Embree by default; written always ("multi-index" with a dash
+    # in documents); round trips; read in version-4 documents too, refused in versions 1-3.
+    assert libmr.SCENE_FORMAT_VERSION == 5
+    s = libmr.Scene()
+    assert s.render.shadow_traversal == libmr.ShadowTraversal.embree
+    assert json.loads(s.to_json())["render"]["shadow_traversal"] == "embree"
+    s.render.shadow_traversal = libmr.ShadowTraversal.multi_index
+    doc = json.loads(s.to_json())
+    assert doc["version"] == 5 and doc["render"]["shadow_traversal"] == "multi-index"
+    back = libmr.scene_from_json(s.to_json())
+    assert back == s and back.render.shadow_traversal == libmr.ShadowTraversal.multi_index
+    assert libmr.RenderSettings(shadow_traversal=libmr.ShadowTraversal.multi_index).shadow_traversal == (
+        libmr.ShadowTraversal.multi_index
+    )
+    v4 = {"format": "libmr-scene", "version": 4, "render": {"shadow_traversal": "multi-index"}}
+    assert libmr.scene_from_json(json.dumps(v4)).render.shadow_traversal == libmr.ShadowTraversal.multi_index
+    with pytest.raises(libmr.InvalidArgumentError, match="/render/shadow_traversal: shadow_traversal is part"):
+        libmr.scene_from_json(json.dumps(dict(v4, version=3)), "old.json")
+    with pytest.raises(libmr.InvalidArgumentError, match="/render/shadow_traversal"):
+        libmr.scene_from_json(json.dumps({"format": "libmr-scene", "version": 5, "render": {"shadow_traversal": "kd"}}))

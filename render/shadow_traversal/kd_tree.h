@@ -78,10 +78,15 @@ struct Counters {
 struct KindCounters {
   Counters occluded, unoccluded;
   std::uint64_t rope_fallbacks = 0;  ///< rope walks that fell back to a root descent
+  /// occluded8: packets traced and the nodes they fetched (a node counts once per packet; the
+  /// per-ray `nodes` above count it for every ray of the packet still active there).
+  std::uint64_t packets = 0, packet_nodes = 0;
   KindCounters& operator+=(const KindCounters& o) {
     occluded += o.occluded;
     unoccluded += o.unoccluded;
     rope_fallbacks += o.rope_fallbacks;
+    packets += o.packets;
+    packet_nodes += o.packet_nodes;
     return *this;
   }
 };
@@ -132,6 +137,16 @@ class KdTree {
   /// stack traversal), false = rope walk. Same answers as occluded().
   bool occluded_multi_index(const Ray& ray, bool predict_occluded,
                             KindCounters* counters = nullptr) const;
+  /// Up to eight rays traced together (the CPU core's 8-wide shadow packets): the standard
+  /// front-to-back stack traversal, one node fetch per packet, 8-wide SIMD interval and
+  /// watertight triangle tests (GCC/Clang vector extensions compiled for AVX2 on x86-64, checked
+  /// at run time; without AVX2 the rays are traced one by one, same answers). Each
+  /// ray's interval at a node is computed exactly as occluded(ray, Order::standard) computes it,
+  /// and a ray is tested only against the leaves whose interval it enters, with the same float
+  /// operations: its answer is that traversal's, bit for bit (only the visiting order differs).
+  /// Lane k (rays[k]) is traced when bit k of `lanes` is set; returns the occluded lanes' bits.
+  /// No lifted indices or ropes (per-ray structures); any tree (plain, SRDH's or multi-index).
+  unsigned occluded8(const Ray* rays, unsigned lanes, KindCounters* counters = nullptr) const;
   /// SRDH's per-node order from a representative ray set (each traced through both children of
   /// every node it enters, recording where it is occluded and how much work each child took).
   void train_srdh(const std::vector<Ray>& sample_rays);
@@ -172,6 +187,8 @@ class KdTree {
   template <bool kCount>
   bool stack_traverse(const Ray& ray, int order_bit, bool use_lifted, float t_start,
                       KindCounters* counters, std::uint64_t& nodes, std::uint64_t& prims) const;
+  template <bool kCount>
+  unsigned packet_traverse(const Ray* rays, unsigned lanes, KindCounters* counters) const;
   template <bool kCount>
   bool rope_walk(const Ray& ray, KindCounters* counters, std::uint64_t& nodes,
                  std::uint64_t& prims) const;

@@ -31,20 +31,30 @@ bool MultiIndexShadowQuery::occluded(const std::array<float, 3>& origin,
 
 void MultiIndexShadowQuery::occluded8(const RayPacket8& rays, bool occluded_out[8]) const {
   packet_count.fetch_add(1, std::memory_order_relaxed);
-  bool predict = previous_occluded;
+  shadow::Ray ray[8];
+  unsigned lanes = 0;
+  int last = -1;
   for (int k = 0; k < 8; ++k) {
-    if (rays.valid[k] == 0) {
-      occluded_out[k] = false;
-      continue;
-    }
-    const shadow::Ray ray{{rays.origin_x[k], rays.origin_y[k], rays.origin_z[k]},
-                          {rays.direction_x[k], rays.direction_y[k], rays.direction_z[k]},
-                          rays.t_near[k],
-                          rays.t_far[k]};
-    occluded_out[k] = tree_.occluded_multi_index(ray, predict);
-    predict = occluded_out[k];
+    occluded_out[k] = false;
+    if (rays.valid[k] == 0) continue;
+    ray[k] = {{rays.origin_x[k], rays.origin_y[k], rays.origin_z[k]},
+              {rays.direction_x[k], rays.direction_y[k], rays.direction_z[k]},
+              rays.t_near[k],
+              rays.t_far[k]};
+    lanes |= 1u << k;
+    last = k;
   }
-  previous_occluded = predict;
+  if (last < 0) return;
+  if ((lanes & (lanes - 1)) == 0) {  // one ray: the predicted single-ray traversal
+    occluded_out[last] = tree_.occluded_multi_index(ray[last], previous_occluded);
+    previous_occluded = occluded_out[last];
+    return;
+  }
+  // The 8-wide packet traversal (same answers; faster than 8 single rays on every benchmark
+  // scene, README "Shadow-ray traversal": one node fetch serves the packet's coherent rays).
+  const unsigned hits = tree_.occluded8(ray, lanes);
+  for (int k = 0; k < 8; ++k) occluded_out[k] = (hits >> k) & 1u;
+  previous_occluded = occluded_out[last];
 }
 
 bool EmbreeShadowQuery::occluded(const std::array<float, 3>& origin,

@@ -18,6 +18,8 @@ class OccluderScene;
 /// lifted primitive indices first; unoccluded: rope walk) is the outcome of the previous ray the
 /// same thread traced: in the CPU core's shadow loops that is the previous march sample along the
 /// same view ray or the neighbouring pixel's ray (seed 004 predicts from the previous frame).
+/// occluded8 traces a packet of two or more rays with the tree's 8-wide packet traversal instead
+/// (KdTree::occluded8: same answers, 1.4-2x faster on the benchmarks; no ropes or lifted indices).
 class MultiIndexShadowQuery final : public ShadowQuery {
  public:
   explicit MultiIndexShadowQuery(const TriangleMesh& mesh,

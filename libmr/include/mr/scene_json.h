@@ -25,8 +25,10 @@ inline constexpr const char* kSceneFormatName = "libmr-scene";
 /// photo does not show) with the completion of structures cut by the frame on by default;
 /// documents of versions 1 and 2 read with it off, so they render as before. Version 4 added
 /// "objects" (3D objects inserted into the photo, mr/objects.h; mesh paths relative to the
-/// document); older documents have none.
-inline constexpr int kSceneFormatVersion = 4;
+/// document); older documents have none. Version 5 added "render": {"shadow_traversal"} (issue
+/// 17: Embree or the multi-index kd-tree for the CPU core's shadow rays; same answers); it is
+/// read in version-4 documents too (builds before the bump wrote it there when not "embree").
+inline constexpr int kSceneFormatVersion = 5;
 
 /// Parses a scene document. `source_name` (usually the file name) starts every error message.
 /// The result has passed validate_scene.
