@@ -603,18 +603,27 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
         return Vec3f{q[0], q[1], q[2]};
       };
       const Vec3f a = P(0), b = P(1), c = P(2);
-      Vec3f ng = unit(cross(sub3(b, a), sub3(c, a)));
-      if (dot(ng, dir) > 0) ng = {-ng[0], -ng[1], -ng[2]};
+      const Vec3f ng_mesh = unit(cross(sub3(b, a), sub3(c, a)));  // the mesh's outside
+      const bool back = dot(ng_mesh, dir) > 0;
+      const Vec3f ng = back ? Vec3f{-ng_mesh[0], -ng_mesh[1], -ng_mesh[2]} : ng_mesh;
       Vec3f ns = ng;
+      Vec3f m = ng_mesh;  // the shading normal on the mesh's normals' side
+      bool flip = back;
       if (world.smooth[hit.prim]) {
-        Vec3f m{0, 0, 0};
+        m = {0, 0, 0};
         const float bw[3] = {1 - hit.u - hit.v, hit.u, hit.v};
         for (int k2 = 0; k2 < 3; ++k2)
           for (int cc = 0; cc < 3; ++cc)
             m[cc] += bw[k2] * world.normals[3 * std::size_t(tri[k2]) + cc];
         m = unit(m);
-        if (dot(m, ng) < 0) m = {-m[0], -m[1], -m[2]};
-        ns = m;
+        flip = dot(m, ng) < 0;
+        ns = flip ? Vec3f{-m[0], -m[1], -m[2]} : m;
+      }
+      if (world.materials[world.triangle_material[hit.prim]].normal_texture) {
+        // The normal map perturbs the normal on the side the mesh's frame describes; seen from
+        // behind, the same bump faces the other way.
+        const Vec3f mapped = normal_mapped(world, hit.prim, hit.u, hit.v, m);
+        ns = flip ? Vec3f{-mapped[0], -mapped[1], -mapped[2]} : mapped;
       }
       const Vec3f view = {-dir[0], -dir[1], -dir[2]};
       const float nv = dot(ns, view);

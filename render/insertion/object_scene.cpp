@@ -135,11 +135,41 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
     };
     s.base_color_texture = texture(m.base_color_texture, "base colour");
     s.metallic_roughness_texture = texture(m.metallic_roughness_texture, "metallic-roughness");
-    (void)texture(m.normal_texture, "normal");  // checked; normal maps are not applied yet
+    s.normal_texture = texture(m.normal_texture, "normal");
+    if (s.normal_texture && s.normal_texture->channels() < 3)
+      fail(mesh, "normal texture '" + mesh.textures[std::size_t(m.normal_texture)].source +
+                     "' has " + std::to_string(s.normal_texture->channels()) +
+                     " channel(s); a tangent-space normal map needs 3 (R, G, B = x, y, z)");
     s.material = material_override ? material_override : m.material;
     if (s.material) validate_material(*s.material, "object '" + mesh.source + "' material");
     world.materials.push_back(s);
   }
+
+  // Tangents, only where a normal texture needs them: the mesh's own (glTF's TANGENT, or the
+  // loader's), else generated from the UVs. A mesh without UVs or normals has none (its normal
+  // texture is then not applied: there is no frame to read it in).
+  bool wants_tangents = false;
+  for (std::size_t k = material_base; k < world.materials.size(); ++k)
+    wants_tangents = wants_tangents || world.materials[k].normal_texture != nullptr;
+  std::vector<std::array<float, 4>> generated;
+  const std::vector<std::array<float, 4>>* tangents = nullptr;
+  if (wants_tangents) {
+    if (mesh.tangents.size() == nv) {
+      tangents = &mesh.tangents;
+    } else if (mesh.uvs.size() == nv && mesh.normals.size() == nv) {
+      ObjectMesh frame_only;  // compute_tangents reads positions, normals, uvs and triangles
+      frame_only.positions = mesh.positions;
+      frame_only.normals = mesh.normals;
+      frame_only.uvs = mesh.uvs;
+      frame_only.triangles = mesh.triangles;
+      compute_tangents(frame_only);
+      generated = std::move(frame_only.tangents);
+      if (generated.size() == nv) tangents = &generated;
+    }
+  }
+  // Once one object has tangents the array is per vertex of all (zero: no frame).
+  if (wants_tangents || !world.tangents.empty())
+    world.tangents.resize(4 * (world.vertex_count() + nv), 0.0f);
 
   const PlacementTransform xf = placement_transform(placement);
   if (!world.positions.empty()) world.positions.pop_back();  // the padding float
@@ -164,6 +194,15 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
       world.uvs.insert(world.uvs.end(), {mesh.uvs[i][0], mesh.uvs[i][1]});
     else
       world.uvs.insert(world.uvs.end(), {0.0f, 0.0f});
+    if (tangents) {
+      const auto& t = (*tangents)[i];
+      Vec3d r{0, 0, 0};
+      if (std::isfinite(t[0]) && std::isfinite(t[1]) && std::isfinite(t[2]) && std::isfinite(t[3]))
+        r = unit(xf.rotate({t[0], t[1], t[2]}));
+      float* out = &world.tangents[4 * std::size_t(vertex_base + i)];
+      out[0] = float(r.x), out[1] = float(r.y), out[2] = float(r.z);
+      out[3] = t[3] < 0 ? -1.0f : 1.0f;
+    }
   }
   world.positions.push_back(0.0f);  // Embree reads 16 bytes for the last float3
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
@@ -248,15 +287,48 @@ SurfaceReflectance reflectance_at(const WorldObjects& world, std::uint32_t prim,
   return r;
 }
 
-ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build) : world_(world) {
+Vec3f normal_mapped(const WorldObjects& world, std::uint32_t prim, float u, float v,
+                    const Vec3f& n) {
+  const ShadingMaterial& m = world.materials[world.triangle_material[prim]];
+  if (!m.normal_texture || world.tangents.empty()) return n;
+  const std::uint32_t* tri = &world.indices[3 * std::size_t(prim)];
+  const float bw[3] = {1 - u - v, u, v};
+  float uv[2] = {0, 0};
+  Vec3f t{0, 0, 0};
+  for (int k = 0; k < 3; ++k) {
+    for (int c = 0; c < 2; ++c) uv[c] += bw[k] * world.uvs[2 * std::size_t(tri[k]) + c];
+    for (int c = 0; c < 3; ++c) t[c] += bw[k] * world.tangents[4 * std::size_t(tri[k]) + c];
+  }
+  // Gram-Schmidt against n: interpolated tangents are neither unit nor orthogonal to the
+  // interpolated normal.
+  const float tn = dot(t, n);
+  t = unit(Vec3f{t[0] - tn * n[0], t[1] - tn * n[1], t[2] - tn * n[2]});
+  if (dot(t, t) < 0.5f) return n;  // no tangent here (a vertex without a frame)
+  const float w = world.tangents[4 * std::size_t(tri[0]) + 3];
+  const Vec3f b0 = cross(n, t);
+  const Vec3f b = {w * b0[0], w * b0[1], w * b0[2]};
+  float s[3];
+  sample_bilinear(*m.normal_texture, uv[0], uv[1], 3, s);
+  const float x = 2 * s[0] - 1, y = 2 * s[1] - 1, z = 2 * s[2] - 1;
+  const Vec3f mapped = unit(Vec3f{x * t[0] + y * b[0] + z * n[0], x * t[1] + y * b[1] + z * n[1],
+                                  x * t[2] + y * b[2] + z * n[2]});
+  if (!(dot(mapped, mapped) > 0.5f)) return n;  // a zero or non-finite texel
+  return mapped;
+}
+
+ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build, bool refittable)
+    : world_(world) {
   if (world.triangle_count() == 0) return;
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw Error(ErrorCode::internal, "Embree: cannot create a device for the objects");
   rtcSetDeviceErrorFunction(device_, &embree_error, nullptr);
   scene_ = rtcNewScene(device_);
-  rtcSetSceneBuildQuality(scene_, fast_build ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_MEDIUM);
+  // Embree honours a geometry's REFIT quality only in its two-level scenes (scene quality LOW).
+  rtcSetSceneBuildQuality(scene_, fast_build || refittable ? RTC_BUILD_QUALITY_LOW
+                                                           : RTC_BUILD_QUALITY_MEDIUM);
   rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
   RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+  if (refittable) rtcSetGeometryBuildQuality(geometry, RTC_BUILD_QUALITY_REFIT);
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                              world.positions.data(), 0, 3 * sizeof(float), world.vertex_count());
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
@@ -264,10 +336,17 @@ ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build) : world_(wo
                              world.triangle_count());
   rtcCommitGeometry(geometry);
   rtcAttachGeometry(scene_, geometry);
-  rtcReleaseGeometry(geometry);
+  if (refittable) {
+    geometry_ = geometry;  // the scene holds it too; released in the destructor
+    positions_ = world.positions.data();
+    vertex_count_ = world.vertex_count();
+  } else {
+    rtcReleaseGeometry(geometry);
+  }
   rtcCommitScene(scene_);
   const RTCError error = rtcGetDeviceError(device_);
   if (error != RTC_ERROR_NONE) {
+    if (geometry_) rtcReleaseGeometry(geometry_);
     rtcReleaseScene(scene_);
     rtcReleaseDevice(device_);
     throw Error(ErrorCode::internal, "Embree: building the objects' scene failed (error " +
@@ -275,7 +354,23 @@ ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build) : world_(wo
   }
 }
 
+void ObjectScene::refit() {
+  if (!scene_) return;  // an empty world: nothing to move
+  if (!geometry_)
+    throw Error(ErrorCode::internal, "Embree: the objects' scene was not built refittable");
+  if (world_.positions.data() != positions_ || world_.vertex_count() != vertex_count_)
+    throw Error(ErrorCode::internal, "Embree: the objects' vertex buffer changed under a refit");
+  rtcUpdateGeometryBuffer(geometry_, RTC_BUFFER_TYPE_VERTEX, 0);
+  rtcCommitGeometry(geometry_);
+  rtcCommitScene(scene_);
+  const RTCError error = rtcGetDeviceError(device_);
+  if (error != RTC_ERROR_NONE)
+    throw Error(ErrorCode::internal, "Embree: refitting the objects' scene failed (error " +
+                                         std::to_string(int(error)) + ")");
+}
+
 ObjectScene::~ObjectScene() {
+  if (geometry_) rtcReleaseGeometry(geometry_);
   if (scene_) rtcReleaseScene(scene_);
   if (device_) rtcReleaseDevice(device_);
 }
