@@ -399,25 +399,26 @@ const InsertResult& InsertPreview::render(std::span<const InsertObject> objects,
   const auto objects_start = Clock::now();
   const bool meshes_kept = m.have_objects && same_meshes(objects, m.objects);
   if (!meshes_kept || !same_placements(objects, m.objects)) {
-    auto world = std::make_unique<render::insertion::WorldObjects>();
-    for (const InsertObject& o : objects)
-      render::insertion::append_object(*world, o.mesh, o.placement, o.material);
-    if (meshes_kept && world->indices == m.world->indices &&
-        world->positions.size() == m.world->positions.size()) {
-      // The scene shares m.world's vertex and index buffers: keep both (the indices are equal),
-      // overwrite the vertices in place, take the rest.
-      std::vector<float> positions = std::move(m.world->positions);
-      std::vector<std::uint32_t> indices = std::move(m.world->indices);
-      std::copy(world->positions.begin(), world->positions.end(), positions.begin());
-      *m.world = std::move(*world);
-      m.world->positions = std::move(positions);
-      m.world->indices = std::move(indices);
+    std::vector<const ObjectMesh*> meshes;
+    std::vector<ObjectPlacement> placements;
+    for (const InsertObject& o : objects) {
+      meshes.push_back(&o.mesh);
+      placements.push_back(o.placement);
+    }
+    // A failed or throwing move leaves the world partly moved: rebuilt at the next frame.
+    m.have_objects = false;
+    if (meshes_kept && render::insertion::move_objects(*m.world, meshes, placements)) {
+      m.have_objects = true;
+      // The scene shares the world's buffers, rewritten in place: refit its BVH.
       m.object_scene->refit();
       for (std::size_t i = 0; i < objects.size(); ++i)
         m.objects[i].placement = objects[i].placement;
       stats.objects_refit = true;
     } else {
       // (A scale small enough to drop degenerate triangles changes the topology: rebuilt.)
+      auto world = std::make_unique<render::insertion::WorldObjects>();
+      for (const InsertObject& o : objects)
+        render::insertion::append_object(*world, o.mesh, o.placement, o.material);
       auto scene = std::make_unique<render::insertion::ObjectScene>(
           *world, /*fast_build=*/true, /*refittable=*/true);
       m.object_scene = std::move(scene);

@@ -69,6 +69,14 @@ struct WorldObjects {
   /// half-diagonal, up to sqrt(3) larger) stays the measure of the sky influence cut.
   std::vector<std::array<float, 4>> tight_bounds;
 
+  /// Per append_object call: where its vertices and (kept) triangles are, and whether it has
+  /// tangents (move_objects needs them).
+  struct Range {
+    std::uint32_t first_vertex = 0, vertex_count = 0, first_triangle = 0, triangle_count = 0;
+    bool tangents = false;
+  };
+  std::vector<Range> objects;
+
   std::size_t triangle_count() const { return indices.size() / 3; }
   std::size_t vertex_count() const { return positions.size() / 3; }
 };
@@ -91,6 +99,15 @@ PlacementTransform placement_transform(const ObjectPlacement& placement);
 /// non-positive or non-finite scale.
 void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlacement& placement,
                    const std::optional<Material>& material_override = std::nullopt);
+
+/// Moves the objects of `world` (appended by append_object from these meshes, in this order) to
+/// new placements in place: positions, normals, tangents and bounding spheres rewritten with
+/// append_object's arithmetic (the result equals a fresh append's bit for bit), the buffers kept
+/// (so an ObjectScene sharing them can refit()). False when that cannot be done (another number
+/// of objects or vertices, or the placement changes which triangles are degenerate): then the
+/// world is partly moved and must be built again. Throws like append_object for a bad placement.
+bool move_objects(WorldObjects& world, std::span<const ObjectMesh* const> meshes,
+                  std::span<const ObjectPlacement> placements);
 
 /// The reflectance at a hit (triangle `prim`, barycentrics u, v): the material's parameters,
 /// times its textures sampled bilinearly (repeat) at the interpolated uv.
