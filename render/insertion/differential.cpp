@@ -181,6 +181,21 @@ ShadingTerms terms_at(const Lights& L, const SurfacePoint& base, const Visibilit
   return t;
 }
 
+// terms_at(...).diffuse alone (the same floats): the photo's side needs only the Lambertian
+// ratio, and the specular lobes cost as much as the rest of its shading.
+Rgb diffuse_at(const Lights& L, const SurfacePoint& base, const Visibility& vis) {
+  SurfacePoint p = base;
+  p.sun_visibility = vis.sun;
+  p.sky_visibility = 0.5f * (1 + p.normal[1]) * vis.sky_share;
+  Rgb d = diffuse_term(p, L.sun_sky);
+  for (std::size_t k = 0; k < L.single_lamp.size() && k < 16; ++k) {
+    if (vis.lamp[k] <= 0) continue;
+    const Rgb l = diffuse_term(p, L.single_lamp[k]);
+    for (int c = 0; c < 3; ++c) d[c] += l[c];
+  }
+  return d;
+}
+
 // Whether a ray from `origin` along unit `dir` (spreading by tan_spread per metre) can pass
 // within the bounding sphere (centre c, radius r) at t > 0, before t_max.
 bool may_hit_sphere(const Vec3f& origin, const Vec3f& dir, float tan_spread,
@@ -553,10 +568,9 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
         sp.normal = n;
         sp.view = {-ray[0], -ray[1], -ray[2]};
         sp.position_m = p;
-        const ShadingTerms without = terms_at(L, sp, visibility_of(set, blocked_photo), 1.0f);
-        const ShadingTerms with = terms_at(L, sp, visibility_of(set, blocked_any), 1.0f);
-        for (int c = 0; c < 3; ++c)
-          ratio[c] = without.diffuse[c] > 1e-12f ? with.diffuse[c] / without.diffuse[c] : 1.0f;
+        const Rgb without = diffuse_at(L, sp, visibility_of(set, blocked_photo));
+        const Rgb with = diffuse_at(L, sp, visibility_of(set, blocked_any));
+        for (int c = 0; c < 3; ++c) ratio[c] = without[c] > 1e-12f ? with[c] / without[c] : 1.0f;
       }
     }
   }
