@@ -162,8 +162,8 @@ std::vector<mr::PixelPoint> ObjectTool::turnRing(int index) const {
   for (int k = 0; k < kRingPoints; ++k) {
     const double a = 2 * M_PI * k / kRingPoints;
     const double cz = r * std::cos(a), cx = r * std::sin(a);
-    const auto q = project({f.x + cz * ez.x + cx * ex.x, f.y + cz * ez.y + cx * ex.y,
-                            f.z + cz * ez.z + cx * ex.z});
+    const auto q = project(
+        {f.x + cz * ez.x + cx * ex.x, f.y + cz * ez.y + cx * ex.y, f.z + cz * ez.z + cx * ex.z});
     if (!q) return {};  // partly behind the camera: no ring
     ring.push_back(*q);
   }
@@ -251,8 +251,7 @@ bool ObjectTool::move(const mr::PixelPoint& p) {
     case Mode::turn_ring: {
       const auto a = angleAround(start, p);
       if (!a) return true;  // past the horizon: stay
-      placement.yaw_deg =
-          std::remainder(start.yaw_deg + (*a - press_angle_) * 180 / M_PI, 360.0);
+      placement.yaw_deg = std::remainder(start.yaw_deg + (*a - press_angle_) * 180 / M_PI, 360.0);
       break;
     }
     case Mode::scale_handle: {
@@ -273,8 +272,8 @@ bool ObjectTool::move(const mr::PixelPoint& p) {
 bool ObjectTool::release(const mr::PixelPoint& p) {
   if (mode_ == Mode::none) return false;
   move(p);
-  static const char* const kWhat[] = {"",           "Move object",  "Turn object",
-                                      "Scale object", "Turn object", "Scale object"};
+  static const char* const kWhat[] = {
+      "", "Move object", "Turn object", "Scale object", "Turn object", "Scale object"};
   if (moved_) panel_->commitLive(before_, tr(kWhat[int(mode_)]));
   mode_ = Mode::none;
   before_.clear();

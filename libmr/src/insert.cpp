@@ -284,8 +284,8 @@ bool same_meshes(std::span<const InsertObject> a, std::span<const InsertObject> 
     const ObjectMesh &m = x.mesh, &n = y.mesh;
     if (m.source != n.source || m.positions != n.positions || m.triangles != n.triangles ||
         m.normals != n.normals || m.uvs != n.uvs || m.tangents != n.tangents ||
-        m.triangle_material != n.triangle_material ||
-        m.materials.size() != n.materials.size() || m.textures.size() != n.textures.size())
+        m.triangle_material != n.triangle_material || m.materials.size() != n.materials.size() ||
+        m.textures.size() != n.textures.size())
       return false;
     for (std::size_t k = 0; k < m.materials.size(); ++k) {
       const ObjectMaterial &u = m.materials[k], &v = n.materials[k];
@@ -419,8 +419,8 @@ const InsertResult& InsertPreview::render(std::span<const InsertObject> objects,
       auto world = std::make_unique<render::insertion::WorldObjects>();
       for (const InsertObject& o : objects)
         render::insertion::append_object(*world, o.mesh, o.placement, o.material);
-      auto scene = std::make_unique<render::insertion::ObjectScene>(
-          *world, /*fast_build=*/true, /*refittable=*/true);
+      auto scene = std::make_unique<render::insertion::ObjectScene>(*world, /*fast_build=*/true,
+                                                                    /*refittable=*/true);
       m.object_scene = std::move(scene);
       m.world = std::move(world);
       m.objects.assign(objects.begin(), objects.end());

@@ -45,7 +45,6 @@ void sample_bilinear(const Image& image, float u, float v, int n, float* out) {
   }
 }
 
-
 void check_placement(const ObjectMesh& mesh, const ObjectPlacement& placement) {
   if (!(std::isfinite(placement.scale) && placement.scale > 0))
     fail(mesh, "placement scale must be finite and > 0, got " + std::to_string(placement.scale));
@@ -76,8 +75,8 @@ const std::vector<std::array<float, 4>>* tangents_of(const ObjectMesh& mesh,
 // definition of the arithmetic, shared by append_object and move_objects so that both give the
 // same floats. Grows lo, hi by the placed position.
 void place_vertex(WorldObjects& world, std::size_t at, const ObjectMesh& mesh, std::size_t i,
-                  const PlacementTransform& xf,
-                  const std::vector<std::array<float, 4>>* tangents, Vec3d& lo, Vec3d& hi) {
+                  const PlacementTransform& xf, const std::vector<std::array<float, 4>>* tangents,
+                  Vec3d& lo, Vec3d& hi) {
   const auto& p = mesh.positions[i];
   if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
     fail(mesh, "vertex " + std::to_string(i) + " has a non-finite position");
@@ -135,8 +134,9 @@ std::pair<std::array<float, 4>, std::array<float, 4>> spheres(const WorldObjects
     const double dx = q[0] - centre.x, dy = q[1] - centre.y, dz = q[2] - centre.z;
     r2 = std::max(r2, dx * dx + dy * dy + dz * dz);
   }
-  return {box, {float(centre.x), float(centre.y), float(centre.z),
-                float(std::sqrt(r2) * 1.0001 + 1e-6)}};
+  return {
+      box,
+      {float(centre.x), float(centre.y), float(centre.z), float(std::sqrt(r2) * 1.0001 + 1e-6)}};
 }
 
 }  // namespace
@@ -410,10 +410,10 @@ ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build, bool refitt
   // Embree honours a geometry's REFIT quality only in its two-level scenes (scene quality LOW),
   // and only refits (instead of building again) in a DYNAMIC scene: measured on the bench's
   // 100k-triangle sphere, 24 ms CPU per move without the flag, 1 ms with it.
-  rtcSetSceneBuildQuality(scene_, fast_build || refittable ? RTC_BUILD_QUALITY_LOW
-                                                           : RTC_BUILD_QUALITY_MEDIUM);
-  rtcSetSceneFlags(scene_, refittable ? RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_DYNAMIC
-                                      : RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(
+      scene_, fast_build || refittable ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_MEDIUM);
+  rtcSetSceneFlags(
+      scene_, refittable ? RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_DYNAMIC : RTC_SCENE_FLAG_ROBUST);
   RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
   if (refittable) rtcSetGeometryBuildQuality(geometry, RTC_BUILD_QUALITY_REFIT);
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,

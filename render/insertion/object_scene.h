@@ -141,8 +141,7 @@ class ObjectScene {
   /// that refit() can update it when only the vertices moved (Embree's
   /// RTC_BUILD_QUALITY_REFIT): what a drag needs, where the topology stays and only the
   /// placement changes.
-  explicit ObjectScene(const WorldObjects& world, bool fast_build = false,
-                       bool refittable = false);
+  explicit ObjectScene(const WorldObjects& world, bool fast_build = false, bool refittable = false);
   ~ObjectScene();
   ObjectScene(const ObjectScene&) = delete;
   ObjectScene& operator=(const ObjectScene&) = delete;
