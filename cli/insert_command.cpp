@@ -7,6 +7,7 @@
 
 #include <CLI/CLI.hpp>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -15,6 +16,7 @@
 
 #include "batch.h"
 #include "mr/annotations.h"
+#include "mr/color.h"
 #include "mr/depth.h"
 #include "mr/error.h"
 #include "mr/estimate.h"
@@ -160,6 +162,17 @@ void run_job(const InsertCommandOptions& o, const Job& job) {
                  r.timings.triangles, r.timings.mesh_s, r.timings.render_s, r.timings.fog_s);
   WriteOptions write;
   write.overwrite = true;  // existing outputs were checked above (skipped without --overwrite)
+  // Display-referred (integer) outputs through the highlight roll-off, as `mr fog` writes them
+  // (DESIGN.md section 7): a sunlit white object, lit relative to the photo's exposure, comes
+  // out at or above the photo's white and would clip flat under plain sRGB. Float outputs stay
+  // linear and unclipped.
+  std::string out_ext = job.output.extension().string();
+  for (char& ch : out_ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+  const ColorConfig color = ColorConfig::from_environment();
+  if (out_ext != ".exr" && out_ext != ".hdr" && out_ext != ".pfm") {
+    write.color = &color;
+    write.colorspace = color.display_colorspace();
+  }
   Image composite = r.composite;
   composite.metadata() = photo.metadata();
   write_image(job.output, composite, write);

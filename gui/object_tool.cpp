@@ -4,6 +4,7 @@
 #include <QFileInfo>
 #include <QPainter>
 #include <QPen>
+#include <QPolygonF>
 #include <algorithm>
 #include <cmath>
 
@@ -122,16 +123,102 @@ mr::ObjectPlacement ObjectTool::placeAt(const mr::PixelPoint& p,
                             options);
 }
 
+// The unit vectors across the placement's up axis that its yaw turns between: the object's +Z
+// and +X after the tilt (yaw 0), in the world.
+static std::pair<mr::Vec3, mr::Vec3> ring_axes(const mr::ObjectPlacement& placement) {
+  mr::ObjectPlacement unturned = placement;
+  unturned.yaw_deg = 0;
+  unturned.scale = 1;
+  const mr::Mat4 m = mr::placement_matrix(unturned);
+  return {mr::Vec3{m[2], m[6], m[10]}, mr::Vec3{m[0], m[4], m[8]}};
+}
+
+std::optional<double> ObjectTool::angleAround(const mr::ObjectPlacement& placement,
+                                              const mr::PixelPoint& p) const {
+  if (!document_) return std::nullopt;
+  const mr::Vec3 d = pose_.ray_direction(document_->camera, p[0], p[1]);
+  const mr::Mat4 m = mr::placement_matrix(placement);
+  const double len = placement.scale;  // the up column is scaled by it
+  const mr::Vec3 up = {m[1] / len, m[5] / len, m[9] / len};
+  const mr::Vec3& f = placement.position_m;
+  const mr::Vec3 o = pose_.position_m;
+  const double denom = d.x * up.x + d.y * up.y + d.z * up.z;
+  if (std::abs(denom) < 1e-9) return std::nullopt;
+  const double t = ((f.x - o.x) * up.x + (f.y - o.y) * up.y + (f.z - o.z) * up.z) / denom;
+  if (!(t > 0)) return std::nullopt;
+  const mr::Vec3 q = {o.x + t * d.x - f.x, o.y + t * d.y - f.y, o.z + t * d.z - f.z};
+  const auto [ez, ex] = ring_axes(placement);
+  return std::atan2(q.x * ex.x + q.y * ex.y + q.z * ex.z, q.x * ez.x + q.y * ez.y + q.z * ez.z);
+}
+
+std::vector<mr::PixelPoint> ObjectTool::turnRing(int index) const {
+  std::vector<mr::PixelPoint> ring;
+  const auto b = bounds(index);
+  if (!b) return ring;
+  const mr::ObjectPlacement& placement = panel_->objects()[std::size_t(index)].placement;
+  const auto [ez, ex] = ring_axes(placement);
+  const mr::Vec3& f = placement.position_m;
+  const double r = b->second;
+  for (int k = 0; k < kRingPoints; ++k) {
+    const double a = 2 * M_PI * k / kRingPoints;
+    const double cz = r * std::cos(a), cx = r * std::sin(a);
+    const auto q = project(
+        {f.x + cz * ez.x + cx * ex.x, f.y + cz * ez.y + cx * ex.y, f.z + cz * ez.z + cx * ex.z});
+    if (!q) return {};  // partly behind the camera: no ring
+    ring.push_back(*q);
+  }
+  return ring;
+}
+
+std::optional<mr::PixelPoint> ObjectTool::scaleHandle(int index) const {
+  const auto circle = screenCircle(index);
+  if (!circle) return std::nullopt;
+  const auto& [centre, radius] = *circle;
+  return mr::PixelPoint{centre[0] + radius * M_SQRT1_2, centre[1] - radius * M_SQRT1_2};
+}
+
+ObjectTool::Handle ObjectTool::handleAt(const mr::PixelPoint& p) const {
+  const int i = panel_->selected();
+  if (!document_ || i < 0 || i >= int(panel_->objects().size())) return Handle::none;
+  const double tolerance = kHandleHitViewPx / view_scale_;
+  if (const auto h = scaleHandle(i);
+      h && std::abs(p[0] - (*h)[0]) <= tolerance && std::abs(p[1] - (*h)[1]) <= tolerance)
+    return Handle::scale;
+  const std::vector<mr::PixelPoint> ring = turnRing(i);
+  for (std::size_t k = 0; k < ring.size(); ++k) {
+    // Distance from p to the ring's segment k.
+    const mr::PixelPoint& a = ring[k];
+    const mr::PixelPoint& b = ring[(k + 1) % ring.size()];
+    const double ux = b[0] - a[0], uy = b[1] - a[1], l2 = ux * ux + uy * uy;
+    const double s =
+        l2 > 0 ? std::clamp(((p[0] - a[0]) * ux + (p[1] - a[1]) * uy) / l2, 0.0, 1.0) : 0.0;
+    if (std::hypot(p[0] - a[0] - s * ux, p[1] - a[1] - s * uy) <= tolerance) return Handle::turn;
+  }
+  return Handle::none;
+}
+
 bool ObjectTool::press(const mr::PixelPoint& p, Qt::KeyboardModifiers modifiers) {
-  const int i = objectAt(p);
+  const Handle handle = handleAt(p);
+  const int i = handle != Handle::none ? panel_->selected() : objectAt(p);
   if (i < 0) return false;
   index_ = i;
   before_ = panel_->objects();
   press_ = p;
   moved_ = false;
-  mode_ = modifiers & Qt::ShiftModifier     ? Mode::rotate
-          : modifiers & Qt::ControlModifier ? Mode::scale
-                                            : Mode::move;
+  if (handle == Handle::turn) {
+    const auto a = angleAround(before_[std::size_t(i)].placement, p);
+    if (!a) return false;
+    press_angle_ = *a;
+    mode_ = Mode::turn_ring;
+  } else if (handle == Handle::scale) {
+    press_centre_ = screenCircle(i)->first;
+    if (std::hypot(p[0] - press_centre_[0], p[1] - press_centre_[1]) < 1) return false;
+    mode_ = Mode::scale_handle;
+  } else {
+    mode_ = modifiers & Qt::ShiftModifier     ? Mode::rotate
+            : modifiers & Qt::ControlModifier ? Mode::scale
+                                              : Mode::move;
+  }
   const auto foot = project(before_[std::size_t(i)].placement.position_m);
   foot_offset_ = foot ? QPointF((*foot)[0] - p[0], (*foot)[1] - p[1]) : QPointF();
   panel_->select(i);
@@ -161,6 +248,18 @@ bool ObjectTool::move(const mr::PixelPoint& p) {
       placement.scale = std::clamp(
           start.scale * std::exp2(-(p[1] - press_[1]) / kScalePixelsPerDoubling), 1e-3, 1e4);
       break;
+    case Mode::turn_ring: {
+      const auto a = angleAround(start, p);
+      if (!a) return true;  // past the horizon: stay
+      placement.yaw_deg = std::remainder(start.yaw_deg + (*a - press_angle_) * 180 / M_PI, 360.0);
+      break;
+    }
+    case Mode::scale_handle: {
+      const double from = std::hypot(press_[0] - press_centre_[0], press_[1] - press_centre_[1]);
+      const double to = std::hypot(p[0] - press_centre_[0], p[1] - press_centre_[1]);
+      placement.scale = std::clamp(start.scale * to / from, 1e-3, 1e4);
+      break;
+    }
     case Mode::none:
       break;
   }
@@ -173,7 +272,8 @@ bool ObjectTool::move(const mr::PixelPoint& p) {
 bool ObjectTool::release(const mr::PixelPoint& p) {
   if (mode_ == Mode::none) return false;
   move(p);
-  static const char* const kWhat[] = {"", "Move object", "Turn object", "Scale object"};
+  static const char* const kWhat[] = {
+      "", "Move object", "Turn object", "Scale object", "Turn object", "Scale object"};
   if (moved_) panel_->commitLive(before_, tr(kWhat[int(mode_)]));
   mode_ = Mode::none;
   before_.clear();
@@ -218,6 +318,7 @@ void ObjectTool::paint(QPainter& painter, const QTransform& to_view) const {
   if (!document_) return;
   painter.save();
   painter.setRenderHint(QPainter::Antialiasing, true);
+  view_scale_ = std::max(1e-6, std::hypot(to_view.m11(), to_view.m12()));
   const int selected = dragging() ? index_ : panel_->selected();
   for (int i = 0; i < int(panel_->objects().size()); ++i) {
     const auto foot = project(panel_->objects()[std::size_t(i)].placement.position_m);
@@ -234,6 +335,22 @@ void ObjectTool::paint(QPainter& painter, const QTransform& to_view) const {
     const double rv = radius * std::hypot(to_view.m11(), to_view.m12());
     painter.setPen(QPen(QColor(255, 200, 40, 200), 1.2, Qt::DashLine));
     painter.drawEllipse(cv, rv, rv);
+    // The handles: the turn ring (solid, where the object turns) and the scale square.
+    const std::vector<mr::PixelPoint> ring = turnRing(i);
+    if (!ring.empty()) {
+      QPolygonF polygon;
+      for (const mr::PixelPoint& q : ring) polygon << to_view.map(QPointF(q[0], q[1]));
+      painter.setPen(QPen(QColor(80, 200, 255, 220), 2.0));
+      painter.setBrush(Qt::NoBrush);
+      painter.drawPolygon(polygon);
+    }
+    if (const auto h = scaleHandle(i)) {
+      const QPointF hv = to_view.map(QPointF((*h)[0], (*h)[1]));
+      const double half = kHandleHitViewPx - 1;
+      painter.setPen(QPen(QColor(40, 40, 40), 1.0));
+      painter.setBrush(QColor(255, 200, 40));
+      painter.drawRect(QRectF(hv.x() - half, hv.y() - half, 2 * half, 2 * half));
+    }
   }
   painter.restore();
 }

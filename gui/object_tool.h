@@ -9,10 +9,17 @@
 //    Ctrl+drag scales it (x2 per 100 pixels up).
 //  * Over an object, Shift+wheel turns it by 15 degrees per notch and Ctrl+wheel scales it by
 //    10 % per notch (the plain wheel still zooms).
+//  * The selected object has two drawn handles: a turn ring (the circle of its bounding radius
+//    around its foot, on the plane through the foot across its up axis, projected) and a scale
+//    handle (a square at the upper-right of its bounding circle, at 45 degrees). Dragging the
+//    ring turns the object by the angle the pointer sweeps around its foot on that plane (the
+//    ring's point follows the pointer); dragging the square scales it by the ratio of the
+//    pointer's distance from the circle's centre to the press point's. They are hit within
+//    kHandleHitViewPx screen pixels (at the view's zoom when last painted), before the object.
 // A drag shows live (each move is applied without an undo step, so the preview re-renders and
 // cancels the stale render) and is one undo step when released; wheel notches in a row merge
 // into one step, like the panel's spin boxes. Objects are drawn as their foot (a cross) and,
-// for the selected one, their bounding circle.
+// for the selected one, their bounding circle and handles.
 #pragma once
 #include <QObject>
 #include <QPointF>
@@ -66,13 +73,29 @@ class ObjectTool : public QObject {
 
   void paint(QPainter& painter, const QTransform& to_view) const;
 
+  /// The selected object's handles (photo pixels): the turn ring as a closed polyline of
+  /// kRingPoints points, and the scale handle's centre. Empty / nullopt without a selection or
+  /// where the camera does not see them.
+  static constexpr int kRingPoints = 72;
+  static constexpr double kHandleHitViewPx = 6;
+  std::vector<mr::PixelPoint> turnRing(int index) const;
+  std::optional<mr::PixelPoint> scaleHandle(int index) const;
+  enum class Handle { none, turn, scale };
+  /// Which handle of the selected object is under p (the scale handle wins where they overlap).
+  Handle handleAt(const mr::PixelPoint& p) const;
+
  signals:
   void changed();  ///< what paint() draws changed
   void message(const QString& text);
 
  private:
-  enum class Mode { none, move, rotate, scale };
+  enum class Mode { none, move, rotate, scale, turn_ring, scale_handle };
   mr::ObjectPlacement placeAt(const mr::PixelPoint& p, const mr::ObjectPlacement& like) const;
+  /// The angle (radians, as yaw turns: from the object's +Z toward its +X) of the point where
+  /// p's ray meets the plane through the placement's foot across its up axis; nullopt when the
+  /// ray does not meet it in front of the camera.
+  std::optional<double> angleAround(const mr::ObjectPlacement& placement,
+                                    const mr::PixelPoint& p) const;
 
   ObjectsPanel* panel_;
   std::shared_ptr<const Document> document_;
@@ -84,6 +107,9 @@ class ObjectTool : public QObject {
   mr::PixelPoint press_{0, 0};
   QPointF foot_offset_;  ///< the object's foot minus the press point (image pixels)
   bool moved_ = false;
+  double press_angle_ = 0;             ///< turn ring: angleAround at the press
+  mr::PixelPoint press_centre_{0, 0};  ///< scale handle: the bounding circle's centre at the press
+  mutable double view_scale_ = 1;      ///< view pixels per photo pixel when last painted
   /// Bounding spheres of meshes in their own frame, by mesh name.
   mutable std::map<std::string, std::pair<mr::Vec3, double>> mesh_bounds_;
 };

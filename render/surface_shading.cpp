@@ -416,6 +416,35 @@ ShadingTerms shading_terms(const SurfacePoint& p, const Lighting& lighting, floa
   return terms;
 }
 
+Rgb diffuse_term(const SurfacePoint& p, const Lighting& lighting) {
+  Rgb d{0, 0, 0};
+  if (!p.surface) return d;
+  const float nv = dot(p.normal, p.view);
+  if (nv <= 0) return d;  // add_direct and the sky term add nothing then
+  if (lighting.sun && p.sun_visibility > 0) {
+    const Sun& sun = *lighting.sun;
+    const float nl = dot(p.normal, unit(to_f(sun.direction_to_sun)));
+    if (nl > 0)
+      for (int c = 0; c < 3; ++c) d[c] += sun.irradiance[c] * p.sun_visibility * nl / kPi;
+  }
+  if (lighting.sky_radiance && p.sky_visibility > 0)
+    for (int c = 0; c < 3; ++c) d[c] += (*lighting.sky_radiance)[c] * p.sky_visibility;
+  for (const Lamp& lamp : lighting.lamps) {
+    const Vec3f to_lamp = {float(lamp.position_m.x) - p.position_m[0],
+                           float(lamp.position_m.y) - p.position_m[1],
+                           float(lamp.position_m.z) - p.position_m[2]};
+    const float r2 = dot(to_lamp, to_lamp);
+    if (!(r2 > 1e-12f)) continue;
+    const Vec3f l = unit(to_lamp);
+    const float spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
+    if (spot <= 0) continue;
+    const float nl = dot(p.normal, l);
+    if (nl <= 0) continue;
+    for (int c = 0; c < 3; ++c) d[c] += lamp.intensity_per_sr[c] * spot / r2 * nl / kPi;
+  }
+  return d;
+}
+
 Rgb shade(const Material& m, const ShadingTerms& t) {
   Rgb out;
   for (int c = 0; c < 3; ++c)

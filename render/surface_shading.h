@@ -98,6 +98,10 @@ struct ShadingTerms {
   Rgb diffuse{}, specular_f0{}, specular_bias{};
 };
 ShadingTerms shading_terms(const SurfacePoint& point, const Lighting& lighting, float roughness);
+/// shading_terms(...).diffuse alone, the same sums in the same order (so the same floats),
+/// without the specular lobes' cost: what a Lambertian ratio (differential rendering's photo
+/// side) needs.
+Rgb diffuse_term(const SurfacePoint& point, const Lighting& lighting);
 Rgb shade(const Material& material, const ShadingTerms& terms);
 
 /// shade_pixel for every pixel with labels(x, y) = k >= 1 and k <= materials.size(), using

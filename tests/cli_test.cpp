@@ -8,6 +8,7 @@
 #include <regex>
 #include <stdexcept>
 
+#include "mr/color.h"
 #include "mr/io.h"
 #include "mr/scene_json.h"
 #include "test_support.h"
@@ -590,6 +591,40 @@ TEST_F(CliScene, ThreadCountDoesNotChangeTheOutput) {
   for (int i = 1; i < 3; ++i)
     for (int k = 0; k < 2; ++k)
       EXPECT_EQ(test::max_abs_diff(outputs[i][k], outputs[0][k]), 0.0) << threads[i] << " " << k;
+}
+
+// `mr insert` writes display-referred (8-bit) outputs through the highlight roll-off, as `mr fog`
+// does (issue 16: sunlit white objects, lit relative to the photo's exposure, are brighter than
+// its white and clipped flat under plain sRGB): each PNG code is the sRGB code of the roll-off of
+// the float output's value (within 1.5 codes: OCIO's LUTs and rounding), so a sphere in a strong
+// sun keeps its shading above 1.0 linear; the EXR stays linear and unclipped.
+TEST_F(CliScene, InsertWritesDisplayOutputsThroughTheRolloff) {
+  const std::string base = kMr + " insert " + (in / "photo.png").string() + " --depth " +
+                           (in / "photo_depth.exr").string() +
+                           " -q --quality preview --object primitive:sphere --position 0,-1.5,7"
+                           " --scale 3 --sun-azimuth 180 --sun-elevation 50"
+                           " --sun-irradiance 12 --sky 0.3 -o " +
+                           (dir / "ins").string();
+  ASSERT_EQ(test::run(base).exit_code, 0);
+  ASSERT_EQ(test::run(base + " --format exr").exit_code, 0);
+  const Image display = read_raw(dir / "ins" / "photo_insert.png");
+  const Image linear = read_raw(dir / "ins" / "photo_insert.exr");
+  ASSERT_EQ(display.width(), linear.width());
+  auto srgb = [](double x) {
+    return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055;
+  };
+  std::size_t above_white = 0;
+  double worst = 0;
+  for (int y = 0; y < linear.height(); ++y)
+    for (int x = 0; x < linear.width(); ++x)
+      for (int c = 0; c < 3; ++c) {
+        const double v = linear.at(x, y, c);
+        above_white += v > 1.05;
+        const double want = 255 * srgb(highlight_rolloff(std::max(v, 0.0)));
+        worst = std::max(worst, std::fabs(255.0 * display.at(x, y, c) - want));
+      }
+  EXPECT_GT(above_white, 30u);  // the sunlit sphere is above the photo's white
+  EXPECT_LT(worst, 1.5);
 }
 
 TEST_F(CliScene, AovLayersInTheExr) {

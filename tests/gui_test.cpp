@@ -243,6 +243,7 @@ class GuiTest : public QObject {
   void blockersPanelEditsValidatesAndRoundTrips();
   void objectsPanelAddsEditsAndUndoes();
   void insertionToolDropDragTurnScaleUndo();
+  void objectToolHandlesTurnAndScale();
   void blockersShadeTheSunnyPreview();
   void blockersFromThePhotosAnnotations();
   void statusBarShowsProgress();
@@ -1644,6 +1645,114 @@ void GuiTest::insertionToolDropDragTurnScaleUndo() {
   QTRY_VERIFY_WITH_TIMEOUT(settled(w), 120000);
   QVERIFY(w.preview()->matte.empty());
   QVERIFY(meanAbsDiff(w.preview()->composite, plain) < 0.01);
+}
+
+// Issue 16, the insertion tool's drawn handles on a synthetic photo (ground plane, camera 1.6 m
+// up): the turn ring is the circle of the object's bounding radius around its foot on the
+// ground, projected; it is hit along its line (not inside it), the scale square at the bounding
+// circle's upper right. Dragging the ring's +Z point to its +X point turns the object by +90
+// degrees (the ring follows the pointer: the angle comes back through the ray-plane
+// intersection, within 1e-6 degrees); dragging the square to twice its distance from the
+// circle's centre doubles the scale; each is one undo step. Shift+drag still turns by 0.5
+// degrees a pixel. The handles are drawn where they are hit.
+void GuiTest::objectToolHandlesTurnAndScale() {
+  auto doc = std::make_shared<Document>();
+  const int w = 320, h = 240;
+  doc->camera = mr::Camera::from_horizontal_fov(w, h, 60);
+  mr::CameraPose pose;
+  pose.position_m = {0, 1.6, 0};
+  pose.pitch_deg = -10;
+  doc->photo = mr::Image(w, h, 3);
+  doc->distance_m = mr::Image(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const mr::Vec3 d = pose.ray_direction(doc->camera, x, y);
+      doc->distance_m.view().at(x, y, 0) =
+          d.y < 0 ? float(-1.6 / d.y) : std::numeric_limits<float>::infinity();
+    }
+  ObjectsPanel panel;
+  QUndoStack undo;
+  panel.setUndoStack(&undo);
+  panel.setCameraPose(pose);
+  mr::SceneObject box;
+  box.mesh = "primitive:box";
+  box.placement.position_m = {0, 0, 6};
+  panel.setObjects({box});
+  panel.select(0);
+  ObjectTool tool(&panel);
+  tool.setContext(doc, pose, QString());
+  using Handle = ObjectTool::Handle;
+
+  const std::vector<mr::PixelPoint> ring = tool.turnRing(0);
+  QCOMPARE(int(ring.size()), ObjectTool::kRingPoints);
+  const auto b = tool.bounds(0);
+  QVERIFY(b);
+  const double r = b->second;
+  const auto plus_z = tool.project({0, 0, 6 + r}), plus_x = tool.project({r, 0, 6});
+  QVERIFY(plus_z && plus_x);
+  const int quarter = ObjectTool::kRingPoints / 4;
+  QVERIFY(std::hypot(ring[0][0] - (*plus_z)[0], ring[0][1] - (*plus_z)[1]) < 1e-9);
+  QVERIFY(std::hypot(ring[quarter][0] - (*plus_x)[0], ring[quarter][1] - (*plus_x)[1]) < 1e-9);
+  const auto foot = tool.project({0, 0, 6});
+  const auto handle = tool.scaleHandle(0);
+  QVERIFY(foot && handle);
+  QCOMPARE(tool.handleAt(ring[quarter]), Handle::turn);
+  QCOMPARE(tool.handleAt({ring[quarter][0] + 3, ring[quarter][1]}), Handle::turn);
+  QCOMPARE(tool.handleAt({ring[quarter][0] + 20, ring[quarter][1]}), Handle::none);
+  QCOMPARE(tool.handleAt(*foot), Handle::none);  // inside the ring: the object itself
+  QCOMPARE(tool.handleAt(*handle), Handle::scale);
+
+  // Drawn: paint onto black at the photo's scale; the ring and the square are there.
+  QImage canvas(w, h, QImage::Format_RGB32);
+  canvas.fill(Qt::black);
+  {
+    QPainter painter(&canvas);
+    tool.paint(painter, QTransform());
+  }
+  auto lit = [&](const mr::PixelPoint& p) {
+    const QRgb c = canvas.pixel(int(std::lround(p[0])), int(std::lround(p[1])));
+    return qRed(c) + qGreen(c) + qBlue(c) > 150;
+  };
+  QVERIFY(lit(ring[quarter]));
+  QVERIFY(lit(ring[3 * quarter]));
+  QVERIFY(lit(*handle));
+  QVERIFY(!lit({ring[quarter][0] + 20, ring[quarter][1]}));
+
+  // Turn by the ring: its +Z point dragged along it to its +X point.
+  QVERIFY(tool.press(ring[0], Qt::NoModifier));
+  QVERIFY(tool.move(ring[quarter / 2]));
+  QVERIFY(tool.release(ring[quarter]));
+  const double yaw = panel.objects()[0].placement.yaw_deg;
+  QVERIFY2(std::abs(yaw - 90) < 1e-6, qPrintable(QString::number(yaw, 'g', 12)));
+  QCOMPARE(panel.objects()[0].placement.position_m.z, 6.0);
+  QCOMPARE(panel.objects()[0].placement.scale, 1.0);
+  QCOMPARE(undo.undoText(), QStringLiteral("Turn object"));
+  QCOMPARE(undo.count(), 1);
+
+  // Scale by the square: dragged to twice its distance from the circle's centre.
+  const auto circle = tool.screenCircle(0);
+  QVERIFY(circle);
+  const mr::PixelPoint c = circle->first;
+  const mr::PixelPoint h2 = *tool.scaleHandle(0);
+  const mr::PixelPoint target = {c[0] + 2 * (h2[0] - c[0]), c[1] + 2 * (h2[1] - c[1])};
+  QVERIFY(tool.press(h2, Qt::NoModifier));
+  QVERIFY(tool.move({(h2[0] + target[0]) / 2, (h2[1] + target[1]) / 2}));
+  QVERIFY(tool.release(target));
+  const double scale = panel.objects()[0].placement.scale;
+  QVERIFY2(std::abs(scale - 2) < 1e-9, qPrintable(QString::number(scale, 'g', 12)));
+  QCOMPARE(undo.undoText(), QStringLiteral("Scale object"));
+  QCOMPARE(undo.count(), 2);
+  undo.undo();
+  QCOMPARE(panel.objects()[0].placement.scale, 1.0);
+  undo.undo();
+  QCOMPARE(panel.objects()[0].placement.yaw_deg, 0.0);
+
+  // The modifier keys stay: Shift+drag from the object's middle turns 0.5 degrees a pixel.
+  const mr::PixelPoint middle = tool.screenCircle(0)->first;
+  QCOMPARE(tool.handleAt(middle), Handle::none);
+  QVERIFY(tool.press(middle, Qt::ShiftModifier));
+  QVERIFY(tool.release({middle[0] + 40, middle[1]}));
+  QVERIFY(std::abs(panel.objects()[0].placement.yaw_deg - 20) < 1e-9);
 }
 
 // Issue 16: the Objects dock adds primitives and models, edits placements and removes objects,

@@ -24,6 +24,9 @@ namespace {
 using mcref::Box;
 using mcref::Geometry;
 
+#define EXPECT_CONTAINS(text, part) \
+  EXPECT_NE(std::string(text).find(part), std::string::npos) << (text)
+
 using test::InsertScene;
 InsertScene make_scene() { return test::make_insert_scene(); }
 
@@ -157,6 +160,118 @@ TEST(InsertObjects, OccludedByTheForegroundExactlyWhereTheDepthSays) {
   EXPECT_GT(covering, 40u);
 }
 
+// Normal maps: a flat plane whose normal texture holds one constant tilted normal is shaded
+// exactly like a plane that is geometrically tilted to that normal (sun only, no sky, nothing
+// that shadows either: the shading then depends only on the normal and the view direction, which
+// the two share at every pixel). The expected normal is the texture's tangent-space one in the
+// plane's own tangent frame (tangent, w cross(n, t), n), rotated by the placement's yaw. Bar:
+// 1e-4 relative (float rounding of the two normals); and the map must change the shading (the
+// untilted plane differs by more than 5 %).
+TEST(InsertObjects, NormalMapShadesLikeATiltedPlane) {
+  const Camera camera = Camera::from_horizontal_fov(64, 48, 40);
+  FogScene scene;
+  scene.pose.position_m = {0, 2, 0};
+  scene.pose.pitch_deg = -30;
+  scene.render.volumetric_shadows = false;  // nothing in the photo casts shadows
+  scene.lighting.sun = Sun{{0.3, 0.8, -0.5}, {3, 3, 3}, 0.27};
+  scene.lighting.sky_radiance = Rgb{0, 0, 0};
+  Image distance(camera.width, camera.height, 1);
+  for (float& d : distance.pixels()) d = 1000.0f;  // a far backdrop
+  const Image photo = test::make_test_photo(camera.width, camera.height);
+
+  const double tilt[3] = {0.35, -0.25, 0.9};  // tangent space: x along t, y along b, z along n
+  const double len = std::sqrt(tilt[0] * tilt[0] + tilt[1] * tilt[1] + tilt[2] * tilt[2]);
+  ObjectMesh mapped = make_primitive("plane");
+  ObjectTexture texture;
+  texture.source = "tilted_normals.png";
+  texture.image = Image(2, 2, 3);
+  for (int y = 0; y < 2; ++y)
+    for (int x = 0; x < 2; ++x)
+      for (int c = 0; c < 3; ++c)
+        texture.image.view().at(x, y, c) = float(0.5 * (tilt[c] / len + 1));
+  mapped.textures.push_back(texture);
+  mapped.materials.at(0).normal_texture = 0;
+  ObjectPlacement placement;
+  placement.position_m = {0, 0, 2 / std::tan(30 * 3.14159265358979 / 180)};
+  placement.yaw_deg = 40;
+  placement.scale = 2;
+
+  // The expected normal in the object's frame, then in the world's (the placement's rotation).
+  const auto& t = mapped.tangents.at(0);
+  const double n_obj[3] = {0, 1, 0}, t_obj[3] = {t[0], t[1], t[2]};
+  const double b_obj[3] = {t[3] * (n_obj[1] * t_obj[2] - n_obj[2] * t_obj[1]),
+                           t[3] * (n_obj[2] * t_obj[0] - n_obj[0] * t_obj[2]),
+                           t[3] * (n_obj[0] * t_obj[1] - n_obj[1] * t_obj[0])};
+  double local[3];
+  for (int c = 0; c < 3; ++c)
+    local[c] = (t_obj[c] * tilt[0] + b_obj[c] * tilt[1] + n_obj[c] * tilt[2]) / len;
+  const Mat4 M = placement_matrix(placement);
+  const Vec3 world{M[0] * local[0] + M[1] * local[1] + M[2] * local[2],
+                   M[4] * local[0] + M[5] * local[1] + M[6] * local[2],
+                   M[8] * local[0] + M[9] * local[1] + M[10] * local[2]};
+  ObjectPlacement tilted = placement;
+  tilted.up = world;  // the scale is uniform: the direction is the normal's
+
+  for (const InsertOptions& options : {InsertOptions::preview(), InsertOptions{}}) {
+    auto render = [&](const ObjectMesh& mesh, const ObjectPlacement& where) {
+      InsertObject o;
+      o.mesh = mesh;
+      o.placement = where;
+      return insert_objects(photo, distance, camera, scene, std::span<const InsertObject>(&o, 1),
+                            options);
+    };
+    const InsertResult with_map = render(mapped, placement);
+    const InsertResult reference = render(make_primitive("plane"), tilted);
+    const InsertResult flat = render(make_primitive("plane"), placement);
+    std::size_t compared = 0, changed = 0;
+    double worst = 0;
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x) {
+        if (with_map.matte.at(x, y, 0) != 1.0f || reference.matte.at(x, y, 0) != 1.0f ||
+            flat.matte.at(x, y, 0) != 1.0f)
+          continue;
+        ++compared;
+        for (int c = 0; c < 3; ++c) {
+          const float a = with_map.composite.at(x, y, c), b = reference.composite.at(x, y, c);
+          ASSERT_GT(b, 0.0f);
+          worst = std::max(worst, double(std::fabs(a - b) / b));
+        }
+        changed += std::fabs(with_map.composite.at(x, y, 1) - flat.composite.at(x, y, 1)) >
+                   0.05f * flat.composite.at(x, y, 1);
+      }
+    std::printf("normal map vs tilted plane: %zu pixels, worst %.2e relative\n", compared, worst);
+    EXPECT_GT(compared, 100u);
+    EXPECT_LT(worst, 1e-4);
+    EXPECT_EQ(changed, compared);
+  }
+}
+
+// A normal texture that cannot hold normals (fewer than 3 channels) is an error naming the model
+// and the texture, not a silent flat surface.
+TEST(InsertObjects, BrokenNormalTextureIsAnErrorNamingIt) {
+  const InsertScene s = make_scene();
+  const Image distance = mcref::distance_map(s.camera, s.scene.pose, s.photo_geometry);
+  const Image photo = test::make_test_photo(s.camera.width, s.camera.height);
+  InsertObject o;
+  o.mesh = make_primitive("box");
+  o.mesh.source = "crate.glb";
+  ObjectTexture texture;
+  texture.source = "crate_normal.png";
+  texture.image = Image(4, 4, 2);
+  o.mesh.textures.push_back(texture);
+  o.mesh.materials.at(0).normal_texture = 0;
+  o.placement.position_m = {0, 0, 6};
+  try {
+    insert_objects(photo, distance, s.camera, s.scene, std::span<const InsertObject>(&o, 1),
+                   InsertOptions::preview());
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "crate.glb");
+    EXPECT_CONTAINS(std::string(e.what()), "crate_normal.png");
+    EXPECT_CONTAINS(std::string(e.what()), "channel");
+  }
+}
+
 // The objects join the fog: their distance replaces the photo's where they are in front (sky
 // light only: T is exactly the view ray's transmittance), and with a sun they cast shafts (less
 // in-scattered light on view rays through their shadows, where the photo is unchanged).
@@ -265,7 +380,18 @@ TEST(InsertPreview, FramesEqualTheFullRenderThroughADrag) {
   objects[1].placement.yaw_deg = 30;
   expect_same(preview.render(objects, InsertOptions::preview()), objects, InsertOptions::preview(),
               "moved");
-  EXPECT_TRUE(preview.last_frame().objects_rebuilt);
+  // A move keeps the meshes: their BVH is refitted, not rebuilt, and the frame is still exact.
+  EXPECT_FALSE(preview.last_frame().objects_rebuilt);
+  EXPECT_TRUE(preview.last_frame().objects_refit);
+  // Further along the drag, scaled, and with the sphere tilted.
+  for (int step = 0; step < 3; ++step) {
+    objects[0].placement.position_m.x += 0.4;
+    objects[1].placement.scale *= 1.1;
+    objects[0].placement.up = {0.2 * step, 1, 0};
+    expect_same(preview.render(objects, InsertOptions::preview()), objects,
+                InsertOptions::preview(), "dragged");
+    EXPECT_TRUE(preview.last_frame().objects_refit);
+  }
   // The idle refinement at the same placement reuses the objects' scene.
   expect_same(preview.render(objects, InsertOptions::preview_refined()), objects,
               InsertOptions::preview_refined(), "refined");

@@ -260,29 +260,39 @@ InsertResult insert_objects(const Image& photo, const Image& distance_m, const C
 
 namespace {
 
-// Whether two object lists give the same world (then the objects' scene is reused). Meshes are
-// compared by content (cheap next to building a BVH of them); an object with a material
-// override always counts as changed (mr::Material has no comparison).
-bool same_objects(std::span<const InsertObject> a, std::span<const InsertObject> b) {
+bool same_placements(std::span<const InsertObject> a, std::span<const InsertObject> b) {
   if (a.size() != b.size()) return false;
   for (std::size_t i = 0; i < a.size(); ++i) {
-    const InsertObject &x = a[i], &y = b[i];
-    if (x.material || y.material) return false;
-    const ObjectPlacement &p = x.placement, &q = y.placement;
+    const ObjectPlacement &p = a[i].placement, &q = b[i].placement;
     if (p.position_m.x != q.position_m.x || p.position_m.y != q.position_m.y ||
         p.position_m.z != q.position_m.z || p.up.x != q.up.x || p.up.y != q.up.y ||
         p.up.z != q.up.z || p.yaw_deg != q.yaw_deg || p.scale != q.scale)
       return false;
+  }
+  return true;
+}
+
+// Whether two object lists hold the same meshes and materials (placements aside): then a move
+// only refits the objects' BVH. Meshes are compared by content (cheap next to building a BVH of
+// them); an object with a material override always counts as changed (mr::Material has no
+// comparison).
+bool same_meshes(std::span<const InsertObject> a, std::span<const InsertObject> b) {
+  if (a.size() != b.size()) return false;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const InsertObject &x = a[i], &y = b[i];
+    if (x.material || y.material) return false;
     const ObjectMesh &m = x.mesh, &n = y.mesh;
     if (m.source != n.source || m.positions != n.positions || m.triangles != n.triangles ||
-        m.normals != n.normals || m.uvs != n.uvs || m.triangle_material != n.triangle_material ||
-        m.materials.size() != n.materials.size() || m.textures.size() != n.textures.size())
+        m.normals != n.normals || m.uvs != n.uvs || m.tangents != n.tangents ||
+        m.triangle_material != n.triangle_material || m.materials.size() != n.materials.size() ||
+        m.textures.size() != n.textures.size())
       return false;
     for (std::size_t k = 0; k < m.materials.size(); ++k) {
       const ObjectMaterial &u = m.materials[k], &v = n.materials[k];
       if (u.material || v.material || u.base_color != v.base_color || u.metallic != v.metallic ||
           u.roughness != v.roughness || u.base_color_texture != v.base_color_texture ||
-          u.metallic_roughness_texture != v.metallic_roughness_texture)
+          u.metallic_roughness_texture != v.metallic_roughness_texture ||
+          u.normal_texture != v.normal_texture)
         return false;
     }
     for (std::size_t k = 0; k < m.textures.size(); ++k)
@@ -383,18 +393,40 @@ const InsertResult& InsertPreview::render(std::span<const InsertObject> objects,
   FrameStats stats;
   stats.tiles_total = m.tiles.bounds.size();
 
-  // The objects' scene: rebuilt only when the objects changed.
+  // The objects' scene: built when the meshes changed; when only placements changed (a drag, a
+  // turn, a scale), the vertices are moved in place and the BVH refitted. The placed vertices
+  // are append_object's, as insert_objects' are, so the frame stays the same bit for bit.
   const auto objects_start = Clock::now();
-  if (!m.have_objects || !same_objects(objects, m.objects)) {
-    auto world = std::make_unique<render::insertion::WorldObjects>();
-    for (const InsertObject& o : objects)
-      render::insertion::append_object(*world, o.mesh, o.placement, o.material);
-    auto scene = std::make_unique<render::insertion::ObjectScene>(*world, /*fast_build=*/true);
-    m.object_scene = std::move(scene);
-    m.world = std::move(world);
-    m.objects.assign(objects.begin(), objects.end());
-    m.have_objects = true;
-    stats.objects_rebuilt = true;
+  const bool meshes_kept = m.have_objects && same_meshes(objects, m.objects);
+  if (!meshes_kept || !same_placements(objects, m.objects)) {
+    std::vector<const ObjectMesh*> meshes;
+    std::vector<ObjectPlacement> placements;
+    for (const InsertObject& o : objects) {
+      meshes.push_back(&o.mesh);
+      placements.push_back(o.placement);
+    }
+    // A failed or throwing move leaves the world partly moved: rebuilt at the next frame.
+    m.have_objects = false;
+    if (meshes_kept && render::insertion::move_objects(*m.world, meshes, placements)) {
+      m.have_objects = true;
+      // The scene shares the world's buffers, rewritten in place: refit its BVH.
+      m.object_scene->refit();
+      for (std::size_t i = 0; i < objects.size(); ++i)
+        m.objects[i].placement = objects[i].placement;
+      stats.objects_refit = true;
+    } else {
+      // (A scale small enough to drop degenerate triangles changes the topology: rebuilt.)
+      auto world = std::make_unique<render::insertion::WorldObjects>();
+      for (const InsertObject& o : objects)
+        render::insertion::append_object(*world, o.mesh, o.placement, o.material);
+      auto scene = std::make_unique<render::insertion::ObjectScene>(*world, /*fast_build=*/true,
+                                                                    /*refittable=*/true);
+      m.object_scene = std::move(scene);
+      m.world = std::move(world);
+      m.objects.assign(objects.begin(), objects.end());
+      m.have_objects = true;
+      stats.objects_rebuilt = true;
+    }
   }
   stats.objects_s = seconds_since(objects_start);
   m.result.timings.triangles = m.world->triangle_count();

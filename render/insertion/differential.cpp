@@ -181,6 +181,21 @@ ShadingTerms terms_at(const Lights& L, const SurfacePoint& base, const Visibilit
   return t;
 }
 
+// terms_at(...).diffuse alone (the same floats): the photo's side needs only the Lambertian
+// ratio, and the specular lobes cost as much as the rest of its shading.
+Rgb diffuse_at(const Lights& L, const SurfacePoint& base, const Visibility& vis) {
+  SurfacePoint p = base;
+  p.sun_visibility = vis.sun;
+  p.sky_visibility = 0.5f * (1 + p.normal[1]) * vis.sky_share;
+  Rgb d = diffuse_term(p, L.sun_sky);
+  for (std::size_t k = 0; k < L.single_lamp.size() && k < 16; ++k) {
+    if (vis.lamp[k] <= 0) continue;
+    const Rgb l = diffuse_term(p, L.single_lamp[k]);
+    for (int c = 0; c < 3; ++c) d[c] += l[c];
+  }
+  return d;
+}
+
 // Whether a ray from `origin` along unit `dir` (spreading by tan_spread per metre) can pass
 // within the bounding sphere (centre c, radius r) at t > 0, before t_max.
 bool may_hit_sphere(const Vec3f& origin, const Vec3f& dir, float tan_spread,
@@ -553,10 +568,9 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
         sp.normal = n;
         sp.view = {-ray[0], -ray[1], -ray[2]};
         sp.position_m = p;
-        const ShadingTerms without = terms_at(L, sp, visibility_of(set, blocked_photo), 1.0f);
-        const ShadingTerms with = terms_at(L, sp, visibility_of(set, blocked_any), 1.0f);
-        for (int c = 0; c < 3; ++c)
-          ratio[c] = without.diffuse[c] > 1e-12f ? with.diffuse[c] / without.diffuse[c] : 1.0f;
+        const Rgb without = diffuse_at(L, sp, visibility_of(set, blocked_photo));
+        const Rgb with = diffuse_at(L, sp, visibility_of(set, blocked_any));
+        for (int c = 0; c < 3; ++c) ratio[c] = without[c] > 1e-12f ? with[c] / without[c] : 1.0f;
       }
     }
   }
@@ -603,18 +617,27 @@ void Renderer::shade(int x, int y, InsertionLayers& out, Scratch& scratch) const
         return Vec3f{q[0], q[1], q[2]};
       };
       const Vec3f a = P(0), b = P(1), c = P(2);
-      Vec3f ng = unit(cross(sub3(b, a), sub3(c, a)));
-      if (dot(ng, dir) > 0) ng = {-ng[0], -ng[1], -ng[2]};
+      const Vec3f ng_mesh = unit(cross(sub3(b, a), sub3(c, a)));  // the mesh's outside
+      const bool back = dot(ng_mesh, dir) > 0;
+      const Vec3f ng = back ? Vec3f{-ng_mesh[0], -ng_mesh[1], -ng_mesh[2]} : ng_mesh;
       Vec3f ns = ng;
+      Vec3f m = ng_mesh;  // the shading normal on the mesh's normals' side
+      bool flip = back;
       if (world.smooth[hit.prim]) {
-        Vec3f m{0, 0, 0};
+        m = {0, 0, 0};
         const float bw[3] = {1 - hit.u - hit.v, hit.u, hit.v};
         for (int k2 = 0; k2 < 3; ++k2)
           for (int cc = 0; cc < 3; ++cc)
             m[cc] += bw[k2] * world.normals[3 * std::size_t(tri[k2]) + cc];
         m = unit(m);
-        if (dot(m, ng) < 0) m = {-m[0], -m[1], -m[2]};
-        ns = m;
+        flip = dot(m, ng) < 0;
+        ns = flip ? Vec3f{-m[0], -m[1], -m[2]} : m;
+      }
+      if (world.materials[world.triangle_material[hit.prim]].normal_texture) {
+        // The normal map perturbs the normal on the side the mesh's frame describes; seen from
+        // behind, the same bump faces the other way.
+        const Vec3f mapped = normal_mapped(world, hit.prim, hit.u, hit.v, m);
+        ns = flip ? Vec3f{-mapped[0], -mapped[1], -mapped[2]} : mapped;
       }
       const Vec3f view = {-dir[0], -dir[1], -dir[2]};
       const float nv = dot(ns, view);

@@ -27,7 +27,9 @@
 //
 // Not modelled: light the objects reflect onto the photo (bounce, colour bleeding) and light the
 // photo's surfaces reflect onto the objects (the lower hemisphere is dark, as in the scattering
-// core's surface term); refraction; normal maps (checked, not applied).
+// core's surface term); refraction. Normal maps perturb the objects' shading normal only
+// (object_scene.h's normal_mapped): their shadow rays leave the true surface, and the photo's
+// side of the ratio does not see the bumps.
 //
 // The seam for the real-time techniques (docs/architecture.md, "Inserted objects"): everything
 // that decides visibility goes through VisibilityPath (shadow rays against "the photo" and "the

@@ -45,6 +45,100 @@ void sample_bilinear(const Image& image, float u, float v, int n, float* out) {
   }
 }
 
+void check_placement(const ObjectMesh& mesh, const ObjectPlacement& placement) {
+  if (!(std::isfinite(placement.scale) && placement.scale > 0))
+    fail(mesh, "placement scale must be finite and > 0, got " + std::to_string(placement.scale));
+  if (!std::isfinite(placement.position_m.x) || !std::isfinite(placement.position_m.y) ||
+      !std::isfinite(placement.position_m.z) || !std::isfinite(placement.yaw_deg))
+    fail(mesh, "placement position and yaw must be finite");
+}
+
+// The tangents a normal texture is read with: the mesh's own (glTF's TANGENT, or the loader's),
+// else generated from its UVs into `generated`; null for a mesh without UVs or normals (its
+// normal texture is then not applied: there is no frame to read it in).
+const std::vector<std::array<float, 4>>* tangents_of(const ObjectMesh& mesh,
+                                                     std::vector<std::array<float, 4>>& generated) {
+  const std::size_t nv = mesh.positions.size();
+  if (mesh.tangents.size() == nv) return &mesh.tangents;
+  if (mesh.uvs.size() != nv || mesh.normals.size() != nv) return nullptr;
+  ObjectMesh frame_only;  // compute_tangents reads positions, normals, uvs and triangles
+  frame_only.positions = mesh.positions;
+  frame_only.normals = mesh.normals;
+  frame_only.uvs = mesh.uvs;
+  frame_only.triangles = mesh.triangles;
+  compute_tangents(frame_only);
+  generated = std::move(frame_only.tangents);
+  return generated.size() == nv ? &generated : nullptr;
+}
+
+// Vertex i of `mesh` placed as world vertex `at` (the arrays already hold it): the one
+// definition of the arithmetic, shared by append_object and move_objects so that both give the
+// same floats. Grows lo, hi by the placed position.
+void place_vertex(WorldObjects& world, std::size_t at, const ObjectMesh& mesh, std::size_t i,
+                  const PlacementTransform& xf, const std::vector<std::array<float, 4>>* tangents,
+                  Vec3d& lo, Vec3d& hi) {
+  const auto& p = mesh.positions[i];
+  if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+    fail(mesh, "vertex " + std::to_string(i) + " has a non-finite position");
+  const Vec3d w = xf.apply({p[0], p[1], p[2]});
+  float* q = &world.positions[3 * at];
+  q[0] = float(w.x), q[1] = float(w.y), q[2] = float(w.z);
+  lo = {std::min(lo.x, w.x), std::min(lo.y, w.y), std::min(lo.z, w.z)};
+  hi = {std::max(hi.x, w.x), std::max(hi.y, w.y), std::max(hi.z, w.z)};
+  Vec3d n{0, 0, 0};
+  if (!mesh.normals.empty()) {
+    const auto& m = mesh.normals[i];
+    if (std::isfinite(m[0]) && std::isfinite(m[1]) && std::isfinite(m[2]))
+      n = unit(xf.rotate({m[0], m[1], m[2]}));
+  }
+  float* nn = &world.normals[3 * at];
+  nn[0] = float(n.x), nn[1] = float(n.y), nn[2] = float(n.z);
+  float* uv = &world.uvs[2 * at];
+  if (!mesh.uvs.empty() && std::isfinite(mesh.uvs[i][0]) && std::isfinite(mesh.uvs[i][1]))
+    uv[0] = mesh.uvs[i][0], uv[1] = mesh.uvs[i][1];
+  else
+    uv[0] = uv[1] = 0.0f;
+  if (tangents) {
+    const auto& t = (*tangents)[i];
+    Vec3d r{0, 0, 0};
+    if (std::isfinite(t[0]) && std::isfinite(t[1]) && std::isfinite(t[2]) && std::isfinite(t[3]))
+      r = unit(xf.rotate({t[0], t[1], t[2]}));
+    float* out = &world.tangents[4 * at];
+    out[0] = float(r.x), out[1] = float(r.y), out[2] = float(r.z);
+    out[3] = t[3] < 0 ? -1.0f : 1.0f;
+  }
+}
+
+// Whether a triangle (mesh indices, offset by base) has zero area once placed.
+bool degenerate(const WorldObjects& world, std::uint32_t base,
+                const std::array<std::uint32_t, 3>& tri) {
+  auto pos = [&](std::uint32_t i) {
+    const float* p = &world.positions[3 * std::size_t(base + i)];
+    return Vec3d{p[0], p[1], p[2]};
+  };
+  const Vec3d a = pos(tri[0]), b = pos(tri[1]), c = pos(tri[2]);
+  return !(length(cross(b - a, c - a)) > 1e-14);
+}
+
+// An object's bounding spheres about its box's centre: the box's half-diagonal, and the
+// farthest vertex (WorldObjects::bounds, tight_bounds).
+std::pair<std::array<float, 4>, std::array<float, 4>> spheres(const WorldObjects& world,
+                                                              std::uint32_t first, std::size_t nv,
+                                                              const Vec3d& lo, const Vec3d& hi) {
+  const Vec3d centre = {(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
+  const std::array<float, 4> box = {float(centre.x), float(centre.y), float(centre.z),
+                                    float(length(hi - centre) * 1.0001 + 1e-6)};
+  double r2 = 0;
+  for (std::size_t i = 0; i < nv; ++i) {
+    const float* q = &world.positions[3 * (std::size_t(first) + i)];
+    const double dx = q[0] - centre.x, dy = q[1] - centre.y, dz = q[2] - centre.z;
+    r2 = std::max(r2, dx * dx + dy * dy + dz * dz);
+  }
+  return {
+      box,
+      {float(centre.x), float(centre.y), float(centre.z), float(std::sqrt(r2) * 1.0001 + 1e-6)}};
+}
+
 }  // namespace
 
 Vec3d PlacementTransform::apply(const Vec3d& p) const {
@@ -96,11 +190,7 @@ PlacementTransform placement_transform(const ObjectPlacement& placement) {
 
 void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlacement& placement,
                    const std::optional<Material>& material_override) {
-  if (!(std::isfinite(placement.scale) && placement.scale > 0))
-    fail(mesh, "placement scale must be finite and > 0, got " + std::to_string(placement.scale));
-  if (!std::isfinite(placement.position_m.x) || !std::isfinite(placement.position_m.y) ||
-      !std::isfinite(placement.position_m.z) || !std::isfinite(placement.yaw_deg))
-    fail(mesh, "placement position and yaw must be finite");
+  check_placement(mesh, placement);
   const std::size_t nv = mesh.positions.size();
   if (!mesh.normals.empty() && mesh.normals.size() != nv)
     fail(mesh,
@@ -135,37 +225,40 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
     };
     s.base_color_texture = texture(m.base_color_texture, "base colour");
     s.metallic_roughness_texture = texture(m.metallic_roughness_texture, "metallic-roughness");
-    (void)texture(m.normal_texture, "normal");  // checked; normal maps are not applied yet
+    s.normal_texture = texture(m.normal_texture, "normal");
+    if (s.normal_texture && s.normal_texture->channels() < 3)
+      fail(mesh, "normal texture '" + mesh.textures[std::size_t(m.normal_texture)].source +
+                     "' has " + std::to_string(s.normal_texture->channels()) +
+                     " channel(s); a tangent-space normal map needs 3 (R, G, B = x, y, z)");
     s.material = material_override ? material_override : m.material;
     if (s.material) validate_material(*s.material, "object '" + mesh.source + "' material");
     world.materials.push_back(s);
   }
 
+  // Tangents, only where a normal texture needs them: the mesh's own (glTF's TANGENT, or the
+  // loader's), else generated from the UVs. A mesh without UVs or normals has none (its normal
+  // texture is then not applied: there is no frame to read it in).
+  bool wants_tangents = false;
+  for (std::size_t k = material_base; k < world.materials.size(); ++k)
+    wants_tangents = wants_tangents || world.materials[k].normal_texture != nullptr;
+  std::vector<std::array<float, 4>> generated;
+  const std::vector<std::array<float, 4>>* tangents =
+      wants_tangents ? tangents_of(mesh, generated) : nullptr;
+  // Once one object has tangents the array is per vertex of all (zero: no frame).
+  if (wants_tangents || !world.tangents.empty())
+    world.tangents.resize(4 * (world.vertex_count() + nv), 0.0f);
+
   const PlacementTransform xf = placement_transform(placement);
   if (!world.positions.empty()) world.positions.pop_back();  // the padding float
   const std::uint32_t vertex_base = std::uint32_t(world.vertex_count());
+  world.positions.resize(3 * (std::size_t(vertex_base) + nv));
+  world.normals.resize(3 * (std::size_t(vertex_base) + nv));
+  world.uvs.resize(2 * (std::size_t(vertex_base) + nv));
   Vec3d lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-  for (std::size_t i = 0; i < nv; ++i) {
-    const auto& p = mesh.positions[i];
-    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
-      fail(mesh, "vertex " + std::to_string(i) + " has a non-finite position");
-    const Vec3d w = xf.apply({p[0], p[1], p[2]});
-    world.positions.insert(world.positions.end(), {float(w.x), float(w.y), float(w.z)});
-    lo = {std::min(lo.x, w.x), std::min(lo.y, w.y), std::min(lo.z, w.z)};
-    hi = {std::max(hi.x, w.x), std::max(hi.y, w.y), std::max(hi.z, w.z)};
-    Vec3d n{0, 0, 0};
-    if (!mesh.normals.empty()) {
-      const auto& m = mesh.normals[i];
-      if (std::isfinite(m[0]) && std::isfinite(m[1]) && std::isfinite(m[2]))
-        n = unit(xf.rotate({m[0], m[1], m[2]}));
-    }
-    world.normals.insert(world.normals.end(), {float(n.x), float(n.y), float(n.z)});
-    if (!mesh.uvs.empty() && std::isfinite(mesh.uvs[i][0]) && std::isfinite(mesh.uvs[i][1]))
-      world.uvs.insert(world.uvs.end(), {mesh.uvs[i][0], mesh.uvs[i][1]});
-    else
-      world.uvs.insert(world.uvs.end(), {0.0f, 0.0f});
-  }
+  for (std::size_t i = 0; i < nv; ++i)
+    place_vertex(world, vertex_base + i, mesh, i, xf, tangents, lo, hi);
   world.positions.push_back(0.0f);  // Embree reads 16 bytes for the last float3
+  const std::size_t first_triangle = world.triangle_count();
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
     const auto& tri = mesh.triangles[t];
     for (int k = 0; k < 3; ++k)
@@ -176,13 +269,7 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
     if (material >= mesh.materials.size())
       fail(mesh, "triangle " + std::to_string(t) + " uses material " + std::to_string(material) +
                      " of " + std::to_string(mesh.materials.size()));
-    auto pos = [&](std::uint32_t i) {
-      const float* p = &world.positions[3 * std::size_t(vertex_base + i)];
-      return Vec3d{p[0], p[1], p[2]};
-    };
-    const Vec3d a = pos(tri[0]), b = pos(tri[1]), c = pos(tri[2]);
-    const double area2 = length(cross(b - a, c - a));
-    if (!(area2 > 1e-14)) continue;  // degenerate: hits nothing, and casts nothing
+    if (degenerate(world, vertex_base, tri)) continue;  // hits nothing, and casts nothing
     world.indices.insert(world.indices.end(),
                          {vertex_base + tri[0], vertex_base + tri[1], vertex_base + tri[2]});
     world.triangle_material.push_back(std::uint32_t(material_base + material));
@@ -194,18 +281,54 @@ void append_object(WorldObjects& world, const ObjectMesh& mesh, const ObjectPlac
     world.smooth.push_back(smooth ? 1 : 0);
   }
   if (nv > 0) {
-    const Vec3d centre = {(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
-    world.bounds.push_back({float(centre.x), float(centre.y), float(centre.z),
-                            float(length(hi - centre) * 1.0001 + 1e-6)});
-    double r2 = 0;
-    for (std::size_t i = 0; i < nv; ++i) {
-      const float* q = &world.positions[3 * std::size_t(vertex_base + i)];
-      const double dx = q[0] - centre.x, dy = q[1] - centre.y, dz = q[2] - centre.z;
-      r2 = std::max(r2, dx * dx + dy * dy + dz * dz);
-    }
-    world.tight_bounds.push_back(
-        {float(centre.x), float(centre.y), float(centre.z), float(std::sqrt(r2) * 1.0001 + 1e-6)});
+    const auto [box, tight] = spheres(world, vertex_base, nv, lo, hi);
+    world.bounds.push_back(box);
+    world.tight_bounds.push_back(tight);
   }
+  world.objects.push_back({vertex_base, std::uint32_t(nv), std::uint32_t(first_triangle),
+                           std::uint32_t(world.triangle_count() - first_triangle),
+                           tangents != nullptr});
+}
+
+bool move_objects(WorldObjects& world, std::span<const ObjectMesh* const> meshes,
+                  std::span<const ObjectPlacement> placements) {
+  if (meshes.size() != world.objects.size() || placements.size() != meshes.size()) return false;
+  std::size_t sphere = 0;
+  for (std::size_t k = 0; k < meshes.size(); ++k) {
+    const ObjectMesh& mesh = *meshes[k];
+    const WorldObjects::Range& range = world.objects[k];
+    const std::size_t nv = mesh.positions.size();
+    if (nv != range.vertex_count) return false;
+    check_placement(mesh, placements[k]);
+    const PlacementTransform xf = placement_transform(placements[k]);
+    std::vector<std::array<float, 4>> generated;
+    const std::vector<std::array<float, 4>>* tangents =
+        range.tangents ? tangents_of(mesh, generated) : nullptr;
+    if (range.tangents && !tangents) return false;
+    Vec3d lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+    for (std::size_t i = 0; i < nv; ++i)
+      place_vertex(world, range.first_vertex + i, mesh, i, xf, tangents, lo, hi);
+    // The same triangles must survive the degenerate test as when appended.
+    std::size_t kept = range.first_triangle;
+    const std::size_t end = std::size_t(range.first_triangle) + range.triangle_count;
+    for (const auto& tri : mesh.triangles) {
+      if (tri[0] >= nv || tri[1] >= nv || tri[2] >= nv) return false;
+      if (degenerate(world, range.first_vertex, tri)) continue;
+      if (kept >= end) return false;
+      const std::uint32_t* w = &world.indices[3 * kept++];
+      if (w[0] != range.first_vertex + tri[0] || w[1] != range.first_vertex + tri[1] ||
+          w[2] != range.first_vertex + tri[2])
+        return false;
+    }
+    if (kept != end) return false;
+    if (nv > 0) {
+      const auto [box, tight] = spheres(world, range.first_vertex, nv, lo, hi);
+      world.bounds[sphere] = box;
+      world.tight_bounds[sphere] = tight;
+      ++sphere;
+    }
+  }
+  return true;
 }
 
 SurfaceReflectance reflectance_at(const WorldObjects& world, std::uint32_t prim, float u, float v) {
@@ -248,15 +371,51 @@ SurfaceReflectance reflectance_at(const WorldObjects& world, std::uint32_t prim,
   return r;
 }
 
-ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build) : world_(world) {
+Vec3f normal_mapped(const WorldObjects& world, std::uint32_t prim, float u, float v,
+                    const Vec3f& n) {
+  const ShadingMaterial& m = world.materials[world.triangle_material[prim]];
+  if (!m.normal_texture || world.tangents.empty()) return n;
+  const std::uint32_t* tri = &world.indices[3 * std::size_t(prim)];
+  const float bw[3] = {1 - u - v, u, v};
+  float uv[2] = {0, 0};
+  Vec3f t{0, 0, 0};
+  for (int k = 0; k < 3; ++k) {
+    for (int c = 0; c < 2; ++c) uv[c] += bw[k] * world.uvs[2 * std::size_t(tri[k]) + c];
+    for (int c = 0; c < 3; ++c) t[c] += bw[k] * world.tangents[4 * std::size_t(tri[k]) + c];
+  }
+  // Gram-Schmidt against n: interpolated tangents are neither unit nor orthogonal to the
+  // interpolated normal.
+  const float tn = dot(t, n);
+  t = unit(Vec3f{t[0] - tn * n[0], t[1] - tn * n[1], t[2] - tn * n[2]});
+  if (dot(t, t) < 0.5f) return n;  // no tangent here (a vertex without a frame)
+  const float w = world.tangents[4 * std::size_t(tri[0]) + 3];
+  const Vec3f b0 = cross(n, t);
+  const Vec3f b = {w * b0[0], w * b0[1], w * b0[2]};
+  float s[3];
+  sample_bilinear(*m.normal_texture, uv[0], uv[1], 3, s);
+  const float x = 2 * s[0] - 1, y = 2 * s[1] - 1, z = 2 * s[2] - 1;
+  const Vec3f mapped = unit(Vec3f{x * t[0] + y * b[0] + z * n[0], x * t[1] + y * b[1] + z * n[1],
+                                  x * t[2] + y * b[2] + z * n[2]});
+  if (!(dot(mapped, mapped) > 0.5f)) return n;  // a zero or non-finite texel
+  return mapped;
+}
+
+ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build, bool refittable)
+    : world_(world) {
   if (world.triangle_count() == 0) return;
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw Error(ErrorCode::internal, "Embree: cannot create a device for the objects");
   rtcSetDeviceErrorFunction(device_, &embree_error, nullptr);
   scene_ = rtcNewScene(device_);
-  rtcSetSceneBuildQuality(scene_, fast_build ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_MEDIUM);
-  rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+  // Embree honours a geometry's REFIT quality only in its two-level scenes (scene quality LOW),
+  // and only refits (instead of building again) in a DYNAMIC scene: measured on the bench's
+  // 100k-triangle sphere, 24 ms CPU per move without the flag, 1 ms with it.
+  rtcSetSceneBuildQuality(
+      scene_, fast_build || refittable ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_MEDIUM);
+  rtcSetSceneFlags(
+      scene_, refittable ? RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_DYNAMIC : RTC_SCENE_FLAG_ROBUST);
   RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+  if (refittable) rtcSetGeometryBuildQuality(geometry, RTC_BUILD_QUALITY_REFIT);
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                              world.positions.data(), 0, 3 * sizeof(float), world.vertex_count());
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
@@ -264,10 +423,17 @@ ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build) : world_(wo
                              world.triangle_count());
   rtcCommitGeometry(geometry);
   rtcAttachGeometry(scene_, geometry);
-  rtcReleaseGeometry(geometry);
+  if (refittable) {
+    geometry_ = geometry;  // the scene holds it too; released in the destructor
+    positions_ = world.positions.data();
+    vertex_count_ = world.vertex_count();
+  } else {
+    rtcReleaseGeometry(geometry);
+  }
   rtcCommitScene(scene_);
   const RTCError error = rtcGetDeviceError(device_);
   if (error != RTC_ERROR_NONE) {
+    if (geometry_) rtcReleaseGeometry(geometry_);
     rtcReleaseScene(scene_);
     rtcReleaseDevice(device_);
     throw Error(ErrorCode::internal, "Embree: building the objects' scene failed (error " +
@@ -275,7 +441,23 @@ ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build) : world_(wo
   }
 }
 
+void ObjectScene::refit() {
+  if (!scene_) return;  // an empty world: nothing to move
+  if (!geometry_)
+    throw Error(ErrorCode::internal, "Embree: the objects' scene was not built refittable");
+  if (world_.positions.data() != positions_ || world_.vertex_count() != vertex_count_)
+    throw Error(ErrorCode::internal, "Embree: the objects' vertex buffer changed under a refit");
+  rtcUpdateGeometryBuffer(geometry_, RTC_BUFFER_TYPE_VERTEX, 0);
+  rtcCommitGeometry(geometry_);
+  rtcCommitScene(scene_);
+  const RTCError error = rtcGetDeviceError(device_);
+  if (error != RTC_ERROR_NONE)
+    throw Error(ErrorCode::internal, "Embree: refitting the objects' scene failed (error " +
+                                         std::to_string(int(error)) + ")");
+}
+
 ObjectScene::~ObjectScene() {
+  if (geometry_) rtcReleaseGeometry(geometry_);
   if (scene_) rtcReleaseScene(scene_);
   if (device_) rtcReleaseDevice(device_);
 }

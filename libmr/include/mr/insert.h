@@ -102,7 +102,8 @@ MR_API InsertResult insert_objects(const Image& photo, const Image& distance_m,
 /// constructor does once what does not depend on the objects: the light resolved (as
 /// insert_objects does), the photo's normals, its occluder mesh (at options.mesh_step) and Embree
 /// scene, and the bounds of its surface in 8 x 8-pixel screen tiles. Each render() then
-/// rebuilds only the objects' scene (and only when the objects or their placements changed) and
+/// builds the objects' scene only when the meshes changed (when only placements changed, as in
+/// a drag, it moves the vertices and refits the BVH) and
 /// re-renders only the tiles the objects, their shadows, their sky occlusion or their lamp
 /// shadows can touch (the tile tests are conservative: the frame equals insert_objects' composite
 /// with the same options), resetting to the photo the tiles the previous frame touched and this
@@ -138,7 +139,9 @@ class MR_API InsertPreview {
     std::size_t tiles_total = 0;
     std::size_t tiles_rendered = 0;  ///< tiles the objects may change (shaded this frame)
     std::size_t tiles_reset = 0;     ///< tiles the previous frame changed, reset to the photo
-    bool objects_rebuilt = false;    ///< the objects' scene was built (else reused)
+    bool objects_rebuilt = false;    ///< the objects' scene was built (else reused or refitted)
+    /// Only placements changed: the objects' vertices were moved and their BVH refitted.
+    bool objects_refit = false;
     double objects_s = 0, render_s = 0, total_s = 0;
   };
   const FrameStats& last_frame() const;
