@@ -18,6 +18,7 @@
 #include "mr/fog.h"
 #include "mr/scene_json.h"
 #include "photo/airlight.h"
+#include "photo/clouds.h"
 #include "photo/geometry.h"
 #include "photo/horizon.h"
 #include "photo/illumination.h"
@@ -681,6 +682,56 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       if (!refined && !blended[i] && !folded) continue;  // kept exactly
       d = std::min(kMaxFiniteDistanceM, q[i] > 0 ? 1.0f / q[i] : kMaxFiniteDistanceM);
     }
+  // Issue 11 (sun bank): the fragments of clouds the sky mask left out, held up by nothing and
+  // joined to the sky by the refinement, are sky: not floating occluders (photo/clouds.h).
+  if (options.refine_depth && mask.pixels > 0) {
+    std::vector<float> ratio(n);
+    std::vector<std::uint8_t> above(n);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        ratio[i] = g.distance_m.at(x, y, 0) / billboard(x, y, far_forward);
+        above[i] = y < horizon_y(x);
+      }
+    const std::vector<std::uint8_t> cloud =
+        photo::floating_clouds(photo->view(), ratio, above, vegetation.vegetation);
+    cv::Mat cloud_mat(h, w, CV_8U), other(h, w, CV_8U);
+    std::size_t made_sky = 0;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        cloud_mat.at<std::uint8_t>(y, x) = cloud[i];
+        other.at<std::uint8_t>(y, x) = !cloud[i] && std::isfinite(g.distance_m.at(x, y, 0));
+        if (!cloud[i]) continue;
+        g.distance_m.at(x, y, 0) = std::numeric_limits<float>::infinity();
+        g.sky_alpha.at(x, y, 0) = 1.0f;
+        g.depth_confidence.at(x, y, 0) = 1.0f;
+        ++made_sky;
+        // Only structures are above the horizon without an annotation: the far billboard's
+        // pixels and those standing where they meet the ground.
+        const int cls = pixel_class[i];
+        std::size_t* from = cls == kFar       ? &g.billboard_pixels
+                            : cls == kContact ? &g.contact_pixels
+                                              : nullptr;
+        if (from && *from > 0) --*from, ++g.sky_pixels;
+      }
+    if (made_sky > 0) {
+      // The sky's blurred band along the cloud's outline: its fractional matte was the cloud's
+      // (the band is the sky mask's guided-filter radius wide); now all sky, unless a surface
+      // that stays is as near.
+      const int band = std::max(2, int(std::lround(0.004 * std::hypot(w, h)))) + 1;
+      const cv::Mat disk =
+          cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * band + 1, 2 * band + 1));
+      cv::Mat near_cloud, near_other;
+      cv::dilate(cloud_mat, near_cloud, disk);
+      cv::dilate(other, near_other, disk);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (near_cloud.at<std::uint8_t>(y, x) && !near_other.at<std::uint8_t>(y, x) &&
+              !std::isfinite(g.distance_m.at(x, y, 0)))
+            g.sky_alpha.at(x, y, 0) = 1.0f;
+    }
+  }
   return g;
 }
 
