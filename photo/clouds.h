@@ -27,9 +27,9 @@
 // `min_distance_ratio` times the far billboard's on the same rays: the photo shows no edge
 // between it and the sky; a sunset cloud is neither grey nor blue). A kite, a balloon or a
 // bird is saturated and has its own edges: it keeps its distance and occludes. The component
-// becomes sky: distance +inf, matte 1, and so does the matte of the sky pixels in the blurred
-// band along its outline (their fractional alpha was the cloud's), so that photo/sky_matte.h
-// mixes no surface's fog into them.
+// becomes sky: distance +inf, matte 1 (libmr/src/estimate.cpp), and so does the matte of the
+// sky pixels in the blurred band along its outline whose nearest all-surface pixel was the
+// cloud's: photo/sky_matte.h would otherwise mix the fog of some surface far away into them.
 #pragma once
 
 #include <cstddef>

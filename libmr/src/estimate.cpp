@@ -24,6 +24,7 @@
 #include "photo/illumination.h"
 #include "photo/lamps.h"
 #include "photo/sky_mask.h"
+#include "photo/sky_matte.h"
 #include "photo/vegetation.h"
 
 namespace mr {
@@ -695,13 +696,17 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       }
     const std::vector<std::uint8_t> cloud =
         photo::floating_clouds(photo->view(), ratio, above, vegetation.vegetation);
-    cv::Mat cloud_mat(h, w, CV_8U), other(h, w, CV_8U);
+    // photo/sky_matte.h mixes the fog of each pixel of the sky's blurred band with that of the
+    // nearest all-surface pixel (alpha 0); where that was the cloud's, it would now be some
+    // surface far away (a dark ghost of the cloud's band in the sun bank): that band is sky.
+    std::vector<std::uint8_t> was_surface(n);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        was_surface[std::size_t(y) * w + x] = g.sky_alpha.at(x, y, 0) <= 0.0f;
     std::size_t made_sky = 0;
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         const std::size_t i = std::size_t(y) * w + x;
-        cloud_mat.at<std::uint8_t>(y, x) = cloud[i];
-        other.at<std::uint8_t>(y, x) = !cloud[i] && std::isfinite(g.distance_m.at(x, y, 0));
         if (!cloud[i]) continue;
         g.distance_m.at(x, y, 0) = std::numeric_limits<float>::infinity();
         g.sky_alpha.at(x, y, 0) = 1.0f;
@@ -716,20 +721,15 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         if (from && *from > 0) --*from, ++g.sky_pixels;
       }
     if (made_sky > 0) {
-      // The sky's blurred band along the cloud's outline: its fractional matte was the cloud's
-      // (the band is the sky mask's guided-filter radius wide); now all sky, unless a surface
-      // that stays is as near.
-      const int band = std::max(2, int(std::lround(0.004 * std::hypot(w, h)))) + 1;
-      const cv::Mat disk =
-          cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * band + 1, 2 * band + 1));
-      cv::Mat near_cloud, near_other;
-      cv::dilate(cloud_mat, near_cloud, disk);
-      cv::dilate(other, near_other, disk);
-      for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x)
-          if (near_cloud.at<std::uint8_t>(y, x) && !near_other.at<std::uint8_t>(y, x) &&
-              !std::isfinite(g.distance_m.at(x, y, 0)))
-            g.sky_alpha.at(x, y, 0) = 1.0f;
+      const std::vector<std::int32_t> nearest = photo::nearest_source(w, h, was_surface);
+      for (int y = 0; y < h && !nearest.empty(); ++y)
+        for (int x = 0; x < w; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          float& a = g.sky_alpha.at(x, y, 0);
+          if (a > 0 && a < 1 && !std::isfinite(g.distance_m.at(x, y, 0)) && nearest[i] >= 0 &&
+              cloud[std::size_t(nearest[i])])
+            a = 1.0f;
+        }
     }
   }
   return g;
