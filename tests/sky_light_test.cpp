@@ -549,6 +549,20 @@ TEST(SkyLight, FloatingCloudsAreSkyNotOccluders) {
       if (scene.building.at<std::uint8_t>(y, x)) ++building, building_finite += finite;
       if (scene.canopy.at<std::uint8_t>(y, x)) ++canopy, canopy_finite += finite;
     }
+  // The matte is fractional only along a surface that remains (photo/sky_matte.h mixes each
+  // such pixel with its nearest all-surface pixel's fog; one left along a cloud made sky would
+  // mix in a far surface's): within the sky mask's band (radius 3 px here) plus a little.
+  cv::Mat open_sky(kH, kW, CV_8U), to_surface;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) open_sky.at<std::uint8_t>(y, x) = !std::isfinite(d.at(x, y, 0));
+  cv::distanceTransform(open_sky, to_surface, cv::DIST_L2, 3);
+  std::size_t orphans = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const float a = est.geometry.sky_alpha.at(x, y, 0);
+      orphans += a > 0 && a < 1 && to_surface.at<float>(y, x) > 8;
+    }
+  EXPECT_EQ(orphans, 0u);
   // The sun bank look (gallery/looks/sun_bank.json): 90 m visibility, height fog (scale 12 m)
   // under a 40 m top, g = 0.6, the sun at azimuth 20, elevation 8 degrees: just below the cloud.
   FogScene sun = est.scene;
