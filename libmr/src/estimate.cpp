@@ -18,11 +18,13 @@
 #include "mr/fog.h"
 #include "mr/scene_json.h"
 #include "photo/airlight.h"
+#include "photo/clouds.h"
 #include "photo/geometry.h"
 #include "photo/horizon.h"
 #include "photo/illumination.h"
 #include "photo/lamps.h"
 #include "photo/sky_mask.h"
+#include "photo/sky_matte.h"
 #include "photo/vegetation.h"
 
 namespace mr {
@@ -681,6 +683,55 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       if (!refined && !blended[i] && !folded) continue;  // kept exactly
       d = std::min(kMaxFiniteDistanceM, q[i] > 0 ? 1.0f / q[i] : kMaxFiniteDistanceM);
     }
+  // Issue 11 (sun bank): the fragments of clouds the sky mask left out, held up by nothing and
+  // joined to the sky by the refinement, are sky: not floating occluders (photo/clouds.h).
+  if (options.refine_depth && mask.pixels > 0) {
+    std::vector<float> ratio(n);
+    std::vector<std::uint8_t> above(n);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        ratio[i] = g.distance_m.at(x, y, 0) / billboard(x, y, far_forward);
+        above[i] = y < horizon_y(x);
+      }
+    const std::vector<std::uint8_t> cloud =
+        photo::floating_clouds(photo->view(), ratio, above, vegetation.vegetation);
+    // photo/sky_matte.h mixes the fog of each pixel of the sky's blurred band with that of the
+    // nearest all-surface pixel (alpha 0); where that was the cloud's, it would now be some
+    // surface far away (a dark ghost of the cloud's band in the sun bank): that band is sky.
+    std::vector<std::uint8_t> was_surface(n);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        was_surface[std::size_t(y) * w + x] = g.sky_alpha.at(x, y, 0) <= 0.0f;
+    std::size_t made_sky = 0;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        if (!cloud[i]) continue;
+        g.distance_m.at(x, y, 0) = std::numeric_limits<float>::infinity();
+        g.sky_alpha.at(x, y, 0) = 1.0f;
+        g.depth_confidence.at(x, y, 0) = 1.0f;
+        ++made_sky;
+        // Only structures are above the horizon without an annotation: the far billboard's
+        // pixels and those standing where they meet the ground.
+        const int cls = pixel_class[i];
+        std::size_t* from = cls == kFar       ? &g.billboard_pixels
+                            : cls == kContact ? &g.contact_pixels
+                                              : nullptr;
+        if (from && *from > 0) --*from, ++g.sky_pixels;
+      }
+    if (made_sky > 0) {
+      const std::vector<std::int32_t> nearest = photo::nearest_source(w, h, was_surface);
+      for (int y = 0; y < h && !nearest.empty(); ++y)
+        for (int x = 0; x < w; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          float& a = g.sky_alpha.at(x, y, 0);
+          if (a > 0 && a < 1 && !std::isfinite(g.distance_m.at(x, y, 0)) && nearest[i] >= 0 &&
+              cloud[std::size_t(nearest[i])])
+            a = 1.0f;
+        }
+    }
+  }
   return g;
 }
 
