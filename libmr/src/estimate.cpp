@@ -190,10 +190,12 @@ class Steps {
 
 // A horizon guessed with less confidence than this may be lowered to below the sky it cuts
 // (the level fall-back has 0.1; cues from lines 0.15 and up), when the sky reaches it in at least
-// this fraction of the columns and continues below it by at least this fraction of the height.
+// this fraction of the columns and continues below it by at least this fraction of the height,
+// filling at least kMinSkyBelowGuessFraction of the band between the guess and the new line.
 constexpr double kWeakHorizonConfidence = 0.2;
 constexpr double kMinSkyAtGuessFraction = 0.25;
 constexpr double kMinHorizonDropFraction = 0.02;
+constexpr double kMinSkyBelowGuessFraction = 0.75;
 
 // The geometry's steps: horizon, sky mask, depth, refine.
 constexpr std::size_t kGeometrySteps = 4;
@@ -336,7 +338,20 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       std::nth_element(reach.begin(), reach.begin() + std::ptrdiff_t(reach.size() / 2),
                        reach.end());
       const double drop = reach[reach.size() / 2];
-      if (drop >= kMinHorizonDropFraction * h) {
+      // The horizon is a line across the whole frame, and open sky below it is sky in
+      // (nearly) every column: lowered only when the band between the guess and the lowered
+      // line is mostly sky. A smooth bluish band running diagonally through the frame (the
+      // CLI tests' gradient pattern: 46 % of the band), or a sea reflecting the sky between
+      // a pier's poles (61 %), continues below the guess in part of the columns only; an
+      // all-sky frame (99 %) or the glow under clouds down to the land (89 %) fills it.
+      std::size_t band = 0, band_sky = 0;
+      for (int x = 0; x < w; ++x) {
+        const int y0 = int(std::floor(guess_y(x)));
+        for (int y = std::max(0, y0 + 1); y <= std::min(h - 1, y0 + int(drop)); ++y)
+          ++band, band_sky += probe.sky[std::size_t(y) * w + x];
+      }
+      if (drop >= kMinHorizonDropFraction * h &&
+          double(band_sky) >= kMinSkyBelowGuessFraction * double(band)) {
         const std::array<PixelPoint, 2> lowered{
             PixelPoint{g.horizon[0][0], g.horizon[0][1] + drop + 1},
             PixelPoint{g.horizon[1][0], g.horizon[1][1] + drop + 1}};
