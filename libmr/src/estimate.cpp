@@ -197,13 +197,6 @@ constexpr double kMinSkyAtGuessFraction = 0.25;
 constexpr double kMinHorizonDropFraction = 0.02;
 constexpr double kMinSkyBelowGuessFraction = 0.75;
 
-// A cloud bank's distance: farther than this a surface is as good as sky for any fog that is not
-// almost clear air.
-constexpr float kCloudDistanceM = 1e5f;
-// A cloud bank spans a fair part of the frame; a small smooth grey piece beside the sky (a
-// roof, a lamp's top) is more likely structure.
-constexpr double kMinCloudBankFraction = 0.01;
-
 // The geometry's steps: horizon, sky mask, depth, refine.
 constexpr std::size_t kGeometrySteps = 4;
 
@@ -474,7 +467,6 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // Per pixel: the forward distance of the structure it is on where it meets the ground (0:
   // none found).
   std::vector<float> contact_forward(n, 0.0f);
-  std::vector<std::uint8_t> cloud_bank(n, 0);  // above the horizon: a cloud bank, not structure
   // Without any sky the horizon is a guess (no ground is seen running to it) and everything
   // above it is "structure": a snow field seen from above, the back wall of a bar. Its
   // contacts would be wherever a dark trunk or a table leg happens to reach below the guessed
@@ -640,65 +632,6 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
             contact_forward[std::size_t(y) * w + x] =
                 float(smooth[offset[l] + std::size_t(x - stats.at<int>(l, cv::CC_STAT_LEFT))]);
         }
-      // Issue 11 (a cloud bank against a hazy sky): what rises above the horizon and stands
-      // nowhere on the ground, next to the sky, as smooth and as grey as clouds are (the sky
-      // mask's texture limit, the floating clouds' saturation limit, over its part above the
-      // horizon), is a cloud bank, kilometres away: on the far billboard (46 m) haze left it
-      // nearly clear under the sky's veil, its edge against the sky hard. It takes the sky's
-      // distance above the horizon (kCloudDistanceM).
-      if (options.cloud_banks) {
-        const photo::SkyMaskOptions sky_options;
-        cv::Mat display(h, w, CV_32FC3), luma(h, w, CV_32F), gx, gy, gradient;
-        for (int y = 0; y < h; ++y)
-          for (int x = 0; x < w; ++x) {
-            cv::Vec3f& v = display.at<cv::Vec3f>(y, x);
-            for (int c = 0; c < 3; ++c)
-              v[c] = std::pow(std::clamp(photo->at(x, y, c), 0.0f, 1.0f), 1.0f / 2.2f);
-            luma.at<float>(y, x) = 0.2126f * v[0] + 0.7152f * v[1] + 0.0722f * v[2];
-          }
-        cv::GaussianBlur(luma, luma, cv::Size(0, 0), 1.0);
-        cv::Sobel(luma, gx, CV_32F, 1, 0, 3, 1.0 / 8);
-        cv::Sobel(luma, gy, CV_32F, 0, 1, 3, 1.0 / 8);
-        cv::magnitude(gx, gy, gradient);
-        std::vector<double> grad_sum(std::size_t(count), 0), sat_sum(std::size_t(count), 0);
-        std::vector<std::size_t> area(std::size_t(count), 0), by_sky(std::size_t(count), 0);
-        std::vector<std::uint8_t> stands(std::size_t(count), 0);
-        for (int l = 1; l < count; ++l)
-          if (rises[std::size_t(l)])
-            for (int k = 0; k < stats.at<int>(l, cv::CC_STAT_WIDTH); ++k)
-              stands[std::size_t(l)] |= smooth[offset[l] + std::size_t(k)] > 0;
-        for (int y = 0; y < h; ++y)
-          for (int x = 0; x < w; ++x) {
-            const std::size_t i = std::size_t(y) * w + x;
-            const auto l = std::size_t(labels.at<int>(y, x));
-            if (!rises[l] || stands[l] || map.coverage[i] != photo::Coverage::sky) continue;
-            const cv::Vec3f& v = display.at<cv::Vec3f>(y, x);
-            const float hi = std::max({v[0], v[1], v[2]}), lo = std::min({v[0], v[1], v[2]});
-            ++area[l];
-            grad_sum[l] += gradient.at<float>(y, x);
-            sat_sum[l] += hi > 0 ? (hi - lo) / hi : 0.0f;
-            by_sky[l] += (x > 0 && mask.sky[i - 1]) || (x + 1 < w && mask.sky[i + 1]) ||
-                         (y > 0 && mask.sky[i - std::size_t(w)]) ||
-                         (y + 1 < h && mask.sky[i + std::size_t(w)]);
-          }
-        std::vector<std::uint8_t> bank(std::size_t(count), 0);
-        for (int l = 1; l < count; ++l) {
-          const double a = double(area[std::size_t(l)]);
-          bank[std::size_t(l)] =
-              a >= kMinCloudBankFraction * double(n) && by_sky[std::size_t(l)] > 0 &&
-              grad_sum[std::size_t(l)] <= sky_options.max_texture * a &&
-              sat_sum[std::size_t(l)] <= sky_options.floating_max_saturation * a;
-        }
-        for (int y = 0; y < h; ++y)
-          for (int x = 0; x < w; ++x) {
-            const std::size_t i = std::size_t(y) * w + x;
-            if (bank[std::size_t(labels.at<int>(y, x))] &&
-                map.coverage[i] == photo::Coverage::sky) {
-              cloud_bank[i] = 1;
-              ++g.cloud_bank_pixels;
-            }
-          }
-      }
     }
   }
 
@@ -721,7 +654,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       } else if (open && contact_forward[i] > 0) {
         d = billboard(x, y, contact_forward[i]), cov = kContact;
       } else if (!mask.sky[i] && map.coverage[i] == photo::Coverage::sky) {
-        d = cloud_bank[i] ? kCloudDistanceM : billboard(x, y, far_forward), cov = kFar;
+        d = billboard(x, y, far_forward), cov = kFar;
       } else if (map.coverage[i] == photo::Coverage::ground && column_forward[std::size_t(x)] > 0) {
         const float b = billboard(x, y, column_forward[std::size_t(x)]);
         if (b < d) ground_ratio[i] = b / d, d = b, cov = column_cov[std::size_t(x)];
@@ -918,11 +851,7 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                              fmt("%.1f", 100.0 * g.billboard_pixels / n) + " % far billboard at " +
                              fmt("%.0f", g.pose.position_m.y /
                                              std::tan(options.billboard_depression_deg * kDeg)) +
-                             " m" +
-                             (g.cloud_bank_pixels
-                                  ? " (of it " + fmt("%.1f", 100.0 * g.cloud_bank_pixels / n) +
-                                        " % a cloud bank, at the sky's distance)"
-                                  : std::string())
+                             " m"
                        : std::string()));
 
   if (!annotations.shadow_pairs.empty()) {

@@ -69,11 +69,6 @@ struct MR_API EstimateOptions {
   /// feet (any column meeting the ground counts), canopy included, instead of needing contacts
   /// in 30 % of its columns. false: off (the estimate as before).
   bool vegetation = true;
-  /// Issue 11: a structure above the horizon that stands nowhere on the ground, touches the sky
-  /// and is as smooth and grey as clouds (the sky mask's texture and floating-cloud saturation
-  /// limits, on average) is a cloud bank: above the horizon it takes the sky's distance instead
-  /// of the far billboard's. false: off.
-  bool cloud_banks = true;
   /// Issue 11 item 3: a photo in which the sky mask finds no sky (an interior, a close-up, a
   /// wall, a field seen from above) shows no horizon and no ground running to it, so nothing in
   /// it is known to be far: when the camera height is not annotated (nor derived from a known
@@ -175,8 +170,6 @@ struct MR_API GeometryEstimate {
   /// Issue 11: pixels by which a weak automatic horizon (the level fall-back, or a cue of
   /// confidence below 0.2) was lowered because the sky continued below it (0: not moved).
   double horizon_lowered_px = 0;
-  /// With EstimateOptions::cloud_banks: pixels above the horizon taken as a cloud bank.
-  std::size_t cloud_bank_pixels = 0;
 };
 
 /// The camera pose whose horizon passes through the two points (pixel-centre coordinates), at
