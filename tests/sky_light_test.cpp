@@ -460,6 +460,37 @@ TEST(SkyLight, BacklitCloudsInHazeCreateNoEdge) {
   EXPECT_LE(e_dense, 2e-4);
 }
 
+// The same photo with the horizon estimated (no annotations): a weak cue (a level horizon
+// through a horizontal vanishing point, confidence 0.15) 34 px above the land's line cut the
+// glow's lower part off the sky: below the guess it became structure standing on the land,
+// left nearly clear by haze under the veil above (a flat bright patch with a hard upper edge:
+// 0.077 % created edges). The sky is only ever above the horizon, so a weak horizon that open
+// sky continues below (with no edge) is lowered under it.
+TEST(SkyLight, BacklitCloudsUnderAWeakHorizonLowerIt) {
+  constexpr int kW = kBacklitW, kH = kBacklitH;
+  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
+  const cv::Mat display = backlit_clouds_display();
+  Image photo(kW, kH, 3);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      for (int c = 0; c < 3; ++c)
+        photo.at(x, y, c) = linear(std::clamp(display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
+  const FogLayers haze = fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
+  const FogLayers dense = fog_auto_look(photo, camera, est, 60, 80, 0.3);
+  const double e_haze = gallery_created_edges(photo, haze.composite);
+  const double e_dense = gallery_created_edges(photo, dense.composite);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder)
+    write_image(std::string(folder) + "/backlit_auto_haze.png", haze.composite);
+  std::printf(
+      "backlit clouds, automatic horizon: %s; lowered %.0f px; created-edge pixels haze "
+      "%.4f %%, dense %.4f %%\n",
+      est.notes.front().c_str(), est.geometry.horizon_lowered_px, 100 * e_haze, 100 * e_dense);
+  EXPECT_GT(est.geometry.horizon_lowered_px, 0.0);
+  EXPECT_LE(e_haze, 2e-4);
+  EXPECT_LE(e_dense, 2e-4);
+}
+
 // Clouds are not occluders (issue 11, sun bank look): a blue sky with a cumulus whose wispy,
 // textured rim the sky mask leaves out (as kite's in the tuning half; the rim rings the core,
 // so the whole cloud is left out), held up by nothing, above a building and a tree standing on

@@ -190,6 +190,15 @@ class Steps {
   const char* current_ = nullptr;
 };
 
+// A horizon guessed with less confidence than this may be lowered to below the sky it cuts
+// (the level fall-back has 0.1; cues from lines 0.15 and up), when the sky reaches it in at least
+// this fraction of the columns and continues below it by at least this fraction of the height,
+// filling at least kMinSkyBelowGuessFraction of the band between the guess and the new line.
+constexpr double kWeakHorizonConfidence = 0.2;
+constexpr double kMinSkyAtGuessFraction = 0.25;
+constexpr double kMinHorizonDropFraction = 0.02;
+constexpr double kMinSkyBelowGuessFraction = 0.75;
+
 // The geometry's steps: horizon, sky mask, depth, refine.
 constexpr std::size_t kGeometrySteps = 4;
 
@@ -290,6 +299,78 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // billboard; the ground behind a column's structure takes the structure's distance.
   photo::SkyMask mask = photo::estimate_sky_mask(photo->view(), g.horizon);
   g.sky_from_mask = true;
+  // Issue 11 (a camera looking up into an all-sky frame; a weak horizon above the land): the
+  // sky is only ever seen above the horizon. Where a guessed horizon (the level fall-back, or
+  // a cue of very low confidence) cuts through open sky, the sky found without it continues
+  // below it with no edge; below the guess it became a ground plane (an unveiled band of sky
+  // under the haze's veil, a hard line between them) and clouds reaching the guess were
+  // "standing on the ground". The horizon is then lowered (same roll) to the median lowest row
+  // that sky reaches, continuously from the guess, in the columns where it reaches the guess.
+  if (!annotations.horizon && g.confidence < kWeakHorizonConfidence) {
+    const int w = camera.width, h = camera.height;
+    const double slope0 =
+        (g.horizon[1][1] - g.horizon[0][1]) / std::max(1.0, g.horizon[1][0] - g.horizon[0][0]);
+    auto guess_y = [&](double x) { return g.horizon[0][1] + (x - g.horizon[0][0]) * slope0; };
+    std::vector<int> reach;  // per column reaching the guess: rows of sky below it
+    int at_guess = 0;
+    photo::SkyMask probe;
+    // The mask's edge sits a few pixels above the line it is clipped to (working resolution,
+    // the matte's refinement): the sky "reaches" the guess when it is within kNear rows of it.
+    constexpr int kNear = 4;
+    auto reaches = [&](int x) {
+      const int row = int(std::floor(guess_y(x)));
+      if (row < kNear || row >= h - 1) return -1;
+      for (int r = row; r >= row - kNear; --r)
+        if (mask.sky[std::size_t(r) * w + x]) return r;
+      return -1;
+    };
+    for (int x = 0; x < w; ++x) at_guess += reaches(x) >= 0;
+    if (at_guess >= kMinSkyAtGuessFraction * w) {
+      const double below = h + 1.0;  // the probe: every pixel is above its horizon
+      probe = photo::estimate_sky_mask(photo->view(),
+                                       {PixelPoint{0, below}, PixelPoint{w - 1.0, below}});
+      for (int x = 0; x < w; ++x) {
+        int row = reaches(x);
+        if (row < 0 || !probe.sky[std::size_t(row) * w + x]) continue;
+        while (row + 1 < h && probe.sky[std::size_t(row + 1) * w + x]) ++row;
+        reach.push_back(row - int(std::floor(guess_y(x))));
+      }
+    }
+    if (!reach.empty()) {
+      std::nth_element(reach.begin(), reach.begin() + std::ptrdiff_t(reach.size() / 2),
+                       reach.end());
+      const double drop = reach[reach.size() / 2];
+      // The horizon is a line across the whole frame, and open sky below it is sky in
+      // (nearly) every column: lowered only when the band between the guess and the lowered
+      // line is mostly sky. A smooth bluish band running diagonally through the frame (the
+      // CLI tests' gradient pattern: 46 % of the band), or a sea reflecting the sky between
+      // a pier's poles (61 %), continues below the guess in part of the columns only; an
+      // all-sky frame (99 %) or the glow under clouds down to the land (89 %) fills it.
+      std::size_t band = 0, band_sky = 0;
+      for (int x = 0; x < w; ++x) {
+        const int y0 = int(std::floor(guess_y(x)));
+        for (int y = std::max(0, y0 + 1); y <= std::min(h - 1, y0 + int(drop)); ++y)
+          ++band, band_sky += probe.sky[std::size_t(y) * w + x];
+      }
+      if (drop >= kMinHorizonDropFraction * h &&
+          double(band_sky) >= kMinSkyBelowGuessFraction * double(band)) {
+        const std::array<PixelPoint, 2> lowered{
+            PixelPoint{g.horizon[0][0], g.horizon[0][1] + drop + 1},
+            PixelPoint{g.horizon[1][0], g.horizon[1][1] + drop + 1}};
+        const double height_m = g.pose.position_m.y;
+        g.pose = pose_from_horizon(camera, lowered, height_m);
+        g.horizon = photo::horizon_of_pose(camera, g.pose);
+        g.horizon_lowered_px = drop + 1;
+        map = photo::distance_map(camera, g.pose, annotations);
+        g.distance_m = std::move(map.distance_m);
+        g.sky_pixels = map.counts[int(photo::Coverage::sky)];
+        g.ground_pixels = map.counts[int(photo::Coverage::ground)];
+        g.plane_pixels = map.counts[int(photo::Coverage::plane)];
+        g.hint_pixels = map.counts[int(photo::Coverage::hint)];
+        mask = photo::estimate_sky_mask(photo->view(), g.horizon);
+      }
+    }
+  }
   // Issue 11 item 3: the sky seen through trees (under a canopy, between trunks, through
   // leaves) is sky, so the occluder mesh has holes there and sun shafts pass (photo/vegetation.h).
   const photo::VegetationOptions vegetation_options;
@@ -785,10 +866,13 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
           ? "automatic, level through a horizontal vanishing point"
       : options.automatic ? "not annotated, no usable lines; assumed level through the image centre"
                           : "not annotated; assumed level through the image centre";
-  est.notes.push_back(std::string("horizon: ") + horizon_how + " (" + to_string(g.horizon_source) +
-                      ")" + ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " +
-                      fmt("%.2f", g.pose.roll_deg) + " deg, confidence " +
-                      fmt("%.2f", g.confidence));
+  est.notes.push_back(
+      std::string("horizon: ") + horizon_how + " (" + to_string(g.horizon_source) + ")" +
+      (g.horizon_lowered_px > 0
+           ? ", lowered " + fmt("%.0f", g.horizon_lowered_px) + " px to below the sky it cut"
+           : std::string()) +
+      ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " + fmt("%.2f", g.pose.roll_deg) +
+      " deg, confidence " + fmt("%.2f", g.confidence));
   est.notes.push_back(std::string("camera height: ") + fmt("%.3f", g.pose.position_m.y) + " m (" +
                       (g.height_source == EstimateSource::annotations    ? "annotated"
                        : g.height_source == EstimateSource::known_length ? "from the known length"

@@ -167,6 +167,9 @@ struct MR_API GeometryEstimate {
   std::size_t room_pixels = 0;
   std::optional<double> room_ceiling_height_m;
   std::vector<std::array<PixelPoint, 2>> room_edges;
+  /// Issue 11: pixels by which a weak automatic horizon (the level fall-back, or a cue of
+  /// confidence below 0.2) was lowered because the sky continued below it (0: not moved).
+  double horizon_lowered_px = 0;
 };
 
 /// The camera pose whose horizon passes through the two points (pixel-centre coordinates), at
