@@ -150,6 +150,21 @@ float spot_factor(const Lamp& lamp, const Vec3f& from_lamp_unit) {
                                   std::cos(lamp.outer_angle_deg * kPiD / 180)));
 }
 
+// A lamp's irradiance on a plane facing it at p (inverse square, spot cone) and the unit
+// direction to it; false where it adds nothing (at the lamp, or outside its cone).
+bool lamp_irradiance(const Lamp& lamp, const SurfacePoint& p, Vec3f& to_lamp_unit, Rgb& e) {
+  const Vec3f to_lamp = {float(lamp.position_m.x) - p.position_m[0],
+                         float(lamp.position_m.y) - p.position_m[1],
+                         float(lamp.position_m.z) - p.position_m[2]};
+  const float r2 = dot(to_lamp, to_lamp);
+  if (!(r2 > 1e-12f)) return false;
+  to_lamp_unit = unit(to_lamp);
+  const float spot = spot_factor(lamp, {-to_lamp_unit[0], -to_lamp_unit[1], -to_lamp_unit[2]});
+  if (spot <= 0) return false;
+  for (int c = 0; c < 3; ++c) e[c] = lamp.intensity_per_sr[c] * spot / r2;
+  return true;
+}
+
 void add_direct(ShadingTerms& terms, const SurfacePoint& p, const Vec3f& l, const Rgb& irradiance,
                 float roughness) {
   const float nl = dot(p.normal, l);
@@ -401,17 +416,9 @@ ShadingTerms shading_terms(const SurfacePoint& p, const Lighting& lighting, floa
     }
   }
   for (const Lamp& lamp : lighting.lamps) {
-    const Vec3f to_lamp = {float(lamp.position_m.x) - p.position_m[0],
-                           float(lamp.position_m.y) - p.position_m[1],
-                           float(lamp.position_m.z) - p.position_m[2]};
-    const float r2 = dot(to_lamp, to_lamp);
-    if (!(r2 > 1e-12f)) continue;
-    const Vec3f l = unit(to_lamp);
-    const float spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
-    if (spot <= 0) continue;
-    const Rgb e = {lamp.intensity_per_sr[0] * spot / r2, lamp.intensity_per_sr[1] * spot / r2,
-                   lamp.intensity_per_sr[2] * spot / r2};
-    add_direct(terms, p, l, e, roughness);
+    Vec3f l;
+    Rgb e;
+    if (lamp_irradiance(lamp, p, l, e)) add_direct(terms, p, l, e, roughness);
   }
   return terms;
 }
@@ -430,17 +437,12 @@ Rgb diffuse_term(const SurfacePoint& p, const Lighting& lighting) {
   if (lighting.sky_radiance && p.sky_visibility > 0)
     for (int c = 0; c < 3; ++c) d[c] += (*lighting.sky_radiance)[c] * p.sky_visibility;
   for (const Lamp& lamp : lighting.lamps) {
-    const Vec3f to_lamp = {float(lamp.position_m.x) - p.position_m[0],
-                           float(lamp.position_m.y) - p.position_m[1],
-                           float(lamp.position_m.z) - p.position_m[2]};
-    const float r2 = dot(to_lamp, to_lamp);
-    if (!(r2 > 1e-12f)) continue;
-    const Vec3f l = unit(to_lamp);
-    const float spot = spot_factor(lamp, {-l[0], -l[1], -l[2]});
-    if (spot <= 0) continue;
+    Vec3f l;
+    Rgb e;
+    if (!lamp_irradiance(lamp, p, l, e)) continue;
     const float nl = dot(p.normal, l);
     if (nl <= 0) continue;
-    for (int c = 0; c < 3; ++c) d[c] += lamp.intensity_per_sr[c] * spot / r2 * nl / kPi;
+    for (int c = 0; c < 3; ++c) d[c] += e[c] * nl / kPi;
   }
   return d;
 }
