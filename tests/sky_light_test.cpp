@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -15,6 +16,8 @@
 #include <limits>
 #include <numbers>
 #include <random>
+#include <string>
+#include <vector>
 
 #include "mr/error.h"
 #include "mr/estimate.h"
@@ -25,6 +28,7 @@
 #include "mr/sky_light.h"
 #include "photo/clouds.h"
 #include "photo/sky_light.h"
+#include "photo/sky_mask.h"
 #include "render/physics/scattering.h"
 #include "tests/display_luma.h"
 
@@ -487,6 +491,168 @@ TEST(SkyLight, BacklitCloudsUnderAWeakHorizonLowerIt) {
       "%.4f %%, dense %.4f %%\n",
       est.notes.front().c_str(), est.geometry.horizon_lowered_px, 100 * e_haze, 100 * e_dense);
   EXPECT_GT(est.geometry.horizon_lowered_px, 0.0);
+  EXPECT_LE(e_haze, 2e-4);
+  EXPECT_LE(e_dense, 2e-4);
+}
+
+// Sky seen through a lattice and between cables (issue 11; the tuning half's launch towers and
+// a suspension bridge's hangers): a blue sky with a lattice tower of thin dark members (2 px)
+// standing on dark land below an annotated horizon, a pair of hanger cables 14 px apart from the
+// top border down to a bridge deck, and a pale blue facade with thick dark windows
+// (sky-coloured, but a surface).
+// The lattice's openings and the strip between the cables are sky-coloured, but the sky mask's
+// texture windows take in the members, so the narrow ones were left out: the top of the tower
+// and the strip were surfaces standing on the ground, blue inside a hard outline in haze while
+// the open sky around them turned the fog's grey (before: 77.8 % of the openings sky, the
+// lower, wider ones; haze created edges 0.058 %, dense 0.003 %). The facade, which the rest of
+// the mask takes as sky (a known limit: a smooth wall of the sky's colour), is there to show
+// that this rule adds none of it.
+constexpr int kLatticeW = 640, kLatticeH = 480, kLatticeHorizon = 330;
+struct LatticePhoto {
+  Image photo;
+  cv::Mat openings, facade;  // where the photo shows sky through the lattice; the facade
+};
+LatticePhoto lattice_photo() {
+  constexpr int w = kLatticeW, h = kLatticeH;
+  cv::Mat m(h, w, CV_32FC3), members(h, w, CV_8U, cv::Scalar(0));
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> grain(-0.04f, 0.04f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float t = float(y) / kLatticeHorizon;
+      m.at<cv::Vec3f>(y, x) =
+          cv::Vec3f(0.30f, 0.50f, 0.84f) * (1 - t) + cv::Vec3f(0.62f, 0.74f, 0.90f) * t;
+    }
+  // The tower: two legs narrowing upwards, crossed by diagonals and struts every 36 rows.
+  auto leg_x = [](int y, bool right) {
+    return right ? 250.0 - 40.0 * (h - y) / h : 110.0 + 40.0 * (h - y) / h;
+  };
+  cv::Mat lattice(h, w, CV_8U, cv::Scalar(0));
+  for (const bool right : {false, true})
+    cv::line(members, cv::Point2d(leg_x(h - 1, right), h - 1), cv::Point2d(leg_x(20, right), 20),
+             cv::Scalar(255), 2, cv::LINE_AA);
+  for (int y = 20; y + 36 < h; y += 36) {
+    const cv::Point2d a(leg_x(y, false), y), b(leg_x(y, true), y);
+    const cv::Point2d c(leg_x(y + 36, false), y + 36), d(leg_x(y + 36, true), y + 36);
+    cv::line(members, a, b, cv::Scalar(255), 2, cv::LINE_AA);
+    cv::line(members, a, d, cv::Scalar(255), 2, cv::LINE_AA);
+    cv::line(members, b, c, cv::Scalar(255), 2, cv::LINE_AA);
+  }
+  std::vector<cv::Point> outline = {{int(leg_x(20, false)), 20},
+                                    {int(leg_x(20, true)), 20},
+                                    {int(leg_x(h - 1, true)), h - 1},
+                                    {int(leg_x(h - 1, false)), h - 1}};
+  cv::fillConvexPoly(lattice, outline, cv::Scalar(255));
+  // The hangers: two cables from the top border down to a bridge deck (a thick beam
+  // across the right half, above the horizon).
+  constexpr int deck_top = 270, deck_bottom = 284;
+  for (const int dx : {0, 14})
+    cv::line(members, cv::Point(380 + dx, 0), cv::Point(355 + dx, deck_top), cv::Scalar(255), 2,
+             cv::LINE_AA);
+  cv::rectangle(members, cv::Point(300, deck_top), cv::Point(w - 1, deck_bottom), cv::Scalar(255),
+                cv::FILLED);
+  for (const int pier : {320, 560})  // the deck stands on piers
+    cv::rectangle(members, cv::Point(pier, deck_top), cv::Point(pier + 24, h - 1), cv::Scalar(255),
+                  cv::FILLED);
+  cv::Mat strip(h, w, CV_8U, cv::Scalar(0));
+  std::vector<cv::Point> between = {{383, 0}, {391, 0}, {366, deck_top}, {358, deck_top}};
+  cv::fillConvexPoly(strip, between, cv::Scalar(255));
+  const cv::Vec3f steel(0.10f, 0.09f, 0.08f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float a = members.at<std::uint8_t>(y, x) / 255.0f;
+      cv::Vec3f& c = m.at<cv::Vec3f>(y, x);
+      c = c * (1 - a) + steel * a;
+    }
+  // The facade: a pale blue, rendered wall (the sky's colour near the horizon) on the land in
+  // front of the deck, its windows dark and 16 px across.
+  cv::Mat facade(h, w, CV_8U, cv::Scalar(0));
+  cv::rectangle(facade, cv::Point(470, 150), cv::Point(600, kLatticeHorizon + 20), cv::Scalar(255),
+                cv::FILLED);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!facade.at<std::uint8_t>(y, x)) continue;
+      const bool window =
+          (x - 470) % 32 >= 8 && (x - 470) % 32 < 24 && (y - 200) % 40 >= 12 && (y - 200) % 40 < 30;
+      const float n = 0.5f * grain(rng);
+      m.at<cv::Vec3f>(y, x) = window ? cv::Vec3f(0.12f + n, 0.13f + n, 0.16f + n)
+                                     : cv::Vec3f(0.58f + n, 0.70f + n, 0.88f + n);
+    }
+  // Dark textured land below the horizon (in front of the tower's and the cables' feet).
+  for (int y = kLatticeHorizon; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (facade.at<std::uint8_t>(y, x) && y < kLatticeHorizon + 20) continue;
+      const float v = 0.16f + 0.04f * float(y - kLatticeHorizon) / h + grain(rng);
+      m.at<cv::Vec3f>(y, x) = cv::Vec3f(v + 0.03f, v + 0.04f, v);
+    }
+  cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);  // a lens
+  LatticePhoto out{Image(w, h, 3), cv::Mat(h, w, CV_8U, cv::Scalar(0)), facade};
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c)
+        out.photo.at(x, y, c) = linear(std::clamp(m.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
+      // The openings, 3 px clear of every member, above the horizon's band.
+      out.openings.at<std::uint8_t>(y, x) =
+          (lattice.at<std::uint8_t>(y, x) || strip.at<std::uint8_t>(y, x)) &&
+          y < kLatticeHorizon - 40;
+    }
+  cv::Mat near_member;
+  cv::dilate(members, near_member, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(7, 7)));
+  out.openings.setTo(0, near_member);
+  return out;
+}
+
+TEST(SkyLight, SkyThroughALatticeIsSky) {
+  const LatticePhoto p = lattice_photo();
+  constexpr int kW = kLatticeW, kH = kLatticeH;
+  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
+  Annotations horizon;
+  horizon.horizon = std::array<PixelPoint, 2>{PixelPoint{0, kLatticeHorizon - 0.5},
+                                              PixelPoint{kW - 1.0, kLatticeHorizon - 0.5}};
+  // The sky mask with and without the rule: the openings, and the facade (what the rest of the
+  // mask makes of a sky-coloured wall touching the sky is not this rule's business; the rule
+  // must add none of it).
+  photo::SkyMaskOptions off;
+  off.thin_member_width = 0;
+  const photo::SkyMask with = photo::estimate_sky_mask(p.photo.view(), *horizon.horizon);
+  const photo::SkyMask without = photo::estimate_sky_mask(p.photo.view(), *horizon.horizon, off);
+  std::size_t openings = 0, open_with = 0, open_without = 0, facade_with = 0, facade_without = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const std::size_t i = std::size_t(y) * kW + x;
+      if (p.openings.at<std::uint8_t>(y, x))
+        ++openings, open_with += with.sky[i], open_without += without.sky[i];
+      if (p.facade.at<std::uint8_t>(y, x))
+        facade_with += with.sky[i], facade_without += without.sky[i];
+    }
+  const SceneEstimate est = estimate_scene(p.photo, camera, horizon);
+  std::size_t open_sky = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      open_sky +=
+          p.openings.at<std::uint8_t>(y, x) && std::isinf(est.geometry.distance_m.at(x, y, 0));
+  const FogLayers haze = fog_auto_look(p.photo, camera, est, 2000, 1500, 0.6);
+  const FogLayers dense = fog_auto_look(p.photo, camera, est, 60, 80, 0.3);
+  Image haze_map;
+  const double e_haze = gallery_created_edges(p.photo, haze.composite, &haze_map);
+  const double e_dense = gallery_created_edges(p.photo, dense.composite);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
+    const std::string f(folder);
+    write_image(f + "/lattice_photo.png", p.photo);
+    write_image(f + "/lattice_haze.png", haze.composite);
+    write_image(f + "/lattice_haze_edges.png", haze_map);
+  }
+  std::printf(
+      "lattice: openings sky in the mask %.1f %% (without the rule %.1f %%), in the estimate "
+      "%.1f %%; facade pixels made sky %zu (without the rule %zu); created-edge pixels haze "
+      "%.4f %%, dense %.4f %%\n",
+      100.0 * double(open_with) / double(openings), 100.0 * double(open_without) / double(openings),
+      100.0 * double(open_sky) / double(openings), facade_with, facade_without, 100 * e_haze,
+      100 * e_dense);
+  EXPECT_GE(double(open_with), 0.95 * double(openings));
+  EXPECT_GE(double(open_sky), 0.95 * double(openings));
+  EXPECT_EQ(facade_with, facade_without);
+  // The issue's target for dense fog and haze: at most 0.02 % of the pixels.
   EXPECT_LE(e_haze, 2e-4);
   EXPECT_LE(e_dense, 2e-4);
 }
