@@ -75,9 +75,10 @@ struct FloatingCloudOptions {
 /// distance over the far billboard's distance on its ray (+inf for the sky; what is not finite
 /// and positive is sky); `above`: 1 where the pixel is above the horizon; `foliage`: non-zero on
 /// vegetation (photo/vegetation.h), or empty; `standing`: non-zero on the pixels that stand on
-/// the ground where they meet it, or empty (read only with `options.guessed_horizon`). Returns a row-major w x h mask, 1 on the pixels of
-/// the components that are floating clouds (see the file comment); all 0 when there are none.
-/// Sizes that do not match give an all-0 mask. Never throws for any image content.
+/// the ground where they meet it, or empty (read only with `options.guessed_horizon`). Returns a
+/// row-major w x h mask, 1 on the pixels of the components that are floating clouds (see the file
+/// comment); all 0 when there are none. Sizes that do not match give an all-0 mask. Never throws
+/// for any image content.
 std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
                                           const std::vector<float>& distance_ratio,
                                           const std::vector<std::uint8_t>& above,

@@ -685,8 +685,8 @@ TEST(SkyLight, FloatingCloudRule) {
   foliage.assign(ratio.size(), 0);
   for (int y = 6; y < 15; ++y)
     for (int x = 25; x < 40; ++x) foliage[std::size_t(y) * w + x] = 1;
-  EXPECT_EQ(photo::floating_clouds(photo.view(), ratio, above, foliage, {})[std::size_t(10) * w + 30],
-            0);
+  EXPECT_EQ(
+      photo::floating_clouds(photo.view(), ratio, above, foliage, {})[std::size_t(10) * w + 30], 0);
 }
 
 // A cumulus cut off by the frame's bottom under a guessed horizon (issue 11, the sun bank look;
@@ -719,7 +719,8 @@ cv::Mat cut_cloud_display(cv::Mat* cloud_mask) {
           cv::Vec3f(0.10f, 0.24f, 0.62f) * (1 - t) + cv::Vec3f(0.22f, 0.40f, 0.78f) * t;
       const float e = envelope.at<float>(y, x);
       const float cover = e * std::clamp(0.55f + 0.6f * noise.at<float>(y, x), 0.0f, 1.0f);
-      const cv::Vec3f cloud = cv::Vec3f(0.93f, 0.94f, 0.97f) * (0.8f + 0.2f * noise.at<float>(y, x));
+      const cv::Vec3f cloud =
+          cv::Vec3f(0.93f, 0.94f, 0.97f) * (0.8f + 0.2f * noise.at<float>(y, x));
       m.at<cv::Vec3f>(y, x) = sky * (1 - cover) + cloud * cover;
       if (e > 0.7f) cloud_mask->at<std::uint8_t>(y, x) = 1;
     }
@@ -771,8 +772,7 @@ TEST(SkyLight, CloudCutOffByTheFrameUnderAGuessedHorizonIsSky) {
       "cloud cut off by the frame (%s; lowered %.0f px): %.1f %% of it sky, %zu surface "
       "pixels; created-edge pixels sun bank %.4f %%, haze %.4f %%, dense %.4f %%\n",
       est.notes.front().c_str(), est.geometry.horizon_lowered_px,
-      100.0 * double(cloud_sky) / double(cloud), finite, 100 * e_sun, 100 * e_haze,
-      100 * e_dense);
+      100.0 * double(cloud_sky) / double(cloud), finite, 100 * e_sun, 100 * e_haze, 100 * e_dense);
   ASSERT_EQ(est.geometry.horizon_source, EstimateSource::fallback);
   ASSERT_GE(est.geometry.horizon[0][1], kH - 1.0);  // the case: lowered to the frame's bottom
   EXPECT_GE(double(cloud_sky), 0.98 * double(cloud));
@@ -796,19 +796,19 @@ TEST(SkyLight, FloatingCloudRuleUnderAGuessedHorizon) {
         for (int k = 0; k < 3; ++k) photo.at(x, y, k) = c[k];
       }
   };
-  put(0, w, 0, h, kSky, {0.1f, 0.25f, 0.7f});             // blue sky
-  put(5, 25, 40, h, 1.0f, {0.8f, 0.82f, 0.9f});           // a white cumulus, 400 px (5.6 %)
-  put(30, 50, 40, h, 1.0f, {0.8f, 0.82f, 0.9f});          // the same, standing on ground seen
+  put(0, w, 0, h, kSky, {0.1f, 0.25f, 0.7f});     // blue sky
+  put(5, 25, 40, h, 1.0f, {0.8f, 0.82f, 0.9f});   // a white cumulus, 400 px (5.6 %)
+  put(30, 50, 40, h, 1.0f, {0.8f, 0.82f, 0.9f});  // the same, standing on ground seen
   for (int x = 30; x < 50; ++x) standing[std::size_t(h - 1) * w + x] = 1;
-  put(55, 75, 40, h, 1.0f, {0.4f, 0.4f, 0.4f});           // grey concrete: not a sky's colours
-  put(80, 82, 20, h, 1.0f, {0.3f, 0.33f, 0.4f});          // a bluish post: 2 columns
-  put(88, 100, 40, h, 1.0f, {0.1f, 0.4f, 0.2f});          // foliage
+  put(55, 75, 40, h, 1.0f, {0.4f, 0.4f, 0.4f});   // grey concrete: not a sky's colours
+  put(80, 82, 20, h, 1.0f, {0.3f, 0.33f, 0.4f});  // a bluish post: 2 columns
+  put(88, 100, 40, h, 1.0f, {0.1f, 0.4f, 0.2f});  // foliage
   for (int y = 40; y < h; ++y)
     for (int x = 88; x < 100; ++x) photo.at(x, y, 2) = 0.5f;  // bluish, but foliage
   foliage.assign(ratio.size(), 0);
   for (int y = 40; y < h; ++y)
     for (int x = 88; x < 100; ++x) foliage[std::size_t(y) * w + x] = 1;
-  put(105, 115, 30, 45, 1.0f, {0.8f, 0.82f, 0.9f});       // a floating cloud
+  put(105, 115, 30, 45, 1.0f, {0.8f, 0.82f, 0.9f});  // a floating cloud
   photo::FloatingCloudOptions guessed;
   guessed.guessed_horizon = true;
   const std::vector<std::uint8_t> cloud =

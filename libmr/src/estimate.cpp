@@ -779,8 +779,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     // Under a guessed horizon no ground was seen: a cumulus cut off by the frame's bottom in an
     // all-sky frame (the guess lowered below it) stood on the frame as a surface (photo/clouds.h).
     photo::FloatingCloudOptions cloud_options;
-    cloud_options.guessed_horizon =
-        !annotations.horizon && g.confidence < kWeakHorizonConfidence;
+    cloud_options.guessed_horizon = !annotations.horizon && g.confidence < kWeakHorizonConfidence;
     const std::vector<std::uint8_t> cloud = photo::floating_clouds(
         photo->view(), ratio, above, vegetation.vegetation, standing, cloud_options);
     // photo/sky_matte.h mixes the fog of each pixel of the sky's blurred band with that of the
