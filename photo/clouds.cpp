@@ -11,12 +11,13 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
                                           const std::vector<float>& distance_ratio,
                                           const std::vector<std::uint8_t>& above,
                                           const std::vector<std::uint8_t>& foliage,
+                                          const std::vector<std::uint8_t>& standing,
                                           const FloatingCloudOptions& options) {
   const int w = photo.width, h = photo.height;
   const std::size_t n = std::size_t(std::max(0, w)) * std::size_t(std::max(0, h));
   std::vector<std::uint8_t> out(n, 0);
   if (n == 0 || photo.channels < 3 || distance_ratio.size() != n || above.size() != n ||
-      (!foliage.empty() && foliage.size() != n))
+      (!foliage.empty() && foliage.size() != n) || (!standing.empty() && standing.size() != n))
     return out;
   auto surface = [&](std::size_t i) {
     return std::isfinite(distance_ratio[i]) && distance_ratio[i] > 0;
@@ -30,7 +31,9 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
   cv::Mat labels, stats, centroids;
   const int m = cv::connectedComponentsWithStats(rest, labels, stats, centroids, 8, CV_32S);
   if (m <= 1) return out;
-  std::vector<std::uint8_t> grounded(std::size_t(m), 0);
+  std::vector<std::uint8_t> standing_any(std::size_t(m), 0);
+  // Pixels with the horizon or the frame's bottom right below; of them, on the frame's bottom.
+  std::vector<int> contact(std::size_t(m), 0), bottom(std::size_t(m), 0);
   std::vector<int> ring_sky(std::size_t(m), 0), ring_frame(std::size_t(m), 0);
   std::vector<int> bluish(std::size_t(m), 0), leafy(std::size_t(m), 0);
   std::vector<double> saturation(std::size_t(m), 0.0);
@@ -43,7 +46,9 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
       const std::size_t i = std::size_t(y) * w + x;
       // Standing on something: the horizon (the ground, or what stands on it) or the frame's
       // bottom right below it.
-      if (y + 1 >= h || !above[i + std::size_t(w)]) grounded[std::size_t(l)] = 1;
+      if (y + 1 >= h) ++bottom[std::size_t(l)];
+      if (y + 1 >= h || !above[i + std::size_t(w)]) ++contact[std::size_t(l)];
+      standing_any[std::size_t(l)] |= !standing.empty() && standing[i];
       ratios[std::size_t(l)].push_back(distance_ratio[i]);
       const float* p = photo.pixel(x, y);
       float c[3];
@@ -70,15 +75,21 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
   bool any = false;
   for (int l = 1; l < m; ++l) {
     const std::size_t k = std::size_t(l);
-    if (grounded[k] || ring_sky[k] == 0) continue;
-    if (!(ring_sky[k] >= options.min_sky_ring * (ring_sky[k] + ring_frame[k]))) continue;
     std::vector<float>& r = ratios[k];
     const double area = double(r.size());
     const bool coloured =
         (saturation[k] <= options.max_saturation * area || 2 * bluish[k] > area) &&
         2 * leafy[k] < area;
+    // Cut off by the frame's bottom, under a guessed horizon at or below it: a bank of a sky's
+    // colours that stands on nothing seen, not a post.
+    const bool cut_off = contact[k] > 0 && contact[k] == bottom[k] && options.guessed_horizon &&
+                         !standing_any[k] && 2 * bluish[k] > area && 2 * leafy[k] < area &&
+                         area >= options.min_bank_fraction * double(n) &&
+                         contact[k] >= options.min_bank_contact * w;
+    if (!(contact[k] == 0 || cut_off) || ring_sky[k] == 0) continue;
+    if (!(ring_sky[k] >= options.min_sky_ring * (ring_sky[k] + ring_frame[k]))) continue;
     std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
-    cloud[k] = coloured || r[r.size() / 2] >= options.min_distance_ratio;
+    cloud[k] = cut_off || coloured || r[r.size() / 2] >= options.min_distance_ratio;
     any |= cloud[k] != 0;
   }
   if (!any) return out;

@@ -30,6 +30,15 @@
 // becomes sky: distance +inf, matte 1 (libmr/src/estimate.cpp), and so does the matte of the
 // sky pixels in the blurred band along its outline whose nearest all-surface pixel was the
 // cloud's: photo/sky_matte.h would otherwise mix the fog of some surface far away into them.
+//
+// A guessed horizon (FloatingCloudOptions::guessed_horizon): in an all-sky frame looking up the
+// guess is lowered below the frame, and a cumulus cut off by the frame's bottom "stood" on it
+// (kite's lower right cloud: a surface 60-70 m away). Nobody saw ground there: a bank of the sky's
+// colours cut off only by the frame's bottom is sky too. Not a bank reaching a guessed line
+// inside the frame (god_rays' backlit bank): it continues below the guess as the "ground" plane,
+// so it would be the sky's veil above the line and nearly clear below it, a straight hard
+// horizontal seam in haze (tried: god_rays haze 0.039 -> 0.509 %, dense 0 -> 0.168 % created
+// edges); that needs the horizon itself lowered below the bank.
 #pragma once
 
 #include <cstddef>
@@ -51,18 +60,30 @@ struct FloatingCloudOptions {
   /// Or joined to the sky: its median of distance / the far billboard's distance on the same
   /// ray is at least this.
   double min_distance_ratio = 10.0;
+  /// The horizon is a guess (the level fall-back, or a cue of very low confidence, possibly
+  /// lowered below the sky it cut; issue 11): then the frame's bottom holds up nothing that
+  /// stands on no ground seen (no `standing` pixel) when the horizon is at or below it (the
+  /// component reaches nothing else), the component is mostly of a blue sky's colours (B > R,
+  /// B >= G) and not foliage, and it is a bank, not a post: at least `min_bank_fraction` of
+  /// the frame's pixels, on the frame's bottom along at least `min_bank_contact` of its width.
+  bool guessed_horizon = false;
+  double min_bank_fraction = 0.0025;
+  double min_bank_contact = 0.02;
 };
 
 /// `photo`: scene-linear, >= 3 channels, w x h; `distance_ratio`: row-major w x h, each pixel's
 /// distance over the far billboard's distance on its ray (+inf for the sky; what is not finite
 /// and positive is sky); `above`: 1 where the pixel is above the horizon; `foliage`: non-zero on
-/// vegetation (photo/vegetation.h), or empty. Returns a row-major w x h mask, 1 on the pixels of
-/// the components that are floating clouds (see the file comment); all 0 when there are none.
-/// Sizes that do not match give an all-0 mask. Never throws for any image content.
+/// vegetation (photo/vegetation.h), or empty; `standing`: non-zero on the pixels that stand on
+/// the ground where they meet it, or empty (read only with `options.guessed_horizon`). Returns a
+/// row-major w x h mask, 1 on the pixels of the components that are floating clouds (see the file
+/// comment); all 0 when there are none. Sizes that do not match give an all-0 mask. Never throws
+/// for any image content.
 std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
                                           const std::vector<float>& distance_ratio,
                                           const std::vector<std::uint8_t>& above,
                                           const std::vector<std::uint8_t>& foliage,
+                                          const std::vector<std::uint8_t>& standing,
                                           const FloatingCloudOptions& options = {});
 
 }  // namespace mr::photo

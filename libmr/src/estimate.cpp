@@ -768,15 +768,20 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // joined to the sky by the refinement, are sky: not floating occluders (photo/clouds.h).
   if (options.refine_depth && mask.pixels > 0) {
     std::vector<float> ratio(n);
-    std::vector<std::uint8_t> above(n);
+    std::vector<std::uint8_t> above(n), standing(n);
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         const std::size_t i = std::size_t(y) * w + x;
         ratio[i] = g.distance_m.at(x, y, 0) / billboard(x, y, far_forward);
         above[i] = y < horizon_y(x);
+        standing[i] = pixel_class[i] == kContact;
       }
-    const std::vector<std::uint8_t> cloud =
-        photo::floating_clouds(photo->view(), ratio, above, vegetation.vegetation);
+    // Under a guessed horizon no ground was seen: a cumulus cut off by the frame's bottom in an
+    // all-sky frame (the guess lowered below it) stood on the frame as a surface (photo/clouds.h).
+    photo::FloatingCloudOptions cloud_options;
+    cloud_options.guessed_horizon = !annotations.horizon && g.confidence < kWeakHorizonConfidence;
+    const std::vector<std::uint8_t> cloud = photo::floating_clouds(
+        photo->view(), ratio, above, vegetation.vegetation, standing, cloud_options);
     // photo/sky_matte.h mixes the fog of each pixel of the sky's blurred band with that of the
     // nearest all-surface pixel (alpha 0); where that was the cloud's, it would now be some
     // surface far away (a dark ghost of the cloud's band in the sun bank): that band is sky.
