@@ -287,8 +287,8 @@ float OccluderScene::intersect_distance(const std::array<float, 3>& origin,
 
 float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& point,
                         const std::array<float, 3>& normal, int ray_count, float max_distance_m,
-                        std::uint32_t seed, const std::array<float, 3>& pole,
-                        int partial_ray_count, int* rays_traced) {
+                        std::uint32_t seed, const std::array<float, 3>& pole, int partial_ray_count,
+                        int* rays_traced) {
   if (ray_count < 1)
     throw Error(ErrorCode::invalid_argument,
                 "ambient occlusion needs at least 1 ray, got " + std::to_string(ray_count));
@@ -326,7 +326,8 @@ float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& 
         scene, std::size_t(count),
         [&](std::size_t k) {
           const int index = first + int(k) * step;
-          const physics::Float3 dir = physics::ao_direction(stream, index, total, stride, n, t1, t2);
+          const physics::Float3 dir =
+              physics::ao_direction(stream, index, total, stride, n, t1, t2);
           return ShadowRay{{origin[0], origin[1], origin[2]},
                            {float(dir.x), float(dir.y), float(dir.z)},
                            0.0f,

@@ -380,9 +380,9 @@ class Core {
     // neighbouring samples agree where the geometry does, so interpolating them stays smooth;
     // the plan's ao_partial_rays where the first ones disagree.
     int traced = 0;
-    const float ao = ambient_occlusion(
-        *in_.occluders, f3(x0), f3(n), plan_.ao_rays, float(std::max(1.0, 0.25 * distance)),
-        scene_.render.seed, f3(-forward_), plan_.ao_partial_rays, &traced);
+    const float ao = ambient_occlusion(*in_.occluders, f3(x0), f3(n), plan_.ao_rays,
+                                       float(std::max(1.0, 0.25 * distance)), scene_.render.seed,
+                                       f3(-forward_), plan_.ao_partial_rays, &traced);
     rays_.local() += std::size_t(traced);
     return ao;
   }

@@ -427,7 +427,7 @@ TEST(SharedPhysics, AmbientOcclusionRaysAreCosineWeighted) {
 // normal, so nearby samples with nearly equal normals trace nearly equal rays. A normal turned
 // by 1e-3 rad moves every ray by less than 3e-3 rad, also across n.z = 0 (where the
 // branchless basis alone flips: a side wall's estimated normals straddle it), and at any angle
-// up to 150 degrees from the pole. The seed turns the set (another render, other rays).
+// up to 138 degrees from the pole (the normals below). The seed turns the set (another render).
 TEST(SharedPhysics, AmbientOcclusionRaysTurnContinuouslyWithTheNormal) {
   const Float3 pole{0, 0, -1};
   const std::uint32_t stream = ph::ao_stream(1);
