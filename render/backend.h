@@ -41,6 +41,9 @@ struct MarchPlan {
   /// build ~3x faster, but shadow edges move by up to one coarse pixel (at normal quality that
   /// doubled the Monte Carlo reference error, 0.54 % -> 1.25 %, for a 25 % shorter 1080p render).
   int mesh_step = 1;
+  /// AO rays where those ao_rays disagree (partly occluded, where the estimate errs): the rest of
+  /// one low-discrepancy set of this many (render/physics/occlusion.h); a multiple of ao_rays.
+  int ao_partial_rays = 32;
 };
 MarchPlan march_plan(const RenderSettings& settings);
 

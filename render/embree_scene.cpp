@@ -287,10 +287,16 @@ float OccluderScene::intersect_distance(const std::array<float, 3>& origin,
 
 float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& point,
                         const std::array<float, 3>& normal, int ray_count, float max_distance_m,
-                        std::uint32_t seed) {
+                        std::uint32_t seed, const std::array<float, 3>& pole, int partial_ray_count,
+                        int* rays_traced) {
   if (ray_count < 1)
     throw Error(ErrorCode::invalid_argument,
                 "ambient occlusion needs at least 1 ray, got " + std::to_string(ray_count));
+  if (partial_ray_count > ray_count && partial_ray_count % ray_count != 0)
+    throw Error(ErrorCode::invalid_argument,
+                "ambient occlusion: " + std::to_string(partial_ray_count) +
+                    " rays where occlusion is partial is not a multiple of " +
+                    std::to_string(ray_count));
   if (!(max_distance_m > 0) || !std::isfinite(max_distance_m))
     throw Error(ErrorCode::invalid_argument, "ambient occlusion distance must be positive, got " +
                                                  std::to_string(max_distance_m) + " m");
@@ -300,7 +306,7 @@ float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& 
     throw Error(ErrorCode::invalid_argument, "ambient occlusion normal is zero or not finite");
   const physics::Float3 n{normal[0] / n_len, normal[1] / n_len, normal[2] / n_len};
   physics::Float3 t1, t2;
-  physics::ao_basis(n, t1, t2);
+  physics::ao_frame(n, physics::normalize(physics::Float3{pole[0], pole[1], pole[2]}), t1, t2);
 
   // Start just off the surface: float positions far from the world origin are coarser.
   const double point_norm = std::sqrt(double(point[0]) * point[0] + double(point[1]) * point[1] +
@@ -309,19 +315,34 @@ float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& 
   const float origin[3] = {float(point[0] + offset_m * n.x), float(point[1] + offset_m * n.y),
                            float(point[2] + offset_m * n.z)};
 
+  // The first ray_count rays are every stride-th of the whole set (itself a low-discrepancy
+  // set); where they disagree, the rest.
+  const int total = std::max(ray_count, partial_ray_count);
+  const int stride = total / ray_count;
   const std::uint32_t stream = physics::ao_stream(seed);
   int open = 0;
-  occluded_rays(
-      scene, std::size_t(ray_count),
-      [&](std::size_t index) {
-        const physics::Float3 dir = physics::ao_direction(stream, int(index), ray_count, n, t1, t2);
-        return ShadowRay{{origin[0], origin[1], origin[2]},
-                         {float(dir.x), float(dir.y), float(dir.z)},
-                         0.0f,
-                         max_distance_m};
-      },
-      [&](std::size_t, bool blocked) { open += blocked ? 0 : 1; });
-  return float(open) / float(ray_count);
+  auto trace = [&](int first, int count, int step) {
+    occluded_rays(
+        scene, std::size_t(count),
+        [&](std::size_t k) {
+          const int index = first + int(k) * step;
+          const physics::Float3 dir =
+              physics::ao_direction(stream, index, total, stride, n, t1, t2);
+          return ShadowRay{{origin[0], origin[1], origin[2]},
+                           {float(dir.x), float(dir.y), float(dir.z)},
+                           0.0f,
+                           max_distance_m};
+        },
+        [&](std::size_t, bool blocked) { open += blocked ? 0 : 1; });
+  };
+  trace(0, ray_count, stride);
+  if (stride == 1 || open == 0 || open == ray_count) {
+    if (rays_traced) *rays_traced = ray_count;
+    return float(open) / float(ray_count);
+  }
+  for (int first = 1; first < stride; ++first) trace(first, ray_count, stride);
+  if (rays_traced) *rays_traced = ray_count * stride;
+  return float(open) / float(ray_count * stride);
 }
 
 }  // namespace mr::render

@@ -143,12 +143,18 @@ void occluded_rays(const OccluderScene& scene, std::size_t count, MakeRay&& make
 /// hemisphere around `normal` that travel `max_distance_m` without hitting the scene (1 = fully
 /// open, 0 = enclosed). The rays start a little off the surface (1e-4 of the point's distance
 /// from the world origin, at least 0.1 mm) so the point's own triangles do not block them.
-/// Deterministic: the same seed gives the same rays (stratified in the polar angle, hashed; no
-/// global state); vary the seed per pixel to decorrelate neighbours. `normal` need not be unit
-/// length. Traces 8-wide packets. Throws mr::Error(invalid_argument) for ray_count < 1, a
-/// non-positive or non-finite max_distance_m, or a zero or non-finite normal.
+/// Deterministic: the seed turns one low-discrepancy ray set (render/physics/occlusion.h), the
+/// same for every point, in a frame that turns continuously with the normal, carried from the
+/// unit `pole` (a direction no normal faces away from: the camera's backward axis), so that
+/// nearby points with similar normals get consistent estimates. partial_ray_count (a multiple
+/// of ray_count, or <= ray_count for none): where the first ray_count rays (every k-th of a set
+/// of that many) disagree, the rest of that set too. `normal` need not be unit length. Traces
+/// 8-wide packets; *rays_traced (if given) gets the count. Throws mr::Error(invalid_argument)
+/// for ray_count < 1, a partial_ray_count that is not a multiple, a non-positive or non-finite
+/// max_distance_m, or a zero or non-finite normal.
 float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& point,
                         const std::array<float, 3>& normal, int ray_count, float max_distance_m,
-                        std::uint32_t seed);
+                        std::uint32_t seed, const std::array<float, 3>& pole = {0, 0, -1},
+                        int partial_ray_count = 0, int* rays_traced = nullptr);
 
 }  // namespace mr::render

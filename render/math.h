@@ -15,6 +15,7 @@
 namespace mr::render {
 
 using Vec3d = physics::Float3;
+using physics::cross;
 using physics::dot;
 using physics::length;
 
@@ -27,9 +28,6 @@ inline Vec3d add(const Vec3d& a, const Vec3d& b, double s = 1) {
 }
 inline Vec3d sub(const Vec3d& a, const Vec3d& b) {
   return a - b;
-}
-inline Vec3d cross(const Vec3d& a, const Vec3d& b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 /// a / |a| (NaN for a zero vector; unit() where that can happen).
 inline Vec3d normalized(const Vec3d& a) {

@@ -376,10 +376,15 @@ class Core {
     const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
     if (dot(n, n) < 0.5) return 1.0;
     const Vec3d x0 = shadow_origin(x, y, distance, n);
-    rays_.local() += std::size_t(plan_.ao_rays);
-    return ambient_occlusion(*in_.occluders, f3(x0), f3(n), plan_.ao_rays,
-                             float(std::max(1.0, 0.25 * distance)),
-                             scene_.render.seed ^ std::uint32_t(x * 7919 + y * 104729));
+    // One ray set for the whole render, in a frame that turns with the normal (occlusion.h):
+    // neighbouring samples agree where the geometry does, so interpolating them stays smooth;
+    // the plan's ao_partial_rays where the first ones disagree.
+    int traced = 0;
+    const float ao = ambient_occlusion(*in_.occluders, f3(x0), f3(n), plan_.ao_rays,
+                                       float(std::max(1.0, 0.25 * distance)), scene_.render.seed,
+                                       f3(-forward_), plan_.ao_partial_rays, &traced);
+    rays_.local() += std::size_t(traced);
+    return ao;
   }
 
   // The fraction of the sun's disk a surface pixel sees past the occluders (-1 where that does
@@ -401,8 +406,10 @@ class Core {
           const int i = int(index);
           Vec3d dir = sun_dir_;
           if (sun_tan_radius_ > 0) {
+            // One set over the disk for every pixel (a spiral turned by the seed), as for AO:
+            // a penumbra on a smooth surface steps consistently instead of speckling.
             const double r = sun_tan_radius_ * std::sqrt((i + 0.5) / count);
-            const double phi = kGoldenAngle * (i + pixel_jitter(x, y, scene_.render.seed) * count);
+            const double phi = kGoldenAngle * i + 2 * kPi * pixel_jitter(0, 0, scene_.render.seed);
             dir = normalized(
                 add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
           }
@@ -586,13 +593,13 @@ MarchPlan march_plan(const RenderSettings& settings) {
   MarchPlan plan;
   switch (settings.quality) {
     case Quality::draft:
-      plan = {12, 8, 4, 2, 4, 2};
+      plan = {12, 8, 4, 2, 8, 2, 32};
       break;
     case Quality::normal:
-      plan = {32, 16, 3, 4, 8, 1};
+      plan = {32, 16, 3, 4, 8, 1, 32};
       break;
     case Quality::final:
-      plan = {128, 48, 1, 16, 32, 1};
+      plan = {128, 48, 1, 16, 32, 1, 64};
       break;
   }
   if (settings.march_steps > 0) plan.steps = settings.march_steps;

@@ -413,14 +413,23 @@ float ambient_occlusion_at(int x, int y) {
   if (dot(n, n) < 0.5) return 1.0;
   const vec3 x0 = P.origin.xyz + ray_dir(x, y) * distance + n * (1e-3 + 1e-3 * distance);
   const float t_far = max(1.0, 0.25 * distance);
-  const uint seed = P.flags.y ^ uint(x * 7919 + y * 104729);
+  const uint seed = P.flags.y;  // one ray set for the render (render/physics/occlusion.h)
   n = normalize(n);
   vec3 t1, t2;
-  ao_basis(n, t1, t2);
+  ao_frame(n, -P.forward.xyz, t1, t2);
   const vec3 origin = x0 + n * max(1e-4, 1e-4 * length(x0));
   const uint stream = ao_stream(seed);
+  // Every stride-th ray of a set of ao_partial_rays first; where they disagree, the rest (as
+  // ambient_occlusion on the CPU).
+  const int total = max(ray_count, int(P.misc.z));
+  const int stride = total / ray_count;
   int open = 0;
-  for (int index = 0; index < ray_count; ++index)
-    if (!screen_space_occluded(origin, ao_direction(stream, index, ray_count, n, t1, t2), t_far)) ++open;
-  return float(open) / float(ray_count);
+  for (int k = 0; k < ray_count; ++k)
+    if (!screen_space_occluded(origin, ao_direction(stream, k * stride, total, stride, n, t1, t2), t_far)) ++open;
+  if (stride == 1 || open == 0 || open == ray_count) return float(open) / float(ray_count);
+  for (int index = 0; index < total; ++index)
+    if (index % stride != 0 &&
+        !screen_space_occluded(origin, ao_direction(stream, index, total, stride, n, t1, t2), t_far))
+      ++open;
+  return float(open) / float(ray_count * stride);
 }

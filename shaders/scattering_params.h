@@ -81,7 +81,8 @@ struct ScatterParams {
   vec4 sun_u;     // frame around the sun direction (xyz)
   vec4 sun_v;
   vec4 sun_irradiance;  // rgb
-  vec4 misc;      // max_distance_m (0: automatic), shadow-map size (texels), 0, 0
+  vec4 misc;      // max_distance_m (0: automatic), shadow-map size (texels), AO rays where the
+                  // plan's AO rays disagree (MarchPlan::ao_partial_rays), 0
   vec4 cascade_end;  // view distance where sun cascades 0..3 end (the last: +inf)
 };
 

@@ -18,18 +18,45 @@ MR_FN void ao_basis(Float3 n, MR_OUT(Float3) t1, MR_OUT(Float3) t2) {
   t2 = Float3(b, sign_ + n.y * n.y * a, -n.y);
 }
 
-/// The ray stream of a pixel's seed.
+/// A frame (t1, t2) around unit n that turns continuously with n: the frame (p1, p2) of the unit
+/// pole p (ao_basis(p)), carried to n by the smallest rotation that takes p to n (Rodrigues).
+/// Neighbouring pixels, whose normals differ a little, so get nearly the same AO directions
+/// (ao_direction), and their AO differs where the geometry does, not from ray set to ray set.
+/// ao_basis alone flips wherever n.z changes sign (a side wall's normals estimated from depth
+/// do, at random). Singular only at n = -p: the backends take the camera's backward axis for p,
+/// which no visible surface faces away from (a sample's normal that does gets any frame).
+MR_FN void ao_frame(Float3 n, Float3 pole, MR_OUT(Float3) t1, MR_OUT(Float3) t2) {
+  Float3 p1, p2;
+  ao_basis(pole, p1, p2);
+  const Float c = dot(pole, n);
+  if (c < -0.999) {
+    ao_basis(n, t1, t2);
+    return;
+  }
+  const Float3 k = cross(pole, n);
+  t1 = normalize(p1 * c + cross(k, p1) + k * (dot(k, p1) / (1.0 + c)));
+  t2 = cross(n, t1);
+}
+
+/// The rotation of a render's AO ray set, from its seed.
 MR_FN uint ao_stream(uint seed) {
   return hash32(seed ^ 0x5bd1e995u);
 }
 
-/// Direction `index` of `ray_count` around unit normal n: cosine-weighted, stratified in
-/// u1 = sin^2 of the polar angle, hashed (results depend only on the seed and the ray number).
-MR_FN Float3 ao_direction(uint stream, int index, int ray_count, Float3 n, Float3 t1, Float3 t2) {
-  const uint h1 = hash32(stream + 2u * uint(index));
-  const uint h2 = hash32(h1 ^ 0x68e31da4u);
-  const Float u1 = (Float(min(index, ray_count - 1)) + unit_float(h1)) / Float(ray_count);
-  const Float phi = 2.0 * kPi * unit_float(h2);
+/// Direction `index` of `ray_count` around unit n (frame t1, t2 from ao_frame): cosine-weighted,
+/// a spiral over the projected unit disk (its area, u1 = sin^2 of the polar angle, stratified at
+/// the strata's midpoints), turned by the stream's rotation. The same set at every pixel: a
+/// low-discrepancy set whose estimate changes only where a ray's visibility does, which
+/// interpolation between grid samples keeps smooth (independent random sets per sample gave
+/// blotches there, issue surf16). The angle advances by the golden angle every `stride` rays,
+/// so that every stride-th ray (indices r, r + stride, ...) is itself a golden-angle spiral
+/// (Fibonacci set; the AO traces those first, the rest only where they disagree); stride 1:
+/// one spiral.
+MR_FN Float3 ao_direction(uint stream, int index, int ray_count, int stride, Float3 n, Float3 t1,
+                          Float3 t2) {
+  const Float u1 = (Float(index) + 0.5) / Float(ray_count);
+  const Float turn = Float(index) * (0.6180339887498949 / Float(stride)) + unit_float(stream);
+  const Float phi = 2.0 * kPi * fract(turn);
   const Float r = sqrt(u1);
   const Float cos_theta = sqrt(max(0.0, 1.0 - u1));
   const Float lx = r * cos(phi);

@@ -8,8 +8,8 @@
 //  - `Float` and `Float3` (double / a small vector struct in C++; float / vec3 in GLSL), int,
 //    uint, bool; Float3 members .x .y .z and [i]; construction as Float3(x, y, z);
 //  - the GLSL built-ins that this header also defines for C++: abs min max clamp floor fract exp
-//    log sqrt tan atan (one and two arguments) dot length normalize isinf isnan, plus expm1_ and
-//    log1p_ (GLSL has neither: evaluated there in forms that keep their relative precision),
+//    log sqrt tan atan (one and two arguments) dot cross length normalize isinf isnan, plus expm1_
+//    and log1p_ (GLSL has neither: evaluated there in forms that keep their relative precision),
 //    lerp_ (a + (b - a) t, the same operations in both) and copysign_one;
 //  - MR_FN before every function (C++: inline), MR_OUT(T) / MR_INOUT(T) for out-parameters,
 //    MR_INF, MR_CONSTANT for constants, and MR_PHYSICS_BEGIN / MR_PHYSICS_END around the code (C++:
@@ -116,6 +116,9 @@ inline double copysign_one(double x) {
 }
 constexpr double dot(const Float3& a, const Float3& b) {
   return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+constexpr Float3 cross(const Float3& a, const Float3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 inline double length(const Float3& a) {
   return std::sqrt(dot(a, a));

@@ -290,6 +290,7 @@ FramePlan pack_parameters(const CoreInputs& in, const TriangleMesh* mesh) {
     f.frame = {u, v, {-l[0], -l[1], -l[2]}};
   }
   p.misc.x = float(scene.render.max_distance_m);
+  p.misc.z = float(f.plan.ao_partial_rays);
   return f;
 }
 
