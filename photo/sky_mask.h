@@ -66,16 +66,6 @@ struct SkyMaskOptions {
   double max_gap_fraction = 3e-3;
   double gap_max_sigma = 3.0;
   double gap_min_luma = 0.8;
-  /// Sky seen through a lattice or between cables: a sky-coloured component (the gap test's
-  /// colour bounds) that touches the sky across structure narrower than `thin_member_width` x
-  /// the working image's diagonal (a morphological opening of that diameter removes it) is sky
-  /// when that thin structure bounds at least `thin_min_bounded` of the pixels around it (within
-  /// about a member's width) and structure that is not thin at most `thin_max_thick` of the
-  /// structure there, and it does not reach the horizon (the sky ends there: a lattice's sky
-  /// would end in a line across it). Only under a blue sky. 0: off.
-  double thin_member_width = 0.008;
-  double thin_min_bounded = 0.25;
-  double thin_max_thick = 0.2;
   /// Along the mask's edges, unmix each pixel against the colours on both sides (the two-colour
   /// matting model) where the sides differ, so the matte sits on the photo's edge and is as wide
   /// as it (issue 11 item 4); false: the guided filter's output alone.
@@ -90,7 +80,7 @@ struct SkyMask {
   /// and below the horizon.
   std::vector<float> alpha;
   std::size_t pixels = 0;      ///< sky pixels
-  std::size_t gap_pixels = 0;  ///< of them, sky seen through foliage or a lattice (gaps)
+  std::size_t gap_pixels = 0;  ///< of them, sky seen through foliage (enclosed gaps)
 };
 
 /// The sky of `photo` (scene-linear, >= 1 channel), only above the horizon through the two
