@@ -47,6 +47,7 @@ constexpr double kGoldenAngle = 2.39996322972865332;
 // bisection steps for a shaft edge's crossing (Core::march): one definition for both backends.
 using gpu::kEdgeBisections;
 using gpu::kShaftRefinement;
+using gpu::kShaftRefinementBisections;
 
 using physics::fract;
 using physics::pixel_jitter;
@@ -229,7 +230,9 @@ class Core {
         edge_hi[e] = sample_t[i + 1];
         edge_dir[e] = sun_sample_direction(i, jitter, double(segments + 1), pixel_rotation);
       }
-      for (int k = 0; k < kEdgeBisections && !edges.empty(); ++k) {
+      // A refined march (pass 2's shaft-edge cells) has closer samples: fewer bisections.
+      const int bisections = steps > plan_.steps ? kShaftRefinementBisections : kEdgeBisections;
+      for (int k = 0; k < bisections && !edges.empty(); ++k) {
         if (edges.size() == 1) {  // one ray: Embree's single-ray path is cheaper than a packet
           const double mid = 0.5 * (edge_lo[0] + edge_hi[0]);
           const bool visible = !in_.occluders->occluded(f3(add(origin_, w, mid)), f3(edge_dir[0]),
@@ -252,7 +255,7 @@ class Core {
               (!blocked == bool(sun_visible[edges[e]]) ? edge_lo[e] : edge_hi[e]) = mid;
             });
       }
-      rays += std::size_t(kEdgeBisections) * edges.size();
+      rays += std::size_t(bisections) * edges.size();
       for (std::size_t e = 0; e < edges.size(); ++e)
         crossing[edges[e]] = 0.5 * (edge_lo[e] + edge_hi[e]);
     }

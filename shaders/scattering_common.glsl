@@ -255,7 +255,9 @@ PixelSample march(int x, int y, int steps) {
       if (vis_n != vis) {
         // Shaft edge: bisect between the two samples for the crossing (to 1/64 of the gap).
         float lo = ts, hi = ts_n;
-        for (int k = 0; k < kEdgeBisections; ++k) {
+        // Fewer in a refined march (a shaft-edge cell's pixel): its samples are closer.
+        const int bisections = steps > P.plan.x ? kShaftRefinementBisections : kEdgeBisections;
+        for (int k = 0; k < bisections; ++k) {
           const float mid = 0.5 * (lo + hi);
           if (sun_lit_on_ray(origin, w, mid) == vis)
             lo = mid;

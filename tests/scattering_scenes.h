@@ -2,10 +2,13 @@
 // compiled once per backend) and the GPU-vs-CPU comparisons (tests/vulkan_scattering_test.cpp).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <random>
+#include <vector>
 
 #include "mr/image.h"
 #include "mr/scene.h"
@@ -103,6 +106,57 @@ inline FogScene low_sun_height_fog_scene() {
   s.lighting.sun = Sun{direction_from_azimuth_elevation(20, 8), {3, 3, 3}, 0.27};
   s.render.quality = Quality::normal;
   return s;
+}
+
+/// A birch forest seen from 1.6 m: 300 trunks (radius 6-20 cm, 6-25 m tall, so most are cut by
+/// the frame's top) standing on the ground 4-70 m ahead over 50 m of width, each with three
+/// thin branches (radius 3-5 cm, 1.5-3 m long, rising 30 degrees), sky between them. Under
+/// low_sun_height_fog_scene's sun (in front of the camera) every view ray crosses shafts: the
+/// scene where nearly every grid cell has a shadow edge (render/scattering_cpu.cpp, pass 2).
+/// Depth of each pixel's centre ray, exact (ray-cylinder intersections). Deterministic.
+inline Image forest_depth(const Camera& cam, const CameraPose& pose) {
+  struct Cylinder {
+    Vec3 base, axis;  // axis: unit direction
+    double length, radius;
+  };
+  std::vector<Cylinder> cylinders;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int i = 0; i < 300; ++i) {
+    const double x = -25 + 50 * u(rng), z = 4 + 66 * u(rng);
+    const double radius = 0.06 + 0.14 * u(rng), height = 6 + 19 * u(rng);
+    cylinders.push_back({{x, 0, z}, {0, 1, 0}, height, radius});
+    for (int b = 0; b < 3; ++b) {
+      const double y = 2 + 6 * u(rng), a = 2 * kPi * u(rng), rise = kPi / 6;
+      cylinders.push_back(
+          {{x, y, z},
+           {std::cos(a) * std::cos(rise), std::sin(rise), std::sin(a) * std::cos(rise)},
+           1.5 + 1.5 * u(rng),
+           0.03 + 0.02 * u(rng)});
+    }
+  }
+  Image depth = ground_depth(cam, pose);
+  const Vec3 o = pose.position_m;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Vec3 w = pose.ray_direction(cam, x, y);
+      float& d = depth.at(x, y, 0);
+      for (const Cylinder& c : cylinders) {
+        // |(p - base) - ((p - base).axis) axis| = radius, with p = o + t w, t > 0, and the
+        // point's position along the axis within [0, length]: the nearer root.
+        const Vec3 m{o.x - c.base.x, o.y - c.base.y, o.z - c.base.z};
+        const double wa = dot(w, c.axis), ma = dot(m, c.axis);
+        const Vec3 wp{w.x - wa * c.axis.x, w.y - wa * c.axis.y, w.z - wa * c.axis.z};
+        const Vec3 mp{m.x - ma * c.axis.x, m.y - ma * c.axis.y, m.z - ma * c.axis.z};
+        const double qa = dot(wp, wp), qb = 2 * dot(wp, mp), qc = dot(mp, mp) - c.radius * c.radius;
+        const double disc = qb * qb - 4 * qa * qc;
+        if (qa < 1e-12 || disc < 0) continue;
+        const double t = (-qb - std::sqrt(disc)) / (2 * qa);
+        const double along = ma + t * wa;
+        if (t > 0.1 && t < d && along >= 0 && along <= c.length) d = float(t);
+      }
+    }
+  return depth;
 }
 
 }  // namespace mr::test
