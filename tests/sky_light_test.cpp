@@ -348,6 +348,22 @@ FogLayers fog_auto_look(const Image& photo, const Camera& camera, const SceneEst
   return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
 }
 
+// The sun bank look (gallery/looks/sun_bank.json): 90 m visibility, height fog (scale 12 m)
+// under a 40 m top, g = 0.6, the sun at azimuth 20, elevation 8 degrees.
+FogLayers fog_sun_bank_look(const Image& photo, const Camera& camera, const SceneEstimate& est) {
+  FogScene sun = est.scene;
+  const float sigma = float(extinction_from_visibility(90));
+  sun.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  sun.medium.g = 0.6;
+  sun.medium.height_fog = Medium::HeightFog{0.0, 12.0};
+  sun.medium.layer_top_m = 40;
+  sun.lighting.sun = Sun{direction_from_azimuth_elevation(20, 8), Rgb{3, 3, 3}, 0.27, true};
+  sun.render.backend = Backend::cpu;
+  sun.lighting.sky_by_direction = true;
+  if (!sun.lighting.sky_radiance) sun.lighting.sky_radiance = estimate_airlight(photo);
+  return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, sun);
+}
+
 // Backlit clouds (class (a) of the held-out set at the end of the last session, rebuilt here
 // without looking at it): an overcast sky with a bright region around a sun hidden behind dark
 // clouds, light rays fanning down from it, the clouds' edges soft (a few pixels to tens), a
@@ -598,19 +614,8 @@ TEST(SkyLight, FloatingCloudsAreSkyNotOccluders) {
       orphans += a > 0 && a < 1 && to_surface.at<float>(y, x) > 8;
     }
   EXPECT_EQ(orphans, 0u);
-  // The sun bank look (gallery/looks/sun_bank.json): 90 m visibility, height fog (scale 12 m)
-  // under a 40 m top, g = 0.6, the sun at azimuth 20, elevation 8 degrees: just below the cloud.
-  FogScene sun = est.scene;
-  const float sigma = float(extinction_from_visibility(90));
-  sun.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  sun.medium.g = 0.6;
-  sun.medium.height_fog = Medium::HeightFog{0.0, 12.0};
-  sun.medium.layer_top_m = 40;
-  sun.lighting.sun = Sun{direction_from_azimuth_elevation(20, 8), Rgb{3, 3, 3}, 0.27, true};
-  sun.render.backend = Backend::cpu;
-  sun.lighting.sky_by_direction = true;
-  if (!sun.lighting.sky_radiance) sun.lighting.sky_radiance = estimate_airlight(photo);
-  const FogLayers lit = fog(photo, d, est.geometry.sky_alpha, camera, sun);
+  // The sun bank look: the sun at elevation 8 degrees is just below the cloud.
+  const FogLayers lit = fog_sun_bank_look(photo, camera, est);
   // Before: the cloud's fragments, surfaces about 100 m away in the height fog, lit and
   // shadowed by the low sun, cut hard edges into the fogged sky around them.
   const double edges = gallery_created_edges(photo, lit.composite);
@@ -750,17 +755,7 @@ TEST(SkyLight, CloudCutOffByTheFrameUnderAGuessedHorizonIsSky) {
       finite += std::isfinite(d.at(x, y, 0));
       if (cloud_mask.at<std::uint8_t>(y, x)) ++cloud, cloud_sky += !std::isfinite(d.at(x, y, 0));
     }
-  FogScene sun = est.scene;  // the sun bank look, as in FloatingCloudsAreSkyNotOccluders
-  const float sigma = float(extinction_from_visibility(90));
-  sun.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  sun.medium.g = 0.6;
-  sun.medium.height_fog = Medium::HeightFog{0.0, 12.0};
-  sun.medium.layer_top_m = 40;
-  sun.lighting.sun = Sun{direction_from_azimuth_elevation(20, 8), Rgb{3, 3, 3}, 0.27, true};
-  sun.render.backend = Backend::cpu;
-  sun.lighting.sky_by_direction = true;
-  if (!sun.lighting.sky_radiance) sun.lighting.sky_radiance = estimate_airlight(photo);
-  const FogLayers lit = fog(photo, d, est.geometry.sky_alpha, camera, sun);
+  const FogLayers lit = fog_sun_bank_look(photo, camera, est);
   const double e_sun = gallery_created_edges(photo, lit.composite);
   const FogLayers haze = fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
   const double e_haze = gallery_created_edges(photo, haze.composite);
