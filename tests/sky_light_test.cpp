@@ -116,8 +116,7 @@ TEST(SkyLight, ConvolutionMatchesBruteForceQuadrature) {
   for (const double g : {0.3, 0.6, 0.8}) {
     const photo::LatLongSizes sizes = photo::latlong_sizes_for(g);
     const Image env = rasterize(sizes.env_width, sizes.env_height);
-    const Image conv =
-        photo::convolve_henyey_greenstein(env, g, sizes.out_width, sizes.out_height);
+    const Image conv = photo::convolve_henyey_greenstein(env, g, sizes.out_width, sizes.out_height);
     double worst = 0;
     std::vector<Vec3> dirs = {direction_from_azimuth_elevation(30, 5),  // the sun
                               direction_from_azimuth_elevation(30, 0.5),
@@ -255,7 +254,8 @@ double created_edge_fraction(const Image& photo, const Image& fogged, int rows) 
                 gf = test::forward_gradient(test::display_luma(fogged));
   std::size_t created = 0;
   for (int y = 0; y < rows; ++y)
-    for (int x = 0; x < gp.cols; ++x) created += gf.at<float>(y, x) > 2 * gp.at<float>(y, x) + 0.01f;
+    for (int x = 0; x < gp.cols; ++x)
+      created += gf.at<float>(y, x) > 2 * gp.at<float>(y, x) + 0.01f;
   return double(created) / double(std::size_t(rows) * gp.cols);
 }
 
@@ -283,9 +283,10 @@ TEST(SkyLight, SunsetGradientSurvivesHazeWithNoCreatedEdge) {
   const double uni_top = warmth(uniform.composite, 0),
                uni_low = warmth(uniform.composite, horizon_row - 2);
   const double lit_top = warmth(lit.composite, 0), lit_low = warmth(lit.composite, horizon_row - 2);
-  std::printf("sky warmth R/B top -> horizon: photo %.3f -> %.3f, uniform sky light %.3f -> "
-              "%.3f, by direction %.3f -> %.3f\n",
-              photo_top, photo_low, uni_top, uni_low, lit_top, lit_low);
+  std::printf(
+      "sky warmth R/B top -> horizon: photo %.3f -> %.3f, uniform sky light %.3f -> "
+      "%.3f, by direction %.3f -> %.3f\n",
+      photo_top, photo_low, uni_top, uni_low, lit_top, lit_low);
   // Uniform: the sky is one flat colour (the case); by direction: warmer toward the horizon,
   // every row at least as warm as the one above it (the photo's ordering kept).
   EXPECT_LT(std::abs(uni_low - uni_top), 0.02 * uni_top);
@@ -296,8 +297,8 @@ TEST(SkyLight, SunsetGradientSurvivesHazeWithNoCreatedEdge) {
   // (Below, the ground plane's fog rises steeply toward the horizon where this flat synthetic
   // meadow has no texture: that is the geometry's, with or without the sky light.)
   const double edges = created_edge_fraction(photo, lit.composite, horizon_row - 1);
-  std::printf("created-edge pixels in the sky by direction %.4f %%, uniform %.4f %%\n",
-              100 * edges, 100 * created_edge_fraction(photo, uniform.composite, horizon_row - 1));
+  std::printf("created-edge pixels in the sky by direction %.4f %%, uniform %.4f %%\n", 100 * edges,
+              100 * created_edge_fraction(photo, uniform.composite, horizon_row - 1));
   EXPECT_LE(edges, 2e-4);
 }
 
@@ -511,6 +512,17 @@ TEST(SkyLight, BacklitCloudsUnderAWeakHorizonLowerIt) {
   EXPECT_LE(e_dense, 2e-4);
 }
 
+// Uniform noise from rng blurred to a cloud's detail (sigmas in pixels), scaled to [0, 1].
+cv::Mat cloud_noise(int h, int w, std::mt19937& rng, double sigma_x, double sigma_y) {
+  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
+  cv::Mat noise(h, w, CV_32F);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) noise.at<float>(y, x) = uniform(rng);
+  cv::GaussianBlur(noise, noise, cv::Size(0, 0), sigma_x, sigma_y);
+  cv::normalize(noise, noise, 0, 1, cv::NORM_MINMAX);
+  return noise;
+}
+
 // Clouds are not occluders (issue 11, sun bank look): a blue sky with a cumulus whose wispy,
 // textured rim the sky mask leaves out (as kite's in the tuning half; the rim rings the core,
 // so the whole cloud is left out), held up by nothing, above a building and a tree standing on
@@ -537,12 +549,7 @@ CloudScene wispy_cloud_scene() {
               cv::FILLED);
   cv::GaussianBlur(envelope, envelope, cv::Size(0, 0), 12);
   std::mt19937 rng(11);
-  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
-  cv::Mat noise(h, w, CV_32F);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) noise.at<float>(y, x) = uniform(rng);
-  cv::GaussianBlur(noise, noise, cv::Size(0, 0), 2.0, 1.2);  // fine, streaky
-  cv::normalize(noise, noise, 0, 1, cv::NORM_MINMAX);
+  const cv::Mat noise = cloud_noise(h, w, rng, 2.0, 1.2);  // fine, streaky
   s.rim = cv::Mat(h, w, CV_8U, cv::Scalar(0));
   s.building = cv::Mat(h, w, CV_8U, cv::Scalar(0));
   s.canopy = cv::Mat(h, w, CV_8U, cv::Scalar(0));
@@ -714,12 +721,7 @@ cv::Mat cut_cloud_display(cv::Mat* cloud_mask) {
               cv::FILLED);
   cv::GaussianBlur(envelope, envelope, cv::Size(0, 0), 6);
   std::mt19937 rng(13);
-  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
-  cv::Mat noise(h, w, CV_32F);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) noise.at<float>(y, x) = uniform(rng);
-  cv::GaussianBlur(noise, noise, cv::Size(0, 0), 1.5);  // a cumulus' cauliflower detail
-  cv::normalize(noise, noise, 0, 1, cv::NORM_MINMAX);
+  const cv::Mat noise = cloud_noise(h, w, rng, 1.5, 1.5);  // a cumulus' cauliflower detail
   *cloud_mask = cv::Mat(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -835,8 +837,8 @@ TEST(SkyLight, NeedsThePhoto) {
 
 TEST(SkyLight, SceneDocumentField) {
   FogScene scene;
-  for (const std::optional<bool> v : {std::optional<bool>{}, std::optional<bool>{true},
-                                      std::optional<bool>{false}}) {
+  for (const std::optional<bool> v :
+       {std::optional<bool>{}, std::optional<bool>{true}, std::optional<bool>{false}}) {
     scene.lighting.sky_by_direction = v;
     const FogScene back = scene_from_json(scene_to_json(scene));
     EXPECT_EQ(back.lighting.sky_by_direction, v);
