@@ -21,6 +21,7 @@
 //   build/bench/mr_bench_scattering --benchmark_filter=BM_Stages --benchmark_repetitions=5
 //   --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
+#include <sys/resource.h>
 
 #include <chrono>
 #include <cmath>
@@ -245,6 +246,84 @@ BENCHMARK(BM_Stages)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(1);
+
+// The geometry stages of BM_Stages alone (normals, full-resolution mesh, blockers, BVH), each
+// with its wall and process CPU time, repeated without the render: for profiling them (perf
+// record on this benchmark alone) and for comparing builds of them.
+void BM_Geometry(benchmark::State& state) {
+  using Clock = std::chrono::steady_clock;
+  const int width = int(state.range(0)), height = int(state.range(1));
+  const Inputs& in = inputs(width, height);
+  mr::FogScene s = scene(mr::Quality::normal, true);
+  double wall_s[4] = {0, 0, 0, 0}, cpu_s[4] = {0, 0, 0, 0}, faults[4] = {0, 0, 0, 0};
+  // Minor page faults (first touches of fresh memory): most of these stages' CPU time on the
+  // development VM before the huge pages of render/huge_pages.h.
+  auto minor_faults = [] {
+    rusage u;
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_minflt);
+  };
+  std::size_t triangles = 0;
+  for (auto _ : state) {
+    int stage = 0;
+    auto t = Clock::now();
+    double cpu = process_cpu_s(), fault = minor_faults();
+    auto lap = [&] {
+      const double c = process_cpu_s(), f = minor_faults();
+      faults[stage] += f - fault;
+      fault = f;
+      const auto now = Clock::now();
+      wall_s[stage] += std::chrono::duration<double>(now - t).count();
+      cpu_s[stage] += c - cpu;
+      ++stage;
+      t = now;
+      cpu = c;
+    };
+    const mr::Image normals = mr::render::estimate_normals(in.depth.view(), in.camera, s.pose);
+    lap();
+    mr::render::TriangleMesh mesh =
+        mr::render::reconstruct_occluder_mesh(in.depth.view(), in.camera, s.pose, {}, normals.view());
+    lap();
+    mr::render::append_blockers(mesh, in.depth.view(), normals.view(), in.camera, s.pose,
+                                s.blockers);
+    lap();
+    triangles = mesh.triangle_count();
+    const mr::render::OccluderScene occluders(std::move(mesh));
+    lap();
+    benchmark::DoNotOptimize(occluders.triangle_count());
+    // MR_BENCH_DUMP=<prefix>: the normals and the mesh (<prefix>.normals.f32, .positions.f32,
+    // .indices.u32), to check that two builds make the same geometry bit for bit.
+    if (const char* prefix = std::getenv("MR_BENCH_DUMP")) {
+      auto dump = [&](const void* data, std::size_t bytes, const char* name) {
+        const std::string path = std::string(prefix) + "." + name;
+        if (std::FILE* f = std::fopen(path.c_str(), "wb")) {
+          std::fwrite(data, 1, bytes, f);
+          std::fclose(f);
+        }
+      };
+      const mr::render::TriangleMesh& m = occluders.mesh();
+      dump(normals.data(), sizeof(float) * normals.pixels().size(), "normals.f32");
+      dump(m.positions.data(), sizeof(float) * m.positions.size(), "positions.f32");
+      dump(m.indices.data(), sizeof(std::uint32_t) * m.indices.size(), "indices.u32");
+    }
+  }
+  const double n = double(state.iterations());
+  const char* names[4] = {"normals", "mesh", "blockers", "bvh"};
+  for (int k = 0; k < 4; ++k) {
+    state.counters[std::string(names[k]) + "_ms"] = wall_s[k] / n * 1e3;
+    state.counters[std::string(names[k]) + "_cpu_ms"] = cpu_s[k] / n * 1e3;
+    state.counters[std::string(names[k]) + "_kfaults"] = faults[k] / n * 1e-3;
+  }
+  state.counters["cpu_ms"] = (cpu_s[0] + cpu_s[1] + cpu_s[2] + cpu_s[3]) / n * 1e3;
+  state.counters["Mtriangles"] = double(triangles) / 1e6;
+}
+
+BENCHMARK(BM_Geometry)
+    ->ArgNames({"w", "h"})
+    ->Args({1920, 1080})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
 
 }  // namespace
 

@@ -8,9 +8,11 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <string>
 
 #include "mr/error.h"
+#include "render/huge_pages.h"
 #include "render/math.h"
 
 namespace mr::render {
@@ -48,11 +50,13 @@ struct RayFrame {
 };
 
 /// One pixel's surface sample, relative to the camera position (world orientation). Floats keep
-/// the 1080p working set small; the inputs are float anyway.
+/// the 1080p working set small; the inputs are float anyway. Trivial (no member initializers;
+/// Sample{} is all zeros), so that arrays of them start uninitialized and the parallel loop
+/// that fills them is the first to touch their pages (HugePageArray).
 struct Sample {
-  float x = 0, y = 0, z = 0;  ///< the 3D point minus the camera position, metres
-  float distance_m = 0;       ///< along the centre ray; 0 = no surface
-  float inv_z = 0;            ///< 1 / z-depth; affine in image coordinates on any plane
+  float x, y, z;     ///< the 3D point minus the camera position, metres
+  float distance_m;  ///< along the centre ray; 0 = no surface
+  float inv_z;       ///< 1 / z-depth; affine in image coordinates on any plane
 
   bool valid() const { return distance_m > 0; }
   V3 point() const { return {x, y, z}; }
@@ -83,9 +87,9 @@ void check_inputs(ConstImageView distance_m, const Camera& camera, double discon
                 "discontinuity ratio must be positive, got " + std::to_string(discontinuity_ratio));
 }
 
-std::vector<Sample> compute_samples(ConstImageView distance_m, const RayFrame& frame) {
+HugePageArray<Sample> compute_samples(ConstImageView distance_m, const RayFrame& frame) {
   const int width = distance_m.width;
-  std::vector<Sample> samples(distance_m.pixel_count());
+  HugePageArray<Sample> samples(distance_m.pixel_count());
   tbb::parallel_for(
       tbb::blocked_range<int>(0, distance_m.height), [&](const tbb::blocked_range<int>& rows) {
         for (int y = rows.begin(); y < rows.end(); ++y) {
@@ -154,9 +158,8 @@ bool axis_tangent(const Sample& c, const Sample* m1, const Sample* m2, const Sam
 }
 
 /// Unit normal of valid pixel (x, y), facing the camera.
-V3 pixel_normal(const std::vector<Sample>& samples, int width, int height, int x, int y,
-                double ratio) {
-  const Sample* base = samples.data();
+V3 pixel_normal(const Sample* samples, int width, int height, int x, int y, double ratio) {
+  const Sample* base = samples;
   auto at = [&](int px, int py) -> const Sample* {
     if (px < 0 || py < 0 || px >= width || py >= height) return nullptr;
     const Sample* s = base + std::size_t(py) * width + px;
@@ -189,7 +192,7 @@ V3 pixel_normal(const std::vector<Sample>& samples, int width, int height, int x
 
 /// Writes the unit normal of every pixel (0 where there is no surface) to normals_out, 3 floats
 /// per pixel, rows contiguous.
-void compute_normals(const std::vector<Sample>& samples, int width, int height, double ratio,
+void compute_normals(const Sample* samples, int width, int height, double ratio,
                      float* normals_out) {
   tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y < rows.end(); ++y) {
@@ -212,7 +215,7 @@ void compute_normals(const std::vector<Sample>& samples, int width, int height, 
 /// A pixel's plane: unit normal n (facing the camera) and offset h = dot(n, point - camera),
 /// negative. A camera ray with unit direction w meets it at distance h / dot(n, w).
 struct Plane {
-  float nx = 0, ny = 0, nz = 0, h = 0;
+  float nx, ny, nz, h;  // trivial, as Sample
   V3 normal() const { return {nx, ny, nz}; }
 };
 
@@ -310,7 +313,7 @@ constexpr int kMergeMax = 32;
 constexpr std::size_t kAppendHeadroomIndices = 3 * 65536;
 
 template <class VertexOf>
-void merge_planar_pixels(TriangleMesh& mesh, const std::vector<std::uint8_t>& flags, int width,
+void merge_planar_pixels(TriangleMesh& mesh, const HugePageArray<std::uint8_t>& flags, int width,
                          int height, const std::vector<std::uint64_t>& row_pixel_offset,
                          const std::vector<std::uint64_t>& row_fan_offset,
                          std::uint64_t fan_triangle_base, double tolerance, V3 origin,
@@ -459,10 +462,11 @@ Image estimate_normals(ConstImageView distance_m, const Camera& camera, const Ca
                        double discontinuity_ratio) {
   check_inputs(distance_m, camera, discontinuity_ratio);
   const RayFrame frame(camera, pose);
-  const std::vector<Sample> samples = compute_samples(distance_m, frame);
+  const HugePageArray<Sample> samples = compute_samples(distance_m, frame);
   Image normals =
       Image::uninitialized(distance_m.width, distance_m.height, 3, {"N.x", "N.y", "N.z"});
-  compute_normals(samples, distance_m.width, distance_m.height, discontinuity_ratio,
+  advise_huge_pages(normals.data(), sizeof(float) * normals.pixels().size());
+  compute_normals(samples.data(), distance_m.width, distance_m.height, discontinuity_ratio,
                   normals.data());
   return normals;
 }
@@ -488,8 +492,8 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
   auto pixel_index = [width](int x, int y) { return std::size_t(y) * width + x; };
 
   // 1. Points, normals and planes per pixel.
-  const std::vector<Sample> samples = compute_samples(distance_m, frame);
-  std::vector<Plane> planes(pixel_count);
+  const HugePageArray<Sample> samples = compute_samples(distance_m, frame);
+  HugePageArray<Plane> planes(pixel_count);
   {
     if (known_normals.data && (known_normals.width != width || known_normals.height != height ||
                                known_normals.channels != 3))
@@ -500,30 +504,26 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
                                                 "x" + std::to_string(height) + "x1");
     // The caller's normals (estimate_normals: the same computation) spare computing them twice,
     // a fifth of the 1080p mesh stage.
-    std::vector<float> own_normals;
-    auto normal = [&](std::size_t i) -> const float* {
-      if (known_normals.data)
-        return known_normals.row(int(i / std::size_t(width))) +
-               3 * std::ptrdiff_t(i % std::size_t(width));
-      return &own_normals[3 * i];
-    };
+    std::unique_ptr<HugePageArray<float>> own_normals;
     if (!known_normals.data) {
-      own_normals.resize(3 * pixel_count);
-      compute_normals(samples, width, height, ratio, own_normals.data());
+      own_normals = std::make_unique<HugePageArray<float>>(3 * pixel_count);
+      compute_normals(samples.data(), width, height, ratio, own_normals->data());
     }
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, pixel_count),
-        [&](const tbb::blocked_range<std::size_t>& r) {
-          for (std::size_t i = r.begin(); i < r.end(); ++i) {
-            const float* n = normal(i);
-            const Sample& s = samples[i];
-            planes[i] = Plane{n[0], n[1], n[2], float(dot(V3{n[0], n[1], n[2]}, s.point()))};
-          }
-        });
+    // By rows (the caller's normals have a row stride of their own): no division per pixel.
+    tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+      for (int y = rows.begin(); y < rows.end(); ++y) {
+        const float* n = known_normals.data ? known_normals.row(y)
+                                            : own_normals->data() + 3 * pixel_index(0, y);
+        for (int x = 0; x < width; ++x, n += 3) {
+          const std::size_t i = pixel_index(x, y);
+          planes[i] = Plane{n[0], n[1], n[2], float(dot(V3{n[0], n[1], n[2]}, samples[i].point()))};
+        }
+      }
+    });
   }
 
   // 2. Continuity with the right and lower neighbours; surface pixels per row.
-  std::vector<std::uint8_t> flags(pixel_count);
+  HugePageArray<std::uint8_t> flags(pixel_count);
   // row_pixel_offset[y + 1] first counts row y's surface pixels, then (prefix sum) is the number
   // of surface pixels in rows 0..y.
   std::vector<std::uint64_t> row_pixel_offset(height + 1, 0);
@@ -557,8 +557,8 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
   // of the corner's first vertex.
   const int corner_width = width + 1, corner_height = height + 1;
   const std::size_t corner_count = std::size_t(corner_width) * corner_height;
-  std::vector<std::uint8_t> corner_key(corner_count);
-  std::vector<std::uint32_t> corner_base(corner_count);
+  HugePageArray<std::uint8_t> corner_key(corner_count);
+  HugePageArray<std::uint32_t> corner_base(corner_count);
   std::vector<std::uint64_t> row_vertex_offset(corner_height + 1, 0);
   auto flags_at = [&](int x, int y) -> std::uint8_t {
     return (x < 0 || y < 0 || x >= width || y >= height) ? 0 : flags[pixel_index(x, y)];
@@ -638,6 +638,7 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
   // committed), plus one float: OccluderScene pads the vertex buffer for Embree's 16-byte loads
   // and should not have to reallocate 25 MB (1080p) to do it.
   mesh.positions.reserve(3 * (surface_vertices + surface_pixels + 2 * extruded_edges) + 1);
+  advise_huge_pages(mesh.positions.data(), sizeof(float) * mesh.positions.capacity());
   mesh.positions.resize(3 * surface_vertices);
   auto store = [&mesh](std::uint64_t vertex, V3 v) {
     float* out = &mesh.positions[3 * vertex];
@@ -717,6 +718,7 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
   mesh.surface_triangle_count = 2 * (surface_pixels + fanned_pixels);
   mesh.indices.reserve(3 * (mesh.surface_triangle_count + 2 * extruded_edges) +
                        kAppendHeadroomIndices);
+  advise_huge_pages(mesh.indices.data(), sizeof(std::uint32_t) * mesh.indices.capacity());
   mesh.indices.resize(3 * (mesh.surface_triangle_count + 2 * extruded_edges));
 
   // 7. Two triangles per surface pixel; a fanned pixel's centre vertex and its other two
