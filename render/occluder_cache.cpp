@@ -9,6 +9,7 @@
 
 #include "render/blockers.h"
 #include "render/depth_downsample.h"
+#include "render/huge_pages.h"
 #include "render/shadow_traversal/multi_index_query.h"
 
 namespace mr::render {
@@ -158,6 +159,9 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   const ConstImageView& d = r.distance_m;
   entry->width = d.width;
   entry->height = d.height;
+  // 8 MB at 1080p: on huge pages, 4 faults instead of 2000 (render/huge_pages.h).
+  entry->distance_m.reserve(std::size_t(d.width) * d.height);
+  advise_huge_pages(entry->distance_m.data(), sizeof(float) * entry->distance_m.capacity());
   entry->distance_m.resize(std::size_t(d.width) * d.height);
   for (int y = 0; y < d.height; ++y)
     std::memcpy(&entry->distance_m[std::size_t(y) * d.width], &d.at(0, y, 0),

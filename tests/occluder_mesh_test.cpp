@@ -769,5 +769,27 @@ TEST(OccluderMesh, KnownNormalsGiveTheSameMesh) {
   }
 }
 
+// The caller's normals are read row by row through the view's row stride: normals inside a
+// wider image (a sub-view, rows farther apart than width * 3 floats) give the same mesh.
+TEST(OccluderMesh, KnownNormalsWithARowStrideGiveTheSameMesh) {
+  const Rendered r = make_box_scene();
+  const Image normals = estimate_normals(r.distance_m.view(), r.camera, r.pose);
+  const int w = r.camera.width, h = r.camera.height;
+  Image wide(w + 7, h + 2, 3);
+  for (float& v : wide.pixels()) v = std::numeric_limits<float>::quiet_NaN();  // must not be read
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) wide.at(x + 5, y + 1, c) = normals.at(x, y, c);
+  const ConstImageView inside = wide.view().sub(Rect{5, 1, w, h});
+  ASSERT_FALSE(inside.contiguous());
+  const TriangleMesh own = reconstruct_occluder_mesh(r.distance_m.view(), r.camera, r.pose);
+  const TriangleMesh given =
+      reconstruct_occluder_mesh(r.distance_m.view(), r.camera, r.pose, {}, inside);
+  ASSERT_GT(own.triangle_count(), 0u);
+  EXPECT_EQ(own.positions, given.positions);
+  EXPECT_EQ(own.indices, given.indices);
+  EXPECT_EQ(own.surface_triangle_count, given.surface_triangle_count);
+}
+
 }  // namespace
 }  // namespace mr::render
