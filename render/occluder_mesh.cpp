@@ -449,6 +449,7 @@ void merge_planar_pixels(TriangleMesh& mesh, const HugePageArray<std::uint8_t>& 
   std::vector<std::uint32_t> indices;
   indices.reserve(surface_indices + (mesh.indices.size() - 3 * mesh.surface_triangle_count) +
                   kAppendHeadroomIndices);
+  advise_huge_pages(indices.data(), sizeof(std::uint32_t) * indices.capacity());
   for (const auto& b : band_indices) indices.insert(indices.end(), b.begin(), b.end());
   indices.insert(indices.end(), mesh.indices.begin() + 3 * mesh.surface_triangle_count,
                  mesh.indices.end());
