@@ -20,6 +20,9 @@
 //
 //   build/bench/mr_bench_scattering --benchmark_filter=BM_Stages --benchmark_repetitions=5
 //   --benchmark_report_aggregates_only=true
+//
+// BM_Geometry runs the geometry stages alone (normals, mesh, blockers, BVH), with each one's
+// CPU time and minor page faults: `perf record` it to profile them.
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
