@@ -284,8 +284,8 @@ void BM_Geometry(benchmark::State& state) {
     };
     const mr::Image normals = mr::render::estimate_normals(in.depth.view(), in.camera, s.pose);
     lap();
-    mr::render::TriangleMesh mesh =
-        mr::render::reconstruct_occluder_mesh(in.depth.view(), in.camera, s.pose, {}, normals.view());
+    mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
+        in.depth.view(), in.camera, s.pose, {}, normals.view());
     lap();
     mr::render::append_blockers(mesh, in.depth.view(), normals.view(), in.camera, s.pose,
                                 s.blockers);

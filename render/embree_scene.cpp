@@ -67,13 +67,13 @@ void validate_mesh(const TriangleMesh& mesh) {
                                                  " indices, not a multiple of 3");
   const std::size_t vertices = mesh.vertex_count();
   const std::uint32_t* indices = mesh.indices.data();
-  if (const std::size_t i = first_bad(mesh.indices.size(),
-                                      [&](std::size_t k) { return indices[k] >= vertices; });
+  if (const std::size_t i =
+          first_bad(mesh.indices.size(), [&](std::size_t k) { return indices[k] >= vertices; });
       i < mesh.indices.size())
     throw Error(ErrorCode::invalid_argument, "occluder mesh index " + std::to_string(i) + " is " +
                                                  std::to_string(mesh.indices[i]) +
-                                                 ", but the mesh has " +
-                                                 std::to_string(vertices) + " vertices");
+                                                 ", but the mesh has " + std::to_string(vertices) +
+                                                 " vertices");
   const float* positions = mesh.positions.data();
   if (const std::size_t i = first_bad(mesh.positions.size(),
                                       [&](std::size_t k) { return !std::isfinite(positions[k]); });

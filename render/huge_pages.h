@@ -36,7 +36,8 @@ class HugePageArray {
  public:
   explicit HugePageArray(std::size_t n) : size_(n) {
     constexpr std::size_t kAlign = std::size_t(2) << 20;
-    const std::size_t bytes = (std::max<std::size_t>(n * sizeof(T), 1) + kAlign - 1) / kAlign * kAlign;
+    const std::size_t bytes =
+        (std::max<std::size_t>(n * sizeof(T), 1) + kAlign - 1) / kAlign * kAlign;
     void* p = std::aligned_alloc(kAlign, bytes);
     if (!p) throw std::bad_alloc();
     data_.reset(static_cast<T*>(p));

@@ -513,8 +513,8 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
     // By rows (the caller's normals have a row stride of their own): no division per pixel.
     tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
       for (int y = rows.begin(); y < rows.end(); ++y) {
-        const float* n = known_normals.data ? known_normals.row(y)
-                                            : own_normals->data() + 3 * pixel_index(0, y);
+        const float* n =
+            known_normals.data ? known_normals.row(y) : own_normals->data() + 3 * pixel_index(0, y);
         for (int x = 0; x < width; ++x, n += 3) {
           const std::size_t i = pixel_index(x, y);
           planes[i] = Plane{n[0], n[1], n[2], float(dot(V3{n[0], n[1], n[2]}, samples[i].point()))};

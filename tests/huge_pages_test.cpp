@@ -65,7 +65,7 @@ TEST(Embree, MalformedLargeMeshNamesTheFirstProblem) {
   TriangleMesh bad = mesh;
   bad.indices[1'000'000] = std::uint32_t(vertices + 5);  // in a late chunk
   bad.indices[200'001] = std::uint32_t(vertices);        // the first bad one
-  bad.indices[70'000] = 12;                             // fine
+  bad.indices[70'000] = 12;                              // fine
   EXPECT_NE(message(bad).find("index 200001 is 300000,"), std::string::npos) << message(bad);
   bad = mesh;
   bad.positions[3 * 250'000 + 2] = std::numeric_limits<float>::infinity();
