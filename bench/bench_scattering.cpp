@@ -266,13 +266,21 @@ void BM_Geometry(benchmark::State& state) {
     getrusage(RUSAGE_SELF, &u);
     return double(u.ru_minflt);
   };
+  double sys[4] = {0, 0, 0, 0};
+  auto sys_s = [] {
+    rusage u;
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_stime.tv_sec) + 1e-6 * double(u.ru_stime.tv_usec);
+  };
   std::size_t triangles = 0;
   for (auto _ : state) {
     int stage = 0;
     auto t = Clock::now();
-    double cpu = process_cpu_s(), fault = minor_faults();
+    double cpu = process_cpu_s(), fault = minor_faults(), kernel = sys_s();
     auto lap = [&] {
-      const double c = process_cpu_s(), f = minor_faults();
+      const double c = process_cpu_s(), f = minor_faults(), k = sys_s();
+      sys[stage] += k - kernel;
+      kernel = k;
       faults[stage] += f - fault;
       fault = f;
       const auto now = Clock::now();
@@ -316,6 +324,7 @@ void BM_Geometry(benchmark::State& state) {
     state.counters[std::string(names[k]) + "_ms"] = wall_s[k] / n * 1e3;
     state.counters[std::string(names[k]) + "_cpu_ms"] = cpu_s[k] / n * 1e3;
     state.counters[std::string(names[k]) + "_kfaults"] = faults[k] / n * 1e-3;
+    state.counters[std::string(names[k]) + "_sys_ms"] = sys[k] / n * 1e3;
   }
   state.counters["cpu_ms"] = (cpu_s[0] + cpu_s[1] + cpu_s[2] + cpu_s[3]) / n * 1e3;
   state.counters["Mtriangles"] = double(triangles) / 1e6;
