@@ -565,8 +565,8 @@ TEST(SkyLight, SeaHorizonInHazeCreatesNoEdge) {
   Image haze_map;
   const double e_haze = gallery_created_edges(photo, haze.composite, &haze_map);
   const double e_dense = gallery_created_edges(photo, dense.composite);
-  const double e_haze_before =
-      gallery_created_edges(photo, fog_auto_look(photo, camera, est_before, 2000, 1500, 0.6).composite);
+  const double e_haze_before = gallery_created_edges(
+      photo, fog_auto_look(photo, camera, est_before, 2000, 1500, 0.6).composite);
   if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
     const std::string f(folder);
     write_image(f + "/sea_photo.png", photo);

@@ -65,8 +65,9 @@ struct MR_API EstimateOptions {
   /// With refine_depth: open water (or flat ground) meeting the sky at the horizon, where the
   /// photo's water mirrors the sky above it, is no nearer than its ground plane's distance over
   /// the ground's confidence (that is, farther than the plane near the horizon), so its fog
-  /// ramps into the sky's over tens of pixels instead of stepping at the horizon (issue 11,
-  /// helper sea11; libmr/src/estimate.cpp). false: the refinement's distance as it is.
+  /// ramps into the sky's over tens of pixels instead of stepping at the horizon; only under a
+  /// horizon annotated or found with confidence >= 0.2 that open sky meets (issue 11, helper
+  /// sea11; libmr/src/estimate.cpp). false: the refinement's distance as it is.
   bool sea_horizon = true;
   /// Trees and foliage (issue 11 item 3, photo/vegetation.h), under an open blue sky only:
   /// sky-coloured pixels above the horizon ringed by green foliage (sky under a canopy, between
