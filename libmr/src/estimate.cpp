@@ -736,7 +736,71 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       c[i] = conf;
     }
   steps.start("refine");
-  if (options.refine_depth) q = photo::refine_inverse_distance(photo->view(), q, c, refine);
+  if (options.refine_depth) {
+    const std::vector<float> q_plane = q;  // before the refinement: the ground plane's
+    q = photo::refine_inverse_distance(photo->view(), q, c, refine);
+    // Only under a horizon that says where the water meets the sky (annotated, or found with
+    // some confidence): under a guessed one (the level fall-back, a weak cue, one lowered
+    // under the sky it cut) the ground's plane is a guess too (a dark ridge under a glow).
+    const bool horizon_known = annotations.horizon || g.confidence >= kWeakHorizonConfidence;
+    if (options.sea_horizon && horizon_known && mask.pixels > 0) {
+      // Issue 11 (sea horizons in haze, helper sea11): near the horizon the ground's confidence
+      // ramps to 0 and the refinement fills mirror-smooth water up to a faint far shore line
+      // with the nearer water's distance (60 m where the plane says hundreds), while the sky
+      // above the line, seen along the layer's slant path, is opaque in haze: a step in the fog
+      // at a line the photo hardly shows. The plane itself, seen from 1.6 m, runs from clear to
+      // opaque within a few pixels (its inverse distance falls linearly to 0 at the horizon;
+      // transmittance exp(-sigma / q)). Where the photo's water mirrors the sky, the optical
+      // depth must meet the sky's at the horizon and return gently: the inverse distance is at
+      // most the plane's times the ground's confidence (quadratic in the depression, reaching
+      // the plane at 2x the billboard's depression), so the fog fades over tens of pixels.
+      // Only under an open horizon (sky within a thin line's width above it; a shore's trees or
+      // a pier standing there keep the refinement's distance), smoothed across columns, and
+      // only where the pixel mirrors the sky (luma within 80 % of the pixel mirrored about the
+      // horizon, blurred: a pier's dark deck on the water does not; coldripple).
+      const int line_px = std::max(3, h / 100);  // a far shore's line, not a structure
+      std::vector<float> open(std::size_t(w), 0.0f);
+      for (int x = 0; x < w; ++x) {
+        const int yh = int(std::ceil(horizon_y(x))) - 1;
+        for (int y = std::max(0, yh - line_px); y <= std::min(h - 1, yh); ++y)
+          if (mask.sky[std::size_t(y) * w + x]) open[std::size_t(x)] = 1.0f;
+      }
+      // A box over 1/10 of the width, squared: the bound fades in across columns, no seam.
+      const int reach = std::max(1, w / 20);
+      std::vector<float> prefix(std::size_t(w) + 1, 0.0f);
+      for (int x = 0; x < w; ++x)
+        prefix[std::size_t(x) + 1] = prefix[std::size_t(x)] + open[std::size_t(x)];
+      for (int x = 0; x < w; ++x) {
+        const int a = std::max(0, x - reach), b = std::min(w, x + reach + 1);
+        const float m = (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a);
+        open[std::size_t(x)] = m * m;
+      }
+      constexpr float kMirrorLumaTolerance = 0.8f;  // |la - lb| / max(la, lb) at which it is 0
+      cv::Mat mirrors(h, w, CV_32F, cv::Scalar(0));
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          const int ym = int(std::lround(2 * horizon_y(x) - y));
+          if (!(y > horizon_y(x)) || ym < 0 || ym >= h || !mask.sky[std::size_t(ym) * w + x])
+            continue;
+          const float* a = photo->pixel(x, y);
+          const float* b = photo->pixel(x, ym);
+          const float la = 0.2126f * a[0] + 0.7152f * a[1] + 0.0722f * a[2];
+          const float lb = 0.2126f * b[0] + 0.7152f * b[1] + 0.0722f * b[2];
+          const float dl = std::abs(la - lb) / std::max({la, lb, 1e-6f});
+          mirrors.at<float>(y, x) = std::clamp(1.0f - dl / kMirrorLumaTolerance, 0.0f, 1.0f);
+        }
+      cv::blur(mirrors, mirrors, cv::Size(std::max(3, w / 40) | 1, std::max(3, h / 80) | 1));
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i])
+            continue;
+          const float weight = open[std::size_t(x)] * mirrors.at<float>(y, x);
+          const float bound = c[i] * q_plane[i];
+          if (q[i] > bound) q[i] = (1 - weight) * q[i] + weight * bound;
+        }
+    }
+  }
   // Issue 11 item 4: a surface that meets the sky where the photo shows no edge (a calm sea
   // under a hazy sky, a hill fading into it) goes to the sky's distance there, so that the fog,
   // opaque in the sky, is continuous across the boundary (photo/geometry.h, sky_fold).

@@ -62,6 +62,13 @@ struct MR_API EstimateOptions {
   /// returns to its own over the refinement's reach (photo/geometry.h, sky_proximity and
   /// sky_fold), so that the fog, opaque in the sky for haze, is continuous there. false: off.
   bool sky_fold = true;
+  /// With refine_depth: open water (or flat ground) meeting the sky at the horizon, where the
+  /// photo's water mirrors the sky above it, is no nearer than its ground plane's distance over
+  /// the ground's confidence (that is, farther than the plane near the horizon), so its fog
+  /// ramps into the sky's over tens of pixels instead of stepping at the horizon; only under a
+  /// horizon annotated or found with confidence >= 0.2 that open sky meets (issue 11, helper
+  /// sea11; libmr/src/estimate.cpp). false: the refinement's distance as it is.
+  bool sea_horizon = true;
   /// Trees and foliage (issue 11 item 3, photo/vegetation.h), under an open blue sky only:
   /// sky-coloured pixels above the horizon ringed by green foliage (sky under a canopy, between
   /// trunks, through leaves) are sky, so the occluder mesh has holes there and the sun passes; a
