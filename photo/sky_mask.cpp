@@ -36,6 +36,100 @@ cv::Mat display_rgb(ConstImageView photo) {
   return out;
 }
 
+// The open sky's colour: mean and inverse covariance of the display-referred RGB of the sky
+// pixels (`sky`, working size), and their median luma; not valid with too few of them.
+struct SkyColour {
+  bool valid = false;
+  cv::Vec3d mean{0, 0, 0};
+  cv::Matx33d inverse = cv::Matx33d::eye();
+  double median_luma = 0;
+  double low_luma = 0;  ///< 5th percentile: the sky's darkest part (a deep blue zenith)
+};
+
+SkyColour sky_colour(const cv::Mat& small, const cv::Mat& luma, const cv::Mat& sky) {
+  SkyColour out;
+  const int w = small.cols, h = small.rows;
+  std::vector<cv::Vec3d> sky_rgb;
+  std::vector<float> sky_luma;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (sky.at<std::uint8_t>(y, x)) {
+        const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
+        sky_rgb.emplace_back(p[0], p[1], p[2]);
+        sky_luma.push_back(luma.at<float>(y, x));
+      }
+  if (sky_rgb.size() < std::max<std::size_t>(64, std::size_t(0.005 * w * h))) return out;
+  for (const auto& v : sky_rgb) out.mean += v;
+  out.mean *= 1.0 / double(sky_rgb.size());
+  cv::Matx33d cov = cv::Matx33d::zeros();
+  for (const auto& v : sky_rgb) {
+    const cv::Vec3d d = v - out.mean;
+    cov += d * d.t();
+  }
+  cov *= 1.0 / double(sky_rgb.size());
+  for (int k = 0; k < 3; ++k) cov(k, k) += 0.03 * 0.03;  // a floor: a flat sky is not exact
+  out.inverse = cov.inv(cv::DECOMP_CHOLESKY);
+  std::nth_element(sky_luma.begin(), sky_luma.begin() + std::ptrdiff_t(sky_luma.size() / 2),
+                   sky_luma.end());
+  out.median_luma = sky_luma[sky_luma.size() / 2];
+  const std::size_t low = std::size_t(0.05 * double(sky_luma.size() - 1));
+  std::nth_element(sky_luma.begin(), sky_luma.begin() + std::ptrdiff_t(low), sky_luma.end());
+  out.low_luma = sky_luma[low];
+  out.valid = true;
+  return out;
+}
+
+// Issue 11 (snow_birches): snow seen between a birch's branches has the sky's colour and thin
+// structure all around it, but it is the ground seen between them and carries the ground's
+// texture (snow's grain, its drifts' shading), where the sky seen through foliage or a lattice is
+// as smooth as the open sky beside it. Which components (labels 1..m-1 of `labels`, those with
+// `candidate`) are: their per-pixel gradient (`pixel_gradient`, working size), away from the
+// structure around them (neither sky nor a component: the gradient's blur, sigma 1 px at full
+// resolution, spreads a member's edge about 3 px, `s` the working scale), at most `ratio` x the
+// open sky's median per-pixel gradient, clamped to [floor, ceiling] (the sky core's limit); the
+// median of those pixels, or the smoothest tenth of a component too narrow to have any.
+std::vector<std::uint8_t> as_smooth_as_the_sky(const cv::Mat& labels, int m,
+                                               const std::vector<std::uint8_t>& candidate,
+                                               const cv::Mat& sky, const cv::Mat& pixel_gradient,
+                                               double s, double ratio, double floor,
+                                               double ceiling) {
+  const int w = labels.cols, h = labels.rows;
+  std::vector<std::uint8_t> out(std::size_t(m), 0);
+  std::vector<float> sky_gradient;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (sky.at<std::uint8_t>(y, x)) sky_gradient.push_back(pixel_gradient.at<float>(y, x));
+  if (sky_gradient.empty()) return out;
+  const std::size_t mid = sky_gradient.size() / 2;
+  std::nth_element(sky_gradient.begin(), sky_gradient.begin() + std::ptrdiff_t(mid),
+                   sky_gradient.end());
+  const double limit = std::clamp(ratio * sky_gradient[mid], floor, ceiling);
+  const int fringe = 1 + int(std::ceil(3.0 * s));
+  cv::Mat structure(h, w, CV_8U), near_structure;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      structure.at<std::uint8_t>(y, x) = !sky.at<std::uint8_t>(y, x) && labels.at<int>(y, x) == 0;
+  cv::dilate(
+      structure, near_structure,
+      cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * fringe + 1, 2 * fringe + 1)));
+  std::vector<std::vector<float>> inner(static_cast<std::size_t>(m)),
+      edge(static_cast<std::size_t>(m));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (const int l = labels.at<int>(y, x); l > 0 && candidate[std::size_t(l)])
+        (near_structure.at<std::uint8_t>(y, x) ? edge : inner)[std::size_t(l)].push_back(
+            pixel_gradient.at<float>(y, x));
+  for (int i = 1; i < m; ++i) {
+    const bool narrow = inner[std::size_t(i)].empty();
+    std::vector<float>& v = narrow ? edge[std::size_t(i)] : inner[std::size_t(i)];
+    if (v.empty()) continue;
+    const std::size_t q = narrow ? v.size() / 10 : v.size() / 2;
+    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(q), v.end());
+    out[std::size_t(i)] = v[q] <= limit;
+  }
+  return out;
+}
+
 }  // namespace
 
 SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
@@ -249,10 +343,28 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       std::nth_element(tex.begin(), tex.begin() + std::ptrdiff_t(q), tex.end());
       const float limit = std::clamp(float(o.core_texture_factor) * tex[q],
                                      float(o.min_core_texture), float(o.max_texture));
+      const cv::Mat patch =
+          cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * win + 1, 2 * win + 1));
       cv::Mat core = sky & (wide <= limit);
-      cv::morphologyEx(
-          core, core, cv::MORPH_OPEN,
-          cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * win + 1, 2 * win + 1)));
+      cv::morphologyEx(core, core, cv::MORPH_OPEN, patch);
+      // Issue 11 (a snow field seen from above, a concrete slab): a sky is smooth down to the
+      // camera's noise somewhere in every patch of its core, a textured surface nowhere (snow's
+      // grain, however even, is several times rougher). Where such a surface is all the photo
+      // offers as sky, its own 5th percentile set the floor above and its whole area passed; so
+      // a core patch is kept only when it holds a patch (as wide) at most `max_core_floor`
+      // rough. Where the sky's floor is lower the limit is already that low: no change.
+      if (o.max_core_floor > 0 && limit > o.max_core_floor) {
+        cv::Mat smooth = sky & (wide <= o.max_core_floor), cl;
+        cv::morphologyEx(smooth, smooth, cv::MORPH_OPEN, patch);
+        const int nc = cv::connectedComponents(core, cl, 8, CV_32S);
+        std::vector<std::uint8_t> has_smooth(std::size_t(nc), 0);
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x)
+            if (smooth.at<std::uint8_t>(y, x)) has_smooth[cl.at<int>(y, x)] = 1;
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x)
+            if (!has_smooth[cl.at<int>(y, x)]) core.at<std::uint8_t>(y, x) = 0;
+      }
       const cv::Mat step = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
       const int steps = int(std::lround(o.core_grow * win));
       cv::Mat grown;
@@ -372,30 +484,11 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   // the gaps are for, comes with a blue sky).
   std::size_t gap_pixels_working = 0;
   if (o.max_gap_fraction > 0 && blue_sky) {
-    std::vector<cv::Vec3d> sky_rgb;
-    std::vector<float> sky_luma;
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x)
-        if (sky.at<std::uint8_t>(y, x)) {
-          const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
-          sky_rgb.emplace_back(p[0], p[1], p[2]);
-          sky_luma.push_back(luma.at<float>(y, x));
-        }
-    if (sky_rgb.size() >= std::max<std::size_t>(64, std::size_t(0.005 * w * h))) {
-      cv::Vec3d mean(0, 0, 0);
-      for (const auto& v : sky_rgb) mean += v;
-      mean *= 1.0 / double(sky_rgb.size());
-      cv::Matx33d cov = cv::Matx33d::zeros();
-      for (const auto& v : sky_rgb) {
-        const cv::Vec3d d = v - mean;
-        cov += d * d.t();
-      }
-      cov *= 1.0 / double(sky_rgb.size());
-      for (int k = 0; k < 3; ++k) cov(k, k) += 0.03 * 0.03;  // a floor: a flat sky is not exact
-      const cv::Matx33d inverse = cov.inv(cv::DECOMP_CHOLESKY);
-      std::nth_element(sky_luma.begin(), sky_luma.begin() + std::ptrdiff_t(sky_luma.size() / 2),
-                       sky_luma.end());
-      const double median_luma = sky_luma[sky_luma.size() / 2];
+    const SkyColour model = sky_colour(small, luma, sky);
+    if (model.valid) {
+      const cv::Vec3d& mean = model.mean;
+      const cv::Matx33d& inverse = model.inverse;
+      const double median_luma = model.median_luma;
       cv::Mat gap_cand = colour & (1 - sky);
       cv::Mat gl, gs, gc;
       const int m = cv::connectedComponentsWithStats(gap_cand, gl, gs, gc, 8, CV_32S);
@@ -433,9 +526,137 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
           }
         if (around > 0 && 2 * textured >= around) gap[i] = 1;
       }
+      // ... and as smooth as the open sky (snow seen between twigs is not).
+      if (o.opening_max_texture_ratio > 0) {
+        const std::vector<std::uint8_t> smooth =
+            as_smooth_as_the_sky(gl, m, gap, sky, pixel_gradient, s, o.opening_max_texture_ratio,
+                                 o.min_core_texture, o.max_texture);
+        for (int i = 1; i < m; ++i) gap[i] = gap[i] && smooth[i];
+      }
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
           if (gap[gl.at<int>(y, x)] && above(x, y)) {
+            sky.at<std::uint8_t>(y, x) = 1;
+            ++gap_pixels_working;
+          }
+    }
+  }
+  // Issue 11: sky seen through a lattice or between cables (a launch tower, a suspension
+  // bridge's hangers, a pylon). Each opening is a patch of the sky's own colour, but the
+  // texture window around it takes in the thin members, so the sky's core never reaches it, and
+  // the openings run into one another (a member one pixel wide does not cut an 8-connected
+  // component), too large for the gaps above. Left out, the whole lattice was one surface:
+  // in haze its sky stayed blue inside a hard outline while the open sky around it turned the
+  // fog's grey. Such a component is sky when it has the open sky's colour and what separates
+  // it from the sky (the structure within about a member's width of it) is thin: narrower than
+  // `thin_member_width` (a morphological opening removes it) in all but `thin_max_thick` of its
+  // pixels, and bounds it along at least `thin_min_bounded` of its ring (sky-coloured rock or a
+  // bluish wall meeting the sky has mostly open sky or thick structure around it), and it is
+  // as smooth as the open sky (as_smooth_as_the_sky: snow seen between a birch's twigs is
+  // bounded just so, but grainy). Openings reached only through other openings follow once
+  // those are sky.
+  if (o.thin_member_width > 0 && blue_sky) {
+    const SkyColour model = sky_colour(small, luma, sky);
+    if (model.valid) {
+      const int member = std::max(3, int(std::lround(o.thin_member_width * std::hypot(w, h))) | 1);
+      const int reach = member;  // across a member (and its mixed fringe) to the sky beyond
+      cv::Mat open_cand = colour & (1 - sky), structure(h, w, CV_8U, cv::Scalar(0)), thick;
+      // Each pixel of the sky's colour (a component's mean would mix the sky in a lattice's
+      // openings with the pale haze along the horizon they run into), no darker than the
+      // sky's darkest part (a tower's top stands against the deep blue zenith).
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          if (!open_cand.at<std::uint8_t>(y, x)) continue;
+          const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
+          const cv::Vec3d d = cv::Vec3d(p[0], p[1], p[2]) - model.mean;
+          open_cand.at<std::uint8_t>(y, x) =
+              (d.t() * model.inverse * d)(0) <= o.gap_max_sigma * o.gap_max_sigma &&
+              luma.at<float>(y, x) >= o.gap_min_luma * model.low_luma;
+        }
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          structure.at<std::uint8_t>(y, x) =
+              !sky.at<std::uint8_t>(y, x) && !open_cand.at<std::uint8_t>(y, x);
+      cv::morphologyEx(structure, thick, cv::MORPH_OPEN,
+                       cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(member, member)));
+      // Below the horizon is the ground, never a member; an opening that reaches it is not
+      // sky (the sky mask ends at the horizon: sky there would end in a line across the
+      // lattice).
+      cv::Mat ground(h, w, CV_8U, cv::Scalar(0));
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (!above(x, y)) ground.at<std::uint8_t>(y, x) = 1;
+      cv::Mat ol, os, oc;
+      const int m = cv::connectedComponentsWithStats(open_cand, ol, os, oc, 8, CV_32S);
+      std::vector<cv::Vec3d> sum(std::size_t(m), cv::Vec3d(0, 0, 0));
+      std::vector<double> luma_sum(std::size_t(m), 0.0);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (const int l = ol.at<int>(y, x); l > 0) {
+            const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
+            sum[l] += cv::Vec3d(p[0], p[1], p[2]);
+            luma_sum[l] += luma.at<float>(y, x);
+          }
+      std::vector<std::uint8_t> sky_coloured(std::size_t(m), 0), made(std::size_t(m), 0);
+      for (int i = 1; i < m; ++i) {
+        const double area = os.at<int>(i, cv::CC_STAT_AREA);
+        const cv::Vec3d d = sum[i] * (1.0 / area) - model.mean;
+        sky_coloured[i] = (d.t() * model.inverse * d)(0) <= o.gap_max_sigma * o.gap_max_sigma &&
+                          luma_sum[i] / area >= o.gap_min_luma * model.low_luma;
+      }
+      if (o.opening_max_texture_ratio > 0) {
+        const std::vector<std::uint8_t> smooth =
+            as_smooth_as_the_sky(ol, m, sky_coloured, sky, pixel_gradient, s,
+                                 o.opening_max_texture_ratio, o.min_core_texture, o.max_texture);
+        for (int i = 1; i < m; ++i) sky_coloured[i] = sky_coloured[i] && smooth[i];
+      }
+      // The ring: every pixel within `reach` of a component's pixels, weighted by how many of
+      // them it is near (cheap, and it weights the ring by closeness).
+      std::vector<cv::Point> disk;
+      for (int dy = -reach; dy <= reach; ++dy)
+        for (int dx = -reach; dx <= reach; ++dx)
+          if (dx * dx + dy * dy <= reach * reach && (dx || dy)) disk.emplace_back(dx, dy);
+      std::vector<double> ring_sky(std::size_t(m), 0.0), ring_thin(std::size_t(m), 0.0),
+          ring_thick(std::size_t(m), 0.0), ring_all(std::size_t(m), 0.0);
+      std::vector<std::uint8_t> reaches_ground(std::size_t(m), 0);
+      for (int round = 0; round < 16; ++round) {
+        std::fill(ring_sky.begin(), ring_sky.end(), 0.0);
+        std::fill(ring_thin.begin(), ring_thin.end(), 0.0);
+        std::fill(ring_thick.begin(), ring_thick.end(), 0.0);
+        std::fill(ring_all.begin(), ring_all.end(), 0.0);
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x) {
+            const int l = ol.at<int>(y, x);
+            if (l == 0 || made[l] || !sky_coloured[l]) continue;
+            for (const cv::Point& d : disk) {
+              const int xx = x + d.x, yy = y + d.y;
+              if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+              const int k = ol.at<int>(yy, xx);
+              if (k == l) continue;
+              ring_all[l] += 1;
+              if (sky.at<std::uint8_t>(yy, xx) || (k > 0 && made[k]))
+                ring_sky[l] += 1;
+              else if (ground.at<std::uint8_t>(yy, xx))
+                reaches_ground[l] = 1;
+              else if (thick.at<std::uint8_t>(yy, xx))
+                ring_thick[l] += 1;
+              else if (structure.at<std::uint8_t>(yy, xx))
+                ring_thin[l] += 1;
+            }
+          }
+        bool changed = false;
+        for (int i = 1; i < m; ++i) {
+          if (made[i] || !sky_coloured[i] || reaches_ground[i] || !(ring_sky[i] > 0)) continue;
+          const double members = ring_thin[i] + ring_thick[i];
+          if (members >= o.thin_min_bounded * ring_all[i] &&
+              ring_thick[i] <= o.thin_max_thick * members)
+            made[i] = 1, changed = true;
+        }
+        if (!changed) break;
+      }
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (made[ol.at<int>(y, x)]) {
             sky.at<std::uint8_t>(y, x) = 1;
             ++gap_pixels_working;
           }

@@ -44,6 +44,10 @@ struct SkyMaskOptions {
   double core_texture_factor = 4.0;
   double min_core_texture = 0.003;
   double core_grow = 2.0;
+  /// ... and each core patch must hold a patch (two windows across) at most this rough: a sky
+  /// is smooth down to the camera's noise somewhere, snow's grain or a concrete slab nowhere
+  /// (when such a surface is all the "sky", its own 5th percentile sets the limit above). 0: off.
+  double max_core_floor = 0.003;
   /// Blue candidates not touching the top border (touching a side one, or larger than 0.2 % of
   /// the image) are sky only when blue sky touches the top border. false: always.
   bool detached_needs_top_sky = true;
@@ -66,6 +70,22 @@ struct SkyMaskOptions {
   double max_gap_fraction = 3e-3;
   double gap_max_sigma = 3.0;
   double gap_min_luma = 0.8;
+  /// Both the gaps above and the openings of a lattice (below) must be as smooth as the open
+  /// sky: their median per-pixel gradient away from the structure around them (or their
+  /// smoothest tenth's, when too narrow) at most this x the open sky's median, clamped to
+  /// [min_core_texture, max_texture]: snow or ground seen between branches carries its texture.
+  /// 0: off.
+  double opening_max_texture_ratio = 4.0;
+  /// Sky seen through a lattice or between cables: a sky-coloured component (the gap test's
+  /// colour bounds) that touches the sky across structure narrower than `thin_member_width` x
+  /// the working image's diagonal (a morphological opening of that diameter removes it) is sky
+  /// when that thin structure bounds at least `thin_min_bounded` of the pixels around it (within
+  /// about a member's width) and structure that is not thin at most `thin_max_thick` of the
+  /// structure there, and it does not reach the horizon (the sky ends there: a lattice's sky
+  /// would end in a line across it). Only under a blue sky. 0: off.
+  double thin_member_width = 0.008;
+  double thin_min_bounded = 0.25;
+  double thin_max_thick = 0.2;
   /// Along the mask's edges, unmix each pixel against the colours on both sides (the two-colour
   /// matting model) where the sides differ, so the matte sits on the photo's edge and is as wide
   /// as it (issue 11 item 4); false: the guided filter's output alone.
@@ -80,7 +100,7 @@ struct SkyMask {
   /// and below the horizon.
   std::vector<float> alpha;
   std::size_t pixels = 0;      ///< sky pixels
-  std::size_t gap_pixels = 0;  ///< of them, sky seen through foliage (enclosed gaps)
+  std::size_t gap_pixels = 0;  ///< of them, sky seen through foliage or a lattice (gaps)
 };
 
 /// The sky of `photo` (scene-linear, >= 1 channel), only above the horizon through the two

@@ -31,6 +31,7 @@
 #include "photo/sky_mask.h"
 #include "render/physics/scattering.h"
 #include "tests/display_luma.h"
+#include "tests/gallery_look.h"
 
 namespace mr {
 namespace {
@@ -219,10 +220,7 @@ TEST(SkyLight, UniformEnvironmentOfAnotherRadianceIsTheClosedForm) {
   EXPECT_LT(worst, 1e-5);
 }
 
-// Display-referred [0, 1] colour -> scene-linear (gamma 2.2).
-float linear(float display) {
-  return std::pow(display, 2.2f);
-}
+using test::linear;  // display-referred [0, 1] -> scene-linear (tests/gallery_look.h)
 
 // A sunset photo: sunset orange at the horizon to blue at the top, a dark meadow below.
 Image sunset_photo(const FogScene& scene) {
@@ -302,52 +300,9 @@ TEST(SkyLight, SunsetGradientSurvivesHazeWithNoCreatedEdge) {
   EXPECT_LE(edges, 2e-4);
 }
 
-// The gallery's created-edge measure exactly (gallery/measures.py: display luma of the clamped,
-// gamma-2.2 values, Gaussian blur sigma 1 px (radius 3, edges replicated), central differences;
-// created where the fogged image's gradient is more than twice the photo's and above 0.01). With
-// `map`: the created pixels (1) for a picture to look at.
-double gallery_created_edges(const Image& photo, const Image& fogged, Image* map = nullptr) {
-  auto strength = [](const Image& img) {
-    cv::Mat l = test::display_luma(img), b, g(l.rows, l.cols, CV_32F);
-    cv::GaussianBlur(l, b, cv::Size(7, 7), 1.0, 1.0, cv::BORDER_REPLICATE);
-    for (int y = 0; y < l.rows; ++y)
-      for (int x = 0; x < l.cols; ++x) {
-        const int x0 = std::max(0, x - 1), x1 = std::min(l.cols - 1, x + 1);
-        const int y0 = std::max(0, y - 1), y1 = std::min(l.rows - 1, y + 1);
-        const float gx = 0.5f * (b.at<float>(y, x1) - b.at<float>(y, x0));
-        const float gy = 0.5f * (b.at<float>(y1, x) - b.at<float>(y0, x));
-        g.at<float>(y, x) = std::hypot(gx, gy);
-      }
-    return g;
-  };
-  const cv::Mat gp = strength(photo), gf = strength(fogged);
-  std::size_t created = 0;
-  if (map) *map = Image(photo.width(), photo.height(), 3);
-  for (int y = 0; y < gp.rows; ++y)
-    for (int x = 0; x < gp.cols; ++x) {
-      const bool c = gf.at<float>(y, x) > 2 * gp.at<float>(y, x) && gf.at<float>(y, x) > 0.01f;
-      created += c;
-      if (map)
-        for (int k = 0; k < 3; ++k)
-          map->at(x, y, k) = c ? float(k == 0) : 0.3f * std::min(1.0f, fogged.at(x, y, k));
-    }
-  return double(created) / double(gp.total());
-}
-
-// As `mr fog --depth auto` with a gallery look (gallery/looks: sky light 'auto', i.e. by
-// direction with the estimate's sky radiance): the automatic estimate, its matte, the fog.
-FogLayers fog_auto_look(const Image& photo, const Camera& camera, const SceneEstimate& est,
-                        double visibility_m, double top_m, double g) {
-  FogScene s = est.scene;
-  const float sigma = float(extinction_from_visibility(visibility_m));
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.g = g;
-  s.medium.layer_top_m = top_m;
-  s.render.backend = Backend::cpu;
-  s.lighting.sky_by_direction = true;
-  if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
-  return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
-}
+// The gallery's created-edge measure and its haze / dense looks on an automatic estimate.
+using test::fog_auto_look;
+using test::gallery_created_edges;
 
 // The sun bank look (gallery/looks/sun_bank.json): 90 m visibility, height fog (scale 12 m)
 // under a 40 m top, g = 0.6, the sun at azimuth 20, elevation 8 degrees.

@@ -1,0 +1,74 @@
+// The gallery's haze and dense looks on an automatic estimate (`mr fog --depth auto` with
+// gallery/looks: sky light 'auto', i.e. by direction with the estimate's sky radiance) and its
+// created-edge measure (gallery/measures.py), for synthetic photos of the gallery's failure
+// classes; shared by the sky light and the sky-through-a-lattice tests.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+
+#include "mr/estimate.h"
+#include "mr/fog.h"
+#include "mr/image.h"
+#include "mr/scattering.h"
+#include "tests/display_luma.h"
+
+namespace mr::test {
+
+// Display-referred [0, 1] colour -> scene-linear (gamma 2.2).
+inline float linear(float display) {
+  return std::pow(display, 2.2f);
+}
+
+// The gallery's created-edge measure exactly (gallery/measures.py: display luma of the clamped,
+// gamma-2.2 values, Gaussian blur sigma 1 px (radius 3, edges replicated), central differences;
+// created where the fogged image's gradient is more than twice the photo's and above 0.01). With
+// `map`: the created pixels (1) for a picture to look at.
+inline double gallery_created_edges(const Image& photo, const Image& fogged, Image* map = nullptr) {
+  auto strength = [](const Image& img) {
+    cv::Mat l = display_luma(img), b, g(l.rows, l.cols, CV_32F);
+    cv::GaussianBlur(l, b, cv::Size(7, 7), 1.0, 1.0, cv::BORDER_REPLICATE);
+    for (int y = 0; y < l.rows; ++y)
+      for (int x = 0; x < l.cols; ++x) {
+        const int x0 = std::max(0, x - 1), x1 = std::min(l.cols - 1, x + 1);
+        const int y0 = std::max(0, y - 1), y1 = std::min(l.rows - 1, y + 1);
+        const float gx = 0.5f * (b.at<float>(y, x1) - b.at<float>(y, x0));
+        const float gy = 0.5f * (b.at<float>(y1, x) - b.at<float>(y0, x));
+        g.at<float>(y, x) = std::hypot(gx, gy);
+      }
+    return g;
+  };
+  const cv::Mat gp = strength(photo), gf = strength(fogged);
+  std::size_t created = 0;
+  if (map) *map = Image(photo.width(), photo.height(), 3);
+  for (int y = 0; y < gp.rows; ++y)
+    for (int x = 0; x < gp.cols; ++x) {
+      const bool c = gf.at<float>(y, x) > 2 * gp.at<float>(y, x) && gf.at<float>(y, x) > 0.01f;
+      created += c;
+      if (map)
+        for (int k = 0; k < 3; ++k)
+          map->at(x, y, k) = c ? float(k == 0) : 0.3f * std::min(1.0f, fogged.at(x, y, k));
+    }
+  return double(created) / double(gp.total());
+}
+
+// As `mr fog --depth auto` with a gallery look (gallery/looks: sky light 'auto', i.e. by
+// direction with the estimate's sky radiance): the automatic estimate, its matte, the fog.
+inline FogLayers fog_auto_look(const Image& photo, const Camera& camera, const SceneEstimate& est,
+                               double visibility_m, double top_m, double g) {
+  FogScene s = est.scene;
+  const float sigma = float(extinction_from_visibility(visibility_m));
+  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  s.medium.g = g;
+  s.medium.layer_top_m = top_m;
+  s.render.backend = Backend::cpu;
+  s.lighting.sky_by_direction = true;
+  if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
+  return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
+}
+
+}  // namespace mr::test
