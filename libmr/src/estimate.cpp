@@ -380,14 +380,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     // land seen under it), the horizon goes below the frame and the bank is sky
     // (photo/clouds.h; a bank over land is left alone: CloudBankOptions::lower_to_land).
     if (g.horizon_lowered_px == 0) {
-      if (probe.sky.empty()) {
-        const double below = h + 1.0;
-        probe = photo::estimate_sky_mask(photo->view(),
-                                         {PixelPoint{0, below}, PixelPoint{w - 1.0, below}});
-      }
-      // The sky: what the mask found above the guess, and the probe's below it.
-      std::vector<std::uint8_t> sky = probe.sky;
-      for (std::size_t i = 0; i < sky.size() && i < mask.sky.size(); ++i) sky[i] |= mask.sky[i];
+      // The sky: what the mask found above the guess, and the probe's below it when it was
+      // run (the bank's tests read bank and sky below the guess alike; a probe of its own
+      // would cost a third of the estimate's CPU time on every photo under the fall-back).
+      std::vector<std::uint8_t> sky = mask.sky;
+      for (std::size_t i = 0; i < sky.size() && i < probe.sky.size(); ++i) sky[i] |= probe.sky[i];
       photo::CloudBank bank = photo::find_cloud_bank(photo->view(), g.horizon, sky);
       if (bank.drop_px > 0) {
         // The sky found above the guess stays sky: with the line below the frame the mask
