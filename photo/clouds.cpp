@@ -188,6 +188,32 @@ CloudBank find_cloud_bank(ConstImageView photo, const std::array<PixelPoint, 2>&
       open_at < options.min_open_at_guess * columns ||
       double(above_sky) < options.min_sky_above * double(std::max<std::size_t>(1, above_n)))
     return result;
+  // Not a straight line under the sky (a sea's horizon): the bank's outline is ragged.
+  {
+    std::vector<double> xs, tops;
+    for (int x = 0; x < w; ++x) {
+      const int row = guess_row(x);
+      if (row < 0 || row >= h - 1 || kind[std::size_t(row) * w + x] != 1) continue;
+      for (int y = row; y >= 0; --y)
+        if (kind[std::size_t(y) * w + x] == 2) {
+          xs.push_back(x), tops.push_back(y);
+          break;
+        }
+    }
+    if (xs.size() < 8) return result;
+    double mx = 0, my = 0;
+    for (std::size_t i = 0; i < xs.size(); ++i) mx += xs[i], my += tops[i];
+    mx /= double(xs.size()), my /= double(xs.size());
+    double sxx = 0, sxy = 0;
+    for (std::size_t i = 0; i < xs.size(); ++i)
+      sxx += (xs[i] - mx) * (xs[i] - mx), sxy += (xs[i] - mx) * (tops[i] - my);
+    const double b = sxx > 0 ? sxy / sxx : 0.0;
+    std::vector<double> residual(xs.size());
+    for (std::size_t i = 0; i < xs.size(); ++i) residual[i] = tops[i] - (my + b * (xs[i] - mx));
+    std::sort(residual.begin(), residual.end());
+    const double iqr = residual[3 * residual.size() / 4] - residual[residual.size() / 4];
+    if (iqr < options.min_outline_spread * h) return result;
+  }
   // Down each column through bank or sky to the land.
   std::vector<int> reach;
   for (int x = 0; x < w; ++x) {

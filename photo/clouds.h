@@ -100,6 +100,12 @@ struct CloudBankOptions {
   double min_open_at_guess = 0.6;
   /// Ringed by sky: sky is at least this fraction of the pixels above the guess.
   double min_sky_above = 0.02;
+  /// A bank's upper outline under the sky is ragged; a sea's or a flat plain's horizon is a
+  /// straight line (a calm grey sea filling the frame below the guess is smooth and bluish as
+  /// well): in the columns where the bank is at the guess with sky above it, the lowest sky
+  /// row's residuals from their least-squares line must have an interquartile range of at
+  /// least this fraction of the height.
+  double min_outline_spread = 0.02;
   /// Below the guess, each column is followed down through bank or sky until `stop_run`
   /// rows in a row are neither (the land); the lowered line is the median of those rows over
   /// the columns where bank or sky is at the guess. It must be at least `min_drop_fraction`

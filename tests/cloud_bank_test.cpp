@@ -260,11 +260,12 @@ TEST(CloudBank, FindCloudBankGuards) {
     std::uniform_real_distribution<float> grain(-0.15f, 0.15f);
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
-        Rgb c{0.1f, 0.25f, 0.7f};                     // blue sky
-        if (y >= 30 && x >= 20 && x < 190) c = bank;  // the bank, rows 30 to the land
-        if (y >= land) c = ground;                    // the land
+        Rgb c{0.1f, 0.25f, 0.7f};                      // blue sky
+        const int top = 22 + (x * 7) % 17;             // a ragged upper outline
+        if (y >= top && x >= 20 && x < 190) c = bank;  // the bank, down to the land
+        if (y >= land) c = ground;                     // the land
         const bool grain_here = (textured_land && y >= land) ||
-                                (textured_bank && y >= 30 && x >= 20 && x < 190 && y < land);
+                                (textured_bank && y >= top && x >= 20 && x < 190 && y < land);
         const float gr = grain_here ? grain(rng) : 0.0f;  // texture
         for (int k = 0; k < 3; ++k) photo.at(x, y, k) = std::max(0.0f, c[k] * (1 + gr));
       }
@@ -313,6 +314,16 @@ TEST(CloudBank, FindCloudBankGuards) {
   {
     const Image p = make(grey_blue, grey_blue, false, false);
     EXPECT_EQ(photo::find_cloud_bank(p.view(), line, sky_of(p)).drop_px, h - 1 - guess);
+  }
+  // A calm grey-blue sea from a straight horizon at row 30 to the frame's bottom: its outline
+  // under the sky is a line, not a bank's ragged one.
+  {
+    Image p = make(grey_blue, grey_blue, false, false);
+    const Rgb blue{0.1f, 0.25f, 0.7f};
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        for (int k = 0; k < 3; ++k) p.at(x, y, k) = y < 30 ? blue[k] : grey_blue[k];
+    EXPECT_EQ(photo::find_cloud_bank(p.view(), line, sky_of(p)).drop_px, 0.0);
   }
   // No sky above the guess (an overcast grey frame, a wall): nothing rings the bank.
   {
