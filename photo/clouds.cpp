@@ -17,7 +17,8 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
   const std::size_t n = std::size_t(std::max(0, w)) * std::size_t(std::max(0, h));
   std::vector<std::uint8_t> out(n, 0);
   if (n == 0 || photo.channels < 3 || distance_ratio.size() != n || above.size() != n ||
-      (!foliage.empty() && foliage.size() != n) || (!standing.empty() && standing.size() != n))
+      (!foliage.empty() && foliage.size() != n) || (!standing.empty() && standing.size() != n) ||
+      (!options.bank.empty() && options.bank.size() != n))
     return out;
   auto surface = [&](std::size_t i) {
     return std::isfinite(distance_ratio[i]) && distance_ratio[i] > 0;
@@ -35,7 +36,7 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
   // Pixels with the horizon or the frame's bottom right below; of them, on the frame's bottom.
   std::vector<int> contact(std::size_t(m), 0), bottom(std::size_t(m), 0);
   std::vector<int> ring_sky(std::size_t(m), 0), ring_frame(std::size_t(m), 0);
-  std::vector<int> bluish(std::size_t(m), 0), leafy(std::size_t(m), 0);
+  std::vector<int> bluish(std::size_t(m), 0), leafy(std::size_t(m), 0), banked(std::size_t(m), 0);
   std::vector<double> saturation(std::size_t(m), 0.0);
   std::vector<std::vector<float>> ratios;
   ratios.resize(std::size_t(m));
@@ -57,6 +58,7 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
       saturation[std::size_t(l)] += hi > 0 ? (hi - lo) / hi : 0.0f;
       bluish[std::size_t(l)] += c[2] > c[0] && c[2] >= c[1];
       leafy[std::size_t(l)] += !foliage.empty() && foliage[i] != 0;
+      banked[std::size_t(l)] += !options.bank.empty() && options.bank[i] != 0;
       bool next_to_sky = false;
       for (int dy = -1; dy <= 1 && !next_to_sky; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
@@ -86,6 +88,13 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
                          !standing_any[k] && 2 * bluish[k] > area && 2 * leafy[k] < area &&
                          area >= options.min_bank_fraction * double(n) &&
                          contact[k] >= options.min_bank_contact * w;
+    // The bank the guessed horizon was lowered under: ringed by sky and with the land (or the
+    // frame's bottom) below it by the horizon step's evidence.
+    if (2 * banked[k] >= area && coloured && ring_sky[k] > 0) {
+      cloud[k] = 2;
+      any = true;
+      continue;
+    }
     if (!(contact[k] == 0 || cut_off) || ring_sky[k] == 0) continue;
     if (!(ring_sky[k] >= options.min_sky_ring * (ring_sky[k] + ring_frame[k]))) continue;
     std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
@@ -95,8 +104,158 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
   if (!any) return out;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
-      out[std::size_t(y) * w + x] = cloud[std::size_t(labels.at<int>(y, x))];
+      out[std::size_t(y) * w + x] = cloud[std::size_t(labels.at<int>(y, x))] != 0;
+  // Of a bank's component, the parts that are not the bank's and stand on the horizon or the
+  // frame's bottom (a ridge, a building, a tree rising from the land into the bank) stay.
+  cv::Mat other(h, w, CV_8U, cv::Scalar(0));
+  bool banks = false;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      const bool in_bank = cloud[std::size_t(labels.at<int>(y, x))] == 2;
+      banks |= in_bank;
+      other.at<std::uint8_t>(y, x) = in_bank && !options.bank[i];
+    }
+  if (!banks) return out;
+  cv::Mat parts, part_stats, part_centroids;
+  const int count =
+      cv::connectedComponentsWithStats(other, parts, part_stats, part_centroids, 8, CV_32S);
+  std::vector<std::uint8_t> stands(std::size_t(count), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int l = parts.at<int>(y, x);
+      if (l > 0 && (y + 1 >= h || !above[std::size_t(y + 1) * w + x]) &&
+          part_stats.at<int>(l, cv::CC_STAT_AREA) >= options.min_standing_fraction * double(n))
+        stands[std::size_t(l)] = 1;
+    }
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (stands[std::size_t(parts.at<int>(y, x))]) out[std::size_t(y) * w + x] = 0;
   return out;
+}
+
+CloudBank find_cloud_bank(ConstImageView photo, const std::array<PixelPoint, 2>& guess,
+                          const std::vector<std::uint8_t>& sky, const CloudBankOptions& options) {
+  CloudBank result;
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(std::max(0, w)) * std::size_t(std::max(0, h));
+  if (n == 0 || photo.channels < 3 || sky.size() != n || h < 8) return result;
+  const double slope = (guess[1][1] - guess[0][1]) / std::max(1.0, guess[1][0] - guess[0][0]);
+  if (!std::isfinite(slope) || !std::isfinite(guess[0][1])) return result;
+  auto guess_row = [&](int x) { return int(std::floor(guess[0][1] + (x - guess[0][0]) * slope)); };
+  // Cloud-like pixels: grey or bluish, not green, smooth.
+  cv::Mat luma(h, w, CV_32F);
+  std::vector<std::uint8_t> tint(n, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* p = photo.pixel(x, y);
+      float c[3];
+      for (int k = 0; k < 3; ++k) c[k] = std::pow(std::clamp(p[k], 0.0f, 1.0f), 1 / 2.2f);
+      luma.at<float>(y, x) = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
+      const float hi = std::max({c[0], c[1], c[2]}), lo = std::min({c[0], c[1], c[2]});
+      const float sat = hi > 0 ? (hi - lo) / hi : 0.0f;
+      const bool green = c[1] > c[0] && c[1] > c[2];
+      const bool blue = c[2] > c[0] && c[2] >= c[1];
+      tint[std::size_t(y) * w + x] = !green && (blue || sat <= options.max_saturation);
+    }
+  cv::Mat gx, gy, mag, texture;
+  cv::Sobel(luma, gx, CV_32F, 1, 0, 1, 0.5);  // central differences
+  cv::Sobel(luma, gy, CV_32F, 0, 1, 1, 0.5);
+  cv::magnitude(gx, gy, mag);
+  const int win = std::max(3, options.texture_window | 1);
+  cv::blur(mag, texture, cv::Size(win, win), cv::Point(-1, -1), cv::BORDER_REPLICATE);
+  // 0: land (neither), 1: bank (cloud-like, not sky), 2: sky.
+  std::vector<std::uint8_t> kind(n, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      kind[i] = sky[i] ? 2 : tint[i] && texture.at<float>(y, x) <= options.max_texture ? 1 : 0;
+    }
+  // The bank sits on the guess, with sky above it.
+  int bank_at = 0, open_at = 0, columns = 0;
+  std::size_t above_n = 0, above_sky = 0;
+  for (int x = 0; x < w; ++x) {
+    const int row = guess_row(x);
+    for (int y = 0; y < std::min(row + 1, h); ++y)
+      ++above_n, above_sky += sky[std::size_t(y) * w + x];
+    if (row < 0 || row >= h - 1) continue;
+    ++columns;
+    const std::uint8_t k = kind[std::size_t(row) * w + x];
+    bank_at += k == 1;
+    open_at += k != 0;
+  }
+  if (columns == 0 || bank_at < options.min_bank_at_guess * columns ||
+      open_at < options.min_open_at_guess * columns ||
+      double(above_sky) < options.min_sky_above * double(std::max<std::size_t>(1, above_n)))
+    return result;
+  // Not a straight line under the sky (a sea's horizon): the bank's outline is ragged.
+  {
+    std::vector<double> xs, tops;
+    for (int x = 0; x < w; ++x) {
+      const int row = guess_row(x);
+      if (row < 0 || row >= h - 1 || kind[std::size_t(row) * w + x] != 1) continue;
+      for (int y = row; y >= 0; --y)
+        if (kind[std::size_t(y) * w + x] == 2) {
+          xs.push_back(x), tops.push_back(y);
+          break;
+        }
+    }
+    if (xs.size() < 8) return result;
+    double mx = 0, my = 0;
+    for (std::size_t i = 0; i < xs.size(); ++i) mx += xs[i], my += tops[i];
+    mx /= double(xs.size()), my /= double(xs.size());
+    double sxx = 0, sxy = 0;
+    for (std::size_t i = 0; i < xs.size(); ++i)
+      sxx += (xs[i] - mx) * (xs[i] - mx), sxy += (xs[i] - mx) * (tops[i] - my);
+    const double b = sxx > 0 ? sxy / sxx : 0.0;
+    std::vector<double> residual(xs.size());
+    for (std::size_t i = 0; i < xs.size(); ++i) residual[i] = tops[i] - (my + b * (xs[i] - mx));
+    std::sort(residual.begin(), residual.end());
+    const double iqr = residual[3 * residual.size() / 4] - residual[residual.size() / 4];
+    if (iqr < options.min_outline_spread * h) return result;
+  }
+  // Down each column through bank or sky to the land.
+  std::vector<int> reach;
+  for (int x = 0; x < w; ++x) {
+    const int row = guess_row(x);
+    if (row < 0 || row >= h - 1 || kind[std::size_t(row) * w + x] == 0) continue;
+    int y = row, land = 0;
+    while (y + 1 < h && land < options.stop_run) {
+      ++y;
+      land = kind[std::size_t(y) * w + x] == 0 ? land + 1 : 0;
+    }
+    // The last bank-or-sky row: the frame's bottom, or above the run of land.
+    reach.push_back((land >= options.stop_run ? y - land : y) - row);
+  }
+  if (reach.empty()) return result;
+  std::nth_element(reach.begin(), reach.begin() + std::ptrdiff_t(reach.size() / 2), reach.end());
+  const int drop = reach[reach.size() / 2];
+  if (drop < options.min_drop_fraction * h) return result;
+  std::size_t band = 0, band_open = 0, under = 0, under_land = 0;
+  const int band_rows = std::max(4, int(std::ceil(options.ground_band_fraction * h)));
+  bool inside = false;  // the lowered line is inside the frame somewhere
+  for (int x = 0; x < w; ++x) {
+    const int y0 = guess_row(x);
+    for (int y = std::max(0, y0 + 1); y <= std::min(h - 1, y0 + drop); ++y)
+      ++band, band_open += kind[std::size_t(y) * w + x] != 0;
+    for (int y = std::max(0, y0 + drop + 1); y <= std::min(h - 1, y0 + drop + band_rows); ++y)
+      ++under, under_land += kind[std::size_t(y) * w + x] == 0, inside = true;
+  }
+  if (double(band_open) < options.min_band_fill * double(std::max<std::size_t>(1, band)))
+    return result;
+  if (inside && !options.lower_to_land) return result;
+  // A line inside the frame needs land under it (what stopped the walk down); unless the frame
+  // ends within a few rows of it almost everywhere (the bank reached the bottom).
+  if (inside && under >= std::size_t(band_rows) * std::size_t(w) / 4 &&
+      double(under_land) < options.min_ground_below * double(under))
+    return result;
+  result.drop_px = drop;
+  result.bank.assign(n, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      result.bank[std::size_t(y) * w + x] =
+          kind[std::size_t(y) * w + x] == 1 && y <= guess_row(x) + drop;
+  return result;
 }
 
 }  // namespace mr::photo

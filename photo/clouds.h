@@ -41,10 +41,12 @@
 // edges); that needs the horizon itself lowered below the bank.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
 
+#include "mr/annotations.h"
 #include "mr/image.h"
 
 namespace mr::photo {
@@ -69,7 +71,87 @@ struct FloatingCloudOptions {
   bool guessed_horizon = false;
   double min_bank_fraction = 0.0025;
   double min_bank_contact = 0.02;
+  /// The cloud bank a guessed horizon was lowered under (CloudBank::bank), row-major w x h, or
+  /// empty. A component at least half of whose pixels are the bank's is a cloud when it is
+  /// cloud-coloured (as above) and touches the sky, held up or not, however much of its outline
+  /// is on the frame: the horizon step found it ringed by sky and the ground only below it.
+  /// Of such a component, only what stands on the horizon and is not the bank's (a building, a
+  /// ridge, a tree rising from the land into the bank: 8-connected parts of it that reach the
+  /// horizon or the frame's bottom and are at least `min_standing_fraction` of the frame) stays
+  /// a surface; the bank's lit rims and other small textured parts inside it go with it (specks
+  /// left standing on the frame's bottom were created edges in haze: god_rays 0.010 %).
+  std::vector<std::uint8_t> bank;
+  double min_standing_fraction = 5e-4;
 };
+
+/// Issue 11: a cloud bank on a guessed horizon line (see find_cloud_bank).
+struct CloudBankOptions {
+  /// Cloud-like, per pixel (display-referred: scene-linear ^ (1 / 2.2)): not sky, not
+  /// foliage-coloured (G above both R and B), grey (saturation at most `max_saturation`) or
+  /// bluish (B > R, B >= G), and smooth: the mean |gradient| of the luma over a
+  /// `texture_window`-pixel square at most `max_texture` (a cloud bank's body is far smoother
+  /// than land, rock, a facade or foliage at the same distance).
+  double max_saturation = 0.3;
+  double max_texture = 0.008;
+  int texture_window = 9;
+  /// The bank sits on the guess: at the guessed line the bank (cloud-like, not sky) is found in
+  /// at least `min_bank_at_guess` of the columns, bank or sky in at least `min_open_at_guess`.
+  double min_bank_at_guess = 0.25;
+  double min_open_at_guess = 0.6;
+  /// Ringed by sky: sky is at least this fraction of the pixels above the guess.
+  double min_sky_above = 0.02;
+  /// A bank's upper outline under the sky is ragged; a sea's or a flat plain's horizon is a
+  /// straight line (a calm grey sea filling the frame below the guess is smooth and bluish as
+  /// well): in the columns where the bank is at the guess with sky above it, the lowest sky
+  /// row's residuals from their least-squares line must have an interquartile range of at
+  /// least this fraction of the height.
+  double min_outline_spread = 0.02;
+  /// Below the guess, each column is followed down through bank or sky until `stop_run`
+  /// rows in a row are neither (the land); the lowered line is the median of those rows over
+  /// the columns where bank or sky is at the guess. It must be at least `min_drop_fraction`
+  /// of the height below the guess, and the band between the guess and it at least
+  /// `min_band_fill` bank or sky.
+  int stop_run = 3;
+  double min_drop_fraction = 0.02;
+  double min_band_fill = 0.75;
+  /// Ground evidence: a line inside the frame has land below it: of the `ground_band_fraction`
+  /// of the height under it (at least 4 rows), at least `min_ground_below` is neither bank nor
+  /// sky. (A line at the frame's bottom: an all-sky frame, a bank filling it below the guess.)
+  double ground_band_fraction = 0.03;
+  double min_ground_below = 0.6;
+  /// Lower a guess to land inside the frame at all. Off: only a bank that fills the frame below
+  /// the guess (no land under it: an all-sky frame) moves the horizon, to the frame's bottom.
+  /// Tried on a synthetic storm bank over hilly land (tests/cloud_bank_test.cpp): the bank
+  /// becomes sky, but the land under it is a ground plane 10-100 m away from a 1.6 m camera
+  /// (the refinement carries its near values up to the skyline), nearly clear in haze under
+  /// the veil: created edges 0.0000 -> 0.90 % along the skyline. A bank over land needs the
+  /// land at its skyline far as well; until then it keeps the old behaviour.
+  bool lower_to_land = false;
+};
+
+struct CloudBank {
+  /// Rows by which to lower the guess (same roll; 0: no bank, or no evidence for one).
+  double drop_px = 0;
+  /// Row-major w x h, 1 on the bank's pixels (cloud-like, not sky) above the lowered line;
+  /// empty when drop_px is 0.
+  std::vector<std::uint8_t> bank;
+};
+
+/// Issue 11: a cloud bank on a guessed horizon. Under the level fall-back (or a weak cue) in a
+/// sky photo, a bank of cloud running across the guessed line is above the line a structure
+/// on the far billboard and below it the "ground" plane: in haze its outline against the
+/// veiled sky becomes a created edge, and under a sun it casts streak fans. Making the bank sky
+/// above the guess alone cuts a straight seam along the guess (the bank continues below it as
+/// ground, nearly clear in haze: tried, god_rays haze 0.039 -> 0.509 %). Where the evidence
+/// supports it, the horizon belongs below the bank: below the frame when the bank fills the
+/// frame below the guess (or, with CloudBankOptions::lower_to_land, where the photo's land
+/// starts: a textured, non-cloud band under it).
+/// `photo`: scene-linear, >= 3 channels; `guess`: the guessed horizon (pixel-centre
+/// coordinates); `sky`: the sky mask found without the horizon's clip (row-major, the photo's
+/// size). Never throws for any image content; sizes that do not match give no bank.
+CloudBank find_cloud_bank(ConstImageView photo, const std::array<PixelPoint, 2>& guess,
+                          const std::vector<std::uint8_t>& sky,
+                          const CloudBankOptions& options = {});
 
 /// `photo`: scene-linear, >= 3 channels, w x h; `distance_ratio`: row-major w x h, each pixel's
 /// distance over the far billboard's distance on its ray (+inf for the sky; what is not finite

@@ -306,6 +306,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // under the haze's veil, a hard line between them) and clouds reaching the guess were
   // "standing on the ground". The horizon is then lowered (same roll) to the median lowest row
   // that sky reaches, continuously from the guess, in the columns where it reaches the guess.
+  std::vector<std::uint8_t> cloud_bank;  // the bank the guess was lowered under, if any
   if (!annotations.horizon && g.confidence < kWeakHorizonConfidence) {
     const int w = camera.width, h = camera.height;
     const double slope0 =
@@ -336,6 +337,22 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         reach.push_back(row - int(std::floor(guess_y(x))));
       }
     }
+    auto lower = [&](double drop) {
+      const std::array<PixelPoint, 2> lowered{
+          PixelPoint{g.horizon[0][0], g.horizon[0][1] + drop + 1},
+          PixelPoint{g.horizon[1][0], g.horizon[1][1] + drop + 1}};
+      const double height_m = g.pose.position_m.y;
+      g.pose = pose_from_horizon(camera, lowered, height_m);
+      g.horizon = photo::horizon_of_pose(camera, g.pose);
+      g.horizon_lowered_px = drop + 1;
+      map = photo::distance_map(camera, g.pose, annotations);
+      g.distance_m = std::move(map.distance_m);
+      g.sky_pixels = map.counts[int(photo::Coverage::sky)];
+      g.ground_pixels = map.counts[int(photo::Coverage::ground)];
+      g.plane_pixels = map.counts[int(photo::Coverage::plane)];
+      g.hint_pixels = map.counts[int(photo::Coverage::hint)];
+      mask = photo::estimate_sky_mask(photo->view(), g.horizon);
+    };
     if (!reach.empty()) {
       std::nth_element(reach.begin(), reach.begin() + std::ptrdiff_t(reach.size() / 2),
                        reach.end());
@@ -353,21 +370,36 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           ++band, band_sky += probe.sky[std::size_t(y) * w + x];
       }
       if (drop >= kMinHorizonDropFraction * h &&
-          double(band_sky) >= kMinSkyBelowGuessFraction * double(band)) {
-        const std::array<PixelPoint, 2> lowered{
-            PixelPoint{g.horizon[0][0], g.horizon[0][1] + drop + 1},
-            PixelPoint{g.horizon[1][0], g.horizon[1][1] + drop + 1}};
-        const double height_m = g.pose.position_m.y;
-        g.pose = pose_from_horizon(camera, lowered, height_m);
-        g.horizon = photo::horizon_of_pose(camera, g.pose);
-        g.horizon_lowered_px = drop + 1;
-        map = photo::distance_map(camera, g.pose, annotations);
-        g.distance_m = std::move(map.distance_m);
-        g.sky_pixels = map.counts[int(photo::Coverage::sky)];
-        g.ground_pixels = map.counts[int(photo::Coverage::ground)];
-        g.plane_pixels = map.counts[int(photo::Coverage::plane)];
-        g.hint_pixels = map.counts[int(photo::Coverage::hint)];
-        mask = photo::estimate_sky_mask(photo->view(), g.horizon);
+          double(band_sky) >= kMinSkyBelowGuessFraction * double(band))
+        lower(drop);
+    }
+    // Issue 11: a cloud bank on the guessed line (god_rays' backlit bank under the level
+    // fall-back), not open sky: above the guess it was a structure, below it the ground plane,
+    // and its outline a created edge against the veiled sky, under a sun an occluder casting
+    // streak fans. Where the bank is ringed by sky and fills the frame below the guess (no
+    // land seen under it), the horizon goes below the frame and the bank is sky
+    // (photo/clouds.h; a bank over land is left alone: CloudBankOptions::lower_to_land).
+    if (g.horizon_lowered_px == 0) {
+      // The sky: what the mask found above the guess, and the probe's below it when it was
+      // run (the bank's tests read bank and sky below the guess alike; a probe of its own
+      // would cost a third of the estimate's CPU time on every photo under the fall-back).
+      std::vector<std::uint8_t> sky = mask.sky;
+      for (std::size_t i = 0; i < sky.size() && i < probe.sky.size(); ++i) sky[i] |= probe.sky[i];
+      photo::CloudBank bank = photo::find_cloud_bank(photo->view(), g.horizon, sky);
+      if (bank.drop_px > 0) {
+        // The sky found above the guess stays sky: with the line below the frame the mask
+        // loses blue patches that reach neither the top border nor a clipped horizon (god_rays'
+        // openings in the bank: none left, the frame a bounded scene).
+        const photo::SkyMask above_guess = mask;
+        lower(bank.drop_px);
+        cloud_bank = std::move(bank.bank);
+        std::size_t pixels = 0;
+        for (std::size_t i = 0; i < mask.sky.size() && i < above_guess.sky.size(); ++i) {
+          if (above_guess.sky[i]) mask.sky[i] = 1;
+          mask.alpha[i] = std::max(mask.alpha[i], above_guess.alpha[i]);
+          pixels += mask.sky[i];
+        }
+        mask.pixels = pixels;
       }
     }
   }
@@ -844,6 +876,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     // all-sky frame (the guess lowered below it) stood on the frame as a surface (photo/clouds.h).
     photo::FloatingCloudOptions cloud_options;
     cloud_options.guessed_horizon = !annotations.horizon && g.confidence < kWeakHorizonConfidence;
+    cloud_options.bank = cloud_bank;
     const std::vector<std::uint8_t> cloud = photo::floating_clouds(
         photo->view(), ratio, above, vegetation.vegetation, standing, cloud_options);
     // photo/sky_matte.h mixes the fog of each pixel of the sky's blurred band with that of the
