@@ -25,7 +25,7 @@
 #include "mr/io.h"
 #include "mr/scattering.h"
 #include "photo/clouds.h"
-#include "tests/display_luma.h"
+#include "tests/gallery_look.h"
 
 namespace mr {
 namespace {
@@ -34,44 +34,9 @@ float linear(float display) {
   return std::pow(std::clamp(display, 0.0f, 1.0f), 2.2f);
 }
 
-// The gallery's created-edge measure exactly (gallery/measures.py: display luma of the clamped,
-// gamma-2.2 values, Gaussian blur sigma 1 px (radius 3, edges replicated), central differences;
-// created where the fogged image's gradient is more than twice the photo's and above 0.01).
-double gallery_created_edges(const Image& photo, const Image& fogged) {
-  auto strength = [](const Image& img) {
-    cv::Mat l = test::display_luma(img), b, g(l.rows, l.cols, CV_32F);
-    cv::GaussianBlur(l, b, cv::Size(7, 7), 1.0, 1.0, cv::BORDER_REPLICATE);
-    for (int y = 0; y < l.rows; ++y)
-      for (int x = 0; x < l.cols; ++x) {
-        const int x0 = std::max(0, x - 1), x1 = std::min(l.cols - 1, x + 1);
-        const int y0 = std::max(0, y - 1), y1 = std::min(l.rows - 1, y + 1);
-        const float gx = 0.5f * (b.at<float>(y, x1) - b.at<float>(y, x0));
-        const float gy = 0.5f * (b.at<float>(y1, x) - b.at<float>(y0, x));
-        g.at<float>(y, x) = std::hypot(gx, gy);
-      }
-    return g;
-  };
-  const cv::Mat gp = strength(photo), gf = strength(fogged);
-  std::size_t created = 0;
-  for (int y = 0; y < gp.rows; ++y)
-    for (int x = 0; x < gp.cols; ++x)
-      created += gf.at<float>(y, x) > 2 * gp.at<float>(y, x) && gf.at<float>(y, x) > 0.01f;
-  return double(created) / double(gp.total());
-}
-
-// As `mr fog --depth auto` with a gallery look (sky light 'auto', by direction).
-FogLayers fog_auto_look(const Image& photo, const Camera& camera, const SceneEstimate& est,
-                        double visibility_m, double top_m, double g) {
-  FogScene s = est.scene;
-  const float sigma = float(extinction_from_visibility(visibility_m));
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.g = g;
-  s.medium.layer_top_m = top_m;
-  s.render.backend = Backend::cpu;
-  s.lighting.sky_by_direction = true;
-  if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
-  return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
-}
+// The gallery's created-edge measure and looks (tests/gallery_look.h).
+using test::fog_auto_look;
+using test::gallery_created_edges;
 
 cv::Mat blurred_noise(int h, int w, std::mt19937& rng, double sigma) {
   std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
