@@ -132,33 +132,39 @@ void write_to_look_at(const std::string& name, const Image& photo, const Image& 
   const std::string f(folder);
   write_image(f + "/" + name + "_photo.png", photo);
   write_image(f + "/" + name + "_haze.png", haze);
-  Image depth(kW, kH, 3);
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x) {
-      const float v =
-          std::isfinite(d.at(x, y, 0)) ? float(-std::expm1(-d.at(x, y, 0) / 200.0)) : 1.0f;
-      for (int c = 0; c < 3; ++c) depth.at(x, y, c) = v;
-    }
-  write_image(f + "/" + name + "_depth.png", depth);
+  write_image(f + "/" + name + "_depth.png", test::depth_picture(d));
 }
 
 double percent(std::size_t a, std::size_t b) {
   return b > 0 ? 100.0 * double(a) / double(b) : 0;
 }
 
+// One scene through the automatic estimate and the gallery's haze (and dense) looks.
+struct BankRun {
+  SceneEstimate est;
+  Counts k;
+  double e_haze = 0, e_dense = 0;
+};
+BankRun run_bank(Kind kind, const std::string& name, bool dense = true) {
+  const BankScene s = bank_scene(kind);
+  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
+  BankRun r;
+  r.est = estimate_scene(s.photo, camera, Annotations{});
+  const Image& d = r.est.geometry.distance_m;
+  r.k = count(s, d);
+  const FogLayers haze = fog_auto_look(s.photo, camera, r.est, 2000, 1500, 0.6);
+  r.e_haze = gallery_created_edges(s.photo, haze.composite);
+  if (dense)
+    r.e_dense = gallery_created_edges(s.photo,
+                                      fog_auto_look(s.photo, camera, r.est, 60, 80, 0.3).composite);
+  write_to_look_at(name, s.photo, haze.composite, d);
+  return r;
+}
+
 // Before: the level fall-back (row 200) ran through the bank; its part above was on the far
 // billboard, 46 m away, below it the ground plane.
 TEST(CloudBank, BankFillingTheFrameBelowAGuessedHorizonIsSky) {
-  const BankScene s = bank_scene(Kind::bank_only);
-  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
-  const SceneEstimate est = estimate_scene(s.photo, camera, Annotations{});
-  const Image& d = est.geometry.distance_m;
-  const Counts k = count(s, d);
-  const FogLayers haze = fog_auto_look(s.photo, camera, est, 2000, 1500, 0.6);
-  const double e_haze = gallery_created_edges(s.photo, haze.composite);
-  const double e_dense =
-      gallery_created_edges(s.photo, fog_auto_look(s.photo, camera, est, 60, 80, 0.3).composite);
-  write_to_look_at("cloud_bank", s.photo, haze.composite, d);
+  const auto [est, k, e_haze, e_dense] = run_bank(Kind::bank_only, "cloud_bank");
   std::printf(
       "cloud bank: %s; lowered %.0f px (horizon row %.1f); bank %.1f %% sky; created-edge "
       "pixels haze %.4f %%, dense %.4f %%\n",
@@ -175,16 +181,7 @@ TEST(CloudBank, BankFillingTheFrameBelowAGuessedHorizonIsSky) {
 // it on, the horizon went to the land's line and the bank became sky, but the land stayed
 // nearly clear under the veil: haze created edges 0.90 % along the skyline).
 TEST(CloudBank, BankOverLandIsLeftAlone) {
-  const BankScene s = bank_scene(Kind::bank_over_land);
-  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
-  const SceneEstimate est = estimate_scene(s.photo, camera, Annotations{});
-  const Image& d = est.geometry.distance_m;
-  const Counts k = count(s, d);
-  const FogLayers haze = fog_auto_look(s.photo, camera, est, 2000, 1500, 0.6);
-  const double e_haze = gallery_created_edges(s.photo, haze.composite);
-  const double e_dense =
-      gallery_created_edges(s.photo, fog_auto_look(s.photo, camera, est, 60, 80, 0.3).composite);
-  write_to_look_at("bank_over_land", s.photo, haze.composite, d);
+  const auto [est, k, e_haze, e_dense] = run_bank(Kind::bank_over_land, "bank_over_land");
   std::printf(
       "bank over land: %s; lowered %.0f px; bank %.1f %% sky, land %.1f %% surface; "
       "created-edge pixels haze %.4f %%, dense %.4f %%\n",
@@ -200,13 +197,9 @@ TEST(CloudBank, BankOverLandIsLeftAlone) {
 // The counter-case: a bluish grey mountain range rising from the land across the guessed line
 // is textured rock, not a bank: the guess is not lowered, the range stays a surface.
 TEST(CloudBank, TexturedMountainOnAGuessedHorizonStaysASurface) {
-  const BankScene s = bank_scene(Kind::mountain);
-  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
-  const SceneEstimate est = estimate_scene(s.photo, camera, Annotations{});
-  const Image& d = est.geometry.distance_m;
-  const Counts k = count(s, d);
-  const FogLayers haze = fog_auto_look(s.photo, camera, est, 2000, 1500, 0.6);
-  write_to_look_at("mountain", s.photo, haze.composite, d);
+  const BankRun r = run_bank(Kind::mountain, "mountain", /*dense=*/false);
+  const SceneEstimate& est = r.est;
+  const Counts& k = r.k;
   std::printf("mountain: %s; lowered %.0f px; range %.1f %% sky, land %.1f %% surface\n",
               est.notes.front().c_str(), est.geometry.horizon_lowered_px,
               percent(k.part_sky, k.part), percent(k.land_finite, k.land));

@@ -56,6 +56,18 @@ inline double gallery_created_edges(const Image& photo, const Image& fogged, Ima
   return double(created) / double(gp.total());
 }
 
+// A distance map to look at: 1 - exp(-d / 200 m) in grey, the sky (infinite) white.
+inline Image depth_picture(const Image& distance_m) {
+  Image picture(distance_m.width(), distance_m.height(), 3);
+  for (int y = 0; y < distance_m.height(); ++y)
+    for (int x = 0; x < distance_m.width(); ++x) {
+      const float d = distance_m.at(x, y, 0);
+      const float v = std::isfinite(d) ? float(-std::expm1(-d / 200.0)) : 1.0f;
+      for (int c = 0; c < 3; ++c) picture.at(x, y, c) = v;
+    }
+  return picture;
+}
+
 // As `mr fog --depth auto` with a gallery look (gallery/looks: sky light 'auto', i.e. by
 // direction with the estimate's sky radiance): the automatic estimate, its matte, the fog.
 inline FogLayers fog_auto_look(const Image& photo, const Camera& camera, const SceneEstimate& est,

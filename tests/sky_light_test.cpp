@@ -671,14 +671,7 @@ TEST(SkyLight, FloatingCloudsAreSkyNotOccluders) {
     const std::string f(folder);
     write_image(f + "/clouds_photo.png", photo);
     write_image(f + "/clouds_sun_bank.png", lit.composite);
-    Image depth(kW, kH, 3);
-    for (int y = 0; y < kH; ++y)
-      for (int x = 0; x < kW; ++x) {
-        const float v =
-            std::isfinite(d.at(x, y, 0)) ? float(-std::expm1(-d.at(x, y, 0) / 200.0)) : 1.0f;
-        for (int c = 0; c < 3; ++c) depth.at(x, y, c) = v;
-      }
-    write_image(f + "/clouds_depth.png", depth);
+    write_image(f + "/clouds_depth.png", test::depth_picture(d));
   }
   std::printf(
       "floating cloud: rim %.1f %% sky; building %.1f %%, canopy %.1f %% surface; sun "
