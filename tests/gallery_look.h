@@ -10,10 +10,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdlib>
+#include <string>
 
 #include "mr/estimate.h"
 #include "mr/fog.h"
 #include "mr/image.h"
+#include "mr/io.h"
 #include "mr/scattering.h"
 #include "tests/display_luma.h"
 
@@ -81,6 +84,29 @@ inline FogLayers fog_auto_look(const Image& photo, const Camera& camera, const S
   s.lighting.sky_by_direction = true;
   if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
   return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
+}
+
+// The gallery's haze and dense looks of one estimate and their created edges; with
+// MR_TEST_IMAGES set, the photo, the haze and its created-edge map are written there as
+// <name>_photo.png, <name>_haze.png, <name>_haze_edges.png to look at.
+struct GalleryLooks {
+  double haze_edges = 0, dense_edges = 0;  // fractions of the pixels
+};
+inline GalleryLooks haze_and_dense_looks(const Image& photo, const Camera& camera,
+                                         const SceneEstimate& est, const std::string& name) {
+  const FogLayers haze = fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
+  const FogLayers dense = fog_auto_look(photo, camera, est, 60, 80, 0.3);
+  Image haze_map;
+  GalleryLooks looks;
+  looks.haze_edges = gallery_created_edges(photo, haze.composite, &haze_map);
+  looks.dense_edges = gallery_created_edges(photo, dense.composite);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {
+    const std::string f(folder);
+    write_image(f + "/" + name + "_photo.png", photo);
+    write_image(f + "/" + name + "_haze.png", haze.composite);
+    write_image(f + "/" + name + "_haze_edges.png", haze_map);
+  }
+  return looks;
 }
 
 }  // namespace mr::test

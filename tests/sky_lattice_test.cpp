@@ -16,23 +16,18 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
-#include <cstdlib>
 #include <random>
-#include <string>
 #include <vector>
 
 #include "mr/estimate.h"
 #include "mr/fog.h"
 #include "mr/image.h"
-#include "mr/io.h"
 #include "photo/sky_mask.h"
 #include "tests/gallery_look.h"
 
 namespace mr {
 namespace {
 
-using test::fog_auto_look;
-using test::gallery_created_edges;
 using test::linear;
 
 // Sky seen through a lattice and between cables (issue 11; the tuning half's launch towers and
@@ -171,17 +166,7 @@ TEST(SkyLight, SkyThroughALatticeIsSky) {
     for (int x = 0; x < kW; ++x)
       open_sky +=
           p.openings.at<std::uint8_t>(y, x) && std::isinf(est.geometry.distance_m.at(x, y, 0));
-  const FogLayers haze = fog_auto_look(p.photo, camera, est, 2000, 1500, 0.6);
-  const FogLayers dense = fog_auto_look(p.photo, camera, est, 60, 80, 0.3);
-  Image haze_map;
-  const double e_haze = gallery_created_edges(p.photo, haze.composite, &haze_map);
-  const double e_dense = gallery_created_edges(p.photo, dense.composite);
-  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
-    const std::string f(folder);
-    write_image(f + "/lattice_photo.png", p.photo);
-    write_image(f + "/lattice_haze.png", haze.composite);
-    write_image(f + "/lattice_haze_edges.png", haze_map);
-  }
+  const auto [e_haze, e_dense] = test::haze_and_dense_looks(p.photo, camera, est, "lattice");
   std::printf(
       "lattice: openings sky in the mask %.1f %% (without the rule %.1f %%), in the estimate "
       "%.1f %%; facade pixels made sky %zu (without the rule %zu); created-edge pixels haze "
@@ -321,17 +306,7 @@ TEST(SkyLight, SnowBetweenBranchesStaysGround) {
     for (int x = 0; x < kW; ++x)
       snow_est +=
           p.snow_openings.at<std::uint8_t>(y, x) && std::isinf(est.geometry.distance_m.at(x, y, 0));
-  const FogLayers haze = fog_auto_look(p.photo, camera, est, 2000, 1500, 0.6);
-  const FogLayers dense = fog_auto_look(p.photo, camera, est, 60, 80, 0.3);
-  Image haze_map;
-  const double e_haze = gallery_created_edges(p.photo, haze.composite, &haze_map);
-  const double e_dense = gallery_created_edges(p.photo, dense.composite);
-  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
-    const std::string f(folder);
-    write_image(f + "/snow_birches_photo.png", p.photo);
-    write_image(f + "/snow_birches_haze.png", haze.composite);
-    write_image(f + "/snow_birches_haze_edges.png", haze_map);
-  }
+  const auto [e_haze, e_dense] = test::haze_and_dense_looks(p.photo, camera, est, "snow_birches");
   auto pct = [](std::size_t a, std::size_t b) { return 100.0 * double(a) / double(b); };
   std::printf(
       "snow between the twigs made sky: %.1f %% (the lattice rule off %.1f %%, unguarded "
