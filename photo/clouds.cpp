@@ -96,9 +96,16 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
       continue;
     }
     if (!(contact[k] == 0 || cut_off) || ring_sky[k] == 0) continue;
-    if (!(ring_sky[k] >= options.min_sky_ring * (ring_sky[k] + ring_frame[k]))) continue;
     std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
-    cloud[k] = cut_off || coloured || r[r.size() / 2] >= options.min_distance_ratio;
+    const bool joined = r[r.size() / 2] >= options.min_distance_ratio;
+    // Cut off by the frame's borders along much of its outline (a cumulus filling a corner, a
+    // deck of cloud along the top): a structure seen from below against the sky (an eave, a
+    // bridge's deck) is in its own shade and has an edge against the sky; a cloud is of the
+    // sky's colours or joined to the sky by the refinement.
+    const bool sky_like = (2 * bluish[k] > area && 2 * leafy[k] < area) || joined;
+    const double min_ring = sky_like ? options.min_sky_ring_sky_like : options.min_sky_ring;
+    if (!(ring_sky[k] >= min_ring * (ring_sky[k] + ring_frame[k]))) continue;
+    cloud[k] = cut_off || coloured || joined;
     any |= cloud[k] != 0;
   }
   if (!any) return out;

@@ -55,6 +55,11 @@ struct FloatingCloudOptions {
   /// At least this fraction of the component's outline (pixels next to the sky, or on the frame's
   /// top, left or right border) is next to the sky.
   double min_sky_ring = 0.6;
+  /// ... or at least this fraction when the component is mostly of a blue sky's colours (B > R,
+  /// B >= G) and not foliage, or joined to the sky (as `min_distance_ratio`): a cumulus
+  /// filling a corner of the frame, a deck of cloud along its top (issue 11, the sun bank's
+  /// streak fans; see the file comment).
+  double min_sky_ring_sky_like = 0.25;
   /// Cloud-coloured: a mean display-referred saturation ((max - min) / max of the channels, on
   /// scene-linear ^ (1 / 2.2)) of at most this, or more than half of its pixels bluish (B > R,
   /// B >= G); and less than half of it foliage.
