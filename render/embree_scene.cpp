@@ -103,9 +103,11 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
     scene_ = rtcNewScene(device_);
     errors_->throw_if_failed();
     rtcSetSceneBuildQuality(scene_, quality);
-    // Compact: indexed leaves, about half the BVH memory. Most of a full-resolution build's
-    // time went into the kernel zeroing fresh pages; at 1080p (one thread) compact built in
-    // 0.89 s instead of 1.51 s and traced 12 % slower: 8 % less in all.
+    // Not compact by default (OccluderSceneOptions::compact). Compact was chosen when most of a
+    // full-resolution build's time went into the kernel zeroing fresh pages (at 1080p, one
+    // thread, it built in 0.89 s instead of 1.51 s and traced 12 % slower); with the build's
+    // memory on huge pages that saving shrank, and on jagged estimated depth the indexed
+    // leaves' vertex gathers made every shadow ray dearer (issue 12, README).
     const std::size_t triangles = mesh_.triangle_count();
     // The occluder mesh's surface, two triangles per pixel, goes in as one quad per pixel
     // (render/triangle_pairs.h): the same triangles, read in place, half the primitives.
@@ -118,7 +120,7 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
     // The triangle test did not; robust quads still build and trace faster than the triangles
     // (BM_Stages 1080p normal, process CPU: geometry 3.29 -> 1.96 s, render 6.86 -> 5.96 s).
     const bool robust = options.robust || surface_quads;
-    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_COMPACT |
+    rtcSetSceneFlags(scene_, (options.compact ? RTC_SCENE_FLAG_COMPACT : RTC_SCENE_FLAG_NONE) |
                                  (robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE));
     // The surface (many small triangles, each about a pixel's footprint) and what follows it
     // (silhouette extrusions and blockers: few triangles, some tens of metres long) get a BVH

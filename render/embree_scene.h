@@ -43,6 +43,15 @@ struct OccluderSceneOptions {
   /// two triangles. Off by default (a shadow ray that leaks through an edge changes one sample of
   /// a smooth integral), though it measured no slower with the medium build.
   bool robust = false;
+  /// Embree's compact BVH for the surface (RTC_SCENE_FLAG_COMPACT: leaves hold vertex indices,
+  /// about half the BVH memory, vertices fetched per test) instead of leaves holding their
+  /// quads' vertices. Off by default: the indexed leaves were cheaper to build only while page
+  /// faults dominated the build (render/huge_pages.h), and every leaf a ray visits pays for the
+  /// gathers. Where the estimated depth is jagged (gallery/tune/dragonfly: 10-15 % of neighbour
+  /// pairs over 1 % apart, so the surface is a fur of slivers along the view rays), a sun shadow
+  /// ray crosses ~70 quad boxes before its hit (leuven's: ~14), and the sun bank render took
+  /// 49 s CPU compact against 34 s without (same rays, same answers; README, issue 12).
+  bool compact = false;
 };
 
 /// The occluder mesh in an Embree device + scene, ready for ray queries (RAII: released on
