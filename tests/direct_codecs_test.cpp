@@ -66,8 +66,27 @@ void expect_same_pixels(detail::ImageReader& mine, OIIO::ImageInput& oiio, OIIO:
 }
 
 TEST(DirectCodecs, DecodesEverySampleAsOiio) {
+  // Also files libmr writes: a float depth map and a half colour EXR (OIIO's writer adds a
+  // DateTime), JPEGs with and without alpha in the image (written as RGB).
+  test::ScratchDir dir;
+  std::vector<fs::path> files = sample_files();
+  {
+    Image depth(33, 17, 1, {"Z"});
+    for (int y = 0; y < 17; ++y)
+      for (int x = 0; x < 33; ++x) depth.at(x, y, 0) = y < 5 ? 1e30f : 1.5f * x + 0.25f * y;
+    WriteOptions raw;
+    raw.colorspace = colorspace::raw;
+    raw.pixel_type = PixelType::float32;
+    write_image(dir / "depth.exr", depth, raw);
+    const Image photo = test::make_test_photo(33, 17);
+    WriteOptions half;
+    half.pixel_type = PixelType::half;
+    write_image(dir / "half.exr", photo, half);
+    write_image(dir / "photo.jpg", photo);
+    files.insert(files.end(), {dir / "depth.exr", dir / "half.exr", dir / "photo.jpg"});
+  }
   int direct = 0, total = 0;
-  for (const fs::path& path : sample_files()) {
+  for (const fs::path& path : files) {
     SCOPED_TRACE(path.string());
     ++total;
     const bool is_direct = detail::open_direct_reader(path) != nullptr;
@@ -162,6 +181,7 @@ TEST(DirectCodecs, WritesJpegAsOiio) {
   photo.metadata().impl().attributes.attribute("ResolutionUnit", "in");
   compare_writers(photo, dir.path(), "tagged");
   compare_writers(photo, dir.path(), "tagged_srgb", "sRGB");
+  compare_writers(photo, dir.path(), "tagged_rolloff", "srgb_rolloff");
   photo.metadata().set("Artist", "Someone");
   photo.metadata().set("Copyright", "CC BY 4.0");
   photo.metadata().set("DateTime", "2026:12:03 12:00:00");

@@ -154,10 +154,12 @@ class ExrReader final : public ImageReader {
         spec_.set(OIIO::ParamValue("screenWindowCenter", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::VEC2), 1, xy));
       } else if (type == "string") {
         const std::string& v = static_cast<const Imf::StringAttribute&>(a.attribute()).value();
+        if (v.empty()) return false;  // OIIO drops some empty ones
+        // capDate is "YYYY:MM:DD HH:MM:SS", as EXIF's DateTime: OIIO keeps the text.
         const std::string oiio_name = name == "comments" ? "ImageDescription"
                                       : name == "owner"  ? "Copyright"
-                                                         : name;
-        if (name == "capDate") return false;  // OIIO reformats it as DateTime
+                                      : name == "capDate" ? "DateTime"
+                                                          : name;
         spec_.attribute(oiio_name, v);
       } else if (type == "float") {
         if (name == "expTime" || name == "aperture" || name == "xDensity" ||

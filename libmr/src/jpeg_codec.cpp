@@ -4,23 +4,24 @@
 // ResolutionUnit and PixelAspectRatio, a COM marker as ImageDescription, the TIFF fields of an
 // EXIF block), and for writing the same quality, chroma subsampling, JFIF density and EXIF.
 // libjpeg's errors longjmp back here (its default error_exit would exit the process).
+#include <OpenImageIO/strutil.h>
+
 #include <algorithm>
-#include <csetjmp>
 #include <cmath>
+#include <csetjmp>
 #include <cstddef>
 #include <cstdio>
 #include <cstdlib>
-
-#include <jpeglib.h>  // after <cstdio>: it uses FILE and size_t without including them
 #include <cstring>
 #include <set>
 #include <string>
 #include <vector>
 
+#include <jpeglib.h>  // after <cstdio>: it uses FILE and size_t without including them
+
 #include "core/oiio_module.h"
 #include "direct_codecs.h"
 #include "jpeg_metadata.h"
-#include "mr/color.h"
 #include "mr/error.h"
 
 namespace mr::detail {
@@ -265,9 +266,10 @@ bool writable_attributes(const ImageHeader& spec) {
          (compression.empty() || compression.rfind("jpeg:", 0) == 0) &&
          spec.extra_attribs.find("PixelAspectRatio") == spec.extra_attribs.cend() &&
          (unit.empty() || unit == "none" || unit == "in" || unit == "cm") &&
-         // "sRGB" OIIO marks in an Exif directory (done here); the config's own sRGB name
-         // it writes nothing for. Others: whatever OIIO does with them.
-         (colour == "sRGB" || colour == colorspace::srgb);
+         // "sRGB" OIIO marks in an Exif directory (done here); other names (the config's
+         // "srgb_texture", "srgb_rolloff") it writes nothing for. Other spellings of "srgb":
+         // whatever OIIO does with them.
+         (colour == "sRGB" || !OIIO::Strutil::iequals(colour, "srgb"));
 }
 
 class JpegWriter final : public ImageWriter {
