@@ -64,8 +64,7 @@ class ExrReader final : public ImageReader {
     const Imf::Header& h = file_->header();
     const Imath::Box2i dw = h.dataWindow();
     spec_.width = dw.max.x - dw.min.x + 1, spec_.height = dw.max.y - dw.min.y + 1;
-    origin_y_ = dw.min.y, origin_x_ = dw.min.x;
-    if (dw.min.x != 0 || dw.min.y != 0 || h.displayWindow() != dw) return false;
+    if (dw.min.x != 0 || dw.min.y != 0 || h.displayWindow() != dw) return false;  // windows: OIIO's
     // Channels: one, or R,G,B(,A) (OIIO orders those so), all of one type.
     std::vector<std::string> names;
     Imf::PixelType type = Imf::HALF;
@@ -82,7 +81,6 @@ class ExrReader final : public ImageReader {
       names = {"R", "G", "B", "A"}, spec_.alpha_channel = 3;
     else if (names.size() != 1)
       return false;
-    pixel_type_ = type;
     spec_.nchannels = int(names.size());
     spec_.channelnames = names;
     spec_.format = type == Imf::HALF ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT;
@@ -105,16 +103,15 @@ class ExrReader final : public ImageReader {
     const int nc = chend - chbegin;
     const std::size_t x_stride = std::size_t(nc) * type.size();
     const std::size_t y_stride = x_stride * std::size_t(spec_.width);
-    // The frame buffer's origin is pixel (0, y0) of the data window: rows y0..y1 land at data.
-    char* base = static_cast<char*>(data) - std::ptrdiff_t(origin_y_ + y0) * std::ptrdiff_t(y_stride) -
-                 std::ptrdiff_t(origin_x_) * std::ptrdiff_t(x_stride);
+    // The frame buffer addresses pixel (0, 0): rows y0..y1 land at data.
+    char* base = static_cast<char*>(data) - std::ptrdiff_t(y0) * std::ptrdiff_t(y_stride);
     Imf::FrameBuffer fb;
     for (int c = chbegin; c < chend; ++c)
       fb.insert(spec_.channelnames[c],
                 Imf::Slice(as, base + std::size_t(c - chbegin) * type.size(), x_stride, y_stride));
     try {
       file_->setFrameBuffer(fb);
-      file_->readPixels(origin_y_ + y0, origin_y_ + y1 - 1);
+      file_->readPixels(y0, y1 - 1);
     } catch (const std::exception& e) {
       throw Error(ErrorCode::corrupt_input,
                   path_ + ": cannot decode pixels (OpenEXR error: " + e.what() + ")");
@@ -179,8 +176,6 @@ class ExrReader final : public ImageReader {
 
   std::string path_;
   std::unique_ptr<Imf::InputFile> file_;
-  Imf::PixelType pixel_type_ = Imf::HALF;
-  int origin_x_ = 0, origin_y_ = 0;
 };
 
 }  // namespace

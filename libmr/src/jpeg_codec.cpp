@@ -144,8 +144,6 @@ class JpegReader final : public ImageReader {
             out[k] = v;
           else if (type == OIIO::TypeDesc::FLOAT)
             reinterpret_cast<float*>(out)[k] = float(v) * (1.0f / 255.0f);
-          else if (type == OIIO::TypeDesc::UINT16)
-            reinterpret_cast<std::uint16_t*>(out)[k] = std::uint16_t(v * 257);
           else
             throw Error(ErrorCode::internal, path_ + ": JPEG read as " + type.c_str());
         }
