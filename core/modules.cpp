@@ -24,7 +24,8 @@ std::vector<std::filesystem::path> module_folders() {
     self = info.dli_fname;
   std::error_code ec;
   // The main program's name is argv[0]-like: /proc/self/exe names it whatever the working folder.
-  if (self.empty() || self.filename() == std::filesystem::canonical("/proc/self/exe", ec).filename())
+  if (self.empty() ||
+      self.filename() == std::filesystem::canonical("/proc/self/exe", ec).filename())
     self = std::filesystem::canonical("/proc/self/exe", ec);
   const std::filesystem::path folder = self.parent_path();
   folders.push_back(folder);
@@ -51,16 +52,17 @@ const void* load_module(const char* file, const char* entry) {
     }
     using Entry = const void* (*)();
     auto get = reinterpret_cast<Entry>(dlsym(handle, entry));
-    if (!get)
-      throw Error(ErrorCode::io, path.string() + ": not libmr's module (no " + entry + ")");
+    if (!get) throw Error(ErrorCode::io, path.string() + ": not libmr's module (no " + entry + ")");
     return get();
   }
-  throw Error(ErrorCode::io, first.string() + ": libmr's module is missing (installed beside "
-                                              "libmr.so; needed for this file or operation)");
+  throw Error(ErrorCode::io, first.string() +
+                                 ": libmr's module is missing (installed beside "
+                                 "libmr.so; needed for this file or operation)");
 }
 
 const OiioModule& oiio_module() {
-  static const auto* module = static_cast<const OiioModule*>(load_module("libmr_oiio.so", "mr_oiio_module"));
+  static const auto* module =
+      static_cast<const OiioModule*>(load_module("libmr_oiio.so", "mr_oiio_module"));
   return *module;
 }
 

@@ -55,8 +55,8 @@ class OiioReader final : public ImageReader {
   void check(bool ok) {
     if (ok && !in_->has_error()) return;
     const std::string msg = in_->geterror();
-    throw Error(ErrorCode::corrupt_input, path_ + ": cannot decode pixels (" +
-                                              (msg.empty() ? "truncated?" : msg) + ")");
+    throw Error(ErrorCode::corrupt_input,
+                path_ + ": cannot decode pixels (" + (msg.empty() ? "truncated?" : msg) + ")");
   }
   std::string path_;
   std::unique_ptr<OIIO::ImageInput> in_;
@@ -113,7 +113,9 @@ ImageWriter* create_writer(const std::string& path) {
   return new OiioWriter(std::move(out));
 }
 
-std::string extension_list() { return OIIO::get_string_attribute("extension_list"); }
+std::string extension_list() {
+  return OIIO::get_string_attribute("extension_list");
+}
 
 void resize(const float* src, int src_width, int src_height, int channels, float* dst, int width,
             int height, const char* filter) {
@@ -128,9 +130,9 @@ void resize(const float* src, int src_width, int src_height, int channels, float
                                          std::to_string(height) + " failed: " + out.geterror());
 }
 
-bool decode_texture(const std::string& filename, const void* memory, std::size_t size,
-                    int max_side, std::uint64_t max_pixels, std::vector<float>& pixels,
-                    int& width, int& height, int& channels, std::string& why) {
+bool decode_texture(const std::string& filename, const void* memory, std::size_t size, int max_side,
+                    std::uint64_t max_pixels, std::vector<float>& pixels, int& width, int& height,
+                    int& channels, std::string& why) {
   OIIO::Filesystem::IOMemReader reader(memory, memory ? size : 0);
   OIIO::Filesystem::IOProxy* io = memory ? &reader : nullptr;
   OIIO::ImageSpec config;

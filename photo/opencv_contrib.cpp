@@ -40,12 +40,18 @@ OnnxNet::OnnxNet(const std::string& path) : net_(module().read_onnx(path)) {}
 OnnxNet::~OnnxNet() {
   if (net_) module().delete_net(net_);
 }
-OnnxNet::OnnxNet(OnnxNet&& other) noexcept : net_(other.net_) { other.net_ = nullptr; }
+OnnxNet::OnnxNet(OnnxNet&& other) noexcept : net_(other.net_) {
+  other.net_ = nullptr;
+}
 OnnxNet& OnnxNet::operator=(OnnxNet&& other) noexcept {
   std::swap(net_, other.net_);
   return *this;
 }
-bool OnnxNet::empty() const { return !net_ || module().net_empty(net_); }
-cv::Mat OnnxNet::forward(const cv::Mat& blob) const { return module().forward(net_, blob); }
+bool OnnxNet::empty() const {
+  return !net_ || module().net_empty(net_);
+}
+cv::Mat OnnxNet::forward(const cv::Mat& blob) const {
+  return module().forward(net_, blob);
+}
 
 }  // namespace mr::photo::contrib

@@ -45,9 +45,13 @@ void* read_onnx(const std::string& path) {
   return net.release();
 }
 
-void delete_net(void* net) { delete static_cast<cv::dnn::Net*>(net); }
+void delete_net(void* net) {
+  delete static_cast<cv::dnn::Net*>(net);
+}
 
-bool net_empty(const void* net) { return static_cast<const cv::dnn::Net*>(net)->empty(); }
+bool net_empty(const void* net) {
+  return static_cast<const cv::dnn::Net*>(net)->empty();
+}
 
 cv::Mat forward(void* net, const cv::Mat& blob) {
   auto* n = static_cast<cv::dnn::Net*>(net);
@@ -55,8 +59,14 @@ cv::Mat forward(void* net, const cv::Mat& blob) {
   return n->forward();
 }
 
-const Module kModule{guided_filter, rolling_guidance_filter, fast_global_smoother_filter,
-                     slic_superpixels, read_onnx, delete_net, net_empty, forward};
+const Module kModule{guided_filter,
+                     rolling_guidance_filter,
+                     fast_global_smoother_filter,
+                     slic_superpixels,
+                     read_onnx,
+                     delete_net,
+                     net_empty,
+                     forward};
 
 }  // namespace
 

@@ -27,11 +27,13 @@ namespace {
 std::vector<fs::path> sample_files() {
   std::vector<fs::path> out;
   const fs::path root(MR_SOURCE_DIR);
-  for (const fs::path& folder : {root / "sample_photos", root / "gallery" / "tune", root / "tests" / "data"})
+  for (const fs::path& folder :
+       {root / "sample_photos", root / "gallery" / "tune", root / "tests" / "data"})
     for (const auto& e : fs::recursive_directory_iterator(folder)) {
       std::string ext = e.path().extension().string();
       for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-      if (ext == ".jpg" || ext == ".jpeg" || ext == ".png" || ext == ".exr") out.push_back(e.path());
+      if (ext == ".jpg" || ext == ".jpeg" || ext == ".png" || ext == ".exr")
+        out.push_back(e.path());
     }
   std::sort(out.begin(), out.end());
   return out;
@@ -41,14 +43,16 @@ void expect_same_attributes(const OIIO::ParamValueList& got, const OIIO::ParamVa
                             const std::string& what) {
   auto list = [](const OIIO::ParamValueList& l) {
     std::string text;
-    for (const OIIO::ParamValue& p : l) text += "  " + p.name().string() + " = " + p.get_string(8) + "\n";
+    for (const OIIO::ParamValue& p : l)
+      text += "  " + p.name().string() + " = " + p.get_string(8) + "\n";
     return text;
   };
   ASSERT_EQ(got.size(), want.size()) << what << "\n" << list(got) << "against\n" << list(want);
   for (std::size_t i = 0; i < got.size(); ++i) {
     EXPECT_EQ(got[i].name(), want[i].name()) << what << " attribute " << i;
     EXPECT_EQ(got[i].type(), want[i].type()) << what << " " << want[i].name();
-    EXPECT_EQ(got[i].get_string(1 << 20), want[i].get_string(1 << 20)) << what << " " << want[i].name();
+    EXPECT_EQ(got[i].get_string(1 << 20), want[i].get_string(1 << 20))
+        << what << " " << want[i].name();
   }
 }
 
@@ -91,7 +95,8 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
     ++total;
     const bool is_direct = detail::open_direct_reader(path) != nullptr;
     direct += is_direct;
-    for (const OIIO::TypeDesc& type : {OIIO::TypeDesc(OIIO::TypeDesc::UNKNOWN), OIIO::TypeDesc(OIIO::TypeDesc::FLOAT)}) {
+    for (const OIIO::TypeDesc& type :
+         {OIIO::TypeDesc(OIIO::TypeDesc::UNKNOWN), OIIO::TypeDesc(OIIO::TypeDesc::FLOAT)}) {
       auto mine = detail::open_image_reader(path);
       auto oiio = OIIO::ImageInput::open(path.string());
       ASSERT_TRUE(mine && oiio);

@@ -78,9 +78,9 @@ TEST(Startup, TiffAndEstimationLoadTheirModules) {
   // No depth given: the geometry is estimated (sky mask, guided filter: ximgproc).
   Image photo = test::make_test_photo(96, 64);
   write_image(dir / "est.jpg", photo);
-  const test::CommandResult e = run_mr("fog " + test::shell_quoted(dir / "est.jpg") +
-                                       " --depth auto --out-dir " +
-                                       test::shell_quoted(dir / "out2") + " --visibility 150m -q");
+  const test::CommandResult e =
+      run_mr("fog " + test::shell_quoted(dir / "est.jpg") + " --depth auto --out-dir " +
+             test::shell_quoted(dir / "out2") + " --visibility 150m -q");
   ASSERT_EQ(e.exit_code, 0) << e.output;
   EXPECT_TRUE(maps(e.output, "libopencv_ximgproc")) << "estimation did not use ximgproc";
   EXPECT_TRUE(fs::exists(dir / "out2" / "est_fog.jpg"));

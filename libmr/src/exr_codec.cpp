@@ -2,11 +2,11 @@
 // (libmr/src/direct_codecs.h): single-part scanline files with one channel or R,G,B(,A), all
 // half or all float, and header attributes of the common types. Anything else goes to OIIO.
 #include <ImfChannelList.h>
+#include <ImfFloatAttribute.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
 #include <ImfIntAttribute.h>
-#include <ImfFloatAttribute.h>
 #include <ImfStandardAttributes.h>
 #include <ImfStringAttribute.h>
 #include <ImfTestFile.h>
@@ -25,17 +25,28 @@ namespace {
 
 const char* compression_name(Imf::Compression c) {
   switch (c) {
-    case Imf::NO_COMPRESSION: return "none";
-    case Imf::RLE_COMPRESSION: return "rle";
-    case Imf::ZIPS_COMPRESSION: return "zips";
-    case Imf::ZIP_COMPRESSION: return "zip";
-    case Imf::PIZ_COMPRESSION: return "piz";
-    case Imf::PXR24_COMPRESSION: return "pxr24";
-    case Imf::B44_COMPRESSION: return "b44";
-    case Imf::B44A_COMPRESSION: return "b44a";
-    case Imf::DWAA_COMPRESSION: return "dwaa";
-    case Imf::DWAB_COMPRESSION: return "dwab";
-    default: return nullptr;
+    case Imf::NO_COMPRESSION:
+      return "none";
+    case Imf::RLE_COMPRESSION:
+      return "rle";
+    case Imf::ZIPS_COMPRESSION:
+      return "zips";
+    case Imf::ZIP_COMPRESSION:
+      return "zip";
+    case Imf::PIZ_COMPRESSION:
+      return "piz";
+    case Imf::PXR24_COMPRESSION:
+      return "pxr24";
+    case Imf::B44_COMPRESSION:
+      return "b44";
+    case Imf::B44A_COMPRESSION:
+      return "b44a";
+    case Imf::DWAA_COMPRESSION:
+      return "dwaa";
+    case Imf::DWAB_COMPRESSION:
+      return "dwab";
+    default:
+      return nullptr;
   }
 }
 
@@ -148,24 +159,28 @@ class ExrReader final : public ImageReader {
       } else if (name == "screenWindowCenter") {
         const Imath::V2f v = h.screenWindowCenter();
         const float xy[2] = {v.x, v.y};
-        spec_.set(OIIO::ParamValue("screenWindowCenter", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::VEC2), 1, xy));
+        spec_.set(OIIO::ParamValue("screenWindowCenter",
+                                   OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::VEC2), 1,
+                                   xy));
       } else if (type == "string") {
         const std::string& v = static_cast<const Imf::StringAttribute&>(a.attribute()).value();
         if (v.empty()) return false;  // OIIO drops some empty ones
         // capDate is "YYYY:MM:DD HH:MM:SS", as EXIF's DateTime: OIIO keeps the text.
-        const std::string oiio_name = name == "comments" ? "ImageDescription"
-                                      : name == "owner"  ? "Copyright"
+        const std::string oiio_name = name == "comments"  ? "ImageDescription"
+                                      : name == "owner"   ? "Copyright"
                                       : name == "capDate" ? "DateTime"
                                                           : name;
         spec_.attribute(oiio_name, v);
       } else if (type == "float") {
-        if (name == "expTime" || name == "aperture" || name == "xDensity" ||
-            name == "utcOffset" || name == "longitude" || name == "latitude" ||
-            name == "altitude" || name == "focus" || name == "isoSpeed")
+        if (name == "expTime" || name == "aperture" || name == "xDensity" || name == "utcOffset" ||
+            name == "longitude" || name == "latitude" || name == "altitude" || name == "focus" ||
+            name == "isoSpeed")
           return false;  // OIIO renames these
-        spec_.set(OIIO::ParamValue(name, static_cast<const Imf::FloatAttribute&>(a.attribute()).value()));
+        spec_.set(
+            OIIO::ParamValue(name, static_cast<const Imf::FloatAttribute&>(a.attribute()).value()));
       } else if (type == "int") {
-        spec_.set(OIIO::ParamValue(name, static_cast<const Imf::IntAttribute&>(a.attribute()).value()));
+        spec_.set(
+            OIIO::ParamValue(name, static_cast<const Imf::IntAttribute&>(a.attribute()).value()));
       } else {
         return false;
       }

@@ -1,9 +1,10 @@
-// JPEG through libjpeg(-turbo) as OpenImageIO 2.4's jpeg plugin does it (libmr/src/direct_codecs.h):
-// libjpeg's defaults for decoding (ISLOW DCT, fancy upsampling, RGB or grey out), the same
-// attributes (oiio:ColorSpace, jpeg:subsampling, the JFIF density as XResolution, YResolution,
-// ResolutionUnit and PixelAspectRatio, a COM marker as ImageDescription, the TIFF fields of an
-// EXIF block), and for writing the same quality, chroma subsampling, JFIF density and EXIF.
-// libjpeg's errors longjmp back here (its default error_exit would exit the process).
+// JPEG through libjpeg(-turbo) as OpenImageIO 2.4's jpeg plugin does it
+// (libmr/src/direct_codecs.h): libjpeg's defaults for decoding (ISLOW DCT, fancy upsampling, RGB or
+// grey out), the same attributes (oiio:ColorSpace, jpeg:subsampling, the JFIF density as
+// XResolution, YResolution, ResolutionUnit and PixelAspectRatio, a COM marker as ImageDescription,
+// the TIFF fields of an EXIF block), and for writing the same quality, chroma subsampling, JFIF
+// density and EXIF. libjpeg's errors longjmp back here (its default error_exit would exit the
+// process).
 #include <OpenImageIO/strutil.h>
 
 #include <algorithm>
@@ -105,8 +106,9 @@ class JpegReader final : public ImageReader {
     jpeg_save_markers(&cinfo_, JPEG_COM, 0xFFFF);
     if (jpeg_read_header(&cinfo_, TRUE) != JPEG_HEADER_OK || err_.failed) return false;
     const bool grey = cinfo_.jpeg_color_space == JCS_GRAYSCALE && cinfo_.num_components == 1;
-    const bool colour = (cinfo_.jpeg_color_space == JCS_YCbCr || cinfo_.jpeg_color_space == JCS_RGB) &&
-                        cinfo_.num_components == 3;
+    const bool colour =
+        (cinfo_.jpeg_color_space == JCS_YCbCr || cinfo_.jpeg_color_space == JCS_RGB) &&
+        cinfo_.num_components == 3;
     if (!grey && !colour) return false;  // CMYK, YCCK: OIIO converts them
     if (!header_attributes()) return false;
     jpeg_start_decompress(&cinfo_);
@@ -183,8 +185,8 @@ class JpegReader final : public ImageReader {
       } else if (m->marker == JPEG_COM) {
         if (spec_.extra_attribs.find("ImageDescription", OIIO::TypeDesc::STRING, false) ==
             spec_.extra_attribs.cend())
-          spec_.attribute("ImageDescription", std::string_view(reinterpret_cast<const char*>(m->data),
-                                                               m->data_length));
+          spec_.attribute("ImageDescription",
+                          std::string_view(reinterpret_cast<const char*>(m->data), m->data_length));
       }
     }
     // The JFIF density, after the EXIF block, wins over its resolution; a density of 1 gives
@@ -194,10 +196,17 @@ class JpegReader final : public ImageReader {
       spec_.set(OIIO::ParamValue("XResolution", float(cinfo_.X_density)));
       spec_.set(OIIO::ParamValue("YResolution", float(cinfo_.Y_density)));
       switch (cinfo_.density_unit) {
-        case 0: spec_.attribute("ResolutionUnit", "none"); break;
-        case 1: spec_.attribute("ResolutionUnit", "in"); break;
-        case 2: spec_.attribute("ResolutionUnit", "cm"); break;
-        default: return false;
+        case 0:
+          spec_.attribute("ResolutionUnit", "none");
+          break;
+        case 1:
+          spec_.attribute("ResolutionUnit", "in");
+          break;
+        case 2:
+          spec_.attribute("ResolutionUnit", "cm");
+          break;
+        default:
+          return false;
       }
     } else if (cinfo_.X_density != cinfo_.Y_density) {
       return false;
@@ -234,8 +243,8 @@ class JpegReader final : public ImageReader {
 bool writable_attributes(const ImageHeader& spec) {
   // ImageDescription is not written here: OIIO's plugin also writes it as a COM marker.
   // The Exif directory's fields OIIO writes for sRGB itself (as "0230", "0100", 1).
-  static const std::set<std::string> handled = {"oiio:ColorSpace", "Compression",
-                                                "jpeg:subsampling", "Exif:ExifVersion",
+  static const std::set<std::string> handled = {"oiio:ColorSpace",      "Compression",
+                                                "jpeg:subsampling",     "Exif:ExifVersion",
                                                 "Exif:FlashPixVersion", "Exif:ColorSpace"};
   for (const OIIO::ParamValue& p : spec.extra_attribs) {
     const std::string name = p.name().string();
@@ -251,16 +260,20 @@ bool writable_attributes(const ImageHeader& spec) {
                                    xres != std::floor(xres) || !(xres >= 1 && xres <= 65535))))
     return false;
   const std::string colour = spec.get_string_attribute("oiio:ColorSpace");
-  if (spec.get_string_attribute("Exif:ExifVersion") != "0230" && spec.extra_attribs.contains("Exif:ExifVersion"))
+  if (spec.get_string_attribute("Exif:ExifVersion") != "0230" &&
+      spec.extra_attribs.contains("Exif:ExifVersion"))
     return false;
-  if (spec.get_string_attribute("Exif:FlashPixVersion") != "0100" && spec.extra_attribs.contains("Exif:FlashPixVersion"))
+  if (spec.get_string_attribute("Exif:FlashPixVersion") != "0100" &&
+      spec.extra_attribs.contains("Exif:FlashPixVersion"))
     return false;
-  if (spec.extra_attribs.contains("Exif:ColorSpace") && spec.get_int_attribute("Exif:ColorSpace") != 1)
+  if (spec.extra_attribs.contains("Exif:ColorSpace") &&
+      spec.get_int_attribute("Exif:ColorSpace") != 1)
     return false;
   const std::string sub = spec.get_string_attribute("jpeg:subsampling");
   const std::string compression = spec.get_string_attribute("Compression");
   const std::string unit = spec.get_string_attribute("ResolutionUnit");
-  return spec.nchannels == 3 && (sub.empty() || sub == "4:4:4" || sub == "4:2:2" || sub == "4:2:0") &&
+  return spec.nchannels == 3 &&
+         (sub.empty() || sub == "4:4:4" || sub == "4:2:2" || sub == "4:2:0") &&
          (compression.empty() || compression.rfind("jpeg:", 0) == 0) &&
          spec.extra_attribs.find("PixelAspectRatio") == spec.extra_attribs.cend() &&
          (unit.empty() || unit == "none" || unit == "in" || unit == "cm") &&

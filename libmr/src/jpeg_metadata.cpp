@@ -22,13 +22,17 @@ struct Field {
 };
 
 const std::map<std::uint16_t, Field>& fields() {
-  static const std::map<std::uint16_t, Field> table = {
-      {270, {"ImageDescription", Kind::text}}, {271, {"Make", Kind::text}},
-      {272, {"Model", Kind::text}},            {274, {"Orientation", Kind::integer}},
-      {282, {"XResolution", Kind::resolution}}, {283, {"YResolution", Kind::resolution}},
-      {296, {"ResolutionUnit", Kind::unit}},   {305, {"Software", Kind::text}},
-      {306, {"DateTime", Kind::text}},         {315, {"Artist", Kind::text}},
-      {33432, {"Copyright", Kind::text}}};
+  static const std::map<std::uint16_t, Field> table = {{270, {"ImageDescription", Kind::text}},
+                                                       {271, {"Make", Kind::text}},
+                                                       {272, {"Model", Kind::text}},
+                                                       {274, {"Orientation", Kind::integer}},
+                                                       {282, {"XResolution", Kind::resolution}},
+                                                       {283, {"YResolution", Kind::resolution}},
+                                                       {296, {"ResolutionUnit", Kind::unit}},
+                                                       {305, {"Software", Kind::text}},
+                                                       {306, {"DateTime", Kind::text}},
+                                                       {315, {"Artist", Kind::text}},
+                                                       {33432, {"Copyright", Kind::text}}};
   return table;
 }
 
@@ -80,7 +84,8 @@ bool decode_tiff_fields(const unsigned char* data, std::size_t size, OIIO::Param
       const std::uint32_t count = u32(e + 4);
       if ((tag == kExifVersion || tag == kFlashPixVersion) && type == kUndefined && count == 4) {
         const std::string_view v(reinterpret_cast<const char*>(data + e + 8), 4);
-        out.push_back(OIIO::ParamValue(tag == kExifVersion ? "Exif:ExifVersion" : "Exif:FlashPixVersion", v));
+        out.push_back(
+            OIIO::ParamValue(tag == kExifVersion ? "Exif:ExifVersion" : "Exif:FlashPixVersion", v));
       } else if (tag == kComponents && type == kUndefined && count == 4) {
         // ComponentsConfiguration: OIIO writes it (Y, Cb, Cr) and reads nothing from it.
       } else if (tag == kColorSpace && type == kShort && count == 1 && u16(e + 8) == 1) {
@@ -113,7 +118,8 @@ bool decode_tiff_fields(const unsigned char* data, std::size_t size, OIIO::Param
       if (at + n > size) return false;
       std::size_t len = n;
       while (len && data[at + len - 1] == 0) --len;  // the terminating NULs
-      out.push_back(OIIO::ParamValue(f.name, std::string_view(reinterpret_cast<const char*>(data + at), len)));
+      out.push_back(OIIO::ParamValue(
+          f.name, std::string_view(reinterpret_cast<const char*>(data + at), len)));
     } else if (f.kind == Kind::integer || f.kind == Kind::unit) {
       if (type != kShort || n != 1) return false;
       const int v = u16(e + 8);
@@ -122,7 +128,9 @@ bool decode_tiff_fields(const unsigned char* data, std::size_t size, OIIO::Param
         out.push_back(OIIO::ParamValue(f.name, OIIO::TypeDesc::UINT16, 1, &stored));
       } else {
         if (v < 1 || v > 3) return false;
-        out.push_back(OIIO::ParamValue(f.name, std::string_view(v == 1 ? "none" : v == 2 ? "in" : "cm")));
+        out.push_back(OIIO::ParamValue(f.name, std::string_view(v == 1   ? "none"
+                                                                : v == 2 ? "in"
+                                                                         : "cm")));
       }
     } else {
       if (type != kRational || n != 1) return false;
@@ -141,7 +149,8 @@ bool is_tiff_field(const OIIO::ParamValue& p) {
   if (!entry) return false;
   const OIIO::TypeDesc t = p.type();
   switch (entry->second.kind) {
-    case Kind::text: return t == OIIO::TypeDesc::STRING;
+    case Kind::text:
+      return t == OIIO::TypeDesc::STRING;
     case Kind::integer:
       return (t == OIIO::TypeDesc::INT || t == OIIO::TypeDesc::UINT16) && p.get_int() >= 0 &&
              p.get_int() <= 65535;
@@ -198,7 +207,10 @@ std::vector<char> encode_tiff_fields(const OIIO::ParamValueList& attributes) {
       }
     } else if (f.kind == Kind::integer || f.kind == Kind::unit) {
       const std::string unit = f.kind == Kind::unit ? p->get_string() : "";
-      const int v = f.kind == Kind::integer ? p->get_int() : unit == "none" ? 1 : unit == "in" ? 2 : 3;
+      const int v = f.kind == Kind::integer ? p->get_int()
+                    : unit == "none"        ? 1
+                    : unit == "in"          ? 2
+                                            : 3;
       put16(kShort);
       put32(1);
       put16(std::uint16_t(v));
@@ -220,7 +232,7 @@ std::vector<char> encode_tiff_fields(const OIIO::ParamValueList& attributes) {
     put32(1);
     put32(0);  // set below
   }
-  put32(0);  // no next directory
+  put32(0);              // no next directory
   if (exif_directory) {  // "0230", Y Cb Cr, "0100", sRGB (values of 4 bytes sit in the entries)
     out.insert(out.end(), extra.begin(), extra.end());
     extra.clear();
@@ -284,7 +296,8 @@ bool decode_iptc(const unsigned char* data, std::size_t size, OIIO::ParamValueLi
       for (const Dataset& k : kDatasets)
         if (k.number == number) d = &k;
       if (!d) return false;
-      out.push_back(OIIO::ParamValue(d->name, std::string_view(reinterpret_cast<const char*>(data + q + 5), n)));
+      out.push_back(OIIO::ParamValue(
+          d->name, std::string_view(reinterpret_cast<const char*>(data + q + 5), n)));
       q += 5 + n;
     }
     at = p + len + (len & 1);

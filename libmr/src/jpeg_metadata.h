@@ -1,9 +1,9 @@
 // Private to libmr: a JPEG's metadata blocks as OIIO 2.4 reads and writes them, as far as
-// libmr's direct JPEG codec takes them (libmr/src/jpeg_codec.cpp). EXIF: the TIFF fields (IFD0: ImageDescription, Make, Model,
-// Orientation, XResolution, YResolution, ResolutionUnit, Software, DateTime, Artist, Copyright)
-// as OIIO 2.4 names and types them (strings, Orientation an int, the resolutions floats,
-// ResolutionUnit "none" / "in" / "cm"). Anything more in a block (the Exif and GPS
-// sub-directories, maker notes, other tags) is left to OIIO's own decoder (the module).
+// libmr's direct JPEG codec takes them (libmr/src/jpeg_codec.cpp). EXIF: the TIFF fields (IFD0:
+// ImageDescription, Make, Model, Orientation, XResolution, YResolution, ResolutionUnit, Software,
+// DateTime, Artist, Copyright) as OIIO 2.4 names and types them (strings, Orientation an int, the
+// resolutions floats, ResolutionUnit "none" / "in" / "cm"). Anything more in a block (the Exif and
+// GPS sub-directories, maker notes, other tags) is left to OIIO's own decoder (the module).
 #pragma once
 
 #include <OpenImageIO/paramlist.h>
