@@ -2,7 +2,7 @@
 
 #include <cstdint>
 
-#include "oiio_bridge.h"
+#include "core/metadata_impl.h"
 
 namespace mr {
 

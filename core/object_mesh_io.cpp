@@ -12,8 +12,6 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
 #include <algorithm>
 #include <assimp/Importer.hpp>
 #include <cctype>
@@ -28,6 +26,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/oiio_module.h"
 #include "mr/error.h"
 
 namespace mr::detail {
@@ -35,10 +34,6 @@ namespace mr::detail {
 namespace {
 
 namespace fs = std::filesystem;
-namespace Filesystem = OIIO::Filesystem;
-using OIIO::ImageInput;
-using OIIO::ImageSpec;
-using OIIO::TypeDesc;
 
 constexpr int kMaxNodeDepth = 256;
 
@@ -63,7 +58,8 @@ class Importer {
   // Decoded texture or nullopt (missing / undecodable: the reason in `why`).
   std::optional<Image> decode_file(const fs::path& file, std::string& why) const;
   std::optional<Image> decode_embedded(const aiTexture* t, std::string& why) const;
-  std::optional<Image> decode(const std::string& filename, Filesystem::IOProxy* io,
+  // Through OIIO's module: a file, or `size` bytes at `memory` (not null) named `filename`.
+  std::optional<Image> decode(const std::string& filename, const void* memory, std::size_t size,
                               std::string& why) const;
 
   fs::path path_;
@@ -391,7 +387,7 @@ int Importer::texture(const aiMaterial* mat,
 }
 
 std::optional<Image> Importer::decode_file(const fs::path& file, std::string& why) const {
-  return decode(file.string(), nullptr, why);
+  return decode(file.string(), nullptr, 0, why);
 }
 
 std::optional<Image> Importer::decode_embedded(const aiTexture* t, std::string& why) const {
@@ -405,8 +401,7 @@ std::optional<Image> Importer::decode_embedded(const aiTexture* t, std::string& 
     if (hint.empty() || !std::all_of(hint.begin(), hint.end(), [](char c) { return std::isalnum(static_cast<unsigned char>(c)); }))
       hint = "png";
     if (hint == "jpeg") hint = "jpg";
-    Filesystem::IOMemReader reader(t->pcData, t->mWidth);
-    return decode("embedded." + hint, &reader, why);
+    return decode("embedded." + hint, t->pcData, t->mWidth, why);
   }
   // Uncompressed BGRA8 texels.
   const std::uint64_t w = t->mWidth, h = t->mHeight;
@@ -427,48 +422,15 @@ std::optional<Image> Importer::decode_embedded(const aiTexture* t, std::string& 
   return image;
 }
 
-std::optional<Image> Importer::decode(const std::string& filename, Filesystem::IOProxy* io,
-                                      std::string& why) const {
-  ImageSpec config;
-  config.attribute("oiio:UnassociatedAlpha", 1);  // base colour keeps its colour where alpha < 1
-  // OIIO 2.4's readers take the memory proxy from the configuration hint (the open() argument
-  // alone is not passed on to every plugin).
-  if (io) config.attribute("oiio:ioproxy", TypeDesc::PTR, &io);
-  std::unique_ptr<ImageInput> in;
-  try {
-    in = ImageInput::open(filename, &config, io);
-  } catch (const std::exception& e) {
-    why = e.what();
+std::optional<Image> Importer::decode(const std::string& filename, const void* memory,
+                                      std::size_t size, std::string& why) const {
+  std::vector<float> pixels;
+  int width = 0, height = 0, stored = 0;
+  if (!oiio_module().decode_texture(filename, memory, size, options_.max_texture_size,
+                                    options_.max_texture_pixels, pixels, width, height, stored,
+                                    why))
     return std::nullopt;
-  }
-  if (!in) {
-    why = OIIO::geterror();
-    if (why.empty()) why = "cannot be decoded as an image";
-    std::replace(why.begin(), why.end(), '\n', ' ');
-    return std::nullopt;
-  }
-  const ImageSpec& spec = in->spec();
-  const std::uint64_t w = std::uint64_t(std::max(spec.width, 0));
-  const std::uint64_t h = std::uint64_t(std::max(spec.height, 0));
-  if (w == 0 || h == 0 || spec.nchannels < 1) {
-    why = "an empty image";
-    return std::nullopt;
-  }
-  if (w > std::uint64_t(options_.max_texture_size) || h > std::uint64_t(options_.max_texture_size) ||
-      w * h > options_.max_texture_pixels) {
-    why = std::to_string(w) + "x" + std::to_string(h) + " is larger than the texture limit (" +
-          std::to_string(options_.max_texture_size) + " pixels a side, " +
-          std::to_string(options_.max_texture_pixels) + " pixels)";
-    return std::nullopt;
-  }
-  const int stored = std::min(spec.nchannels, 4);
-  std::vector<float> pixels(w * h * std::uint64_t(stored));
-  if (!in->read_image(0, 0, 0, stored, TypeDesc::FLOAT, pixels.data())) {
-    why = in->geterror();
-    if (why.empty()) why = "truncated or corrupt image";
-    std::replace(why.begin(), why.end(), '\n', ' ');
-    return std::nullopt;
-  }
+  const std::uint64_t w = std::uint64_t(width), h = std::uint64_t(height);
   // RGB or RGBA: grey is spread over the three colour channels.
   const int channels = (stored == 2 || stored == 4) ? 4 : 3;
   Image image(static_cast<int>(w), static_cast<int>(h), channels);

@@ -1,27 +1,26 @@
-// Private to libmr: OpenImageIO <-> mr::Image / mr::Metadata. Heavy header: include only in .cpp.
+// Private to libmr: mr::Image views as OpenImageIO ImageBufs, for code that links OIIO itself
+// (the OIIO module, tests). Header-only, so libmr.so does not need libOpenImageIO.
 #pragma once
 
 #include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/paramlist.h>
 
+#include "core/metadata_impl.h"
 #include "mr/image.h"
-#include "mr/metadata.h"
 
-namespace mr {
-
-struct Metadata::Impl {
-  OIIO::ParamValueList attributes;
-};
-
-namespace detail {
+namespace mr::detail {
 
 /// An ImageBuf that wraps the view's pixels without copying (the view must stay alive).
 /// Works for any row stride.
-OIIO::ImageBuf wrap(ImageView view);
-OIIO::ImageBuf wrap(ConstImageView view);
-/// A spec for the view's size with float pixels and the image's channel names.
-OIIO::ImageSpec float_spec(int width, int height, int channels,
-                           const std::vector<std::string>& channel_names);
+inline OIIO::ImageBuf wrap(ImageView view) {
+  OIIO::ImageSpec spec(view.width, view.height, view.channels, OIIO::TypeDesc::FLOAT);
+  return OIIO::ImageBuf(spec, view.data, OIIO::stride_t(view.channels * sizeof(float)),
+                        OIIO::stride_t(view.row_stride * sizeof(float)));
+}
 
-}  // namespace detail
-}  // namespace mr
+inline OIIO::ImageBuf wrap(ConstImageView view) {
+  // ImageBuf has no const-wrapping constructor; callers only read from the result.
+  return wrap(ImageView{const_cast<float*>(view.data), view.width, view.height, view.channels,
+                        view.row_stride});
+}
+
+}  // namespace mr::detail

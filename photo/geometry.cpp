@@ -2,7 +2,6 @@
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/ximgproc/edge_filter.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -12,6 +11,7 @@
 
 #include "core/cv_bridge.h"
 #include "core/vec3.h"
+#include "photo/opencv_contrib.h"
 #include "mr/error.h"
 
 namespace mr::photo {
@@ -395,11 +395,11 @@ cv::Mat smooth_against_photo(ConstImageView photo, const cv::Mat& map, const Opt
     // leaves each pixel with its own unrefined value, a speckled, jagged depth in exactly
     // the low-confidence band it should smooth (a seam in dense fog).
     cv::Mat plain;
-    cv::ximgproc::rollingGuidanceFilter(guide, plain, -1, 25, texture_px, 4);
+    contrib::rolling_guidance_filter(guide, plain, -1, 25, texture_px, 4);
     guide = plain;
   }
   cv::Mat smoothed;
-  cv::ximgproc::fastGlobalSmootherFilter(guide, small, smoothed, o.lambda, o.sigma_color);
+  contrib::fast_global_smoother_filter(guide, small, smoothed, o.lambda, o.sigma_color);
   if (s < 1) cv::resize(smoothed, smoothed, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
   return smoothed;
 }

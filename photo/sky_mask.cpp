@@ -2,7 +2,6 @@
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/ximgproc/edge_filter.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -10,6 +9,7 @@
 #include <vector>
 
 #include "core/cv_bridge.h"
+#include "photo/opencv_contrib.h"
 #include "photo/sky_matte.h"
 
 namespace mr::photo {
@@ -669,7 +669,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   if (s < 1) cv::resize(soft, soft, cv::Size(photo.width, photo.height), 0, 0, cv::INTER_LINEAR);
   const int radius = std::max(2, int(std::lround(0.004 * std::hypot(photo.width, photo.height))));
   cv::Mat refined, binary, grown, shrunk;
-  cv::ximgproc::guidedFilter(full, soft, refined, radius, 1e-3);
+  contrib::guided_filter(full, soft, refined, radius, 1e-3);
   // Only within `radius` of the mask's edges does the filter decide; elsewhere the mask stands.
   binary = soft >= 0.5f;
   const cv::Mat disk =

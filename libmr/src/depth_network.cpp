@@ -2,21 +2,21 @@
 // OpenImageIO's (ImageBufAlgo::resize); OpenCV only runs the graph.
 #include "mr/depth_network.h"
 
-#include <OpenImageIO/imagebufalgo.h>
 
 #include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <opencv2/core.hpp>
-#include <opencv2/dnn.hpp>
 #include <string>
 #include <system_error>
 #include <utility>
 #include <vector>
 
 #include "mr/error.h"
-#include "core/oiio_bridge.h"
+#include "core/oiio_module.h"
+#include "photo/opencv_contrib.h"
 
 namespace mr {
 
@@ -37,12 +37,9 @@ std::string shape_text(const cv::Mat& m) {
 // default for the direction of the resize.
 Image resize_image(const Image& src, int w, int h, const char* filter) {
   if (src.width() == w && src.height() == h) return src;
-  OIIO::ImageBuf in = detail::wrap(src.view());
   Image out = Image::uninitialized(w, h, src.channels(), src.channel_names());
-  OIIO::ImageBuf dst = detail::wrap(out.view());
-  if (!OIIO::ImageBufAlgo::resize(dst, in, filter, 0.0f, OIIO::ROI(0, w, 0, h, 0, 1, 0, src.channels()), 1))
-    throw Error(ErrorCode::internal, "resize to " + std::to_string(w) + "x" + std::to_string(h) +
-                                         " failed: " + dst.geterror());
+  detail::oiio_module().resize(src.data(), src.width(), src.height(), src.channels(), out.data(),
+                               w, h, filter);
   return out;
 }
 
@@ -51,14 +48,13 @@ Image resize_image(const Image& src, int w, int h, const char* filter) {
 struct DepthNetwork::Impl {
   std::filesystem::path path;
   DepthNetworkOptions options;
-  mutable cv::dnn::Net net;
+  mutable std::optional<photo::contrib::OnnxNet> net;
 
   // Forward pass on an NCHW blob; the output as an h x w CV_32F map. Errors name the model.
   cv::Mat forward(const cv::Mat& blob) const {
     cv::Mat out;
     try {
-      net.setInput(blob);
-      out = net.forward();
+      out = net->forward(blob);
     } catch (const cv::Exception& e) {
       throw Error(ErrorCode::corrupt_input,
                   path.string() + ": does not run on a [1, 3, " + std::to_string(options.input_height) +
@@ -114,14 +110,12 @@ DepthNetwork::DepthNetwork(const std::filesystem::path& model, const DepthNetwor
   probe.close();
 
   try {
-    impl_->net = cv::dnn::readNetFromONNX(name);
+    impl_->net.emplace(name);
   } catch (const cv::Exception& e) {
     throw Error(ErrorCode::corrupt_input, name + ": not an ONNX model OpenCV can load: " + e.err);
   }
-  if (impl_->net.empty())
+  if (impl_->net->empty())
     throw Error(ErrorCode::corrupt_input, name + ": not an ONNX model OpenCV can load (empty network)");
-  impl_->net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
-  impl_->net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
   // Check the input and output shapes now, so a wrong model fails at load time.
   const int shape[4] = {1, 3, o.input_height, o.input_width};
   impl_->forward(cv::Mat(4, shape, CV_32F, cv::Scalar(0)));

@@ -8,7 +8,6 @@
 // the outputs file for file.
 #include "mr/fog_stream.h"
 
-#include <OpenImageIO/imageio.h>
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
 
@@ -23,7 +22,8 @@
 #include "depth_convert.h"
 #include "mr/error.h"
 #include "mr/scattering.h"
-#include "core/oiio_bridge.h"
+#include "core/metadata_impl.h"
+#include "image_files.h"
 #include "oiio_formats.h"
 #include "photo/composite.h"
 #include "render/medium.h"
@@ -35,6 +35,9 @@ namespace {
 using detail::automatic_pixel_type;
 using detail::drop_encoding_attributes;
 using detail::format_supports;
+using detail::ImageHeader;
+using detail::ImageReader;
+using detail::ImageWriter;
 using detail::to_oiio;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -43,10 +46,10 @@ bool is_integer(PixelType t) {
   return t == PixelType::uint8 || t == PixelType::uint16;
 }
 
-int depth_channel(const OIIO::ImageSpec& spec) {
+int depth_channel(const ImageHeader& spec) {
   for (const char* name : {"Z", "depth.Z", "Y", "depth.Y", "R"})
     for (int c = 0; c < spec.nchannels; ++c)
-      if (spec.channel_name(c) == name) return c;
+      if (c < int(spec.channelnames.size()) && spec.channelnames[c] == name) return c;
   return 0;
 }
 
@@ -66,12 +69,14 @@ void ensure(std::vector<T>& v, std::size_t n) {
   if (v.size() < n) v.resize(n);
 }
 
-std::unique_ptr<OIIO::ImageInput> open_quietly(const std::filesystem::path& path) {
+std::unique_ptr<ImageReader> open_quietly(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) return nullptr;
-  auto in = OIIO::ImageInput::open(path.string());
-  if (!in) OIIO::geterror();  // clear it: the full-frame path reports the problem
-  return in;
+  try {
+    return detail::open_image_reader(path);
+  } catch (const Error&) {
+    return nullptr;  // the full-frame path reports the problem
+  }
 }
 
 }  // namespace
@@ -108,7 +113,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
 
   // --- The photo's header: what read_image would do with it.
   const Image* image = req.photo_image;
-  std::unique_ptr<OIIO::ImageInput> in;
+  std::unique_ptr<ImageReader> in;
   int w = 0, h = 0, n = 0, photo_bits = 0;
   std::string from;
   std::vector<std::string> channel_names;
@@ -121,7 +126,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   } else {
     in = open_quietly(req.photo);
     if (!in) return decline("the photo cannot be opened here");
-    const OIIO::ImageSpec& spec = in->spec();
+    const ImageHeader& spec = in->spec();
     w = spec.width, h = spec.height, n = spec.nchannels;
     if (w <= 0 || h <= 0 || spec.depth > 1) return decline("unusual image shape");
     if (std::uint64_t(w) * std::uint64_t(h) > max_decoded_pixels())
@@ -152,7 +157,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   // --- The depth file's header: what read_depth would do with it.
   auto depth_in = open_quietly(req.depth);
   if (!depth_in) return decline("the depth map cannot be opened here");
-  const OIIO::ImageSpec dspec = depth_in->spec();
+  const ImageHeader dspec = depth_in->spec();
   if (dspec.width != w || dspec.height != h || dspec.depth > 1 || dspec.nchannels <= 0)
     return decline("depth map of another size");
   if (dspec.tile_width > 0) return decline("tiled depth map");
@@ -170,8 +175,6 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   else
     return decline("depth map of an unusual pixel type");
   const int depth_c = depth_channel(dspec);
-  // Stored as read (float, 8 or 16-bit): the native read, as for the photo below.
-  const bool depth_native = dspec.format == depth_type;
   const DepthOptions& depth_options = req.depth_options;
   if (!(depth_options.scale > 0) || !std::isfinite(depth_options.scale) ||
       !std::isfinite(depth_options.doffs_px) ||
@@ -181,15 +184,9 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
 
   // --- The output: what write_image would do.
   const std::filesystem::path& out_path = req.output;
-  std::string format;
-  {
-    auto probe = OIIO::ImageOutput::create(out_path.string());
-    if (!probe) {
-      OIIO::geterror();
-      return decline("no writer for the output's extension");
-    }
-    format = probe->format_name();
-  }
+  std::unique_ptr<ImageWriter> out = detail::create_image_writer(out_path);
+  if (!out) return decline("no writer for the output's extension");
+  const std::string format = out->format_name();
   const WriteOptions& wo = req.write;
   const PixelType out_type =
       wo.pixel_type == PixelType::automatic ? automatic_pixel_type(format) : wo.pixel_type;
@@ -269,7 +266,9 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   }
 
   // --- The output file, opened before the first strip is decoded.
-  OIIO::ImageSpec out_spec(w, h, n, to_oiio(out_type));
+  ImageHeader out_spec;
+  out_spec.width = w, out_spec.height = h, out_spec.nchannels = n;
+  out_spec.format = to_oiio(out_type);
   out_spec.channelnames = channel_names;
   if (n == 4) out_spec.alpha_channel = 3;
   out_spec.extra_attribs = metadata.impl().attributes;
@@ -283,21 +282,19 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   }
   if (format == "openexr") out_spec.attribute("Compression", "zip");
   if (format == "tiff") out_spec.attribute("Compression", "zip");
-  detail::AtomicFile file(out_path);  // declared before `out`: `out` closes first
-  auto out = OIIO::ImageOutput::create(out_path.string());
-  if (!out) throw Error(ErrorCode::invalid_argument, out_path.string() + ": " + OIIO::geterror());
-  if (!out->open(file.temp_path().string(), out_spec))
-    throw Error(ErrorCode::io, out_path.string() + ": cannot write: " + out->geterror());
-
-  auto decode_error = [](const std::filesystem::path& path, OIIO::ImageInput& input) {
-    const std::string msg = input.geterror();
-    return Error(ErrorCode::corrupt_input, path.string() + ": cannot decode pixels (" +
-                                               (msg.empty() ? "truncated?" : msg) + ")");
-  };
+  detail::AtomicFile file(out_path);
+  // `out` was made before `file`: closed (reset) explicitly below before the commit, or, on
+  // an exception, before the temporary file is removed.
+  struct CloseFirst {
+    std::unique_ptr<ImageWriter>& out;
+    ~CloseFirst() { out.reset(); }
+  } close_first{out};
+  out->open(file.temp_path().string(), out_path.string(), out_spec);
 
   int next_row = 0;
   std::size_t next_token = 0;
   bool stopped = false;
+  const OIIO::TypeDesc photo_type = photo_bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::UINT8;
   const double alpha_scale = 1.0 / (photo_bits == 16 ? 65535.0 : 255.0);
   const double out_max_code = out_bits == 8 ? 255.0 : 65535.0;
   report_progress(cancel, "render", 0, std::size_t(h));  // mr/cancel.h: rows written
@@ -316,26 +313,18 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
             s.y0 = next_row;
             s.rows = std::min(strip_rows, h - next_row);
             next_row += s.rows;
-            // The photo's own type (photo_bits is its format), so the native read gives the
-            // same bytes as read_scanlines without the temporary buffer read_scanlines
-            // allocates per call (fresh pages, hence page faults, per strip: issue 12).
-            if (in && (!in->read_native_scanlines(0, 0, s.y0, s.y0 + s.rows, 0, 0, n,
-                                                  s.photo_codes.data()) ||
-                       in->has_error()))
-              throw decode_error(req.photo, *in);
+            // The photo's own type (photo_bits is its format): a native read.
+            if (in)
+              in->read_scanlines(s.y0, s.y0 + s.rows, 0, n, photo_type, s.photo_codes.data());
             return &s;
           }) &
           // Decode the depth map's rows (its own decoder: overlaps the photo's).
           tbb::make_filter<Strip*, Strip*>(
               tbb::filter_mode::serial_in_order,
               [&](Strip* s) {
-                const bool ok =
-                    depth_native
-                        ? depth_in->read_native_scanlines(0, 0, s->y0, s->y0 + s->rows, 0, depth_c,
-                                                          depth_c + 1, s->depth_values.data())
-                        : depth_in->read_scanlines(0, 0, s->y0, s->y0 + s->rows, 0, depth_c,
-                                                   depth_c + 1, depth_type, s->depth_values.data());
-                if (!ok || depth_in->has_error()) throw decode_error(req.depth, *depth_in);
+                // Native (no conversion) when stored as read (float, 8 or 16-bit).
+                depth_in->read_scanlines(s->y0, s->y0 + s->rows, depth_c, depth_c + 1, depth_type,
+                                         s->depth_values.data());
                 return s;
               }) &
           // Linearise, fog, composite, encode: strips in parallel.
@@ -444,16 +433,13 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
               }) &
           // Encode in order.
           tbb::make_filter<Strip*, void>(tbb::filter_mode::serial_in_order, [&](Strip* s) {
-            const bool ok = is_integer(out_type)
-                                ? out->write_scanlines(s->y0, s->y0 + s->rows, 0,
-                                                       out_bits == 8 ? OIIO::TypeDesc::UINT8
-                                                                     : OIIO::TypeDesc::UINT16,
-                                                       s->out_codes.data())
-                                : out->write_scanlines(s->y0, s->y0 + s->rows, 0,
-                                                       OIIO::TypeDesc::FLOAT, s->pixels.data());
-            if (!ok)
-              throw Error(ErrorCode::io,
-                          out_path.string() + ": writing failed: " + out->geterror());
+            if (is_integer(out_type))
+              out->write_scanlines(s->y0, s->y0 + s->rows,
+                                   out_bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16,
+                                   s->out_codes.data());
+            else
+              out->write_scanlines(s->y0, s->y0 + s->rows, OIIO::TypeDesc::FLOAT,
+                                   s->pixels.data());
             result.no_surface_pixels += s->counts.no_surface;
             result.invalid_pixels += s->counts.invalid;
             result.sky_threshold_pixels += s->counts.sky_threshold;
@@ -461,10 +447,9 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
             report_progress(cancel, "render", std::size_t(s->y0 + s->rows), std::size_t(h));
           }));
   if (stopped) throw_if_cancelled(cancel, "fog_file");
-  if (in) in->close();
-  depth_in->close();
-  if (!out->close())
-    throw Error(ErrorCode::io, out_path.string() + ": writing failed: " + out->geterror());
+  in.reset();
+  depth_in.reset();
+  out->close();
   out.reset();
   file.commit(wo.overwrite);
   result.streamed = true;

@@ -1,6 +1,5 @@
 #include "mr/io.h"
 
-#include <OpenImageIO/imageio.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -16,7 +15,8 @@
 
 #include "atomic_file.h"
 #include "mr/error.h"
-#include "core/oiio_bridge.h"
+#include "core/metadata_impl.h"
+#include "image_files.h"
 #include "oiio_formats.h"
 
 namespace mr {
@@ -26,6 +26,9 @@ namespace {
 using detail::automatic_pixel_type;
 using detail::drop_encoding_attributes;
 using detail::format_supports;
+using detail::ImageHeader;
+using detail::ImageReader;
+using detail::ImageWriter;
 using detail::to_oiio;
 
 std::string lower(std::string s) {
@@ -55,15 +58,10 @@ const ColorConfig& config_or_default(const ColorConfig* given, ColorConfig& stor
 
 std::atomic<std::uint64_t> g_max_decoded_pixels{kDefaultMaxDecodedPixels};
 
-std::unique_ptr<OIIO::ImageInput> open_input(const std::filesystem::path& path) {
+std::unique_ptr<ImageReader> open_input(const std::filesystem::path& path) {
   // Only regular files: a FIFO or /dev/zero would block or stream for ever.
   detail::check_regular_input(path, "an image");
-  auto in = OIIO::ImageInput::open(path.string());
-  if (!in) {
-    std::string msg = OIIO::geterror();
-    if (msg.empty()) msg = "unknown reason";
-    throw Error(ErrorCode::io, path.string() + ": not a readable image (" + msg + ")");
-  }
+  auto in = detail::open_image_reader(path);
   const auto& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 || spec.depth > 1)
     throw Error(ErrorCode::corrupt_input,
@@ -78,7 +76,7 @@ std::unique_ptr<OIIO::ImageInput> open_input(const std::filesystem::path& path) 
 
 // The decoded size is known from the header: a small file that would decode to gigabytes is
 // refused before any pixel is allocated.
-void check_decoded_size(const std::filesystem::path& path, const OIIO::ImageSpec& spec) {
+void check_decoded_size(const std::filesystem::path& path, const ImageHeader& spec) {
   const std::uint64_t pixels = std::uint64_t(spec.width) * std::uint64_t(spec.height);
   const std::uint64_t limit = max_decoded_pixels();
   if (pixels > limit) {
@@ -148,7 +146,7 @@ Image reorient(const Image& stored, int orientation) {
 }
 
 
-void write_buf(const std::filesystem::path& path, const OIIO::ImageSpec& spec,
+void write_buf(const std::filesystem::path& path, ImageWriter& out, const ImageHeader& spec,
                OIIO::TypeDesc data_type, const void* data, bool overwrite) {
   std::error_code ec;
   const auto folder = path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path();
@@ -157,15 +155,10 @@ void write_buf(const std::filesystem::path& path, const OIIO::ImageSpec& spec,
                                    " does not exist");
   if (!overwrite && std::filesystem::exists(path, ec))
     throw Error(ErrorCode::io, path.string() + ": exists already (not overwriting)");
-  auto out = OIIO::ImageOutput::create(path.string());
-  if (!out) throw Error(ErrorCode::invalid_argument, path.string() + ": " + OIIO::geterror());
   detail::AtomicFile file(path);
-  if (!out->open(file.temp_path().string(), spec))
-    throw Error(ErrorCode::io, path.string() + ": cannot write: " + out->geterror());
-  const bool wrote = out->write_image(data_type, data);
-  const bool closed = out->close();
-  if (!wrote || !closed)
-    throw Error(ErrorCode::io, path.string() + ": writing failed: " + out->geterror());
+  out.open(file.temp_path().string(), path.string(), spec);
+  out.write_image(data_type, data);
+  out.close();
   file.commit(overwrite);
 }
 
@@ -216,7 +209,7 @@ void set_max_decoded_pixels(std::uint64_t pixels) noexcept {
 
 Image read_image(const std::filesystem::path& path, const ReadOptions& options) {
   auto in = open_input(path);
-  const OIIO::ImageSpec spec = in->spec();
+  const ImageHeader spec = in->spec();
   check_decoded_size(path, spec);
   const PixelType stored = from_oiio(spec.format);
 
@@ -235,13 +228,7 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
                                         "' in OCIO config " + config.source());
     }
   }
-  auto read_pixels = [&](OIIO::TypeDesc type, void* data) {
-    if (!in->read_image(0, 0, 0, spec.nchannels, type, data) || in->has_error()) {
-      const std::string msg = in->geterror();
-      throw Error(ErrorCode::corrupt_input, path.string() + ": cannot decode pixels (" +
-                                                (msg.empty() ? "truncated?" : msg) + ")");
-    }
-  };
+  auto read_pixels = [&](OIIO::TypeDesc type, void* data) { in->read_image(type, data); };
 
   Image image = Image::uninitialized(spec.width, spec.height, spec.nchannels, spec.channelnames);
   const int n = spec.nchannels;
@@ -266,12 +253,8 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
       const int rows = std::min(strip_rows, spec.height - y0);
       if (strip_rows == spec.height) {
         read_pixels(code_type, codes.data());
-      } else if (!in->read_scanlines(0, 0, spec.y + y0, spec.y + y0 + rows, spec.z, 0, n, code_type,
-                                     codes.data()) ||
-                 in->has_error()) {
-        const std::string msg = in->geterror();
-        throw Error(ErrorCode::corrupt_input, path.string() + ": cannot decode pixels (" +
-                                                  (msg.empty() ? "truncated?" : msg) + ")");
+      } else {
+        in->read_scanlines(y0, y0 + rows, 0, n, code_type, codes.data());
       }
       float* out = image.data() + std::size_t(y0) * std::size_t(spec.width) * std::size_t(n);
       config.convert_pixels(codes.data(), bits, in_px, in_px * spec.width, out, 32, out_px,
@@ -298,7 +281,7 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
       config.convert(image.view(), from, colorspace::scene_linear);
     }
   }
-  in->close();
+  in.reset();
   image.metadata().impl().attributes = spec.extra_attribs;
   if (options.to_scene_linear) drop_encoding_attributes(image.metadata().impl().attributes);
   const int orientation = spec.get_int_attribute("Orientation", 1);
@@ -329,12 +312,11 @@ void write_image(const std::filesystem::path& path, const Image& image,
   if (options.jpeg_quality < 1 || options.jpeg_quality > 100)
     throw Error(ErrorCode::invalid_argument,
                 "jpeg quality " + std::to_string(options.jpeg_quality) + " is not in 1..100");
-  auto probe = OIIO::ImageOutput::create(path.string());
-  if (!probe)
+  const std::unique_ptr<ImageWriter> out = detail::create_image_writer(path);
+  if (!out)
     throw Error(ErrorCode::invalid_argument,
                 path.string() + ": no image format for extension '" + path.extension().string() + "'");
-  const std::string format = probe->format_name();
-  probe.reset();
+  const std::string format = out->format_name();
 
   const PixelType type = options.pixel_type == PixelType::automatic ? automatic_pixel_type(format)
                                                                     : options.pixel_type;
@@ -383,7 +365,9 @@ void write_image(const std::filesystem::path& path, const Image& image,
     data = encoded.data();
   }
 
-  OIIO::ImageSpec spec(image.width(), image.height(), image.channels(), to_oiio(type));
+  ImageHeader spec;
+  spec.width = image.width(), spec.height = image.height(), spec.nchannels = image.channels();
+  spec.format = to_oiio(type);
   spec.channelnames = image.channel_names();
   if (image.channels() == 4) spec.alpha_channel = 3;
   spec.extra_attribs = image.metadata().impl().attributes;
@@ -396,7 +380,7 @@ void write_image(const std::filesystem::path& path, const Image& image,
   }
   if (format == "openexr") spec.attribute("Compression", "zip");
   if (format == "tiff") spec.attribute("Compression", "zip");
-  write_buf(path, spec, data_type, data, options.overwrite);
+  write_buf(path, *out, spec, data_type, data, options.overwrite);
 }
 
 void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLayer> layers,
@@ -427,7 +411,9 @@ void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLaye
       for (int c = 0; c < n; ++c) interleaved[i * total + offset + c] = im.data()[i * n + c];
     offset += n;
   }
-  OIIO::ImageSpec spec(width, height, total, to_oiio(pixel_type));
+  ImageHeader spec;
+  spec.width = width, spec.height = height, spec.nchannels = total;
+  spec.format = to_oiio(pixel_type);
   spec.channelnames = names;
   // Data layers (depth) must not be rounded to half: keep them float.
   spec.channelformats.assign(total, to_oiio(pixel_type));
@@ -444,34 +430,12 @@ void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLaye
   spec.attribute("Compression", "zip");
   if (path.extension() != ".exr" && path.extension() != ".EXR")
     throw Error(ErrorCode::invalid_argument, path.string() + ": layered output must be .exr");
-  write_buf(path, spec, OIIO::TypeDesc::FLOAT, interleaved.data(), true);
+  const std::unique_ptr<ImageWriter> out = detail::create_image_writer(path);
+  write_buf(path, *out, spec, OIIO::TypeDesc::FLOAT, interleaved.data(), true);
 }
 
 bool is_readable_image_extension(const std::filesystem::path& path) {
-  static const std::set<std::string> extensions = [] {
-    std::set<std::string> out;
-    // "tiff:tif,tiff;jpeg:jpg,jpeg;..."
-    const std::string list = OIIO::get_string_attribute("extension_list");
-    std::size_t pos = 0;
-    while (pos < list.size()) {
-      std::size_t end = list.find(';', pos);
-      if (end == std::string::npos) end = list.size();
-      std::string entry = list.substr(pos, end - pos);
-      std::size_t colon = entry.find(':');
-      std::string exts = colon == std::string::npos ? entry : entry.substr(colon + 1);
-      std::size_t p = 0;
-      while (p <= exts.size()) {
-        std::size_t comma = exts.find(',', p);
-        if (comma == std::string::npos) comma = exts.size();
-        if (comma > p) out.insert(lower(exts.substr(p, comma - p)));
-        p = comma + 1;
-      }
-      pos = end + 1;
-    }
-    return out;
-  }();
-  std::string ext = lower(path.extension().string());
-  return ext.size() > 1 && extensions.count(ext.substr(1)) > 0;
+  return detail::is_readable_extension(path);
 }
 
 void check_output_path(const std::filesystem::path& path) { detail::check_output_target(path); }
@@ -480,7 +444,7 @@ void remove_unfinished_outputs() noexcept { detail::remove_temporaries_now(); }
 
 bool is_writable_image_extension(const std::filesystem::path& path) {
   if (!is_readable_image_extension(path)) return false;
-  return OIIO::ImageOutput::create(path.string()) != nullptr;
+  return detail::create_image_writer(path) != nullptr;
 }
 
 }  // namespace mr

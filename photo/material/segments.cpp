@@ -7,7 +7,6 @@
 #include <tbb/parallel_for.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/ximgproc/slic.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -20,6 +19,7 @@
 
 #include "mr/error.h"
 #include "photo/material/style.h"
+#include "photo/opencv_contrib.h"
 
 namespace mr::photo {
 
@@ -131,17 +131,14 @@ Segmentation segment_image(const Image& photo, const Image* valid, const Segment
   const int region_size = int(std::lround(region_size_full * scale));
   if (work.cols >= 4 && work.rows >= 4 && region_size >= 2) {
     const int size = std::min(region_size, std::min(work.cols, work.rows));
-    cv::Ptr<cv::ximgproc::SuperpixelSLIC> slic =
-        cv::ximgproc::createSuperpixelSLIC(work, cv::ximgproc::SLICO, size, kSlicRuler);
-    slic->iterate(kSlicIterations);
-    slic->enforceLabelConnectivity(25);
     cv::Mat work_labels;
-    slic->getLabels(work_labels);
+    const int count = contrib::slic_superpixels(work, contrib::kSlico, size, kSlicRuler,
+                                                kSlicIterations, 25, work_labels);
     if (scale < 1)
       cv::resize(work_labels, superpixels, cv::Size(w, h), 0, 0, cv::INTER_NEAREST);
     else
       superpixels = work_labels;
-    superpixel_count = slic->getNumberOfSuperpixels();
+    superpixel_count = count;
   }
   if (!superpixels.isContinuous()) superpixels = superpixels.clone();
 

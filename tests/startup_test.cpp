@@ -1,0 +1,90 @@
+// Issue 12, start-up: `mr` maps OpenImageIO and OpenCV's ximgproc / dnn only when a run needs
+// them. A streamed sky-only `mr fog` of a 16x12 JPEG with its depth EXR loads none of them
+// (the dynamic loader's own log, LD_DEBUG=files, lists every library a process maps); reading
+// a TIFF loads OIIO's module, and estimating geometry loads OpenCV's contrib module, and both
+// work. And libmr.so itself does not need them (readelf -d).
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "mr/mr.h"
+#include "test_support.h"
+
+namespace fs = std::filesystem;
+
+namespace mr {
+namespace {
+
+const std::string kHeavy[] = {"libOpenImageIO.so", "libopencv_ximgproc", "libopencv_dnn"};
+
+bool maps(const std::string& log, const std::string& library) {
+  return log.find("file=" + library) != std::string::npos;
+}
+
+// Writes a 16x12 photo (JPEG, directly) and its depth (OpenEXR, float).
+void write_inputs(const fs::path& dir) {
+  Image photo = test::make_test_photo(16, 12);
+  write_image(dir / "tiny.jpg", photo);
+  Image depth(16, 12, 1, {"Z"});
+  for (int y = 0; y < 12; ++y)
+    for (int x = 0; x < 16; ++x) depth.at(x, y, 0) = y < 4 ? 1e30f : 10.0f + 10.0f * y;
+  WriteOptions raw;
+  raw.colorspace = colorspace::raw;
+  raw.pixel_type = PixelType::float32;
+  write_image(dir / "tiny_depth.exr", depth, raw);
+}
+
+test::CommandResult run_mr(const std::string& args) {
+  return test::run("LD_DEBUG=files " + std::string(MR_CLI_PATH) + " " + args + " 2>&1");
+}
+
+TEST(Startup, LibmrDoesNotNeedTheHeavyLibraries) {
+  const test::CommandResult r = test::run("readelf -d " + std::string(MR_LIBRARY_PATH));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("libOpenImageIO_Util"), std::string::npos) << r.output;
+  for (const std::string& lib : kHeavy)
+    EXPECT_EQ(r.output.find("[" + lib), std::string::npos) << lib << " in\n" << r.output;
+}
+
+TEST(Startup, SkyOnlyFogLoadsNoHeavyLibrary) {
+  test::ScratchDir dir;
+  write_inputs(dir.path());
+  const test::CommandResult r =
+      run_mr("fog " + test::shell_quoted(dir / "tiny.jpg") + " --depth " +
+             test::shell_quoted(dir / "tiny_depth.exr") + " --out-dir " +
+             test::shell_quoted(dir / "out") + " --visibility 150m --airlight 0.8 -q");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(dir / "out" / "tiny_fog.jpg")) << r.output;
+  for (const std::string& lib : kHeavy) EXPECT_FALSE(maps(r.output, lib)) << lib << " was loaded";
+  EXPECT_FALSE(maps(r.output, "libmr_oiio.so"));
+  EXPECT_FALSE(maps(r.output, "libmr_opencv_contrib.so"));
+  // `mr --version` neither.
+  const test::CommandResult v = run_mr("--version");
+  ASSERT_EQ(v.exit_code, 0) << v.output;
+  for (const std::string& lib : kHeavy) EXPECT_FALSE(maps(v.output, lib)) << lib;
+}
+
+TEST(Startup, TiffAndEstimationLoadTheirModules) {
+  test::ScratchDir dir;
+  write_inputs(dir.path());
+  write_image(dir / "tiny.tif", read_image(dir / "tiny.jpg"));  // through OIIO's module
+  const test::CommandResult r =
+      run_mr("fog " + test::shell_quoted(dir / "tiny.tif") + " --depth " +
+             test::shell_quoted(dir / "tiny_depth.exr") + " --out-dir " +
+             test::shell_quoted(dir / "out") + " --visibility 150m --airlight 0.8 -q");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(maps(r.output, "libOpenImageIO.so")) << "the TIFF was not read through OIIO";
+  EXPECT_TRUE(fs::exists(dir / "out" / "tiny_fog.tif"));
+  // No depth given: the geometry is estimated (sky mask, guided filter: ximgproc).
+  Image photo = test::make_test_photo(96, 64);
+  write_image(dir / "est.jpg", photo);
+  const test::CommandResult e =
+      run_mr("fog " + test::shell_quoted(dir / "est.jpg") + " --depth auto --out-dir " +
+             test::shell_quoted(dir / "out2") + " --visibility 150m -q");
+  ASSERT_EQ(e.exit_code, 0) << e.output;
+  EXPECT_TRUE(maps(e.output, "libopencv_ximgproc")) << "estimation did not use ximgproc";
+  EXPECT_TRUE(fs::exists(dir / "out2" / "est_fog.jpg"));
+}
+
+}  // namespace
+}  // namespace mr
