@@ -2,6 +2,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -97,6 +98,86 @@ std::size_t apply_sky_matte(ConstImageView sky_alpha, ImageView transmittance,
       ++mixed;
     }
   return mixed;
+}
+
+std::size_t trim_matte_spill(ConstImageView photo, std::vector<float>& alpha) {
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(w) * h;
+  if (alpha.size() != n)
+    throw Error(ErrorCode::size_mismatch, "trim_matte_spill: the photo is " + std::to_string(w) +
+                                              "x" + std::to_string(h) + " but the matte holds " +
+                                              std::to_string(alpha.size()) + " values");
+  if (w < 3 || h < 3 || photo.channels < 1) return 0;
+  // A sharp edge: the sky side reaches kFirmSky within kFirmReachPx of the pixel, and the
+  // binary sky (alpha >= 0.5) within kEdgeReachPx. A soft edge (a blurred leaf: a ramp ten or
+  // more pixels wide) has no firm sky that near, and its unmixed values are noisy (hue and
+  // texture of the leaves): trimming pixels in its ramp leaves cliffs in the matte.
+  constexpr float kFirmSky = 0.9f;
+  constexpr double kFirmReachPx = 3.5, kEdgeReachPx = 2.5;
+  // SkyMask's contrast thresholds (display-referred, about 8 and 20 codes of 255).
+  constexpr float kNoEdge = 0.03f, kEdge = 0.08f;
+  // How near the surface's colour (along F -> B) a pixel must be to show the surface only.
+  constexpr float kBeyond = 0.1f;
+  std::vector<std::uint8_t> sky(n), surface(n), half_sky(n), firm_sky(n);
+  bool spill = false;
+  for (std::size_t i = 0; i < n; ++i) {
+    sky[i] = alpha[i] >= 1.0f;
+    surface[i] = alpha[i] <= 0.0f;
+    half_sky[i] = alpha[i] >= 0.5f;
+    firm_sky[i] = alpha[i] >= kFirmSky;
+    spill |= alpha[i] > 0.0f && alpha[i] < 0.5f;
+  }
+  if (!spill) return 0;
+  const std::vector<std::int32_t> near_sky = nearest_source(w, h, sky);
+  const std::vector<std::int32_t> near_surface = nearest_source(w, h, surface);
+  const std::vector<std::int32_t> near_half_sky = nearest_source(w, h, half_sky);
+  const std::vector<std::int32_t> near_firm_sky = nearest_source(w, h, firm_sky);
+  if (near_sky.empty() || near_surface.empty() || near_half_sky.empty() || near_firm_sky.empty())
+    return 0;
+  auto within = [w](std::int32_t j, int x, int y, double reach) {
+    return j >= 0 && std::hypot(double(j % w - x), double(j / w - y)) <= reach;
+  };
+  cv::Mat linear(h, w, CV_32FC3), mean;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* p = photo.pixel(x, y);
+      cv::Vec3f v;
+      for (int c = 0; c < 3; ++c) {
+        const float u = p[photo.channels >= 3 ? c : 0];
+        v[c] = std::isfinite(u) ? std::clamp(u, 0.0f, 1.0f) : 0.0f;
+      }
+      linear.at<cv::Vec3f>(y, x) = v;
+    }
+  cv::blur(linear, mean, cv::Size(3, 3));
+  std::size_t lowered = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      float& a = alpha[i];
+      if (!(a > 0.0f && a < 0.5f)) continue;
+      if (!within(near_half_sky[i], x, y, kEdgeReachPx) ||
+          !within(near_firm_sky[i], x, y, kFirmReachPx))
+        continue;
+      const std::int32_t k = near_sky[i], f = near_surface[i];
+      if (k < 0 || f < 0) continue;
+      const cv::Vec3f B = mean.at<cv::Vec3f>(k / w, k % w);
+      const cv::Vec3f F = mean.at<cv::Vec3f>(f / w, f % w);
+      const cv::Vec3f I = linear.at<cv::Vec3f>(y, x);
+      const cv::Vec3f BF = B - F;
+      const float norm2 = BF.dot(BF);
+      float contrast = 0;
+      for (int c = 0; c < 3; ++c)
+        contrast =
+            std::max(contrast, std::abs(std::pow(B[c], 1 / 2.2f) - std::pow(F[c], 1 / 2.2f)));
+      const float t = std::clamp((contrast - kNoEdge) / (kEdge - kNoEdge), 0.0f, 1.0f);
+      if (!(t > 0) || !(norm2 > 0)) continue;
+      const float projection = (I - F).dot(BF) / norm2;
+      if (projection > kBeyond) continue;  // some of the sky's colour: the guided ramp stands
+      const float wt = t * t * (3 - 2 * t);
+      const float v = wt * std::max(projection, 0.0f) + (1 - wt) * a;
+      if (v < a) a = v, ++lowered;
+    }
+  return lowered;
 }
 
 }  // namespace mr::photo
