@@ -149,15 +149,15 @@ std::size_t trim_matte_spill(ConstImageView photo, std::vector<float>& alpha) {
       linear.at<cv::Vec3f>(y, x) = v;
     }
   cv::blur(linear, mean, cv::Size(3, 3));
-  std::size_t lowered = 0;
+  // The trimmed value of each surface-side pixel of a plain edge (-1: none): its alpha moved
+  // to its projection on F -> B, weighted by the contrast.
+  const std::vector<float> original = alpha;
+  std::vector<float> trimmed(n, -1.0f);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
-      float& a = alpha[i];
+      const float a = alpha[i];
       if (!(a > 0.0f && a < 0.5f)) continue;
-      if (!within(near_half_sky[i], x, y, kEdgeReachPx) ||
-          !within(near_firm_sky[i], x, y, kFirmReachPx))
-        continue;
       const std::int32_t k = near_sky[i], f = near_surface[i];
       if (k < 0 || f < 0) continue;
       const cv::Vec3f B = mean.at<cv::Vec3f>(k / w, k % w);
@@ -175,8 +175,40 @@ std::size_t trim_matte_spill(ConstImageView photo, std::vector<float>& alpha) {
       if (projection > kBeyond) continue;  // some of the sky's colour: the guided ramp stands
       const float wt = t * t * (3 - 2 * t);
       const float v = wt * std::max(projection, 0.0f) + (1 - wt) * a;
-      if (v < a) a = v, ++lowered;
+      if (v < a) trimmed[i] = v;
     }
+  // Seeds: the pixels next to a sharp edge. Then the ramp's tail outward from them: a pixel
+  // next to a trimmed one whose alpha was at least its own (the same ramp, falling away from
+  // the sky), up to kMaxSpillPx rows of it.
+  constexpr int kMaxSpillPx = 6;
+  std::vector<std::uint8_t> done(n, 0);
+  std::vector<std::size_t> front;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      if (trimmed[i] >= 0.0f && within(near_half_sky[i], x, y, kEdgeReachPx) &&
+          within(near_firm_sky[i], x, y, kFirmReachPx))
+        front.push_back(i), done[i] = 1;
+    }
+  std::size_t lowered = 0;
+  for (int step = 0; !front.empty(); ++step) {
+    for (const std::size_t i : front) alpha[i] = trimmed[i], ++lowered;
+    if (step == kMaxSpillPx) break;
+    std::vector<std::size_t> next;
+    for (const std::size_t i : front) {
+      const int x = int(i % std::size_t(w)), y = int(i / std::size_t(w));
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int u = x + dx, v = y + dy;
+          if (u < 0 || v < 0 || u >= w || v >= h) continue;
+          const std::size_t j = std::size_t(v) * w + u;
+          if (done[j] || !(trimmed[j] >= 0.0f) || original[j] > original[i]) continue;
+          done[j] = 1;
+          next.push_back(j);
+        }
+    }
+    front = std::move(next);
+  }
   return lowered;
 }
 
