@@ -114,7 +114,12 @@ std::size_t trim_matte_spill(ConstImageView photo, std::vector<float>& alpha) {
   // texture of the leaves): trimming pixels in its ramp leaves cliffs in the matte.
   constexpr float kFirmSky = 0.9f;
   constexpr double kFirmReachPx = 3.5, kEdgeReachPx = 2.5;
-  // SkyMask's contrast thresholds (display-referred, about 8 and 20 codes of 255).
+  // And a plain surface (alpha 0) beyond the ramp within kSurfaceReachPx: F is then the colour
+  // of the surface right there. A thin member (a lattice's 1-3 px steel, a cable) lies wholly
+  // inside the band; its nearest plain surface is some other structure, and trimming it would
+  // set a member at its own distance, clear, against the sky's opaque haze (rocket's towers).
+  constexpr double kSurfaceReachPx = 4.5;
+  // SkyMask's contrast thresholds (display-referred, about 8 and 20 codes of 255), on luma.
   constexpr float kNoEdge = 0.03f, kEdge = 0.08f;
   // How near the surface's colour (along F -> B) a pixel must be to show the surface only.
   constexpr float kBeyond = 0.1f;
@@ -159,16 +164,22 @@ std::size_t trim_matte_spill(ConstImageView photo, std::vector<float>& alpha) {
       const float a = alpha[i];
       if (!(a > 0.0f && a < 0.5f)) continue;
       const std::int32_t k = near_sky[i], f = near_surface[i];
-      if (k < 0 || f < 0) continue;
+      if (k < 0 || !within(f, x, y, kSurfaceReachPx)) continue;
       const cv::Vec3f B = mean.at<cv::Vec3f>(k / w, k % w);
       const cv::Vec3f F = mean.at<cv::Vec3f>(f / w, f % w);
       const cv::Vec3f I = linear.at<cv::Vec3f>(y, x);
       const cv::Vec3f BF = B - F;
       const float norm2 = BF.dot(BF);
-      float contrast = 0;
-      for (int c = 0; c < 3; ++c)
-        contrast =
-            std::max(contrast, std::abs(std::pow(B[c], 1 / 2.2f) - std::pow(F[c], 1 / 2.2f)));
+      // The step in display luma: only an edge the photo shows in brightness takes a sharp
+      // matte. Where the two sides differ in hue but hardly in luma (a dark steel leg against a
+      // dark blue dusk sky), the photo's luma is smooth across the edge, and a crisp silhouette
+      // against the haze's brighter, neutral sky is a luma step the photo does not have; the
+      // guided ramp's softness is kinder there.
+      auto luma = [](const cv::Vec3f& v) {
+        return 0.2126f * std::pow(v[0], 1 / 2.2f) + 0.7152f * std::pow(v[1], 1 / 2.2f) +
+               0.0722f * std::pow(v[2], 1 / 2.2f);
+      };
+      const float contrast = std::abs(luma(B) - luma(F));
       const float t = std::clamp((contrast - kNoEdge) / (kEdge - kNoEdge), 0.0f, 1.0f);
       if (!(t > 0) || !(norm2 > 0)) continue;
       const float projection = (I - F).dot(BF) / norm2;

@@ -152,7 +152,7 @@ TEST(SkyMatteSpill, DarkRoofUnderAWhiteSkyGetsNoSkyFog) {
   // pixels above 0.005, mean 0.0089), and haze draws a second edge there (0.156 %).
   EXPECT_GT(before.spilled, 1000u);
   EXPECT_GT(before.haze, 2e-4);
-  // Trimmed (measured: 74 pixels, mean 0.0002; haze 0.036 %, the rest spots where the dark rim
+  // Trimmed (measured: 81 pixels, mean 0.0002; haze 0.036 %, the rest spots where the dark rim
   // meets the tiles inside the narrow chimneys, not the matte's spill): a tenth of the spill
   // at most, the haze's created edges a third at most; dense fog within the target.
   EXPECT_LT(after.spilled, before.spilled / 10);
@@ -216,6 +216,33 @@ TEST(SkyMatteSpill, TrimsOnlyTheSurfaceSideOfASharpEdge) {
     // Alpha 0.07: its projection (<= 0.1) is its own value, up to the 3x3 means' blur of B
     // and F: nearly unchanged.
     EXPECT_NEAR(a[std::size_t(11) * w + 3], 0.07f, 0.005f);
+  }
+  // A hue edge with (nearly) no step in luma: a brown leg against a dark blue dusk sky, display
+  // luma 0.246 and 0.254 (rocket's towers): kept, the photo's luma is smooth across it.
+  {
+    const std::array<float, 3> sky{0.15f, 0.25f, 0.60f}, steel{0.40f, 0.21f, 0.15f};
+    Image img(w, h, 3);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        for (int c = 0; c < 3; ++c)
+          img.at(x, y, c) = linear(y < 10 ? sky[std::size_t(c)] : steel[std::size_t(c)]);
+    std::vector<float> a = matte_of(column);
+    photo::trim_matte_spill(img.view(), a);
+    EXPECT_FLOAT_EQ(a[std::size_t(10) * w + 3], 0.3f);
+    EXPECT_FLOAT_EQ(a[std::size_t(11) * w + 3], 0.07f);
+  }
+  // A thin member (rows 10-12) with sky on both sides, its nearest plain surface 8 px away
+  // (beyond 4.5 px): its colour is not compared with some other structure's: kept.
+  {
+    std::vector<float> member(h, 1.0f), thin_share(h, 1.0f);
+    const float ramp2[] = {0.95f, 0.8f, 0.3f, 0.2f, 0.3f, 0.8f, 0.95f};
+    for (int k = 0; k < 7; ++k) member[std::size_t(8 + k)] = ramp2[k];
+    for (int y = 20; y < h; ++y) member[std::size_t(y)] = 0.0f, thin_share[std::size_t(y)] = 0.0f;
+    for (int y = 10; y < 13; ++y) thin_share[std::size_t(y)] = 0.0f;
+    std::vector<float> a = matte_of(member);
+    photo::trim_matte_spill(photo_of(thin_share).view(), a);
+    EXPECT_FLOAT_EQ(a[std::size_t(10) * w + 3], 0.3f);
+    EXPECT_FLOAT_EQ(a[std::size_t(11) * w + 3], 0.2f);
   }
   // A sharp edge the photo hardly shows (sides 0.02 apart, display-referred): kept.
   {
