@@ -46,7 +46,8 @@ RoofPhoto roof_photo() {
   for (int y = 0; y < kH; ++y)
     for (int x = 0; x < kW; ++x) {
       const float t = float(y) / kHorizon;
-      const float patch = std::exp(-(std::pow((x - 180.0f) / 120, 2.0f) + std::pow((y - 60.0f) / 50, 2.0f)));
+      const float patch =
+          std::exp(-(std::pow((x - 180.0f) / 120, 2.0f) + std::pow((y - 60.0f) / 50, 2.0f)));
       cv::Vec3f c = cv::Vec3f(0.90f, 0.93f, 0.98f) * (1 - 0.3f * (1 - t)) +
                     cv::Vec3f(0.96f, 0.97f, 0.98f) * 0.3f * (1 - t);
       c = c * (1 - 0.5f * patch) + cv::Vec3f(0.62f, 0.76f, 0.95f) * 0.5f * patch;
@@ -112,8 +113,8 @@ RoofPhoto roof_photo() {
 }
 
 struct SpillRun {
-  double spill = 0;          // the matte's mean alpha over the roof's rim
-  std::size_t spilled = 0;   // of those pixels, how many have alpha > 0.005
+  double spill = 0;            // the matte's mean alpha over the roof's rim
+  std::size_t spilled = 0;     // of those pixels, how many have alpha > 0.005
   double haze = 0, dense = 0;  // created-edge fractions
 };
 SpillRun run(const RoofPhoto& p, bool trim, const char* name) {
@@ -143,11 +144,12 @@ TEST(SkyMatteSpill, DarkRoofUnderAWhiteSkyGetsNoSkyFog) {
   const SpillRun before = run(p, false, "roof_untrimmed");
   const SpillRun after = run(p, true, "roof_trimmed");
   std::printf(
-      "roof: matte over the roof's rim (1-4 px inside its edge), mean %.5f (%zu pixels > 0.005) untrimmed, "
+      "roof: matte over the roof's rim (1-4 px inside its edge), mean %.5f (%zu pixels > 0.005) "
+      "untrimmed, "
       "%.5f (%zu) trimmed; created-edge pixels haze %.4f %% -> %.4f %%, dense %.4f %% -> "
       "%.4f %%\n",
-      before.spill, before.spilled, after.spill, after.spilled, 100 * before.haze,
-      100 * after.haze, 100 * before.dense, 100 * after.dense);
+      before.spill, before.spilled, after.spill, after.spilled, 100 * before.haze, 100 * after.haze,
+      100 * before.dense, 100 * after.dense);
   // The defect, reproduced: the untrimmed matte lays sky on the roof's rim (measured: 2043 rim
   // pixels above 0.005, mean 0.0089), and haze draws a second edge there (0.156 %).
   EXPECT_GT(before.spilled, 1000u);
@@ -251,7 +253,8 @@ TEST(SkyMatteSpill, TrimsOnlyTheSurfaceSideOfASharpEdge) {
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x)
         for (int c = 0; c < 3; ++c)
-          img.at(x, y, c) = y < 10 ? b[std::size_t(c)] : std::pow(std::pow(0.5f, 1 / 2.2f) - 0.02f, 2.2f);
+          img.at(x, y, c) =
+              y < 10 ? b[std::size_t(c)] : std::pow(std::pow(0.5f, 1 / 2.2f) - 0.02f, 2.2f);
     std::vector<float> a = matte_of(column);
     photo::trim_matte_spill(img.view(), a);
     EXPECT_FLOAT_EQ(a[std::size_t(10) * w + 3], 0.3f);
