@@ -418,6 +418,9 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     g.vegetation_pixels = vegetation.vegetation_pixels;
     g.vegetation_gap_pixels = vegetation.gap_pixels;
   }
+  // Issue 11 (helper haze11b): the matte's ramp running past a sharp edge into the surface
+  // (photo/sky_matte.h, trim_matte_spill).
+  if (options.trim_matte_spill) photo::trim_matte_spill(photo->view(), mask.alpha);
   steps.start("depth");
   const int w = camera.width, h = camera.height;
   const std::size_t n = std::size_t(w) * h;

@@ -69,6 +69,12 @@ struct MR_API EstimateOptions {
   /// horizon annotated or found with confidence >= 0.2 that open sky meets (issue 11, helper
   /// sea11; libmr/src/estimate.cpp). false: the refinement's distance as it is.
   bool sea_horizon = true;
+  /// The sky matte's spill onto a surface beyond a sharp edge trimmed: on the surface side of
+  /// the matte (alpha < 0.5), where sky and surface differ plainly in brightness, alpha is at
+  /// most the pixel's unmixed share of the sky's colour (issue 11, helper haze11b; photo/sky_matte.h,
+  /// trim_matte_spill), so no band of the sky's fog lies on a surface the photo shows plainly.
+  /// false: the matte as the sky mask made it.
+  bool trim_matte_spill = true;
   /// Trees and foliage (issue 11 item 3, photo/vegetation.h), under an open blue sky only:
   /// sky-coloured pixels above the horizon ringed by green foliage (sky under a canopy, between
   /// trunks, through leaves) are sky, so the occluder mesh has holes there and the sun passes; a
