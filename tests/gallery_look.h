@@ -27,6 +27,16 @@ inline float linear(float display) {
   return std::pow(display, 2.2f);
 }
 
+// The scene-linear photo of a display-referred CV_32FC3 picture (clamped to [0, 1] first).
+inline Image linear_photo(const cv::Mat& display) {
+  Image photo(display.cols, display.rows, 3);
+  for (int y = 0; y < display.rows; ++y)
+    for (int x = 0; x < display.cols; ++x)
+      for (int c = 0; c < 3; ++c)
+        photo.at(x, y, c) = linear(std::clamp(display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
+  return photo;
+}
+
 // The gallery's created-edge measure exactly (gallery/measures.py: display luma of the clamped,
 // gamma-2.2 values, Gaussian blur sigma 1 px (radius 3, edges replicated), central differences;
 // created where the fogged image's gradient is more than twice the photo's and above 0.01). With

@@ -221,6 +221,7 @@ TEST(SkyLight, UniformEnvironmentOfAnotherRadianceIsTheClosedForm) {
 }
 
 using test::linear;  // display-referred [0, 1] -> scene-linear (tests/gallery_look.h)
+using test::linear_photo;
 
 // A sunset photo: sunset orange at the horizon to blue at the top, a dark meadow below.
 Image sunset_photo(const FogScene& scene) {
@@ -377,11 +378,7 @@ TEST(SkyLight, BacklitCloudsInHazeCreateNoEdge) {
   const cv::Mat display = backlit_clouds_display();
   constexpr int kW = kBacklitW, kH = kBacklitH;
   const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
-  Image photo(kW, kH, 3);
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x)
-      for (int c = 0; c < 3; ++c)
-        photo.at(x, y, c) = linear(std::clamp(display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
+  const Image photo = linear_photo(display);
   // The horizon along the land's lowest dips (as a user marks it, or lines find it): the
   // case is the clouds, not a misplaced horizon (a horizon estimated above the land's line puts
   // the sky under it on the ground; see the report in gallery/results/sky11_tune.md).
@@ -446,11 +443,7 @@ TEST(SkyLight, BacklitCloudsUnderAWeakHorizonLowerIt) {
   constexpr int kW = kBacklitW, kH = kBacklitH;
   const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
   const cv::Mat display = backlit_clouds_display();
-  Image photo(kW, kH, 3);
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x)
-      for (int c = 0; c < 3; ++c)
-        photo.at(x, y, c) = linear(std::clamp(display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
+  const Image photo = linear_photo(display);
   const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
   const FogLayers haze = fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
   const FogLayers dense = fog_auto_look(photo, camera, est, 60, 80, 0.3);
@@ -559,6 +552,35 @@ cv::Mat cloud_noise(int h, int w, std::mt19937& rng, double sigma_x, double sigm
   return noise;
 }
 
+// A textured meadow below the horizon (`grain`: this pixel's noise).
+cv::Vec3f meadow(int y, int horizon, int h, float grain) {
+  const float v = 0.22f + 0.06f * float(y - horizon) / h + grain;
+  return cv::Vec3f(v * 0.55f, v * 1.05f, v * 0.75f);
+}
+
+// A tree standing on the horizon: an 8 px trunk from `trunk_top` down, under an elliptical
+// canopy (centre, radii in px) of textured green, marked in `canopy`.
+struct Tree {
+  int cx, cy, rx, ry, trunk_top;
+};
+void paint_tree(const Tree& t, int x, int y, std::uniform_real_distribution<float>& grain,
+                std::mt19937& rng, cv::Vec3f& c, cv::Mat& canopy) {
+  if (x >= t.cx - 4 && x < t.cx + 4 && y >= t.trunk_top) {
+    c = cv::Vec3f(0.15f, 0.12f, 0.10f);
+  } else if (std::pow(double(x - t.cx) / t.rx, 2) + std::pow(double(y - t.cy) / t.ry, 2) < 1) {
+    const float v = 0.18f + grain(rng);
+    c = cv::Vec3f(v * 0.6f, v * 1.4f, v * 0.7f);
+    canopy.at<std::uint8_t>(y, x) = 1;
+  }
+}
+
+// A level horizon through the frame's middle, as a user marks it.
+Annotations level_horizon(int w, int h) {
+  Annotations a;
+  a.horizon = std::array<PixelPoint, 2>{PixelPoint{0, 0.5 * h - 0.5}, PixelPoint{w - 1.0, 0.5 * h - 0.5}};
+  return a;
+}
+
 // Clouds are not occluders (issue 11, sun bank look): a blue sky with a cumulus whose wispy,
 // textured rim the sky mask leaves out (as kite's in the tuning half; the rim rings the core,
 // so the whole cloud is left out), held up by nothing, above a building and a tree standing on
@@ -600,19 +622,14 @@ CloudScene wispy_cloud_scene() {
       const float cover = std::max(k, wisp);
       cv::Vec3f c = sky * (1 - cover) + cv::Vec3f(0.95f, 0.95f, 0.97f) * cover;
       if (e > 0.3f && k < 0.5f) s.rim.at<std::uint8_t>(y, x) = 1;
-      if (y >= horizon) {  // a meadow, textured
-        const float v = 0.22f + 0.06f * float(y - horizon) / h + grain(rng);
-        c = cv::Vec3f(v * 0.55f, v * 1.05f, v * 0.75f);
+      if (y >= horizon) {
+        c = meadow(y, horizon, h, grain(rng));
       } else if (x >= 70 && x < 160 && y >= 150) {  // a building: dark walls, lit windows
         const bool window = x >= 74 && x < 150 && (x - 70) % 18 > 9 && (y - 150) % 20 > 11;
         c = window ? cv::Vec3f(0.55f, 0.52f, 0.45f) : cv::Vec3f(0.20f, 0.19f, 0.18f);
         s.building.at<std::uint8_t>(y, x) = 1;
-      } else if (x >= 276 && x < 284 && y >= 205) {  // a trunk
-        c = cv::Vec3f(0.15f, 0.12f, 0.10f);
-      } else if (std::pow((x - 280) / 34.0, 2) + std::pow((y - 185) / 26.0, 2) < 1) {  // canopy
-        const float v = 0.18f + grain(rng);
-        c = cv::Vec3f(v * 0.6f, v * 1.4f, v * 0.7f);
-        s.canopy.at<std::uint8_t>(y, x) = 1;
+      } else {
+        paint_tree(Tree{280, 185, 34, 26, 205}, x, y, grain, rng, c, s.canopy);
       }
       s.display.at<cv::Vec3f>(y, x) = c;
     }
@@ -624,14 +641,8 @@ TEST(SkyLight, FloatingCloudsAreSkyNotOccluders) {
   const CloudScene scene = wispy_cloud_scene();
   constexpr int kW = kCloudW, kH = kCloudH;
   const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
-  Image photo(kW, kH, 3);
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x)
-      for (int c = 0; c < 3; ++c)
-        photo.at(x, y, c) = linear(std::clamp(scene.display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
-  Annotations horizon;  // the case is the clouds, not the horizon
-  horizon.horizon = std::array<PixelPoint, 2>{PixelPoint{0, 0.5 * kH - 0.5},
-                                              PixelPoint{kW - 1.0, 0.5 * kH - 0.5}};
+  const Image photo = linear_photo(scene.display);
+  const Annotations horizon = level_horizon(kW, kH);  // the case is the clouds, not the horizon
   const SceneEstimate est = estimate_scene(photo, camera, horizon);
   const Image& d = est.geometry.distance_m;
   std::size_t rim = 0, rim_sky = 0, building = 0, building_finite = 0, canopy = 0,
@@ -811,11 +822,7 @@ TEST(SkyLight, CloudCutOffByTheFrameUnderAGuessedHorizonIsSky) {
   cv::Mat cloud_mask;
   const cv::Mat display = cut_cloud_display(&cloud_mask);
   const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
-  Image photo(kW, kH, 3);
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x)
-      for (int c = 0; c < 3; ++c)
-        photo.at(x, y, c) = linear(std::clamp(display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
+  const Image photo = linear_photo(display);
   const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
   const Image& d = est.geometry.distance_m;
   std::size_t cloud = 0, cloud_sky = 0, finite = 0;
@@ -935,16 +942,10 @@ CornerCloudScene corner_cloud_scene() {
           cv::Vec3f(0.93f, 0.94f, 0.97f) * (0.8f + 0.2f * noise.at<float>(y, x));
       cv::Vec3f c = sky * (1 - cover) + cloud * cover;
       if (e > 0.7f && y < horizon) s.cloud.at<std::uint8_t>(y, x) = 1;
-      if (y >= horizon) {  // a meadow, textured
-        const float v = 0.22f + 0.06f * float(y - horizon) / h + grain(rng);
-        c = cv::Vec3f(v * 0.55f, v * 1.05f, v * 0.75f);
-      } else if (x >= 86 && x < 94 && y >= 200) {  // a trunk
-        c = cv::Vec3f(0.15f, 0.12f, 0.10f);
-      } else if (std::pow((x - 90) / 34.0, 2) + std::pow((y - 175) / 30.0, 2) < 1) {  // canopy
-        const float v = 0.18f + grain(rng);
-        c = cv::Vec3f(v * 0.6f, v * 1.4f, v * 0.7f);
-        s.canopy.at<std::uint8_t>(y, x) = 1;
-      }
+      if (y >= horizon)
+        c = meadow(y, horizon, h, grain(rng));
+      else
+        paint_tree(Tree{90, 175, 34, 30, 200}, x, y, grain, rng, c, s.canopy);
       s.display.at<cv::Vec3f>(y, x) = c;
     }
   cv::GaussianBlur(s.display, s.display, cv::Size(0, 0), 0.7);  // a lens
@@ -955,14 +956,8 @@ TEST(SkyLight, CloudsCutOffByTheFrameAreSkyNotOccluders) {
   const CornerCloudScene scene = corner_cloud_scene();
   constexpr int kW = kCornerW, kH = kCornerH;
   const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
-  Image photo(kW, kH, 3);
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x)
-      for (int c = 0; c < 3; ++c)
-        photo.at(x, y, c) = linear(std::clamp(scene.display.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
-  Annotations horizon;  // the case is the clouds, not the horizon
-  horizon.horizon = std::array<PixelPoint, 2>{PixelPoint{0, 0.5 * kH - 0.5},
-                                              PixelPoint{kW - 1.0, 0.5 * kH - 0.5}};
+  const Image photo = linear_photo(scene.display);
+  const Annotations horizon = level_horizon(kW, kH);  // the case is the clouds, not the horizon
   const SceneEstimate est = estimate_scene(photo, camera, horizon);
   const Image& d = est.geometry.distance_m;
   std::size_t cloud = 0, cloud_sky = 0, canopy = 0, canopy_finite = 0;

@@ -98,11 +98,7 @@ RoofPhoto roof_photo() {
       m.at<cv::Vec3f>(y, x) = cv::Vec3f(v + 0.02f, v + 0.03f, v);
     }
   cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);  // a lens
-  RoofPhoto out{Image(kW, kH, 3), cv::Mat()};
-  for (int y = 0; y < kH; ++y)
-    for (int x = 0; x < kW; ++x)
-      for (int c = 0; c < 3; ++c)
-        out.photo.at(x, y, c) = linear(std::clamp(m.at<cv::Vec3f>(y, x)[c], 0.0f, 1.0f));
+  RoofPhoto out{test::linear_photo(m), cv::Mat()};
   // The roof's rim: 1 to 4 px inside its outline (the lens mixes the outermost pixel).
   cv::Mat inner, deep;
   cv::erode(roof, inner, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
