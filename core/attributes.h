@@ -122,11 +122,12 @@ struct Attribute {
   /// `nvalues` values of `type` at `data` (for a string type: an array of `const char*`).
   Attribute(std::string_view name, DataType type, int nvalues, const void* data);
 
-  /// As ParamValue::get_int: integers (not floats) converted, a string only if it is
-  /// entirely an integer; else `fallback`.
+  /// As OIIO 2.4's ParamValue::get_int: the first value if single (not a vector) and an
+  /// integer, a string only if it is entirely an integer; else `fallback`.
   int get_int(int fallback = 0) const;
-  /// As ParamValue::get_float: any number (a rational divided), a string only if entirely a
-  /// number; else `fallback`.
+  /// As OIIO 2.4's ParamValue::get_float: the first value if single and a number but a 32-bit
+  /// int (OIIO 2.4 does not convert those), a rational divided (0 for a zero denominator), a
+  /// string only if entirely a number; else `fallback`.
   float get_float(float fallback = 0) const;
   /// As ParamValue::get_string(maxsize): a single string itself, else the values as OIIO
   /// formats them (", " between values, rationals "n/d", strings quoted and escaped, at most
