@@ -1,15 +1,14 @@
-// Private to libmr: what is behind mr::Metadata. OIIO's ParamValueList, from
-// libOpenImageIO_Util (light: not libOpenImageIO, see core/oiio_module.h).
+// Private to libmr: what is behind mr::Metadata, an attribute list as OIIO keeps them
+// (core/attributes.h; converted to OIIO's ParamValueList only in its module and tests).
 #pragma once
 
-#include <OpenImageIO/paramlist.h>
-
+#include "core/attributes.h"
 #include "mr/metadata.h"
 
 namespace mr {
 
 struct Metadata::Impl {
-  OIIO::ParamValueList attributes;
+  detail::AttributeList attributes;
 };
 
 }  // namespace mr

@@ -5,6 +5,7 @@
 #include <OpenImageIO/imagebuf.h>
 
 #include "core/metadata_impl.h"
+#include "core/oiio_attributes.h"
 #include "mr/image.h"
 
 namespace mr::detail {

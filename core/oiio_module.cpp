@@ -12,6 +12,7 @@
 #include <memory>
 #include <string>
 
+#include "core/oiio_attributes.h"
 #include "core/oiio_module.h"
 #include "mr/error.h"
 
@@ -24,10 +25,10 @@ ImageHeader to_header(const OIIO::ImageSpec& spec) {
   h.width = spec.width, h.height = spec.height, h.depth = spec.depth;
   h.nchannels = spec.nchannels, h.tile_width = spec.tile_width;
   h.alpha_channel = spec.alpha_channel;
-  h.format = spec.format;
-  h.channelformats = spec.channelformats;
+  h.format = from_oiio(spec.format);
+  for (const OIIO::TypeDesc& t : spec.channelformats) h.channelformats.push_back(from_oiio(t));
   h.channelnames = spec.channelnames;
-  h.extra_attribs = spec.extra_attribs;
+  h.extra_attribs = from_oiio(spec.extra_attribs);
   return h;
 }
 
@@ -38,8 +39,9 @@ class OiioReader final : public ImageReader {
     spec_ = to_header(in_->spec());
     format_name_ = in_->format_name();
   }
-  void read_scanlines(int y0, int y1, int chbegin, int chend, OIIO::TypeDesc type,
+  void read_scanlines(int y0, int y1, int chbegin, int chend, DataType data_type,
                       void* data) override {
+    const OIIO::TypeDesc type = to_oiio(data_type);
     const OIIO::ImageSpec& s = in_->spec();
     // The native read gives the same bytes as read_scanlines without the temporary buffer
     // read_scanlines allocates per call (fresh pages, hence page faults, per strip: issue 12).
@@ -47,8 +49,8 @@ class OiioReader final : public ImageReader {
     check(native ? in_->read_native_scanlines(0, 0, s.y + y0, s.y + y1, s.z, chbegin, chend, data)
                  : in_->read_scanlines(0, 0, s.y + y0, s.y + y1, s.z, chbegin, chend, type, data));
   }
-  void read_image(OIIO::TypeDesc type, void* data) override {
-    check(in_->read_image(0, 0, 0, in_->spec().nchannels, type, data));
+  void read_image(DataType type, void* data) override {
+    check(in_->read_image(0, 0, 0, in_->spec().nchannels, to_oiio(type), data));
   }
 
  private:
@@ -69,20 +71,20 @@ class OiioWriter final : public ImageWriter {
   }
   void open(const std::string& path, const std::string& name, const ImageHeader& h) override {
     name_ = name;
-    OIIO::ImageSpec spec(h.width, h.height, h.nchannels, h.format);
+    OIIO::ImageSpec spec(h.width, h.height, h.nchannels, to_oiio(h.format));
     spec.channelnames = h.channelnames;
-    spec.channelformats = h.channelformats;
+    for (const DataType& t : h.channelformats) spec.channelformats.push_back(to_oiio(t));
     spec.alpha_channel = h.alpha_channel;
-    spec.extra_attribs = h.extra_attribs;
+    spec.extra_attribs = to_oiio(h.extra_attribs);
     if (!out_->open(path, spec))
       throw Error(ErrorCode::io, name_ + ": cannot write: " + out_->geterror());
   }
-  void write_scanlines(int y0, int y1, OIIO::TypeDesc type, const void* data) override {
-    if (!out_->write_scanlines(y0, y1, 0, type, data))
+  void write_scanlines(int y0, int y1, DataType type, const void* data) override {
+    if (!out_->write_scanlines(y0, y1, 0, to_oiio(type), data))
       throw Error(ErrorCode::io, name_ + ": writing failed: " + out_->geterror());
   }
-  void write_image(OIIO::TypeDesc type, const void* data) override {
-    if (!out_->write_image(type, data))
+  void write_image(DataType type, const void* data) override {
+    if (!out_->write_image(to_oiio(type), data))
       throw Error(ErrorCode::io, name_ + ": writing failed: " + out_->geterror());
   }
   void close() override {

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/metadata_impl.h"
+#include "core/oiio_attributes.h"
 #include "core/oiio_module.h"
 #include "libmr/src/direct_codecs.h"
 #include "libmr/src/image_files.h"
@@ -56,13 +57,48 @@ void expect_same_attributes(const OIIO::ParamValueList& got, const OIIO::ParamVa
   }
 }
 
+void expect_same_attributes(const detail::AttributeList& got, const OIIO::ParamValueList& want,
+                            const std::string& what) {
+  expect_same_attributes(detail::to_oiio(got), want, what);
+}
+
+// The same list bit for bit: names, types, counts, interpolation, value bytes (strings as text).
+void expect_identical(const OIIO::ParamValueList& got, const OIIO::ParamValueList& want,
+                      const std::string& what) {
+  ASSERT_EQ(got.size(), want.size()) << what;
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    const OIIO::ParamValue &a = got[i], &b = want[i];
+    EXPECT_EQ(a.name(), b.name()) << what;
+    EXPECT_EQ(a.type(), b.type()) << what << " " << b.name();
+    EXPECT_EQ(a.type().reserved, b.type().reserved) << what << " " << b.name();
+    EXPECT_EQ(a.nvalues(), b.nvalues()) << what << " " << b.name();
+    EXPECT_EQ(a.interp(), b.interp()) << what << " " << b.name();
+    ASSERT_EQ(a.datasize(), b.datasize()) << what << " " << b.name();
+    if (b.type().basetype == OIIO::TypeDesc::STRING) {
+      for (std::size_t k = 0; k < std::size_t(b.nvalues()) * b.type().basevalues(); ++k)
+        EXPECT_EQ(a.get<OIIO::ustring>(int(k)), b.get<OIIO::ustring>(int(k))) << what;
+    } else {
+      EXPECT_EQ(std::memcmp(a.data(), b.data(), std::size_t(b.datasize())), 0)
+          << what << " " << b.name();
+    }
+  }
+}
+
+// OIIO's list converted to mr's and back is the same list, and mr's converted to OIIO's and
+// back is equal too.
+void expect_lossless(const OIIO::ParamValueList& list, const std::string& what) {
+  const detail::AttributeList mine = detail::from_oiio(list);
+  expect_identical(detail::to_oiio(mine), list, what);
+  EXPECT_TRUE(detail::from_oiio(detail::to_oiio(mine)) == mine) << what;
+}
+
 // Every value of `type` read both ways, compared bit for bit.
 void expect_same_pixels(detail::ImageReader& mine, OIIO::ImageInput& oiio, OIIO::TypeDesc type,
                         const std::string& what) {
   const OIIO::ImageSpec& s = oiio.spec();
   const std::size_t bytes = std::size_t(s.width) * s.height * s.nchannels * type.size();
   std::vector<unsigned char> a(bytes), b(bytes);
-  mine.read_image(type, a.data());
+  mine.read_image(detail::from_oiio(type), a.data());
   ASSERT_TRUE(oiio.read_image(0, 0, 0, s.nchannels, type, b.data())) << oiio.geterror();
   std::size_t differ = 0;
   for (std::size_t i = 0; i < bytes; ++i) differ += a[i] != b[i];
@@ -106,11 +142,12 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
       EXPECT_EQ(h.width, s.width);
       EXPECT_EQ(h.height, s.height);
       ASSERT_EQ(h.nchannels, s.nchannels);
-      EXPECT_EQ(h.format, s.format);
+      EXPECT_EQ(detail::to_oiio(h.format), s.format);
       EXPECT_EQ(h.channelnames, s.channelnames);
       EXPECT_EQ(h.tile_width, s.tile_width);
       EXPECT_EQ(h.channelformats.size(), s.channelformats.size());
       expect_same_attributes(h.extra_attribs, s.extra_attribs, path.filename().string());
+      expect_lossless(s.extra_attribs, path.filename().string());
       expect_same_pixels(*mine, *oiio, type == OIIO::TypeDesc::UNKNOWN ? s.format : type,
                          path.filename().string());
     }
@@ -128,7 +165,7 @@ void compare_writers(const Image& photo, const fs::path& dir, const std::string&
   // The header write_image gives the writer: the photo's metadata with the encoding set.
   detail::ImageHeader h;
   h.width = photo.width(), h.height = photo.height(), h.nchannels = 3;
-  h.format = OIIO::TypeDesc::UINT8;
+  h.format = detail::kTypeUInt8;
   h.channelnames = {"R", "G", "B"};
   h.extra_attribs = photo.metadata().impl().attributes;
   h.attribute("oiio:ColorSpace", colour);
@@ -149,7 +186,7 @@ void compare_writers(const Image& photo, const fs::path& dir, const std::string&
                              detail::oiio_module().create_writer(path.string()));
     ASSERT_TRUE(w);
     w->open(path.string(), path.string(), h);
-    w->write_image(OIIO::TypeDesc::UINT8, codes.data());
+    w->write_image(detail::kTypeUInt8, codes.data());
     w->close();
   }
   auto a = OIIO::ImageInput::open(direct.string());
@@ -200,6 +237,107 @@ TEST(DirectCodecs, WritesJpegAsOiio) {
   // Attributes the direct writer leaves to OIIO's (EXIF sub-directory): the same file anyway.
   photo.metadata().impl().attributes.attribute("Exif:FocalLengthIn35mmFilm", 28);
   compare_writers(photo, dir.path(), "exif");
+}
+
+// mr's attribute list (core/attributes.h) against OIIO's ParamValueList on values of every
+// type OIIO's TypeDesc describes in files (scalars, vectors, matrices, arrays, rationals, time
+// codes, several values, strings with quotes, control characters and NULs): the conversion is
+// exact both ways, and the values read as text (get_string, also cut at 1 and 8 values), int
+// and float exactly as OIIO reads them. Tolerance: none.
+TEST(DirectCodecs, AttributeListsAreOiiosExactly) {
+  using T = OIIO::TypeDesc;
+  const int ints[] = {1, 250, -3, 4, 7, 0, 2147483647, -2147483647, 5, 6, 9, 12, 13, 14, 15, 16};
+  const unsigned uints[] = {3, 5, 0x01020304u, 4000000000u, 9, 10};
+  const float floats[] = {1.5f, 2, 3e-7f, -0.1f, 1e30f, 0.25f, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16};
+  const double doubles[] = {0.1, -2.5e100, 3};
+  const std::uint16_t u16[] = {400, 7, 0x3c00, 0x7bff};
+  const std::int16_t i16[] = {-3, 300};
+  const std::uint8_t u8[] = {48, 50, 51, 48};
+  const std::int8_t i8[] = {-5, 100};
+  const std::uint64_t u64[] = {1234567890123ull, 18446744073709551615ull};
+  const std::int64_t i64[] = {-1234567890123ll, 5};
+  std::vector<int> many(100);
+  for (int k = 0; k < 100; ++k) many[std::size_t(k)] = k * k - 50;
+  const OIIO::ustring strings[] = {OIIO::ustring("plain"), OIIO::ustring("a\"b\n\t\\c"),
+                                   OIIO::ustring(std::string("nul\0inside", 10)),
+                                   OIIO::ustring("")};
+  OIIO::ParamValueList list;
+  auto add = [&](const char* name, T type, int n, const void* data) {
+    list.push_back(OIIO::ParamValue(name, type, n, data));
+  };
+  add("int", T::INT, 1, ints);
+  add("ints", T::INT, 3, ints);
+  add("int[3]", T(T::INT, 3), 1, ints);
+  add("many", T::INT, 100, many.data());
+  add("many[100]", T(T::INT, 100), 1, many.data());
+  add("rational", OIIO::TypeRational, 1, ints);
+  add("rationals", OIIO::TypeRational, 2, ints);
+  add("rational[2]", T(T::INT, T::VEC2, T::RATIONAL, 2), 1, ints);
+  add("rational0", OIIO::TypeRational, 1, ints + 4);
+  add("urational", T(T::UINT, T::VEC2, T::RATIONAL), 1, uints);
+  add("uint", T::UINT, 2, uints + 2);
+  add("timecode", OIIO::TypeTimeCode, 1, uints + 2);
+  add("keycode", OIIO::TypeKeyCode, 1, ints);
+  add("box2i", OIIO::TypeBox2i, 1, ints);
+  add("float", T::FLOAT, 1, floats);
+  add("floats", T::FLOAT, 5, floats);
+  add("vec3", OIIO::TypeVector, 1, floats);
+  add("color", OIIO::TypeColor, 1, floats + 3);
+  add("vec2 x2", T(T::FLOAT, T::VEC2), 2, floats);
+  add("matrix", OIIO::TypeMatrix44, 1, floats);
+  add("matrix33", OIIO::TypeMatrix33, 1, floats);
+  add("double", T::DOUBLE, 3, doubles);
+  add("half", T::HALF, 4, u16);
+  add("uint16", T::UINT16, 1, u16);
+  add("uint16[2]", T(T::UINT16, 2), 1, u16);
+  add("int16", T::INT16, 2, i16);
+  add("uint8[4]", T(T::UINT8, 4), 1, u8);
+  add("int8", T::INT8, 2, i8);
+  add("uint64", T::UINT64, 2, u64);
+  add("int64", T::INT64, 2, i64);
+  list.push_back(OIIO::ParamValue("string", strings[1]));
+  list.push_back(OIIO::ParamValue("nul string", strings[2]));
+  list.push_back(OIIO::ParamValue("empty string", strings[3]));
+  add("strings", T::STRING, 3, strings);
+  add("string[2]", T(T::STRING, 2), 1, strings);
+  list.push_back(OIIO::ParamValue("int text", T::STRING, "  42"));
+  list.push_back(OIIO::ParamValue("float text", T::STRING, "2.5"));
+  list.push_back(OIIO::ParamValue("not a number", T::STRING, "2.5 m"));
+  list.push_back(OIIO::ParamValue("vertex", T::FLOAT, 2, OIIO::ParamValue::INTERP_VERTEX, floats));
+  expect_lossless(list, "synthetic");
+  const detail::AttributeList mine = detail::from_oiio(list);
+  ASSERT_EQ(mine.size(), list.size());
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const OIIO::ParamValue& p = list[i];
+    const detail::Attribute& a = mine[i];
+    for (int maxsize : {64, 1, 8, 1 << 20})
+      EXPECT_EQ(a.get_string(maxsize), p.get_string(maxsize)) << a.name << " cut at " << maxsize;
+    EXPECT_EQ(a.get_int(-77), p.get_int(-77)) << a.name;
+    const float fa = a.get_float(-77), fb = p.get_float(-77);
+    EXPECT_TRUE(std::memcmp(&fa, &fb, sizeof fa) == 0) << a.name << ": " << fa << " vs " << fb;
+    EXPECT_EQ(mine.get_int(a.name), list.get_int(p.name().string())) << a.name;
+  }
+  // List edits as OIIO's: replace in place, case-insensitive lookups, removal.
+  OIIO::ParamValueList theirs = list;
+  detail::AttributeList ours = mine;
+  theirs.attribute("Float", 3.0f);  // another name (case-sensitive): appended
+  theirs.attribute("float", 4.0f);  // replaced in place, then by an int
+  theirs.attribute("float", 5);
+  theirs.attribute("", 6);  // ignored
+  theirs.attribute("rational", "text");
+  theirs.remove("ints");
+  theirs.remove("INT16");  // case-sensitive: stays
+  ours.attribute("Float", 3.0f);
+  ours.attribute("float", 4.0f);
+  ours.attribute("float", 5);
+  ours.attribute("", 6);
+  ours.attribute("rational", "text");
+  ours.remove("ints");
+  ours.remove("INT16");
+  expect_identical(detail::to_oiio(ours), theirs, "edited");
+  EXPECT_EQ(ours.get_float("FLOAT"), theirs.get_float("FLOAT"));
+  EXPECT_EQ(ours.contains("FLOAT"), theirs.contains("FLOAT"));
+  EXPECT_EQ(ours.contains("Float"), theirs.contains("Float"));
 }
 
 TEST(DirectCodecs, DamagedFilesNameTheFile) {

@@ -90,12 +90,12 @@ TEST(Metadata, TypedValuesReadAsTextAndNumbers) {
   m.erase("Make");
   EXPECT_FALSE(m.contains("Make"));
   // EXIF rationals (e.g. exposure time 1/250) come through as their value.
-  m.impl().attributes.attribute("ExposureTime", OIIO::TypeRational, std::array<int, 2>{1, 250}.data());
+  m.impl().attributes.attribute("ExposureTime", detail::kTypeRational, std::array<int, 2>{1, 250}.data());
   EXPECT_NEAR(*m.get_number("ExposureTime"), 0.004, 1e-12);
   // Integer types (OIIO 2.4's get_float_indexed reads INT as 0).
   m.impl().attributes.attribute("Orientation", 6);
   EXPECT_EQ(m.get_number("Orientation"), 6.0);
-  m.impl().attributes.attribute("Exif:ISO", OIIO::TypeUInt16, std::array<std::uint16_t, 1>{400}.data());
+  m.impl().attributes.attribute("Exif:ISO", detail::kTypeUInt16, std::array<std::uint16_t, 1>{400}.data());
   EXPECT_EQ(m.get_number("Exif:ISO"), 400.0);
 }
 

@@ -162,7 +162,7 @@ TEST(Io, MetadataTravelsFromInputToOutput) {
   attrs.set("Make", std::string("libmr test camera"));
   attrs.set("Model", std::string("Mk II"));
   attrs.impl().attributes.attribute("Exif:FocalLengthIn35mmFilm", 28);
-  attrs.impl().attributes.attribute("Exif:PhotographicSensitivity", OIIO::TypeUInt16, std::array<std::uint16_t, 1>{400}.data());
+  attrs.impl().attributes.attribute("Exif:PhotographicSensitivity", detail::kTypeUInt16, std::array<std::uint16_t, 1>{400}.data());
   write_image(dir / "first.jpg", im);
   const Image first = read_image(dir / "first.jpg");
   write_image(dir / "second.jpg", first);

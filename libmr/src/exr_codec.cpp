@@ -94,23 +94,22 @@ class ExrReader final : public ImageReader {
       return false;
     spec_.nchannels = int(names.size());
     spec_.channelnames = names;
-    spec_.format = type == Imf::HALF ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT;
+    spec_.format = type == Imf::HALF ? kTypeHalf : kTypeFloat;
     format_name_ = "openexr";
     return header_attributes(h);
   }
 
-  void read_scanlines(int y0, int y1, int chbegin, int chend, OIIO::TypeDesc type,
-                      void* data) override {
+  void read_scanlines(int y0, int y1, int chbegin, int chend, DataType type, void* data) override {
     if (y0 < 0 || y1 > spec_.height || y0 >= y1 || chbegin < 0 || chend > spec_.nchannels ||
         chbegin >= chend)
       throw Error(ErrorCode::internal, path_ + ": EXR rows out of range");
     Imf::PixelType as;
-    if (type == OIIO::TypeDesc::FLOAT)
+    if (type.is(DataType::kFloat))
       as = Imf::FLOAT;
-    else if (type == OIIO::TypeDesc::HALF)
+    else if (type.is(DataType::kHalf))
       as = Imf::HALF;
     else
-      throw Error(ErrorCode::internal, path_ + ": EXR read as " + type.c_str());
+      throw Error(ErrorCode::internal, path_ + ": EXR read as " + type.base_name());
     const int nc = chend - chbegin;
     const std::size_t x_stride = std::size_t(nc) * type.size();
     const std::size_t y_stride = x_stride * std::size_t(spec_.width);
@@ -129,7 +128,7 @@ class ExrReader final : public ImageReader {
     }
   }
 
-  void read_image(OIIO::TypeDesc type, void* data) override {
+  void read_image(DataType type, void* data) override {
     read_scanlines(0, spec_.height, 0, spec_.nchannels, type, data);
   }
 
@@ -153,15 +152,14 @@ class ExrReader final : public ImageReader {
       if (name == "compression") {
         continue;
       } else if (name == "pixelAspectRatio") {
-        spec_.set(OIIO::ParamValue("PixelAspectRatio", h.pixelAspectRatio()));
+        spec_.set(Attribute("PixelAspectRatio", h.pixelAspectRatio()));
       } else if (name == "screenWindowWidth") {
-        spec_.set(OIIO::ParamValue("screenWindowWidth", h.screenWindowWidth()));
+        spec_.set(Attribute("screenWindowWidth", h.screenWindowWidth()));
       } else if (name == "screenWindowCenter") {
         const Imath::V2f v = h.screenWindowCenter();
         const float xy[2] = {v.x, v.y};
-        spec_.set(OIIO::ParamValue("screenWindowCenter",
-                                   OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::VEC2), 1,
-                                   xy));
+        spec_.set(
+            Attribute("screenWindowCenter", DataType(DataType::kFloat, DataType::kVec2), 1, xy));
       } else if (type == "string") {
         const std::string& v = static_cast<const Imf::StringAttribute&>(a.attribute()).value();
         if (v.empty()) return false;  // OIIO drops some empty ones
@@ -176,11 +174,9 @@ class ExrReader final : public ImageReader {
             name == "longitude" || name == "latitude" || name == "altitude" || name == "focus" ||
             name == "isoSpeed")
           return false;  // OIIO renames these
-        spec_.set(
-            OIIO::ParamValue(name, static_cast<const Imf::FloatAttribute&>(a.attribute()).value()));
+        spec_.set(Attribute(name, static_cast<const Imf::FloatAttribute&>(a.attribute()).value()));
       } else if (type == "int") {
-        spec_.set(
-            OIIO::ParamValue(name, static_cast<const Imf::IntAttribute&>(a.attribute()).value()));
+        spec_.set(Attribute(name, static_cast<const Imf::IntAttribute&>(a.attribute()).value()));
       } else {
         return false;
       }

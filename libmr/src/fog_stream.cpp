@@ -38,7 +38,7 @@ using detail::format_supports;
 using detail::ImageHeader;
 using detail::ImageReader;
 using detail::ImageWriter;
-using detail::to_oiio;
+using detail::stored_type;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
@@ -136,9 +136,9 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
     if (!spec.channelformats.empty()) return decline("per-channel pixel types");
     const int orientation = spec.get_int_attribute("Orientation", 1);
     if (orientation >= 2 && orientation <= 8) return decline("EXIF orientation turns the photo");
-    if (spec.format == OIIO::TypeDesc::UINT8)
+    if (spec.format.is(detail::DataType::kUInt8))
       photo_bits = 8;
-    else if (spec.format == OIIO::TypeDesc::UINT16)
+    else if (spec.format.is(detail::DataType::kUInt16))
       photo_bits = 16;
     else
       return decline("not an 8/16-bit photo");
@@ -164,14 +164,14 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   if (!dspec.channelformats.empty()) return decline("depth map with per-channel pixel types");
   const int d_orientation = dspec.get_int_attribute("Orientation", 1);
   if (d_orientation >= 2 && d_orientation <= 8) return decline("depth map has an orientation");
-  OIIO::TypeDesc depth_type;
+  detail::DataType depth_type;
   std::size_t depth_bytes = 0;
-  if (dspec.format == OIIO::TypeDesc::UINT8)
-    depth_type = OIIO::TypeDesc::UINT8, depth_bytes = 1;
-  else if (dspec.format == OIIO::TypeDesc::UINT16)
-    depth_type = OIIO::TypeDesc::UINT16, depth_bytes = 2;
-  else if (dspec.format == OIIO::TypeDesc::FLOAT || dspec.format == OIIO::TypeDesc::HALF)
-    depth_type = OIIO::TypeDesc::FLOAT, depth_bytes = 4;
+  if (dspec.format.is(detail::DataType::kUInt8))
+    depth_type = detail::kTypeUInt8, depth_bytes = 1;
+  else if (dspec.format.is(detail::DataType::kUInt16))
+    depth_type = detail::kTypeUInt16, depth_bytes = 2;
+  else if (dspec.format.is(detail::DataType::kFloat) || dspec.format.is(detail::DataType::kHalf))
+    depth_type = detail::kTypeFloat, depth_bytes = 4;
   else
     return decline("depth map of an unusual pixel type");
   const int depth_c = depth_channel(dspec);
@@ -268,7 +268,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   // --- The output file, opened before the first strip is decoded.
   ImageHeader out_spec;
   out_spec.width = w, out_spec.height = h, out_spec.nchannels = n;
-  out_spec.format = to_oiio(out_type);
+  out_spec.format = stored_type(out_type);
   out_spec.channelnames = channel_names;
   if (n == 4) out_spec.alpha_channel = 3;
   out_spec.extra_attribs = metadata.impl().attributes;
@@ -294,7 +294,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   int next_row = 0;
   std::size_t next_token = 0;
   bool stopped = false;
-  const OIIO::TypeDesc photo_type = photo_bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::UINT8;
+  const detail::DataType photo_type = photo_bits == 16 ? detail::kTypeUInt16 : detail::kTypeUInt8;
   const double alpha_scale = 1.0 / (photo_bits == 16 ? 65535.0 : 255.0);
   const double out_max_code = out_bits == 8 ? 255.0 : 65535.0;
   report_progress(cancel, "render", 0, std::size_t(h));  // mr/cancel.h: rows written
@@ -435,10 +435,10 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
           tbb::make_filter<Strip*, void>(tbb::filter_mode::serial_in_order, [&](Strip* s) {
             if (is_integer(out_type))
               out->write_scanlines(s->y0, s->y0 + s->rows,
-                                   out_bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16,
+                                   out_bits == 8 ? detail::kTypeUInt8 : detail::kTypeUInt16,
                                    s->out_codes.data());
             else
-              out->write_scanlines(s->y0, s->y0 + s->rows, OIIO::TypeDesc::FLOAT,
+              out->write_scanlines(s->y0, s->y0 + s->rows, detail::kTypeFloat,
                                    s->pixels.data());
             result.no_surface_pixels += s->counts.no_surface;
             result.invalid_pixels += s->counts.invalid;

@@ -29,20 +29,20 @@ using detail::format_supports;
 using detail::ImageHeader;
 using detail::ImageReader;
 using detail::ImageWriter;
-using detail::to_oiio;
+using detail::stored_type;
 
 std::string lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
   return s;
 }
 
-PixelType from_oiio(OIIO::TypeDesc t) {
+PixelType from_oiio(detail::DataType t) {
   switch (t.basetype) {
-    case OIIO::TypeDesc::UINT8:
-    case OIIO::TypeDesc::INT8: return PixelType::uint8;
-    case OIIO::TypeDesc::UINT16:
-    case OIIO::TypeDesc::INT16: return PixelType::uint16;
-    case OIIO::TypeDesc::HALF: return PixelType::half;
+    case detail::DataType::kUInt8:
+    case detail::DataType::kInt8: return PixelType::uint8;
+    case detail::DataType::kUInt16:
+    case detail::DataType::kInt16: return PixelType::uint16;
+    case detail::DataType::kHalf: return PixelType::half;
     default: return PixelType::float32;
   }
 }
@@ -147,7 +147,7 @@ Image reorient(const Image& stored, int orientation) {
 
 
 void write_buf(const std::filesystem::path& path, ImageWriter& out, const ImageHeader& spec,
-               OIIO::TypeDesc data_type, const void* data, bool overwrite) {
+               detail::DataType data_type, const void* data, bool overwrite) {
   std::error_code ec;
   const auto folder = path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path();
   if (!std::filesystem::is_directory(folder, ec))
@@ -228,7 +228,7 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
                                         "' in OCIO config " + config.source());
     }
   }
-  auto read_pixels = [&](OIIO::TypeDesc type, void* data) { in->read_image(type, data); };
+  auto read_pixels = [&](detail::DataType type, void* data) { in->read_image(type, data); };
 
   Image image = Image::uninitialized(spec.width, spec.height, spec.nchannels, spec.channelnames);
   const int n = spec.nchannels;
@@ -239,7 +239,7 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
     // at the float image plus one strip); tiled ones whole.
     const int bits = stored == PixelType::uint8 ? 8 : 16;
     const std::size_t bytes = std::size_t(bits / 8);
-    const OIIO::TypeDesc code_type = bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16;
+    const detail::DataType code_type = bits == 8 ? detail::kTypeUInt8 : detail::kTypeUInt16;
     const std::size_t row_codes = std::size_t(spec.width) * std::size_t(n) * bytes;
     constexpr std::size_t kStripBytes = std::size_t(4) << 20;
     const int strip_rows =
@@ -271,7 +271,7 @@ Image read_image(const std::filesystem::path& path, const ReadOptions& options) 
       }
     }
   } else {
-    read_pixels(OIIO::TypeDesc::FLOAT, image.data());
+    read_pixels(detail::kTypeFloat, image.data());
     if (options.reject_non_finite)
       if (std::size_t bad = count_non_finite(image))
         throw Error(ErrorCode::corrupt_input, path.string() + ": " + std::to_string(bad) +
@@ -336,7 +336,7 @@ void write_image(const std::filesystem::path& path, const Image& image,
   // Encode: integer files get OCIO's clamped, rounded integer output directly.
   const int n = image.channels();
   const float* pixels = image.data();
-  OIIO::TypeDesc data_type = OIIO::TypeDesc::FLOAT;
+  detail::DataType data_type = detail::kTypeFloat;
   const void* data = pixels;
   Image encoded;
   std::vector<unsigned char> codes;
@@ -357,7 +357,7 @@ void write_image(const std::filesystem::path& path, const Image& image,
         if (bits == 8) codes[k] = static_cast<unsigned char>(v);
         else c16[k] = static_cast<std::uint16_t>(v);
       }
-    data_type = bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16;
+    data_type = bits == 8 ? detail::kTypeUInt8 : detail::kTypeUInt16;
     data = codes.data();
   } else if (n >= 3) {
     encoded = image;
@@ -367,7 +367,7 @@ void write_image(const std::filesystem::path& path, const Image& image,
 
   ImageHeader spec;
   spec.width = image.width(), spec.height = image.height(), spec.nchannels = image.channels();
-  spec.format = to_oiio(type);
+  spec.format = stored_type(type);
   spec.channelnames = image.channel_names();
   if (image.channels() == 4) spec.alpha_channel = 3;
   spec.extra_attribs = image.metadata().impl().attributes;
@@ -413,15 +413,15 @@ void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLaye
   }
   ImageHeader spec;
   spec.width = width, spec.height = height, spec.nchannels = total;
-  spec.format = to_oiio(pixel_type);
+  spec.format = stored_type(pixel_type);
   spec.channelnames = names;
   // Data layers (depth) must not be rounded to half: keep them float.
-  spec.channelformats.assign(total, to_oiio(pixel_type));
+  spec.channelformats.assign(total, stored_type(pixel_type));
   offset = 0;
   for (const ExrLayer& layer : layers) {
     if (layer.is_data)
       for (int c = 0; c < layer.image->channels(); ++c)
-        spec.channelformats[offset + c] = OIIO::TypeDesc::FLOAT;
+        spec.channelformats[offset + c] = detail::kTypeFloat;
     offset += layer.image->channels();
   }
   spec.extra_attribs = metadata.impl().attributes;
@@ -431,7 +431,7 @@ void write_exr_layers(const std::filesystem::path& path, std::span<const ExrLaye
   if (path.extension() != ".exr" && path.extension() != ".EXR")
     throw Error(ErrorCode::invalid_argument, path.string() + ": layered output must be .exr");
   const std::unique_ptr<ImageWriter> out = detail::create_image_writer(path);
-  write_buf(path, *out, spec, OIIO::TypeDesc::FLOAT, interleaved.data(), true);
+  write_buf(path, *out, spec, detail::kTypeFloat, interleaved.data(), true);
 }
 
 bool is_readable_image_extension(const std::filesystem::path& path) {

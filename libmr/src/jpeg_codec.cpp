@@ -5,8 +5,6 @@
 // the TIFF fields of an EXIF block), and for writing the same quality, chroma subsampling, JFIF
 // density and EXIF. libjpeg's errors longjmp back here (its default error_exit would exit the
 // process).
-#include <OpenImageIO/strutil.h>
-
 #include <algorithm>
 #include <cmath>
 #include <csetjmp>
@@ -115,7 +113,7 @@ class JpegReader final : public ImageReader {
     if (err_.failed) return false;
     spec_.width = int(cinfo_.output_width), spec_.height = int(cinfo_.output_height);
     spec_.nchannels = cinfo_.output_components;
-    spec_.format = OIIO::TypeDesc::UINT8;
+    spec_.format = kTypeUInt8;
     spec_.channelnames = spec_.nchannels == 1 ? std::vector<std::string>{"Y"}
                                               : std::vector<std::string>{"R", "G", "B"};
     format_name_ = "jpeg";
@@ -123,8 +121,7 @@ class JpegReader final : public ImageReader {
     return true;
   }
 
-  void read_scanlines(int y0, int y1, int chbegin, int chend, OIIO::TypeDesc type,
-                      void* data) override {
+  void read_scanlines(int y0, int y1, int chbegin, int chend, DataType type, void* data) override {
     if (y0 != next_row_ || y1 > spec_.height || chbegin < 0 || chend > spec_.nchannels ||
         chbegin >= chend)
       throw Error(ErrorCode::internal, path_ + ": JPEG rows read out of order");
@@ -133,7 +130,7 @@ class JpegReader final : public ImageReader {
     for (int y = y0; y < y1; ++y) {
       read_row();
       auto* out = static_cast<unsigned char*>(data) + std::size_t(y - y0) * out_row;
-      if (type == OIIO::TypeDesc::UINT8 && nc == n) {
+      if (type.is(DataType::kUInt8) && nc == n) {
         std::memcpy(out, row_.data(), row_.size());
         continue;
       }
@@ -142,17 +139,17 @@ class JpegReader final : public ImageReader {
           const unsigned char v = row_[std::size_t(x) * n + chbegin + c];
           const std::size_t k = std::size_t(x) * nc + c;
           // OIIO's convert_type: integers scale to [0, 1] by a float multiply.
-          if (type == OIIO::TypeDesc::UINT8)
+          if (type.is(DataType::kUInt8))
             out[k] = v;
-          else if (type == OIIO::TypeDesc::FLOAT)
+          else if (type.is(DataType::kFloat))
             reinterpret_cast<float*>(out)[k] = float(v) * (1.0f / 255.0f);
           else
-            throw Error(ErrorCode::internal, path_ + ": JPEG read as " + type.c_str());
+            throw Error(ErrorCode::internal, path_ + ": JPEG read as " + type.base_name());
         }
     }
   }
 
-  void read_image(OIIO::TypeDesc type, void* data) override {
+  void read_image(DataType type, void* data) override {
     read_scanlines(0, spec_.height, 0, spec_.nchannels, type, data);
   }
 
@@ -173,17 +170,17 @@ class JpegReader final : public ImageReader {
     if (!subsampling.empty()) spec_.attribute("jpeg:subsampling", subsampling);
     for (jpeg_saved_marker_ptr m = cinfo_.marker_list; m; m = m->next) {
       if (m->marker == JPEG_APP0 + 1) {
-        OIIO::ParamValueList exif;
+        AttributeList exif;
         if (m->data_length < 6 || !decode_tiff_fields(m->data + 6, m->data_length - 6, exif))
           return false;  // more than the TIFF fields
-        for (const OIIO::ParamValue& p : exif) spec_.set(p);
+        for (const Attribute& p : exif) spec_.set(p);
       } else if (m->marker == JPEG_APP0 + 13) {
-        OIIO::ParamValueList iptc;
+        AttributeList iptc;
         if (!decode_iptc(m->data + sizeof kPhotoshop, m->data_length - sizeof kPhotoshop, iptc))
           return false;  // more than the datasets OIIO writes for the TIFF fields
-        for (const OIIO::ParamValue& p : iptc) spec_.set(p);
+        for (const Attribute& p : iptc) spec_.set(p);
       } else if (m->marker == JPEG_COM) {
-        if (spec_.extra_attribs.find("ImageDescription", OIIO::TypeDesc::STRING, false) ==
+        if (spec_.extra_attribs.find("ImageDescription", kTypeString, false) ==
             spec_.extra_attribs.cend())
           spec_.attribute("ImageDescription",
                           std::string_view(reinterpret_cast<const char*>(m->data), m->data_length));
@@ -193,8 +190,8 @@ class JpegReader final : public ImageReader {
     // only a pixel aspect (libjpeg's default 1:1 says nothing), and the EXIF values stand.
     if (cinfo_.X_density > 1 && cinfo_.Y_density > 1) {
       if (cinfo_.X_density != cinfo_.Y_density) return false;  // a pixel aspect: OIIO's
-      spec_.set(OIIO::ParamValue("XResolution", float(cinfo_.X_density)));
-      spec_.set(OIIO::ParamValue("YResolution", float(cinfo_.Y_density)));
+      spec_.set(Attribute("XResolution", float(cinfo_.X_density)));
+      spec_.set(Attribute("YResolution", float(cinfo_.Y_density)));
       switch (cinfo_.density_unit) {
         case 0:
           spec_.attribute("ResolutionUnit", "none");
@@ -246,8 +243,8 @@ bool writable_attributes(const ImageHeader& spec) {
   static const std::set<std::string> handled = {"oiio:ColorSpace",      "Compression",
                                                 "jpeg:subsampling",     "Exif:ExifVersion",
                                                 "Exif:FlashPixVersion", "Exif:ColorSpace"};
-  for (const OIIO::ParamValue& p : spec.extra_attribs) {
-    const std::string name = p.name().string();
+  for (const Attribute& p : spec.extra_attribs) {
+    const std::string& name = p.name;
     if (handled.count(name)) continue;
     if (name != "ImageDescription" && is_tiff_field(p)) continue;  // EXIF (some also IPTC)
     return false;
@@ -280,7 +277,7 @@ bool writable_attributes(const ImageHeader& spec) {
          // "sRGB" OIIO marks in an Exif directory (done here); other names (the config's
          // "srgb_texture", "srgb_rolloff") it writes nothing for. Other spellings of "srgb":
          // whatever OIIO does with them.
-         (colour == "sRGB" || !OIIO::Strutil::iequals(colour, "srgb"));
+         (colour == "sRGB" || !iequals(colour, "srgb"));
 }
 
 class JpegWriter final : public ImageWriter {
@@ -346,10 +343,10 @@ class JpegWriter final : public ImageWriter {
     if (err_.failed) fail();
   }
 
-  void write_scanlines(int y0, int y1, OIIO::TypeDesc type, const void* data) override {
+  void write_scanlines(int y0, int y1, DataType type, const void* data) override {
     if (fallback_) return fallback_->write_scanlines(y0, y1, type, data);
-    if (type != OIIO::TypeDesc::UINT8)
-      throw Error(ErrorCode::internal, name_ + ": JPEG rows given as " + type.c_str());
+    if (!type.is(DataType::kUInt8))
+      throw Error(ErrorCode::internal, name_ + ": JPEG rows given as " + type.base_name());
     if (setjmp(err_.jump)) fail();
     const auto* rows = static_cast<const unsigned char*>(data);
     for (int y = y0; y < y1; ++y) {
@@ -359,7 +356,7 @@ class JpegWriter final : public ImageWriter {
     if (err_.failed) fail();
   }
 
-  void write_image(OIIO::TypeDesc type, const void* data) override {
+  void write_image(DataType type, const void* data) override {
     if (fallback_) return fallback_->write_image(type, data);
     write_scanlines(0, int(cinfo_.image_height), type, data);
   }

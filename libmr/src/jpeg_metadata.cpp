@@ -58,7 +58,7 @@ bool as_rational(float value, std::uint32_t& num, std::uint32_t& den) {
 
 }  // namespace
 
-bool decode_tiff_fields(const unsigned char* data, std::size_t size, OIIO::ParamValueList& out) {
+bool decode_tiff_fields(const unsigned char* data, std::size_t size, AttributeList& out) {
   if (size < 8) return false;
   const bool little = data[0] == 'I' && data[1] == 'I';
   if (!little && !(data[0] == 'M' && data[1] == 'M')) return false;
@@ -85,12 +85,12 @@ bool decode_tiff_fields(const unsigned char* data, std::size_t size, OIIO::Param
       if ((tag == kExifVersion || tag == kFlashPixVersion) && type == kUndefined && count == 4) {
         const std::string_view v(reinterpret_cast<const char*>(data + e + 8), 4);
         out.push_back(
-            OIIO::ParamValue(tag == kExifVersion ? "Exif:ExifVersion" : "Exif:FlashPixVersion", v));
+            Attribute(tag == kExifVersion ? "Exif:ExifVersion" : "Exif:FlashPixVersion", v));
       } else if (tag == kComponents && type == kUndefined && count == 4) {
         // ComponentsConfiguration: OIIO writes it (Y, Cb, Cr) and reads nothing from it.
       } else if (tag == kColorSpace && type == kShort && count == 1 && u16(e + 8) == 1) {
         const std::uint16_t srgb = 1;
-        out.push_back(OIIO::ParamValue("Exif:ColorSpace", OIIO::TypeDesc::UINT16, 1, &srgb));
+        out.push_back(Attribute("Exif:ColorSpace", kTypeUInt16, 1, &srgb));
       } else {
         return false;
       }
@@ -118,19 +118,17 @@ bool decode_tiff_fields(const unsigned char* data, std::size_t size, OIIO::Param
       if (at + n > size) return false;
       std::size_t len = n;
       while (len && data[at + len - 1] == 0) --len;  // the terminating NULs
-      out.push_back(OIIO::ParamValue(
-          f.name, std::string_view(reinterpret_cast<const char*>(data + at), len)));
+      out.push_back(
+          Attribute(f.name, std::string_view(reinterpret_cast<const char*>(data + at), len)));
     } else if (f.kind == Kind::integer || f.kind == Kind::unit) {
       if (type != kShort || n != 1) return false;
       const int v = u16(e + 8);
       if (f.kind == Kind::integer) {
         const std::uint16_t stored = std::uint16_t(v);  // SHORT: OIIO keeps it uint16
-        out.push_back(OIIO::ParamValue(f.name, OIIO::TypeDesc::UINT16, 1, &stored));
+        out.push_back(Attribute(f.name, kTypeUInt16, 1, &stored));
       } else {
         if (v < 1 || v > 3) return false;
-        out.push_back(OIIO::ParamValue(f.name, std::string_view(v == 1   ? "none"
-                                                                : v == 2 ? "in"
-                                                                         : "cm")));
+        out.push_back(Attribute(f.name, std::string_view(v == 1 ? "none" : v == 2 ? "in" : "cm")));
       }
     } else {
       if (type != kRational || n != 1) return false;
@@ -138,44 +136,43 @@ bool decode_tiff_fields(const unsigned char* data, std::size_t size, OIIO::Param
       if (at + 8 > size) return false;
       const std::uint32_t num = u32(at), den = u32(at + 4);
       if (den == 0) return false;
-      out.push_back(OIIO::ParamValue(f.name, float(double(num) / double(den))));
+      out.push_back(Attribute(f.name, float(double(num) / double(den))));
     }
   }
   return true;
 }
 
-bool is_tiff_field(const OIIO::ParamValue& p) {
-  const auto* entry = field_named(p.name().string());
+bool is_tiff_field(const Attribute& p) {
+  const auto* entry = field_named(p.name);
   if (!entry) return false;
-  const OIIO::TypeDesc t = p.type();
+  const DataType t = p.type;
   switch (entry->second.kind) {
     case Kind::text:
-      return t == OIIO::TypeDesc::STRING;
+      return t.is(DataType::kString);
     case Kind::integer:
-      return (t == OIIO::TypeDesc::INT || t == OIIO::TypeDesc::UINT16) && p.get_int() >= 0 &&
+      return (t.is(DataType::kInt32) || t.is(DataType::kUInt16)) && p.get_int() >= 0 &&
              p.get_int() <= 65535;
     case Kind::unit: {  // not written to EXIF (as OIIO): the JFIF density unit holds it
-      if (t != OIIO::TypeDesc::STRING) return false;
-      const std::string v = p.get_ustring().string();
+      if (!t.is(DataType::kString)) return false;
+      const std::string& v = p.string_value();
       return v == "none" || v == "in" || v == "cm";
     }
     case Kind::resolution: {
       std::uint32_t num = 0, den = 0;
-      return t == OIIO::TypeDesc::FLOAT && as_rational(p.get_float(), num, den);
+      return t.is(DataType::kFloat) && as_rational(p.get_float(), num, den);
     }
   }
   return false;
 }
 
-std::vector<char> encode_tiff_fields(const OIIO::ParamValueList& attributes) {
+std::vector<char> encode_tiff_fields(const AttributeList& attributes) {
   // In the attributes' order, as OIIO writes them (and reads them back).
-  std::vector<std::pair<std::uint16_t, const OIIO::ParamValue*>> present;
-  for (const OIIO::ParamValue& p : attributes)
-    if (is_tiff_field(p) && p.name() != "ResolutionUnit")
-      present.emplace_back(field_named(p.name().string())->first, &p);
-  const auto colour = attributes.find("oiio:ColorSpace", OIIO::TypeDesc::STRING, false);
-  const bool exif_directory =
-      colour != attributes.cend() && colour->get_ustring().string() == "sRGB";
+  std::vector<std::pair<std::uint16_t, const Attribute*>> present;
+  for (const Attribute& p : attributes)
+    if (is_tiff_field(p) && p.name != "ResolutionUnit")
+      present.emplace_back(field_named(p.name)->first, &p);
+  const auto colour = attributes.find("oiio:ColorSpace", kTypeString, false);
+  const bool exif_directory = colour != attributes.cend() && colour->string_value() == "sRGB";
   std::size_t pointer_entry = 0;
   std::vector<char> out;
   out.reserve(256);
@@ -193,7 +190,7 @@ std::vector<char> encode_tiff_fields(const OIIO::ParamValueList& attributes) {
     const Field& f = fields().at(tag);
     put16(tag);
     if (f.kind == Kind::text) {
-      std::string v = p->get_ustring().string();
+      std::string v = p->string_value();
       v.push_back('\0');
       put16(kAscii);
       put32(std::uint32_t(v.size()));
@@ -273,7 +270,7 @@ constexpr Dataset kDatasets[] = {{65, "Software", "IPTC:OriginatingProgram"},
 
 }  // namespace
 
-bool decode_iptc(const unsigned char* data, std::size_t size, OIIO::ParamValueList& out) {
+bool decode_iptc(const unsigned char* data, std::size_t size, AttributeList& out) {
   std::size_t at = 0;
   while (at < size) {
     // An image resource: "8BIM", id, a padded Pascal name, a size, padded data.
@@ -296,8 +293,8 @@ bool decode_iptc(const unsigned char* data, std::size_t size, OIIO::ParamValueLi
       for (const Dataset& k : kDatasets)
         if (k.number == number) d = &k;
       if (!d) return false;
-      out.push_back(OIIO::ParamValue(
-          d->name, std::string_view(reinterpret_cast<const char*>(data + q + 5), n)));
+      out.push_back(
+          Attribute(d->name, std::string_view(reinterpret_cast<const char*>(data + q + 5), n)));
       q += 5 + n;
     }
     at = p + len + (len & 1);
@@ -305,12 +302,12 @@ bool decode_iptc(const unsigned char* data, std::size_t size, OIIO::ParamValueLi
   return true;
 }
 
-std::vector<char> encode_iptc(const OIIO::ParamValueList& attributes) {
+std::vector<char> encode_iptc(const AttributeList& attributes) {
   std::vector<char> iim;
   for (const Dataset& d : kDatasets) {
-    const auto it = attributes.find(d.field, OIIO::TypeDesc::STRING, false);
+    const auto it = attributes.find(d.field, kTypeString, false);
     if (it == attributes.cend()) continue;
-    const std::string v = it->get_ustring().string();
+    const std::string& v = it->string_value();
     const std::size_t n = std::min<std::size_t>(v.size(), 0x7FFF);
     for (int c : {0x1C, 2, d.number, int(n >> 8), int(n & 0xFF)}) iim.push_back(char(c));
     iim.insert(iim.end(), v.begin(), v.begin() + std::ptrdiff_t(n));

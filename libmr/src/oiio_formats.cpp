@@ -7,12 +7,12 @@
 
 namespace mr::detail {
 
-OIIO::TypeDesc to_oiio(PixelType t) {
+DataType stored_type(PixelType t) {
   switch (t) {
-    case PixelType::uint8: return OIIO::TypeDesc::UINT8;
-    case PixelType::uint16: return OIIO::TypeDesc::UINT16;
-    case PixelType::half: return OIIO::TypeDesc::HALF;
-    default: return OIIO::TypeDesc::FLOAT;
+    case PixelType::uint8: return kTypeUInt8;
+    case PixelType::uint16: return kTypeUInt16;
+    case PixelType::half: return kTypeHalf;
+    default: return kTypeFloat;
   }
 }
 
@@ -39,7 +39,7 @@ PixelType automatic_pixel_type(const std::string& format) {
 }
 
 // Attributes that describe the input file's encoding, not the picture: never carried over.
-void drop_encoding_attributes(OIIO::ParamValueList& attrs) {
+void drop_encoding_attributes(AttributeList& attrs) {
   for (const char* name : {"oiio:BitsPerSample", "oiio:ColorSpace", "oiio:Gamma", "Compression",
                            "CompressionQuality", "oiio:UnassociatedAlpha", "tiff:RowsPerStrip",
                            "tiff:Compression", "tiff:PhotometricInterpretation",

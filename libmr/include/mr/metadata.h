@@ -35,7 +35,7 @@ class MR_API Metadata {
   void set(const std::string& name, double value);
   void erase(const std::string& name);
 
-  /// Private to libmr: the OIIO::ParamValueList behind this object.
+  /// Private to libmr: the typed attribute list behind this object (core/metadata_impl.h).
   struct Impl;
   Impl& impl() { return *impl_; }
   const Impl& impl() const { return *impl_; }
