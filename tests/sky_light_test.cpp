@@ -577,7 +577,8 @@ void paint_tree(const Tree& t, int x, int y, std::uniform_real_distribution<floa
 // A level horizon through the frame's middle, as a user marks it.
 Annotations level_horizon(int w, int h) {
   Annotations a;
-  a.horizon = std::array<PixelPoint, 2>{PixelPoint{0, 0.5 * h - 0.5}, PixelPoint{w - 1.0, 0.5 * h - 0.5}};
+  a.horizon =
+      std::array<PixelPoint, 2>{PixelPoint{0, 0.5 * h - 0.5}, PixelPoint{w - 1.0, 0.5 * h - 0.5}};
   return a;
 }
 
@@ -701,24 +702,38 @@ TEST(SkyLight, FloatingCloudsAreSkyNotOccluders) {
   EXPECT_LE(e_dense, 2e-4);
 }
 
-// The rule of photo/clouds.h on a hand-made map: sky above row 40, the ground below, and six
-// surfaces above the horizon, two of them clouds.
-TEST(SkyLight, FloatingCloudRule) {
-  constexpr int w = 120, h = 60, horizon = 40;
-  constexpr float kSky = std::numeric_limits<float>::infinity();
-  Image photo(w, h, 3);
-  std::vector<float> ratio(std::size_t(w) * h, kSky);
-  std::vector<std::uint8_t> above(ratio.size(), 0), foliage;
-  auto put = [&](int x0, int x1, int y0, int y1, float r, Rgb c) {
+// A hand-made map for the rule of photo/clouds.h: 120 x 60, blue sky (distance ratio infinite)
+// above the horizon at row 40; `put` paints a surface (its ratio to the billboard, its colour).
+struct CloudRuleMap {
+  static constexpr int w = 120, h = 60, horizon = 40;
+  Image photo{w, h, 3};
+  std::vector<float> ratio =
+      std::vector<float>(std::size_t(w) * h, std::numeric_limits<float>::infinity());
+  std::vector<std::uint8_t> above = std::vector<std::uint8_t>(std::size_t(w) * h, 0);
+  CloudRuleMap() {
+    put(0, w, 0, h, std::numeric_limits<float>::infinity(), {0.1f, 0.25f, 0.7f});
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) above[std::size_t(y) * w + x] = y < horizon;
+  }
+  void put(int x0, int x1, int y0, int y1, float r, Rgb c) {
     for (int y = y0; y < y1; ++y)
       for (int x = x0; x < x1; ++x) {
         ratio[std::size_t(y) * w + x] = r;
         for (int k = 0; k < 3; ++k) photo.at(x, y, k) = c[k];
       }
-  };
-  put(0, w, 0, h, kSky, {0.1f, 0.25f, 0.7f});  // blue sky
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) above[std::size_t(y) * w + x] = y < horizon;
+  }
+};
+
+// The rule of photo/clouds.h on a hand-made map: sky above row 40, the ground below, and six
+// surfaces above the horizon, two of them clouds.
+TEST(SkyLight, FloatingCloudRule) {
+  CloudRuleMap m;
+  constexpr int w = CloudRuleMap::w, h = CloudRuleMap::h, horizon = CloudRuleMap::horizon;
+  Image& photo = m.photo;
+  std::vector<float>& ratio = m.ratio;
+  std::vector<std::uint8_t>& above = m.above;
+  std::vector<std::uint8_t> foliage;
+  auto put = [&m](int x0, int x1, int y0, int y1, float r, Rgb c) { m.put(x0, x1, y0, y1, r, c); };
   put(0, w, horizon, h, 1.0f, {0.1f, 0.2f, 0.05f});   // the ground
   put(0, w, 0, 3, 1.0f, {0.3f, 0.3f, 0.3f});          // an eave along the top border
   put(5, 15, 20, horizon, 1.0f, {0.4f, 0.4f, 0.4f});  // a grey building on the horizon
@@ -748,21 +763,13 @@ TEST(SkyLight, FloatingCloudRule) {
 // The rule of photo/clouds.h for surfaces cut off by the frame (hand-made map): sky above row
 // 40, the ground below; three corner pieces ringed more by the frame than by the sky.
 TEST(SkyLight, FloatingCloudRuleAtTheFrame) {
-  constexpr int w = 120, h = 60, horizon = 40;
-  constexpr float kSky = std::numeric_limits<float>::infinity();
-  Image photo(w, h, 3);
-  std::vector<float> ratio(std::size_t(w) * h, kSky);
-  std::vector<std::uint8_t> above(ratio.size(), 0), foliage;
-  auto put = [&](int x0, int x1, int y0, int y1, float r, Rgb c) {
-    for (int y = y0; y < y1; ++y)
-      for (int x = x0; x < x1; ++x) {
-        ratio[std::size_t(y) * w + x] = r;
-        for (int k = 0; k < 3; ++k) photo.at(x, y, k) = c[k];
-      }
-  };
-  put(0, w, 0, h, kSky, {0.1f, 0.25f, 0.7f});  // blue sky
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) above[std::size_t(y) * w + x] = y < horizon;
+  CloudRuleMap m;
+  constexpr int w = CloudRuleMap::w, h = CloudRuleMap::h, horizon = CloudRuleMap::horizon;
+  Image& photo = m.photo;
+  std::vector<float>& ratio = m.ratio;
+  std::vector<std::uint8_t>& above = m.above;
+  std::vector<std::uint8_t> foliage;
+  auto put = [&m](int x0, int x1, int y0, int y1, float r, Rgb c) { m.put(x0, x1, y0, y1, r, c); };
   put(0, w, horizon, h, 1.0f, {0.1f, 0.2f, 0.05f});  // the ground
   // Each a 20 x 20 square in a corner: its outline 40 px on the frame, 39 next to the sky.
   put(0, 20, 0, 20, 1.0f, {0.3f, 0.3f, 0.3f});     // a grey eave, near
