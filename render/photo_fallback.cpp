@@ -1,5 +1,7 @@
 #include "render/photo_fallback.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -47,6 +49,19 @@ Vec3d PhotoFallback::ray(int x, int y) const {
   return physics::camera_ray(forward_, right_, up_, camera_.focal_px, camera_.cx, camera_.cy, x, y);
 }
 
+Vec3d PhotoFallback::point(int x, int y, double distance) const {
+  return add(origin_, ray(x, y), distance);
+}
+
+void PhotoFallback::cache_points() {
+  const int w = distance_m_.width, h = distance_m_.height;
+  points_.emplace(std::size_t(w) * std::size_t(h));
+  tbb::parallel_for(0, h, [&](int y) {
+    Vec3d* row = points_->data() + std::size_t(y) * std::size_t(w);
+    for (int x = 0; x < w; ++x) row[x] = point(x, y, distance_m_.at(x, y, 0));
+  });
+}
+
 bool PhotoFallback::faces_sun(int x, int y) const {
   if (!scene_.lighting.sun || normals_.data == nullptr) return false;
   if (!std::isfinite(distance_m_.at(x, y, 0))) return false;
@@ -82,12 +97,17 @@ bool PhotoFallback::shows_sunlit(int x, int y, double ao, const float* sun_disk)
   const double amb = std::numbers::pi * luminance(sky_radiance_.data()) * ao;
   const double k = amb > 0 ? std::min(100.0, (e + amb) / amb) : 100.0;
   if (k < 1.25) return false;
-  const Vec3d xp = add(origin_, ray(x, y), distance);
+  const Vec3d xp = point(x, y, distance);
+  const double here = luminance(photo_.pixel(x, y));
+  const double root_k = std::sqrt(k);
+  // The tests below compare `here` with the median (element count / 2 of the sorted values) of
+  // each level. Both comparisons are monotone in the level (rounded products and quotients by a
+  // positive root_k are), so the median passes exactly when more than half of the values
+  // (count / 2 + 1 of them) pass: counted here, with no values kept and no selection.
+  int n_lit = 0, n_dark = 0, lit_pass = 0, dark_pass = 0;
   constexpr int kRadius = 3;
-  constexpr int kMax = (2 * kRadius + 1) * (2 * kRadius + 1);
-  double lit[kMax], dark[kMax];
-  int n_lit = 0, n_dark = 0;
   const int w = distance_m_.width, h = distance_m_.height;
+  const Vec3d* points = points_ ? points_->data() : nullptr;
   for (int j = std::max(0, y - kRadius); j <= std::min(h - 1, y + kRadius); ++j)
     for (int i = std::max(0, x - kRadius); i <= std::min(w - 1, x + kRadius); ++i) {
       if (i == x && j == y) continue;
@@ -97,19 +117,20 @@ bool PhotoFallback::shows_sunlit(int x, int y, double ao, const float* sun_disk)
       if (!std::isfinite(dn)) continue;
       const Vec3d nn = {normals_.at(i, j, 0), normals_.at(i, j, 1), normals_.at(i, j, 2)};
       if (dot(nn, n) < 0.9) continue;
-      const Vec3d xn = add(origin_, ray(i, j), dn);
+      const Vec3d xn = points ? points[std::size_t(j) * w + i] : point(i, j, dn);
       if (std::fabs(dot(sub(xn, xp), n)) > 0.02 * distance) continue;
-      (v == 1.0f ? lit[n_lit++] : dark[n_dark++]) = luminance(photo_.pixel(i, j));
+      const double level = luminance(photo_.pixel(i, j));
+      if (v == 1.0f) {
+        ++n_lit;
+        lit_pass += here >= level / root_k;
+      } else {
+        ++n_dark;
+        dark_pass += here >= root_k * level;
+      }
     }
-  auto median = [](double* v, int count) {
-    std::nth_element(v, v + count / 2, v + count);
-    return v[count / 2];
-  };
-  const double here = luminance(photo_.pixel(x, y));
-  const double root_k = std::sqrt(k);
   if (n_lit < 3 && n_dark < 3) return false;
-  if (n_dark >= 3 && !(here >= root_k * median(dark, n_dark))) return false;
-  if (n_lit >= 3 && !(here >= median(lit, n_lit) / root_k)) return false;
+  if (n_dark >= 3 && dark_pass < n_dark / 2 + 1) return false;
+  if (n_lit >= 3 && lit_pass < n_lit / 2 + 1) return false;
   return here > 0;
 }
 

@@ -1025,6 +1025,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   std::vector<float> disk;
   if (photo_fallback) {
     fallback.emplace(*in.camera, *in.scene, in.distance_m, in.normals, in.photo, in.sky_radiance);
+    fallback->cache_points();
     disk.assign(std::size_t(w) * h, -1.0f);
     tbb::parallel_for(0, h, [&](int y) {
       if (stop()) return;
