@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "render/embree_scene.h"
+#include "render/huge_pages.h"
 #include "render/math.h"
 #include "render/medium.h"
 #include "render/photo_fallback.h"
@@ -523,14 +524,18 @@ class Core {
 // straight into the output image (as float, what pass 3 wrote before), AO and the surface's sun
 // visibility in doubles, the camera's optical depth only when noise keeps pass 3 from its closed
 // form. A full-frame PixelSample array (88 bytes a pixel, 182 MB at 1080p, zeroed by the kernel
-// on every render) was a tenth of the render's CPU time in page faults.
+// on every render) was a tenth of the render's CPU time in page faults. The per-pixel and
+// per-sample arrays are HugePageArrays (render/huge_pages.h), left uninitialized: every pixel
+// is set by pass 1 or 2 before pass 3 reads it, and a grid sample is read only where present.
+// As zero-filled std::vectors (ao, sun_disk, grid, the gradients: ~85 MB at 1080p) their 4 KiB
+// page faults and serial zeroing cost ~0.3 s of CPU a render on the 2-core VM.
 struct Sparse {
   int width = 0, height = 0;
-  ImageView inscatter;               // the output R (3 channels)
-  std::vector<double> ao, sun_disk;  // per pixel
-  std::vector<double> camera_od;     // 3 per pixel, only when keep_camera_od
+  ImageView inscatter;                                 // the output R (3 channels)
+  std::optional<HugePageArray<double>> ao, sun_disk;  // per pixel
+  std::optional<HugePageArray<double>> camera_od;     // 3 per pixel, only when keep_camera_od
   bool keep_camera_od = false;
-  std::vector<PixelSample> grid;           // the grid samples, row-major over gx x gy (when kept)
+  std::optional<HugePageArray<PixelSample>> grid;  // the grid samples, row-major over gx x gy
   std::vector<int> grid_column, grid_row;  // a pixel column's (row's) index in gx (gy), or -1
   std::size_t columns = 0;                 // gx.size()
   std::vector<unsigned char> present;      // whether a grid sample was traced (adaptive grid)
@@ -542,15 +547,15 @@ struct Sparse {
     inscatter = r;
     keep_camera_od = keep_od;
     columns = gx.size();
-    ao.resize(std::size_t(w) * h);
-    sun_disk.resize(std::size_t(w) * h);
-    if (keep_od) camera_od.resize(3 * std::size_t(w) * h);
+    ao.emplace(std::size_t(w) * h);
+    sun_disk.emplace(std::size_t(w) * h);
+    if (keep_od) camera_od.emplace(3 * std::size_t(w) * h);
     grid_column.assign(std::size_t(w), -1);
     grid_row.assign(std::size_t(h), -1);
     for (std::size_t i = 0; i < gx.size(); ++i) grid_column[std::size_t(gx[i])] = int(i);
     for (std::size_t j = 0; j < gy.size(); ++j) grid_row[std::size_t(gy[j])] = int(j);
     if (keep_grid) {
-      grid.resize(gx.size() * gy.size());
+      grid.emplace(gx.size() * gy.size());
       present.assign(gx.size() * gy.size(), 0);
     }
   }
@@ -562,18 +567,20 @@ struct Sparse {
   bool present_at(std::size_t i, std::size_t j) const { return present[j * columns + i] != 0; }
   // Keeps grid sample (i, j).
   void put(std::size_t i, std::size_t j, const PixelSample& s) {
-    grid[j * columns + i] = s;
+    (*grid)[j * columns + i] = s;
     present[j * columns + i] = 1;
   }
-  const PixelSample& grid_at(std::size_t i, std::size_t j) const { return grid[j * columns + i]; }
-  PixelSample& grid_at(std::size_t i, std::size_t j) { return grid[j * columns + i]; }
+  const PixelSample& grid_at(std::size_t i, std::size_t j) const {
+    return (*grid)[j * columns + i];
+  }
+  PixelSample& grid_at(std::size_t i, std::size_t j) { return (*grid)[j * columns + i]; }
   void set(int x, int y, const PixelSample& s) {
     const std::size_t idx = std::size_t(y) * width + x;
     for (int c = 0; c < 3; ++c) inscatter.at(x, y, c) = float(s.inscatter[c]);
     if (keep_camera_od)
-      for (int c = 0; c < 3; ++c) camera_od[3 * idx + c] = s.camera_od[c];
-    ao[idx] = s.ao;
-    sun_disk[idx] = s.sun_disk;
+      for (int c = 0; c < 3; ++c) (*camera_od)[3 * idx + c] = s.camera_od[c];
+    (*ao)[idx] = s.ao;
+    (*sun_disk)[idx] = s.sun_disk;
   }
   // What pass 3 reads of pixel (x, y) (R as stored; the camera's optical depth 0 unless kept).
   PixelSample at(int x, int y) const {
@@ -581,9 +588,9 @@ struct Sparse {
     PixelSample s;
     for (int c = 0; c < 3; ++c) s.inscatter[c] = inscatter.at(x, y, c);
     if (keep_camera_od)
-      for (int c = 0; c < 3; ++c) s.camera_od[c] = camera_od[3 * idx + c];
-    s.ao = ao[idx];
-    s.sun_disk = sun_disk[idx];
+      for (int c = 0; c < 3; ++c) s.camera_od[c] = (*camera_od)[3 * idx + c];
+    s.ao = (*ao)[idx];
+    s.sun_disk = (*sun_disk)[idx];
     return s;
   }
 };
@@ -699,7 +706,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // A sample's gradients along both grid axes from its nearest present grid neighbours on
   // each side (central where both are depth-continuous with it, one-sided where one is, else
   // flat). The nearest: the next fine sample where it was traced, else the next coarse one.
-  std::vector<Gradients> sample_gradients(g > 1 ? nx * ny : 0);
+  HugePageArray<Gradients> sample_gradients(g > 1 ? nx * ny : 0);  // read only where present
   auto gradients_at = [&](std::size_t i, std::size_t j) {
     const PixelSample& s = sparse.grid_at(i, j);
     double v[kValues];
@@ -1022,16 +1029,16 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   const bool photo_fallback = PhotoFallback::wanted(*in.scene, in.distance_m, in.normals, in.photo,
                                                     in.occluders != nullptr);
   std::optional<PhotoFallback> fallback;
-  std::vector<float> disk;
+  std::optional<HugePageArray<float>> disk;  // every pixel written below
   if (photo_fallback) {
     fallback.emplace(*in.camera, *in.scene, in.distance_m, in.normals, in.photo, in.sky_radiance);
     fallback->cache_points();
-    disk.assign(std::size_t(w) * h, -1.0f);
+    disk.emplace(std::size_t(w) * h);
     tbb::parallel_for(0, h, [&](int y) {
       if (stop()) return;
       for (int x = 0; x < w; ++x) {
         const PixelSample& s = sparse.at(x, y);
-        disk[std::size_t(y) * w + x] =
+        (*disk)[std::size_t(y) * w + x] =
             float(s.sun_disk >= 0 ? s.sun_disk : core.sun_disk_visibility(x, y));
       }
     });
@@ -1048,8 +1055,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         float sun_visible = 1.0f;
         double sun_disk = s.sun_disk;
         if (photo_fallback) {
-          sun_disk = disk[std::size_t(y) * w + x];
-          if (sun_disk >= 0 && sun_disk < 1 && fallback->shows_sunlit(x, y, s.ao, disk.data()))
+          sun_disk = (*disk)[std::size_t(y) * w + x];
+          if (sun_disk >= 0 && sun_disk < 1 && fallback->shows_sunlit(x, y, s.ao, disk->data()))
             sun_disk = 1;
         }
         core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible);
