@@ -633,6 +633,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   auto stop = [&] { return in.cancel && in.cancel->requested(); };
   auto throw_if_stopped = [&] { throw_if_cancelled(in.cancel, "render_scattering (cpu)"); };
   throw_if_stopped();
+  // The outputs (83 MB at 1080p) are commonly fresh, never-written allocations
+  // (Image::uninitialized): advised for huge pages before the passes below first write them,
+  // they fault in 2 MiB at a time instead of 4 KiB (~20 k faults, ~0.2 s of CPU a 1080p render
+  // on the 2-core VM). Memory already written keeps its pages; nothing else changes.
+  for (const ImageView& v : {out.transmittance, out.inscatter, out.sun_visibility, out.optical_depth})
+    if (v.data != nullptr && v.height > 0)
+      advise_huge_pages(v.data, std::size_t(v.height) * std::size_t(v.row_stride) * sizeof(float));
 
   // Pass 1: exact samples on the sparse grid (and the last row / column, so every pixel lies in
   // a cell with four samples), adaptively (issue 12 item 4): first a coarse grid of every
