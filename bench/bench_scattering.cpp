@@ -21,6 +21,10 @@
 //   build/bench/mr_bench_scattering --benchmark_filter=BM_Stages --benchmark_repetitions=5
 //   --benchmark_report_aggregates_only=true
 //
+// MR_BENCH_DUMP=<prefix> writes BM_Stages' last R, T and sun visibility (raw floats),
+// MR_BENCH_EXACT=1 renders without the gradient acceleration, MR_BENCH_STEPS=<n> with n march
+// steps (the reference for the acceleration's error: MR_BENCH_EXACT=1 MR_BENCH_STEPS=128).
+//
 // BM_Geometry runs the geometry stages alone (normals, mesh, blockers, BVH), with each one's
 // CPU time and minor page faults: `perf record` it to profile them.
 #include <benchmark/benchmark.h>
@@ -165,6 +169,9 @@ void BM_Stages(benchmark::State& state) {
   // for the acceleration's error pixel by pixel).
   const char* exact_env = std::getenv("MR_BENCH_EXACT");
   mr::FogScene s = scene(quality, !(exact_env && *exact_env == '1'));
+  // MR_BENCH_STEPS=<n>: n march steps instead of the preset's (with MR_BENCH_EXACT=1 and
+  // MR_BENCH_DUMP, a many-step reference: the 32-step unaccelerated march is itself noisy).
+  if (const char* steps = std::getenv("MR_BENCH_STEPS")) s.render.march_steps = std::atoi(steps);
   s.lighting.sky_radiance = mr::estimate_airlight(in.photo);
   mr::Image transmittance = mr::Image::uninitialized(width, height, 3);
   mr::Image inscatter = mr::Image::uninitialized(width, height, 3);
