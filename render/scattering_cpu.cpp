@@ -754,8 +754,18 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // cells' own test), corners that disagree on the surface's sun visibility, a gradient
   // interpolation whose error estimate exceeds kRefineTolerance, or (probes below) a fine grid
   // point whose surface sun visibility differs from the corners'.
+  //
+  // A cell refined for its surface alone (corners that differ in AO or sun visibility, or a
+  // probe's find) while R passes every test of an unrefined cell (no shadow edge or glow core,
+  // no depth discontinuity, the gradient interpolation's error estimate within tolerance) gets
+  // its fine grid points as surface samples: AO and sun visibility traced as at an exact
+  // sample, R (with the camera's optical depth and the lit fraction) interpolated from the
+  // coarse cell exactly as pass 2 interpolates an unrefined cell's pixels. Such cells were 83 %
+  // of the refined ones on the bench scene (1080p normal), and a march is ~70 % of an exact
+  // sample's rays. A fine point next to a fully refined cell is traced exactly.
+  constexpr unsigned char kRefineNone = 0, kRefineFull = 1, kRefineSurface = 2;
   const std::size_t ncx = cx.size() - 1, ncy = cy.size() - 1;
-  std::vector<unsigned char> refine(g > 1 ? ncx * ncy : 0, 0);
+  std::vector<unsigned char> refine(g > 1 ? ncx * ncy : 0, kRefineNone);
   if (g > 1 && k_coarse > 1 && ncx > 0 && ncy > 0) {
     tbb::parallel_for(std::size_t(0), cy.size(), [&](std::size_t b) {
       if (stop()) return;
@@ -766,7 +776,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     // Whether a coarse cell needs the fine grid (see above), from its corners' samples and
     // coarse gradients.
     auto refine_coarse_cell =
-        [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners) {
+        [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners) -> unsigned char {
           double value[4][kValues];
           const Gradients* grad[4];
           double shaft_min = 1, shaft_max = 0, lum_min = kInf, lum_max = 0;
@@ -781,16 +791,16 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
             lum_min = std::min(lum_min, lum);
             lum_max = std::max(lum_max, lum);
           }
-          if (physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max)) return true;
+          if (physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max)) return kRefineFull;
           double ao_min = 1, ao_max = 0;
           for (int k = 0; k < 4; ++k) {
             ao_min = std::min(ao_min, value[k][6]);
             ao_max = std::max(ao_max, value[k][6]);
           }
-          if (ao_max - ao_min > kRefineAo) return true;
+          bool surface = ao_max - ao_min > kRefineAo;
           const double disk0 = sparse.grid_at(corners[0].first, corners[0].second).sun_disk;
           for (int k = 1; k < 4; ++k)
-            if (sparse.grid_at(corners[k].first, corners[k].second).sun_disk != disk0) return true;
+            surface |= sparse.grid_at(corners[k].first, corners[k].second).sun_disk != disk0;
           // Every pixel depth-continuous with every corner (else the fine grid's cells would
           // march some of them exactly, and their gradients see the discontinuity).
           const int x0 = gx[corners[0].first], x1 = gx[corners[3].first];
@@ -801,7 +811,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
             for (int x = x0; x <= x1; ++x) {
               const double dp = d(x, y);
               for (int k = 0; k < 4; ++k)
-                if (!depth_continuous(dp, dc[k])) return true;
+                if (!depth_continuous(dp, dc[k])) return kRefineFull;
             }
           // The gradient interpolation's error estimate along each edge (corners A, B a
           // distance h apart along one axis, values v, slopes s along it): the Hermite curve
@@ -822,10 +832,10 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
               const double bend = std::fabs(sa - sb) * h_px / 4;
               const double miss = std::fabs(vb - va - 0.5 * (sa + sb) * h_px);
               const double scale = std::max(std::fabs(va), std::fabs(vb));
-              if (std::max(bend, miss) > kRefineTolerance * scale + 1e-12) return true;
+              if (std::max(bend, miss) > kRefineTolerance * scale + 1e-12) return kRefineFull;
             }
           }
-          return false;
+          return surface ? kRefineSurface : kRefineNone;
         };
     tbb::parallel_for(std::size_t(0), ncy, [&](std::size_t b) {
       if (stop()) return;
@@ -897,7 +907,43 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           }
       }
     });
-    for (std::size_t c = 0; c < refine.size(); ++c) refine[c] |= probe_refine[c];
+    for (std::size_t c = 0; c < refine.size(); ++c)
+      if (refine[c] == kRefineNone && probe_refine[c]) refine[c] = kRefineSurface;
+
+    // A surface sample at pixel (x, y) of coarse cell (a, b): R, the camera's optical depth and
+    // the lit fraction as pass 2 would interpolate them there (resolve_cell), AO and the
+    // surface's sun visibility as exact() traces them.
+    auto surface_sample = [&](std::size_t a, std::size_t b, int x, int y, double known_sun_disk) {
+      const std::size_t i0 = cx[a], i1 = cx[a + 1], j0 = cy[b], j1 = cy[b + 1];
+      const int x0 = gx[i0], x1 = gx[i1], y0 = gy[j0], y1 = gy[j1];
+      const std::array<std::pair<std::size_t, std::size_t>, 4> corners{
+          {{i0, j0}, {i1, j0}, {i0, j1}, {i1, j1}}};
+      const double fx = double(x - x0) / (x1 - x0), fy = double(y - y0) / (y1 - y0);
+      double acc[kValues] = {};
+      double shaft = 0;
+      for (int k = 0; k < 4; ++k) {
+        const auto [ci, cj] = corners[k];
+        const PixelSample& c = sparse.grid_at(ci, cj);
+        double v[kValues];
+        values(c, v);
+        const Gradients& gr = sample_gradients[cj * nx + ci];
+        const double weight = physics::corner_weight(k, fx, fy);
+        const double dx = x - gx[ci], dy = y - gy[cj];
+        for (int m = 0; m < kValues; ++m)
+          acc[m] += weight * physics::extrapolate(v[m], gr[m], gr[kValues + m], dx, dy);
+        shaft += weight * c.shaft;
+      }
+      PixelSample p;
+      for (int c = 0; c < 3; ++c) {
+        p.inscatter[c] = std::max(0.0, acc[c]);
+        p.camera_od[c] = std::max(0.0, acc[3 + c]);
+      }
+      p.shaft = shaft;
+      if (core.needs_ao()) p.ao = core.ambient_occlusion_at(x, y);
+      p.sun_disk = std::isnan(known_sun_disk) ? core.sun_disk_visibility(x, y) : known_sun_disk;
+      sparse.set(x, y, p);
+      return p;
+    };
 
     // The fine samples of the refined cells.
     tbb::combinable<std::size_t> fine{[] { return std::size_t(0); }};
@@ -906,12 +952,24 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       std::size_t work = 0;
       for (std::size_t i = 0; i < nx; ++i) {
         if (sparse.present_at(i, j)) continue;
-        bool needed = false;
-        for_cells(i, j, [&](std::size_t a, std::size_t b) { needed |= refine[b * ncx + a] != 0; });
+        bool full = false, surface = false;
+        std::size_t surface_a = 0, surface_b = 0;
+        for_cells(i, j, [&](std::size_t a, std::size_t b) {
+          const unsigned char r = refine[b * ncx + a];
+          full |= r == kRefineFull;
+          if (r == kRefineSurface && !surface) {
+            surface = true;
+            surface_a = a;
+            surface_b = b;
+          }
+        });
         work += kSampleWork;
-        if (!needed) continue;
-        sparse.put(i, j, exact(gx[i], gy[j], plan.steps, probe[j * nx + i]));
-        ++fine.local();
+        if (full) {
+          sparse.put(i, j, exact(gx[i], gy[j], plan.steps, probe[j * nx + i]));
+          ++fine.local();
+        } else if (surface) {
+          sparse.put(i, j, surface_sample(surface_a, surface_b, gx[i], gy[j], probe[j * nx + i]));
+        }
       }
       progress.add(work);
     });
