@@ -94,6 +94,21 @@ class Core {
       sun_u_ = normalized(cross(helper, sun_dir_));
       sun_v_ = cross(sun_dir_, sun_u_);
       sun_tan_radius_ = std::tan(sun.angular_radius_deg * kDeg);
+      // The surface's sun-disk rays: one set for every pixel (sun_disk_visibility), so their
+      // directions once per render instead of a sincos and a normalization per ray.
+      const int disk_rays = sun_tan_radius_ > 0 ? plan.sun_surface_rays : 1;
+      for (int i = 0; i < disk_rays; ++i) {
+        Vec3d dir = sun_dir_;
+        if (sun_tan_radius_ > 0) {
+          // A spiral turned by the seed, as for AO: a penumbra on a smooth surface steps
+          // consistently instead of speckling.
+          const double r = sun_tan_radius_ * std::sqrt((i + 0.5) / disk_rays);
+          const double phi = kGoldenAngle * i + 2 * kPi * pixel_jitter(0, 0, scene_.render.seed);
+          dir = normalized(
+              add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
+        }
+        disk_dirs_.push_back(dir);
+      }
       // cos / sin of the golden-angle spiral's angles, looked up per march step (sincos per
       // step measured 9 % of a render).
       const std::size_t max_steps = std::size_t(
@@ -401,22 +416,13 @@ class Core {
     if (dot(n, n) < 0.5 || dot(n, sun_dir_) <= 0) return -1;
     if (!in_.occluders) return 1;
     const Vec3d xo = shadow_origin(x, y, distance, n);
-    const int count = sun_tan_radius_ > 0 ? plan_.sun_surface_rays : 1;
+    const int count = int(disk_dirs_.size());
     rays_.local() += std::size_t(count);
     int seen = 0;
     occluded_rays(
         *in_.occluders, std::size_t(count),
         [&](std::size_t index) {
-          const int i = int(index);
-          Vec3d dir = sun_dir_;
-          if (sun_tan_radius_ > 0) {
-            // One set over the disk for every pixel (a spiral turned by the seed), as for AO:
-            // a penumbra on a smooth surface steps consistently instead of speckling.
-            const double r = sun_tan_radius_ * std::sqrt((i + 0.5) / count);
-            const double phi = kGoldenAngle * i + 2 * kPi * pixel_jitter(0, 0, scene_.render.seed);
-            dir = normalized(
-                add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
-          }
+          const Vec3d& dir = disk_dirs_[index];
           return ShadowRay{{float(xo[0]), float(xo[1]), float(xo[2])},
                            {float(dir[0]), float(dir[1]), float(dir[2])},
                            0.0f};
@@ -511,6 +517,7 @@ class Core {
   bool grey_ = false;
   Vec3d sun_dir_{0, 1, 0}, sun_u_{1, 0, 0}, sun_v_{0, 0, 1};
   double sun_tan_radius_ = 0;
+  std::vector<Vec3d> disk_dirs_;  // the surface's sun-disk ray directions (sun_disk_visibility)
   static constexpr std::uint32_t kSpiralRotations = 1024;
   std::vector<std::pair<double, double>> spiral_;  // cos, sin of kGoldenAngle * n
   Vec3d origin_{};
@@ -1046,9 +1053,12 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           for (int k = 0; k < 4; ++k) {
             const double weight = physics::corner_weight(k, fx, fy);
             const double dx = x - gx[corners[k].first], dy = y - gy[corners[k].second];
-            for (int c = 0; c < kValues; ++c)
+            for (int c = 0; c < kValues; ++c) {
+              // The camera's optical depth is pass 3's closed form unless noise modulates it.
+              if (closed_form_camera && c >= 3 && c < 6) continue;
               acc[c] +=
                   weight * physics::extrapolate(value[k][c], grad_x[k][c], grad_y[k][c], dx, dy);
+            }
           }
           for (int c = 0; c < 3; ++c) {
             p.inscatter[c] = std::max(0.0, acc[c]);
