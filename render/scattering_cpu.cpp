@@ -104,8 +104,8 @@ class Core {
           // consistently instead of speckling.
           const double r = sun_tan_radius_ * std::sqrt((i + 0.5) / disk_rays);
           const double phi = kGoldenAngle * i + 2 * kPi * pixel_jitter(0, 0, scene_.render.seed);
-          dir = normalized(
-              add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
+          dir =
+              normalized(add(add(sun_dir_, sun_u_, r * std::cos(phi)), sun_v_, r * std::sin(phi)));
         }
         disk_dirs_.push_back(dir);
       }
@@ -538,7 +538,7 @@ class Core {
 // page faults and serial zeroing cost ~0.3 s of CPU a render on the 2-core VM.
 struct Sparse {
   int width = 0, height = 0;
-  ImageView inscatter;                                 // the output R (3 channels)
+  ImageView inscatter;                                // the output R (3 channels)
   std::optional<HugePageArray<double>> ao, sun_disk;  // per pixel
   std::optional<HugePageArray<double>> camera_od;     // 3 per pixel, only when keep_camera_od
   bool keep_camera_od = false;
@@ -644,7 +644,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // (Image::uninitialized): advised for huge pages before the passes below first write them,
   // they fault in 2 MiB at a time instead of 4 KiB (~20 k faults, ~0.2 s of CPU a 1080p render
   // on the 2-core VM). Memory already written keeps its pages; nothing else changes.
-  for (const ImageView& v : {out.transmittance, out.inscatter, out.sun_visibility, out.optical_depth})
+  for (const ImageView& v :
+       {out.transmittance, out.inscatter, out.sun_visibility, out.optical_depth})
     if (v.data != nullptr && v.height > 0)
       advise_huge_pages(v.data, std::size_t(v.height) * std::size_t(v.row_stride) * sizeof(float));
 
@@ -784,66 +785,66 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     // coarse gradients.
     auto refine_coarse_cell =
         [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners) -> unsigned char {
-          double value[4][kValues];
-          const Gradients* grad[4];
-          double shaft_min = 1, shaft_max = 0, lum_min = kInf, lum_max = 0;
-          for (int k = 0; k < 4; ++k) {
-            const auto [ci, cj] = corners[k];
-            const PixelSample& s = sparse.grid_at(ci, cj);
-            values(s, value[k]);
-            grad[k] = &sample_gradients[cj * nx + ci];
-            shaft_min = std::min(shaft_min, s.shaft);
-            shaft_max = std::max(shaft_max, s.shaft);
-            const double lum = value[k][0] + value[k][1] + value[k][2];
-            lum_min = std::min(lum_min, lum);
-            lum_max = std::max(lum_max, lum);
-          }
-          if (physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max)) return kRefineFull;
-          double ao_min = 1, ao_max = 0;
-          for (int k = 0; k < 4; ++k) {
-            ao_min = std::min(ao_min, value[k][6]);
-            ao_max = std::max(ao_max, value[k][6]);
-          }
-          bool surface = ao_max - ao_min > kRefineAo;
-          const double disk0 = sparse.grid_at(corners[0].first, corners[0].second).sun_disk;
-          for (int k = 1; k < 4; ++k)
-            surface |= sparse.grid_at(corners[k].first, corners[k].second).sun_disk != disk0;
-          // Every pixel depth-continuous with every corner (else the fine grid's cells would
-          // march some of them exactly, and their gradients see the discontinuity).
-          const int x0 = gx[corners[0].first], x1 = gx[corners[3].first];
-          const int y0 = gy[corners[0].second], y1 = gy[corners[3].second];
-          double dc[4];
-          for (int k = 0; k < 4; ++k) dc[k] = d(gx[corners[k].first], gy[corners[k].second]);
-          for (int y = y0; y <= y1; ++y)
-            for (int x = x0; x <= x1; ++x) {
-              const double dp = d(x, y);
-              for (int k = 0; k < 4; ++k)
-                if (!depth_continuous(dp, dc[k])) return kRefineFull;
-            }
-          // The gradient interpolation's error estimate along each edge (corners A, B a
-          // distance h apart along one axis, values v, slopes s along it): the Hermite curve
-          // through both departs from the straight line by |sA - sB| h / 4 at the middle, and
-          // the slopes' mean misses the secant by |vB - vA - (sA + sB) h / 2|; either, relative
-          // to the values, above kRefineTolerance refines. Checked on R (the camera's optical
-          // depth is a closed form in pass 3: without noise, the only case with coarse cells).
-          constexpr int kEdges[4][3] = {{0, 1, 0}, {2, 3, 0}, {0, 2, 1}, {1, 3, 1}};
-          constexpr int checked = 3;
-          for (const auto& e : kEdges) {
-            const int ka = e[0], kb = e[1];
-            const bool along_x = e[2] == 0;
-            const double h_px = along_x ? x1 - x0 : y1 - y0;
-            const int off = along_x ? 0 : kValues;
-            for (int c = 0; c < checked; ++c) {
-              const double va = value[ka][c], vb = value[kb][c];
-              const double sa = (*grad[ka])[off + c], sb = (*grad[kb])[off + c];
-              const double bend = std::fabs(sa - sb) * h_px / 4;
-              const double miss = std::fabs(vb - va - 0.5 * (sa + sb) * h_px);
-              const double scale = std::max(std::fabs(va), std::fabs(vb));
-              if (std::max(bend, miss) > kRefineTolerance * scale + 1e-12) return kRefineFull;
-            }
-          }
-          return surface ? kRefineSurface : kRefineNone;
-        };
+      double value[4][kValues];
+      const Gradients* grad[4];
+      double shaft_min = 1, shaft_max = 0, lum_min = kInf, lum_max = 0;
+      for (int k = 0; k < 4; ++k) {
+        const auto [ci, cj] = corners[k];
+        const PixelSample& s = sparse.grid_at(ci, cj);
+        values(s, value[k]);
+        grad[k] = &sample_gradients[cj * nx + ci];
+        shaft_min = std::min(shaft_min, s.shaft);
+        shaft_max = std::max(shaft_max, s.shaft);
+        const double lum = value[k][0] + value[k][1] + value[k][2];
+        lum_min = std::min(lum_min, lum);
+        lum_max = std::max(lum_max, lum);
+      }
+      if (physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max)) return kRefineFull;
+      double ao_min = 1, ao_max = 0;
+      for (int k = 0; k < 4; ++k) {
+        ao_min = std::min(ao_min, value[k][6]);
+        ao_max = std::max(ao_max, value[k][6]);
+      }
+      bool surface = ao_max - ao_min > kRefineAo;
+      const double disk0 = sparse.grid_at(corners[0].first, corners[0].second).sun_disk;
+      for (int k = 1; k < 4; ++k)
+        surface |= sparse.grid_at(corners[k].first, corners[k].second).sun_disk != disk0;
+      // Every pixel depth-continuous with every corner (else the fine grid's cells would
+      // march some of them exactly, and their gradients see the discontinuity).
+      const int x0 = gx[corners[0].first], x1 = gx[corners[3].first];
+      const int y0 = gy[corners[0].second], y1 = gy[corners[3].second];
+      double dc[4];
+      for (int k = 0; k < 4; ++k) dc[k] = d(gx[corners[k].first], gy[corners[k].second]);
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) {
+          const double dp = d(x, y);
+          for (int k = 0; k < 4; ++k)
+            if (!depth_continuous(dp, dc[k])) return kRefineFull;
+        }
+      // The gradient interpolation's error estimate along each edge (corners A, B a
+      // distance h apart along one axis, values v, slopes s along it): the Hermite curve
+      // through both departs from the straight line by |sA - sB| h / 4 at the middle, and
+      // the slopes' mean misses the secant by |vB - vA - (sA + sB) h / 2|; either, relative
+      // to the values, above kRefineTolerance refines. Checked on R (the camera's optical
+      // depth is a closed form in pass 3: without noise, the only case with coarse cells).
+      constexpr int kEdges[4][3] = {{0, 1, 0}, {2, 3, 0}, {0, 2, 1}, {1, 3, 1}};
+      constexpr int checked = 3;
+      for (const auto& e : kEdges) {
+        const int ka = e[0], kb = e[1];
+        const bool along_x = e[2] == 0;
+        const double h_px = along_x ? x1 - x0 : y1 - y0;
+        const int off = along_x ? 0 : kValues;
+        for (int c = 0; c < checked; ++c) {
+          const double va = value[ka][c], vb = value[kb][c];
+          const double sa = (*grad[ka])[off + c], sb = (*grad[kb])[off + c];
+          const double bend = std::fabs(sa - sb) * h_px / 4;
+          const double miss = std::fabs(vb - va - 0.5 * (sa + sb) * h_px);
+          const double scale = std::max(std::fabs(va), std::fabs(vb));
+          if (std::max(bend, miss) > kRefineTolerance * scale + 1e-12) return kRefineFull;
+        }
+      }
+      return surface ? kRefineSurface : kRefineNone;
+    };
     tbb::parallel_for(std::size_t(0), ncy, [&](std::size_t b) {
       if (stop()) return;
       for (std::size_t a = 0; a < ncx; ++a) {
