@@ -7,6 +7,108 @@
 
 namespace mr::photo {
 
+namespace {
+
+// The display-referred saturation ((max - min) / max on scene-linear ^ (1 / 2.2)) of a pixel and
+// whether it is bluish (B > R, B >= G).
+void display_tint(const float* p, float* saturation, bool* bluish) {
+  float c[3];
+  for (int k = 0; k < 3; ++k) c[k] = std::pow(std::clamp(p[k], 0.0f, 1.0f), 1 / 2.2f);
+  const float hi = std::max({c[0], c[1], c[2]}), lo = std::min({c[0], c[1], c[2]});
+  *saturation = hi > 0 ? (hi - lo) / hi : 0.0f;
+  *bluish = c[2] > c[0] && c[2] >= c[1];
+}
+
+// Of the components marked in `split` (held up by the horizon or the frame's bottom), the parts
+// that do not rest on it: each column's run of the component's pixels upward from where it meets
+// the horizon (or the frame's bottom) holds up; the rest hangs beside those runs (a cloud joined
+// to a cloud that stands on the horizon). Each 8-connected part of the rest that is a cloud by
+// the rule of FloatingCloudOptions (min_overhang_*) is 1 in the returned row-major mask.
+std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
+                                             const std::vector<float>& distance_ratio,
+                                             const std::vector<std::uint8_t>& above,
+                                             const std::vector<std::uint8_t>& foliage,
+                                             const cv::Mat& labels,
+                                             const std::vector<std::uint8_t>& split,
+                                             const FloatingCloudOptions& options) {
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(w) * std::size_t(h);
+  auto in_split = [&](int x, int y) { return split[std::size_t(labels.at<int>(y, x))] != 0; };
+  // Held: in a split component, on the frame's bottom or the horizon, or on a held pixel.
+  cv::Mat held(h, w, CV_8U, cv::Scalar(0)), rest(h, w, CV_8U, cv::Scalar(0));
+  for (int x = 0; x < w; ++x)
+    for (int y = h - 1; y >= 0; --y) {
+      if (!in_split(x, y)) continue;
+      const bool on = y + 1 >= h || !above[std::size_t(y + 1) * w + x] ||
+                      (held.at<std::uint8_t>(y + 1, x) != 0);
+      held.at<std::uint8_t>(y, x) = on;
+      rest.at<std::uint8_t>(y, x) = !on;
+    }
+  std::vector<std::uint8_t> out;
+  cv::Mat parts, stats, centroids;
+  const int m = cv::connectedComponentsWithStats(rest, parts, stats, centroids, 8, CV_32S);
+  if (m <= 1) return out;
+  cv::Mat inside;  // each part's pixel's distance to its outline
+  cv::distanceTransform(rest, inside, cv::DIST_L2, 3);
+  const double min_radius = std::max(options.min_overhang_radius_px,
+                                     options.min_overhang_radius_fraction * double(std::min(w, h)));
+  std::vector<int> ring_sky(std::size_t(m), 0), ring_other(std::size_t(m), 0);
+  std::vector<int> bluish(std::size_t(m), 0), leafy(std::size_t(m), 0);
+  std::vector<double> saturation(std::size_t(m), 0.0), radius(std::size_t(m), 0.0);
+  std::vector<std::vector<float>> ratios;
+  ratios.resize(std::size_t(m));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int l = parts.at<int>(y, x);
+      if (l == 0) continue;
+      const std::size_t k = std::size_t(l), i = std::size_t(y) * w + x;
+      float sat = 0;
+      bool blue = false;
+      display_tint(photo.pixel(x, y), &sat, &blue);
+      saturation[k] += sat;
+      bluish[k] += blue;
+      leafy[k] += !foliage.empty() && foliage[i] != 0;
+      ratios[k].push_back(distance_ratio[i]);
+      radius[k] = std::max(radius[k], double(inside.at<float>(y, x)));
+      // The outline: next to the sky, or to the frame's top, left or right border, or to the
+      // surface that holds it up (or another surface).
+      bool sky = false, other = x == 0 || y == 0 || x == w - 1;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int yy = y + dy, xx = x + dx;
+          if (yy < 0 || yy >= h || xx < 0 || xx >= w || (dx == 0 && dy == 0)) continue;
+          const std::size_t j = std::size_t(yy) * w + xx;
+          if (!above[j] || parts.at<int>(yy, xx) == l) continue;
+          const bool surface = std::isfinite(distance_ratio[j]) && distance_ratio[j] > 0;
+          (surface ? other : sky) = true;
+        }
+      ring_sky[k] += sky;
+      ring_other[k] += other && !sky;
+    }
+  for (int l = 1; l < m; ++l) {
+    const std::size_t k = std::size_t(l);
+    const double area = double(stats.at<int>(l, cv::CC_STAT_AREA));
+    if (area < options.min_overhang_fraction * double(n) || radius[k] < min_radius) continue;
+    if (2 * leafy[k] >= area) continue;
+    std::vector<float>& r = ratios[k];
+    std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
+    const bool joined = r[r.size() / 2] >= options.min_distance_ratio;
+    const bool sky_like = 2 * bluish[k] > area || joined;
+    const bool coloured = saturation[k] <= options.max_saturation * area || 2 * bluish[k] > area;
+    if (!sky_like || !coloured) continue;
+    if (!(ring_sky[k] >= options.min_sky_ring * (ring_sky[k] + ring_other[k]))) continue;
+    if (out.empty()) out.assign(n, 0);
+    for (int y = stats.at<int>(l, cv::CC_STAT_TOP);
+         y < stats.at<int>(l, cv::CC_STAT_TOP) + stats.at<int>(l, cv::CC_STAT_HEIGHT); ++y)
+      for (int x = stats.at<int>(l, cv::CC_STAT_LEFT);
+           x < stats.at<int>(l, cv::CC_STAT_LEFT) + stats.at<int>(l, cv::CC_STAT_WIDTH); ++x)
+        if (parts.at<int>(y, x) == l) out[std::size_t(y) * w + x] = 1;
+  }
+  return out;
+}
+
+}  // namespace
+
 std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
                                           const std::vector<float>& distance_ratio,
                                           const std::vector<std::uint8_t>& above,
@@ -108,10 +210,26 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
     cloud[k] = cut_off || coloured || joined;
     any |= cloud[k] != 0;
   }
-  if (!any) return out;
+  // Held up, but only in part (see the file comment, joined clouds): what hangs beside the
+  // columns that rise from the horizon (or the frame's bottom) is judged as a floating cloud.
+  std::vector<std::uint8_t> overhang_cloud;
+  if (options.min_overhang_fraction > 0 && options.min_overhang_fraction <= 1) {
+    std::vector<std::uint8_t> split(std::size_t(m), 0);
+    bool splits = false;
+    for (int l = 1; l < m; ++l)
+      if (!cloud[std::size_t(l)] && contact[std::size_t(l)] > 0 && ring_sky[std::size_t(l)] > 0)
+        split[std::size_t(l)] = 1, splits = true;
+    if (splits)
+      overhang_cloud =
+          overhanging_clouds(photo, distance_ratio, above, foliage, labels, split, options);
+  }
+  if (!any && overhang_cloud.empty()) return out;
   for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x)
-      out[std::size_t(y) * w + x] = cloud[std::size_t(labels.at<int>(y, x))] != 0;
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      out[i] = cloud[std::size_t(labels.at<int>(y, x))] != 0 ||
+               (!overhang_cloud.empty() && overhang_cloud[i]);
+    }
   // Of a bank's component, the parts that are not the bank's and stand on the horizon or the
   // frame's bottom (a ridge, a building, a tree rising from the land into the bank) stay.
   cv::Mat other(h, w, CV_8U, cv::Scalar(0));
