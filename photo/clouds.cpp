@@ -35,6 +35,10 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
   const std::size_t n = std::size_t(w) * std::size_t(h);
   auto in_split = [&](int x, int y) { return split[std::size_t(labels.at<int>(y, x))] != 0; };
   // Held: in a split component, on the frame's bottom or the horizon, or on a held pixel.
+  // Of each component, what holds it up must be cloud too: its held pixels' tint.
+  const std::size_t components = split.size();
+  std::vector<int> held_area(components, 0), held_bluish(components, 0), held_leafy(components, 0);
+  std::vector<double> held_saturation(components, 0.0);
   cv::Mat held(h, w, CV_8U, cv::Scalar(0)), rest(h, w, CV_8U, cv::Scalar(0));
   for (int x = 0; x < w; ++x)
     for (int y = h - 1; y >= 0; --y) {
@@ -43,6 +47,13 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
                       (held.at<std::uint8_t>(y + 1, x) != 0);
       held.at<std::uint8_t>(y, x) = on;
       rest.at<std::uint8_t>(y, x) = !on;
+      if (!on) continue;
+      const std::size_t c = std::size_t(labels.at<int>(y, x));
+      float sat = 0;
+      bool blue = false;
+      display_tint(photo.pixel(x, y), &sat, &blue);
+      ++held_area[c], held_saturation[c] += sat, held_bluish[c] += blue;
+      held_leafy[c] += !foliage.empty() && foliage[std::size_t(y) * w + x] != 0;
     }
   std::vector<std::uint8_t> out;
   cv::Mat parts, stats, centroids;
@@ -57,11 +68,13 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
   std::vector<double> saturation(std::size_t(m), 0.0), radius(std::size_t(m), 0.0);
   std::vector<std::vector<float>> ratios;
   ratios.resize(std::size_t(m));
+  std::vector<std::size_t> component(std::size_t(m), 0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const int l = parts.at<int>(y, x);
       if (l == 0) continue;
       const std::size_t k = std::size_t(l), i = std::size_t(y) * w + x;
+      component[k] = std::size_t(labels.at<int>(y, x));
       float sat = 0;
       bool blue = false;
       display_tint(photo.pixel(x, y), &sat, &blue);
@@ -94,9 +107,29 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
     std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
     const bool joined = r[r.size() / 2] >= options.min_distance_ratio;
     const bool sky_like = 2 * bluish[k] > area || joined;
-    const bool coloured = saturation[k] <= options.max_saturation * area || 2 * bluish[k] > area;
-    if (!sky_like || !coloured) continue;
+    // Grey: a structure in its own shade under a blue sky is bluish but saturated (rocket's
+    // launch towers at dusk, palace's tower in shade: 0.32-0.37 against a cumulus' 0.18).
+    if (!sky_like || !(saturation[k] <= options.max_saturation * area)) continue;
     if (!(ring_sky[k] >= options.min_sky_ring * (ring_sky[k] + ring_other[k]))) continue;
+    // What holds it up is cloud-coloured as well (astronaut's white model shuttle hangs beside
+    // the studio's surfaces: not a cloud).
+    const std::size_t c = component[k];
+    const double held_n = double(held_area[c]);
+    if (!((held_saturation[c] <= options.max_saturation * held_n || 2 * held_bluish[c] > held_n) &&
+          2 * held_leafy[c] < held_n))
+      continue;
+    // Solid: a lattice (a mast, a crane, a pylon) encloses sky in its outline.
+    {
+      const int x0 = stats.at<int>(l, cv::CC_STAT_LEFT), y0 = stats.at<int>(l, cv::CC_STAT_TOP);
+      const int bw = stats.at<int>(l, cv::CC_STAT_WIDTH), bh = stats.at<int>(l, cv::CC_STAT_HEIGHT);
+      cv::Mat outside(bh + 2, bw + 2, CV_8U, cv::Scalar(0));
+      for (int y = 0; y < bh; ++y)
+        for (int x = 0; x < bw; ++x)
+          outside.at<std::uint8_t>(y + 1, x + 1) = parts.at<int>(y0 + y, x0 + x) == l ? 128 : 0;
+      cv::floodFill(outside, cv::Point(0, 0), cv::Scalar(255));
+      const double holes = double(cv::countNonZero(outside == 0));
+      if (holes > options.max_overhang_holes * area) continue;
+    }
     if (out.empty()) out.assign(n, 0);
     for (int y = stats.at<int>(l, cv::CC_STAT_TOP);
          y < stats.at<int>(l, cv::CC_STAT_TOP) + stats.at<int>(l, cv::CC_STAT_HEIGHT); ++y)

@@ -112,12 +112,16 @@ struct FloatingCloudOptions {
   /// on its own: a cloud when at least `min_overhang_fraction` of the frame, a body at least
   /// `min_overhang_radius_px` and `min_overhang_radius_fraction` of the frame's smaller side
   /// from its outline at its thickest (a cornice, a crane's jib, a cable or a branch is thin),
-  /// not foliage, cloud-coloured (as `max_saturation`) and of a sky's colours or joined to the
-  /// sky (as `min_distance_ratio`), with at least `min_sky_ring` of its outline next to the sky
-  /// (the seam with what holds it up counts as not). 0: off.
+  /// not foliage, grey (a mean saturation of at most `max_saturation`) and of a sky's colours
+  /// or joined to the sky (as `min_distance_ratio`), with at least `min_sky_ring` of its
+  /// outline next to the sky (the seam with what holds it up counts as not), solid (the sky it
+  /// encloses at most `max_overhang_holes` of its area: not a lattice), and what holds it up
+  /// (the component's pixels that rest on the horizon) cloud-coloured and not foliage (as a
+  /// floating component). 0: off.
   double min_overhang_fraction = 5e-4;
   double min_overhang_radius_px = 3;
   double min_overhang_radius_fraction = 0.01;
+  double max_overhang_holes = 0.1;
 };
 
 /// Issue 11: a cloud bank on a guessed horizon line (see find_cloud_bank).

@@ -825,6 +825,37 @@ TEST(SkyLight, FloatingCloudRuleForJoinedClouds) {
   EXPECT_EQ(photo::floating_clouds(m.photo.view(), m.ratio, m.above, foliage,
                                    {})[std::size_t(14) * w + 90],
             0);
+  // Not clouds: the same shapes held up by an orange facade, a navy structure in its own
+  // shade (bluish but saturated), and the white cloud as a lattice enclosing sky.
+  CloudRuleMap o;
+  const Rgb navy{0.03f, 0.08f, 0.3f};
+  o.put(0, w, horizon, h, 1.0f, {0.1f, 0.2f, 0.05f});    // the ground
+  o.put(5, 15, 20, horizon, 1.0f, {0.8f, 0.45f, 0.1f});  // an orange facade
+  o.put(15, 35, 20, 32, 1.0f, white);                    // white, beside it
+  o.put(40, 80, 32, horizon, 1.0f, white);               // a bank on the horizon
+  o.put(40, 44, 20, 32, 1.0f, white);                    // a tower rising from it
+  o.put(44, 80, 8, 20, 1.0f, navy);                      // navy, beside the tower
+  o.put(85, 118, 32, horizon, 1.0f, white);              // a second bank and tower
+  o.put(85, 89, 8, 32, 1.0f, white);
+  o.put(89, 118, 8, 20, 1.0f, white);  // a white lattice: 2x2 holes of sky, every 4 px
+  for (int y = 10; y < 18; y += 4)
+    for (int x = 92; x < 116; x += 4)
+      o.put(x, x + 2, y, y + 2, std::numeric_limits<float>::infinity(), {0.1f, 0.25f, 0.7f});
+  const std::vector<std::uint8_t> none =
+      photo::floating_clouds(o.photo.view(), o.ratio, o.above, {}, {});
+  EXPECT_EQ(none[std::size_t(26) * w + 25], 0);   // held by the facade
+  EXPECT_EQ(none[std::size_t(14) * w + 60], 0);   // saturated
+  EXPECT_EQ(none[std::size_t(15) * w + 100], 0);  // a lattice
+  // Without the holes it is a cloud: the lattice's holes are what refuse it.
+  o.put(89, 118, 8, 20, 1.0f, white);
+  EXPECT_EQ(
+      photo::floating_clouds(o.photo.view(), o.ratio, o.above, {}, {})[std::size_t(15) * w + 100],
+      1);
+  // The navy as a grey cloud is one: its saturation is what refuses it.
+  o.put(44, 80, 8, 20, 1.0f, white);
+  EXPECT_EQ(
+      photo::floating_clouds(o.photo.view(), o.ratio, o.above, {}, {})[std::size_t(14) * w + 60],
+      1);
 }
 
 // A cumulus cut off by the frame's bottom under a guessed horizon (issue 11, the sun bank look;
