@@ -56,6 +56,39 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
       held_leafy[c] += !foliage.empty() && foliage[std::size_t(y) * w + x] != 0;
     }
   std::vector<std::uint8_t> out;
+  // A bank on a known horizon (see the file comment): what rests on the horizon is sky when it
+  // is grey, mostly of a blue sky's colours, not foliage and joined to the sky by the
+  // refinement (its median distance ratio); of it, the pixels the refinement pulled beyond
+  // `min_bank_pixel_ratio` x the far billboard (a spire rising into the bank keeps its edge).
+  if (!options.guessed_horizon && options.min_bank_pixel_ratio > 0) {
+    std::vector<std::vector<float>> held_ratio(components);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (held.at<std::uint8_t>(y, x))
+          held_ratio[std::size_t(labels.at<int>(y, x))].push_back(
+              distance_ratio[std::size_t(y) * w + x]);
+    std::vector<std::uint8_t> bank(components, 0);
+    bool banks = false;
+    for (std::size_t c = 0; c < components; ++c) {
+      const double held_n = double(held_area[c]);
+      std::vector<float>& r = held_ratio[c];
+      if (held_n < options.min_overhang_fraction * double(n) || r.empty()) continue;
+      std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
+      bank[c] = held_saturation[c] <= options.max_saturation * held_n &&
+                2 * held_bluish[c] > held_n && 2 * held_leafy[c] < held_n &&
+                r[r.size() / 2] >= options.min_distance_ratio;
+      banks |= bank[c] != 0;
+    }
+    for (int y = 0; y < h && banks; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        if (held.at<std::uint8_t>(y, x) && bank[std::size_t(labels.at<int>(y, x))] &&
+            distance_ratio[i] >= options.min_bank_pixel_ratio) {
+          if (out.empty()) out.assign(n, 0);
+          out[i] = 1;
+        }
+      }
+  }
   cv::Mat parts, stats, centroids;
   const int m = cv::connectedComponentsWithStats(rest, parts, stats, centroids, 8, CV_32S);
   if (m <= 1) return out;

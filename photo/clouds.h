@@ -50,6 +50,15 @@
 // the sky's colours hanging beside those runs is judged as a floating cloud. A tree's crown is
 // foliage; a cornice, a jib, a cable, a bridge deck is thin, grey or in its own shade.
 //
+// A cloud bank low over land on a known horizon (FloatingCloudOptions::min_bank_pixel_ratio):
+// what rests on the horizon stays a surface on the far billboard, nearly clear in haze under
+// the veiled sky (the same scene: 0.030 % created edges) and an occluder under the sun bank.
+// When it is grey, of a blue sky's colours and the refinement joined it to the sky (no edge
+// between them; a wall, a ship or a ridge keeps its edge), it is sky: with the horizon known
+// the land under it is far (the ground plane), so no seam (0.0036 %). Not under a guessed
+// horizon: the guess may cut the bank, which then runs on below it as the ground plane (see
+// CloudBankOptions::lower_to_land).
+//
 // A guessed horizon (FloatingCloudOptions::guessed_horizon): in an all-sky frame looking up the
 // guess is lowered below the frame, and a cumulus cut off by the frame's bottom "stood" on it
 // (kite's lower right cloud: a surface 60-70 m away). Nobody saw ground there: a bank of the sky's
@@ -122,6 +131,14 @@ struct FloatingCloudOptions {
   double min_overhang_radius_px = 3;
   double min_overhang_radius_fraction = 0.01;
   double max_overhang_holes = 0.1;
+  /// A cloud bank low over land on a known horizon (not `guessed_horizon`; issue 11, the sun
+  /// bank's dark column under it): the pixels of a held-up component that rest on the horizon
+  /// (as above) are sky when, together, they are at least `min_overhang_fraction` of the frame,
+  /// grey (as `max_saturation`), mostly of a blue sky's colours, less than half foliage and
+  /// joined to the sky by the refinement (median ratio at least `min_distance_ratio`); of them,
+  /// those at least this times the far billboard's distance (a spire or a mast rising into the
+  /// bank keeps its edge against it and its distance). 0: off.
+  double min_bank_pixel_ratio = 2.0;
 };
 
 /// Issue 11: a cloud bank on a guessed horizon line (see find_cloud_bank).
