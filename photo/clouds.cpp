@@ -7,6 +7,174 @@
 
 namespace mr::photo {
 
+namespace {
+
+// The display-referred saturation ((max - min) / max on scene-linear ^ (1 / 2.2)) of a pixel and
+// whether it is bluish (B > R, B >= G).
+void display_tint(const float* p, float* saturation, bool* bluish) {
+  float c[3];
+  for (int k = 0; k < 3; ++k) c[k] = std::pow(std::clamp(p[k], 0.0f, 1.0f), 1 / 2.2f);
+  const float hi = std::max({c[0], c[1], c[2]}), lo = std::min({c[0], c[1], c[2]});
+  *saturation = hi > 0 ? (hi - lo) / hi : 0.0f;
+  *bluish = c[2] > c[0] && c[2] >= c[1];
+}
+
+// Of the components marked in `split` (held up by the horizon or the frame's bottom), the parts
+// that do not rest on it: each column's run of the component's pixels upward from where it meets
+// the horizon (or the frame's bottom) holds up; the rest hangs beside those runs (a cloud joined
+// to a cloud that stands on the horizon). Each 8-connected part of the rest that is a cloud by
+// the rule of FloatingCloudOptions (min_overhang_*) is 1 in the returned row-major mask.
+std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
+                                             const std::vector<float>& distance_ratio,
+                                             const std::vector<std::uint8_t>& above,
+                                             const std::vector<std::uint8_t>& foliage,
+                                             const cv::Mat& labels,
+                                             const std::vector<std::uint8_t>& split,
+                                             const FloatingCloudOptions& options) {
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(w) * std::size_t(h);
+  auto in_split = [&](int x, int y) { return split[std::size_t(labels.at<int>(y, x))] != 0; };
+  // Held: in a split component, on the frame's bottom or the horizon, or on a held pixel.
+  // Of each component, what holds it up must be cloud too: its held pixels' tint.
+  const std::size_t components = split.size();
+  std::vector<int> held_area(components, 0), held_bluish(components, 0), held_leafy(components, 0);
+  std::vector<double> held_saturation(components, 0.0);
+  cv::Mat held(h, w, CV_8U, cv::Scalar(0)), rest(h, w, CV_8U, cv::Scalar(0));
+  for (int x = 0; x < w; ++x)
+    for (int y = h - 1; y >= 0; --y) {
+      if (!in_split(x, y)) continue;
+      const bool on = y + 1 >= h || !above[std::size_t(y + 1) * w + x] ||
+                      (held.at<std::uint8_t>(y + 1, x) != 0);
+      held.at<std::uint8_t>(y, x) = on;
+      rest.at<std::uint8_t>(y, x) = !on;
+      if (!on) continue;
+      const std::size_t c = std::size_t(labels.at<int>(y, x));
+      float sat = 0;
+      bool blue = false;
+      display_tint(photo.pixel(x, y), &sat, &blue);
+      ++held_area[c], held_saturation[c] += sat, held_bluish[c] += blue;
+      held_leafy[c] += !foliage.empty() && foliage[std::size_t(y) * w + x] != 0;
+    }
+  std::vector<std::uint8_t> out;
+  // A bank on a known horizon (see the file comment): what rests on the horizon is sky when it
+  // is grey, mostly of a blue sky's colours, not foliage and joined to the sky by the
+  // refinement (its median distance ratio); of it, the pixels the refinement pulled beyond
+  // `min_bank_pixel_ratio` x the far billboard (a spire rising into the bank keeps its edge).
+  if (!options.guessed_horizon && options.min_bank_pixel_ratio > 0) {
+    std::vector<std::vector<float>> held_ratio(components);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (held.at<std::uint8_t>(y, x))
+          held_ratio[std::size_t(labels.at<int>(y, x))].push_back(
+              distance_ratio[std::size_t(y) * w + x]);
+    std::vector<std::uint8_t> bank(components, 0);
+    bool banks = false;
+    for (std::size_t c = 0; c < components; ++c) {
+      const double held_n = double(held_area[c]);
+      std::vector<float>& r = held_ratio[c];
+      if (held_n < options.min_overhang_fraction * double(n) || r.empty()) continue;
+      std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
+      bank[c] = held_saturation[c] <= options.max_saturation * held_n &&
+                2 * held_bluish[c] > held_n && 2 * held_leafy[c] < held_n &&
+                r[r.size() / 2] >= options.min_distance_ratio;
+      banks |= bank[c] != 0;
+    }
+    for (int y = 0; y < h && banks; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        if (held.at<std::uint8_t>(y, x) && bank[std::size_t(labels.at<int>(y, x))] &&
+            distance_ratio[i] >= options.min_bank_pixel_ratio) {
+          if (out.empty()) out.assign(n, 0);
+          out[i] = 1;
+        }
+      }
+  }
+  cv::Mat parts, stats, centroids;
+  const int m = cv::connectedComponentsWithStats(rest, parts, stats, centroids, 8, CV_32S);
+  if (m <= 1) return out;
+  cv::Mat inside;  // each part's pixel's distance to its outline
+  cv::distanceTransform(rest, inside, cv::DIST_L2, 3);
+  const double min_radius = std::max(options.min_overhang_radius_px,
+                                     options.min_overhang_radius_fraction * double(std::min(w, h)));
+  std::vector<int> ring_sky(std::size_t(m), 0), ring_other(std::size_t(m), 0);
+  std::vector<int> bluish(std::size_t(m), 0), leafy(std::size_t(m), 0);
+  std::vector<double> saturation(std::size_t(m), 0.0), radius(std::size_t(m), 0.0);
+  std::vector<std::vector<float>> ratios;
+  ratios.resize(std::size_t(m));
+  std::vector<std::size_t> component(std::size_t(m), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int l = parts.at<int>(y, x);
+      if (l == 0) continue;
+      const std::size_t k = std::size_t(l), i = std::size_t(y) * w + x;
+      component[k] = std::size_t(labels.at<int>(y, x));
+      float sat = 0;
+      bool blue = false;
+      display_tint(photo.pixel(x, y), &sat, &blue);
+      saturation[k] += sat;
+      bluish[k] += blue;
+      leafy[k] += !foliage.empty() && foliage[i] != 0;
+      ratios[k].push_back(distance_ratio[i]);
+      radius[k] = std::max(radius[k], double(inside.at<float>(y, x)));
+      // The outline: next to the sky, or to the frame's top, left or right border, or to the
+      // surface that holds it up (or another surface).
+      bool sky = false, other = x == 0 || y == 0 || x == w - 1;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int yy = y + dy, xx = x + dx;
+          if (yy < 0 || yy >= h || xx < 0 || xx >= w || (dx == 0 && dy == 0)) continue;
+          const std::size_t j = std::size_t(yy) * w + xx;
+          if (!above[j] || parts.at<int>(yy, xx) == l) continue;
+          const bool surface = std::isfinite(distance_ratio[j]) && distance_ratio[j] > 0;
+          (surface ? other : sky) = true;
+        }
+      ring_sky[k] += sky;
+      ring_other[k] += other && !sky;
+    }
+  for (int l = 1; l < m; ++l) {
+    const std::size_t k = std::size_t(l);
+    const double area = double(stats.at<int>(l, cv::CC_STAT_AREA));
+    if (area < options.min_overhang_fraction * double(n) || radius[k] < min_radius) continue;
+    if (2 * leafy[k] >= area) continue;
+    std::vector<float>& r = ratios[k];
+    std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
+    const bool joined = r[r.size() / 2] >= options.min_distance_ratio;
+    const bool sky_like = 2 * bluish[k] > area || joined;
+    // Grey: a structure in its own shade under a blue sky is bluish but saturated (rocket's
+    // launch towers at dusk, palace's tower in shade: 0.32-0.37 against a cumulus' 0.18).
+    if (!sky_like || !(saturation[k] <= options.max_saturation * area)) continue;
+    if (!(ring_sky[k] >= options.min_sky_ring * (ring_sky[k] + ring_other[k]))) continue;
+    // What holds it up is cloud-coloured as well (astronaut's white model shuttle hangs beside
+    // the studio's surfaces: not a cloud).
+    const std::size_t c = component[k];
+    const double held_n = double(held_area[c]);
+    if (!((held_saturation[c] <= options.max_saturation * held_n || 2 * held_bluish[c] > held_n) &&
+          2 * held_leafy[c] < held_n))
+      continue;
+    // Solid: a lattice (a mast, a crane, a pylon) encloses sky in its outline.
+    {
+      const int x0 = stats.at<int>(l, cv::CC_STAT_LEFT), y0 = stats.at<int>(l, cv::CC_STAT_TOP);
+      const int bw = stats.at<int>(l, cv::CC_STAT_WIDTH), bh = stats.at<int>(l, cv::CC_STAT_HEIGHT);
+      cv::Mat outside(bh + 2, bw + 2, CV_8U, cv::Scalar(0));
+      for (int y = 0; y < bh; ++y)
+        for (int x = 0; x < bw; ++x)
+          outside.at<std::uint8_t>(y + 1, x + 1) = parts.at<int>(y0 + y, x0 + x) == l ? 128 : 0;
+      cv::floodFill(outside, cv::Point(0, 0), cv::Scalar(255));
+      const double holes = double(cv::countNonZero(outside == 0));
+      if (holes > options.max_overhang_holes * area) continue;
+    }
+    if (out.empty()) out.assign(n, 0);
+    for (int y = stats.at<int>(l, cv::CC_STAT_TOP);
+         y < stats.at<int>(l, cv::CC_STAT_TOP) + stats.at<int>(l, cv::CC_STAT_HEIGHT); ++y)
+      for (int x = stats.at<int>(l, cv::CC_STAT_LEFT);
+           x < stats.at<int>(l, cv::CC_STAT_LEFT) + stats.at<int>(l, cv::CC_STAT_WIDTH); ++x)
+        if (parts.at<int>(y, x) == l) out[std::size_t(y) * w + x] = 1;
+  }
+  return out;
+}
+
+}  // namespace
+
 std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
                                           const std::vector<float>& distance_ratio,
                                           const std::vector<std::uint8_t>& above,
@@ -108,10 +276,26 @@ std::vector<std::uint8_t> floating_clouds(ConstImageView photo,
     cloud[k] = cut_off || coloured || joined;
     any |= cloud[k] != 0;
   }
-  if (!any) return out;
+  // Held up, but only in part (see the file comment, joined clouds): what hangs beside the
+  // columns that rise from the horizon (or the frame's bottom) is judged as a floating cloud.
+  std::vector<std::uint8_t> overhang_cloud;
+  if (options.min_overhang_fraction > 0 && options.min_overhang_fraction <= 1) {
+    std::vector<std::uint8_t> split(std::size_t(m), 0);
+    bool splits = false;
+    for (int l = 1; l < m; ++l)
+      if (!cloud[std::size_t(l)] && contact[std::size_t(l)] > 0 && ring_sky[std::size_t(l)] > 0)
+        split[std::size_t(l)] = 1, splits = true;
+    if (splits)
+      overhang_cloud =
+          overhanging_clouds(photo, distance_ratio, above, foliage, labels, split, options);
+  }
+  if (!any && overhang_cloud.empty()) return out;
   for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x)
-      out[std::size_t(y) * w + x] = cloud[std::size_t(labels.at<int>(y, x))] != 0;
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      out[i] = cloud[std::size_t(labels.at<int>(y, x))] != 0 ||
+               (!overhang_cloud.empty() && overhang_cloud[i]);
+    }
   // Of a bank's component, the parts that are not the bank's and stand on the horizon or the
   // frame's bottom (a ridge, a building, a tree rising from the land into the bank) stay.
   cv::Mat other(h, w, CV_8U, cv::Scalar(0));

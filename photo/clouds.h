@@ -41,6 +41,24 @@
 // sky; a component mostly of a blue sky's colours (and not foliage) or joined to the sky by the
 // refinement needs only a quarter of its outline next to the sky.
 //
+// Joined clouds (FloatingCloudOptions::min_overhang_*): a cumulus high in the sky joined
+// (8-connected, through a band of cloud) to a cloud that sits on the horizon was held up with
+// it: a surface on the far billboard, casting shafts fanning from it under the sun bank's low
+// sun (tests/sky_light_test.cpp: sun bank 0.30 %, haze 0.22 % created edges, none of it sky).
+// Of a component held up by the horizon, what rests on it is each column's run of the
+// component's pixels upward from where it meets the horizon; a thick, cloud-coloured part of
+// the sky's colours hanging beside those runs is judged as a floating cloud. A tree's crown is
+// foliage; a cornice, a jib, a cable, a bridge deck is thin, grey or in its own shade.
+//
+// A cloud bank low over land on a known horizon (FloatingCloudOptions::min_bank_pixel_ratio):
+// what rests on the horizon stays a surface on the far billboard, nearly clear in haze under
+// the veiled sky (the same scene: 0.030 % created edges) and an occluder under the sun bank.
+// When it is grey, of a blue sky's colours and the refinement joined it to the sky (no edge
+// between them; a wall, a ship or a ridge keeps its edge), it is sky: with the horizon known
+// the land under it is far (the ground plane), so no seam (0.0036 %). Not under a guessed
+// horizon: the guess may cut the bank, which then runs on below it as the ground plane (see
+// CloudBankOptions::lower_to_land).
+//
 // A guessed horizon (FloatingCloudOptions::guessed_horizon): in an all-sky frame looking up the
 // guess is lowered below the frame, and a cumulus cut off by the frame's bottom "stood" on it
 // (kite's lower right cloud: a surface 60-70 m away). Nobody saw ground there: a bank of the sky's
@@ -97,6 +115,30 @@ struct FloatingCloudOptions {
   /// left standing on the frame's bottom were created edges in haze: god_rays 0.010 %).
   std::vector<std::uint8_t> bank;
   double min_standing_fraction = 5e-4;
+  /// Joined clouds (issue 11, the sun bank's streak fans): of a component held up by the
+  /// horizon (or the frame's bottom), what does not rest on it (not on a column of the
+  /// component's pixels rising from where it meets the horizon) and is 8-connected is judged
+  /// on its own: a cloud when at least `min_overhang_fraction` of the frame, a body at least
+  /// `min_overhang_radius_px` and `min_overhang_radius_fraction` of the frame's smaller side
+  /// from its outline at its thickest (a cornice, a crane's jib, a cable or a branch is thin),
+  /// not foliage, grey (a mean saturation of at most `max_saturation`) and of a sky's colours
+  /// or joined to the sky (as `min_distance_ratio`), with at least `min_sky_ring` of its
+  /// outline next to the sky (the seam with what holds it up counts as not), solid (the sky it
+  /// encloses at most `max_overhang_holes` of its area: not a lattice), and what holds it up
+  /// (the component's pixels that rest on the horizon) cloud-coloured and not foliage (as a
+  /// floating component). 0: off.
+  double min_overhang_fraction = 5e-4;
+  double min_overhang_radius_px = 3;
+  double min_overhang_radius_fraction = 0.01;
+  double max_overhang_holes = 0.1;
+  /// A cloud bank low over land on a known horizon (not `guessed_horizon`; issue 11, the sun
+  /// bank's dark column under it): the pixels of a held-up component that rest on the horizon
+  /// (as above) are sky when, together, they are at least `min_overhang_fraction` of the frame,
+  /// grey (as `max_saturation`), mostly of a blue sky's colours, less than half foliage and
+  /// joined to the sky by the refinement (median ratio at least `min_distance_ratio`); of them,
+  /// those at least this times the far billboard's distance (a spire or a mast rising into the
+  /// bank keeps its edge against it and its distance). 0: off.
+  double min_bank_pixel_ratio = 2.0;
 };
 
 /// Issue 11: a cloud bank on a guessed horizon line (see find_cloud_bank).
