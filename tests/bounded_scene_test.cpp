@@ -17,8 +17,10 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "mr/estimate.h"
@@ -81,6 +83,52 @@ Image still_life() {
   return test::linear_photo(m);
 }
 
+// An interior with no sky and no lines for a horizon (a pool hall): a panelled back wall down
+// to row 300, a carpet below; a pool table's green felt from row 210 to 400 (a plain region
+// bounded by its dark rails that spans the guessed horizon, row 239.5) on dark legs, two lamp
+// shades hanging over it from the top border, a framed picture on the wall.
+Image pool_hall() {
+  cv::Mat m(kH, kW, CV_32FC3);
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> grain(-0.03f, 0.03f);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      cv::Vec3f c;
+      if (y < 300) {
+        const float seam = (x % 48) < 2 ? -0.08f : 0.0f;  // the panels' joints
+        const float v = 0.40f + seam + 0.03f * std::sin(x / 7.0f) + grain(rng);
+        c = cv::Vec3f(v, 0.78f * v, 0.55f * v);
+      } else {
+        const float v = 0.22f + 2 * grain(rng);
+        c = cv::Vec3f(0.9f * v, 0.35f * v, 0.35f * v);
+      }
+      m.at<cv::Vec3f>(y, x) = c;
+    }
+  cv::rectangle(m, cv::Point(420, 60), cv::Point(560, 160), cv::Scalar(0.15, 0.12, 0.10),
+                cv::FILLED);
+  cv::rectangle(m, cv::Point(430, 70), cv::Point(550, 150), cv::Scalar(0.55, 0.65, 0.75),
+                cv::FILLED);
+  for (const int x : {150, 420}) {
+    cv::rectangle(m, cv::Point(x - 3, 0), cv::Point(x + 3, 90), cv::Scalar(0.1, 0.1, 0.1),
+                  cv::FILLED);
+    std::vector<cv::Point> shade{{x - 60, 140}, {x - 20, 90}, {x + 20, 90}, {x + 60, 140}};
+    cv::fillConvexPoly(m, shade, cv::Scalar(0.20, 0.45, 0.25), cv::LINE_AA);
+  }
+  for (const int x : {110, 520})
+    cv::rectangle(m, cv::Point(x, 390), cv::Point(x + 16, 470), cv::Scalar(0.12, 0.08, 0.05),
+                  cv::FILLED);
+  std::vector<cv::Point> rails{{130, 200}, {510, 200}, {600, 410}, {40, 410}};
+  cv::fillConvexPoly(m, rails, cv::Scalar(0.25, 0.13, 0.06), cv::LINE_AA);
+  std::vector<cv::Point> felt{{145, 212}, {495, 212}, {575, 398}, {65, 398}};
+  for (int y = 212; y <= 398; ++y)
+    for (int x = 60; x <= 580; ++x) {
+      const float v = 0.02f * std::sin(x / 40.0f + y / 60.0f);  // smooth light falloff
+      if (cv::pointPolygonTest(felt, cv::Point2f(float(x), float(y)), false) > 0)
+        m.at<cv::Vec3f>(y, x) = cv::Vec3f(0.10f + v, 0.45f + v, 0.22f + v);
+    }
+  return test::linear_photo(m);
+}
+
 struct Looks {
   test::GalleryLooks edges;
   double worst_rise = 0;  // the largest rise of the distance going down a column (m)
@@ -90,6 +138,16 @@ struct Looks {
 Looks measure(const Image& photo, const SceneEstimate& est, const char* name) {
   Looks l;
   l.edges = test::haze_and_dense_looks(photo, kCamera, est, name);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
+    const std::string f = std::string(folder) + "/" + name;
+    write_image(f + "_dense.png", test::fog_auto_look(photo, kCamera, est, 60, 80, 0.3).composite);
+    Image depth(kW, kH, 3);  // 1 - exp(-d / 8 m): the bounded scene's metres
+    for (int y = 0; y < kH; ++y)
+      for (int x = 0; x < kW; ++x)
+        for (int c = 0; c < 3; ++c)
+          depth.at(x, y, c) = float(-std::expm1(-est.geometry.distance_m.at(x, y, 0) / 8.0));
+    write_image(f + "_depth.png", depth);
+  }
   const Image& d = est.geometry.distance_m;
   for (int x = 0; x < kW; ++x)
     for (int y = 0; y + 1 < kH; ++y) {
@@ -111,11 +169,6 @@ TEST(BoundedScene, StillLifeInDenseFogHasNoCutOutsAndNoBand) {
       << after.geometry.scale_cue;
   const Looks b = measure(photo, before, "bounded_refined");
   const Looks a = measure(photo, after, "bounded_smooth");
-  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {
-    const std::string f(folder);
-    write_image(f + "/bounded_refined_depth.png", test::depth_picture(before.geometry.distance_m));
-    write_image(f + "/bounded_smooth_depth.png", test::depth_picture(after.geometry.distance_m));
-  }
   std::printf(
       "still life (%s): created-edge pixels dense / haze, refined %.4f / %.4f %%, smooth %.4f / "
       "%.4f %%; largest rise of the distance down a column: refined %.3f m, smooth %.6f m; "
@@ -137,6 +190,32 @@ TEST(BoundedScene, StillLifeInDenseFogHasNoCutOutsAndNoBand) {
   // No farther than the far billboard (8 m ahead) at the frame's widest angle.
   const double widest = std::atan(std::hypot(320.0, 240.0) / kCamera.focal_px);
   EXPECT_LT(a.largest_m, 8.0 / std::cos(widest) + 0.01);
+}
+
+// The same class indoors: a pool table's felt spanning the guessed horizon.
+TEST(BoundedScene, PoolHallInDenseFogHasNoCutOutsAndNoBand) {
+  const Image photo = pool_hall();
+  EstimateOptions refined;
+  refined.smooth_bounded_depth = false;
+  const SceneEstimate before = estimate_scene(photo, kCamera, Annotations{}, refined);
+  const SceneEstimate after = estimate_scene(photo, kCamera, Annotations{});
+  ASSERT_EQ(after.geometry.sky_pixels, 0u);
+  ASSERT_NE(after.geometry.scale_cue.find("no sky"), std::string::npos)
+      << after.geometry.scale_cue;
+  const Looks b = measure(photo, before, "pool_refined");
+  const Looks a = measure(photo, after, "pool_smooth");
+  std::printf(
+      "pool hall (%s): created-edge pixels dense / haze, refined %.4f / %.4f %%, smooth %.4f / "
+      "%.4f %%; largest rise of the distance down a column: refined %.3f m, smooth %.6f m\n",
+      after.geometry.scale_cue.c_str(), 100 * b.edges.dense_edges, 100 * b.edges.haze_edges,
+      100 * a.edges.dense_edges, 100 * a.edges.haze_edges, b.worst_rise, a.worst_rise);
+  // Reproduced: the band (the felt's refined distance rising going down across the guessed
+  // horizon: a lighter stripe across the table in dense fog, too soft for the created-edge
+  // measure, 0 % before and after); fixed as in the still life.
+  EXPECT_GT(b.worst_rise, 0.3);
+  EXPECT_LE(a.edges.dense_edges, 2e-4);
+  EXPECT_LE(a.edges.haze_edges, 2e-4);
+  EXPECT_LE(a.worst_rise, 1e-3);
 }
 
 // The bounded depth against its closed forms: far below the join the ground plane (distance
