@@ -165,8 +165,7 @@ TEST(BoundedScene, StillLifeInDenseFogHasNoCutOutsAndNoBand) {
   const SceneEstimate before = estimate_scene(photo, kCamera, Annotations{}, refined);
   const SceneEstimate after = estimate_scene(photo, kCamera, Annotations{});
   ASSERT_EQ(after.geometry.sky_pixels, 0u);
-  ASSERT_NE(after.geometry.scale_cue.find("no sky"), std::string::npos)
-      << after.geometry.scale_cue;
+  ASSERT_NE(after.geometry.scale_cue.find("no sky"), std::string::npos) << after.geometry.scale_cue;
   const Looks b = measure(photo, before, "bounded_refined");
   const Looks a = measure(photo, after, "bounded_smooth");
   std::printf(
@@ -174,8 +173,8 @@ TEST(BoundedScene, StillLifeInDenseFogHasNoCutOutsAndNoBand) {
       "%.4f %%; largest rise of the distance down a column: refined %.3f m, smooth %.6f m; "
       "largest distance %.2f / %.2f m\n",
       after.geometry.scale_cue.c_str(), 100 * b.edges.dense_edges, 100 * b.edges.haze_edges,
-      100 * a.edges.dense_edges, 100 * a.edges.haze_edges, b.worst_rise, a.worst_rise,
-      b.largest_m, a.largest_m);
+      100 * a.edges.dense_edges, 100 * a.edges.haze_edges, b.worst_rise, a.worst_rise, b.largest_m,
+      a.largest_m);
   // Reproduced: the refined depth's created edges in dense fog above the gallery's target
   // (0.02 % of the pixels), and a distance that rises going down a column (the band: the
   // refinement's ground meeting the billboard over the backdrop) by more than 0.3 m.
@@ -200,8 +199,7 @@ TEST(BoundedScene, PoolHallInDenseFogHasNoCutOutsAndNoBand) {
   const SceneEstimate before = estimate_scene(photo, kCamera, Annotations{}, refined);
   const SceneEstimate after = estimate_scene(photo, kCamera, Annotations{});
   ASSERT_EQ(after.geometry.sky_pixels, 0u);
-  ASSERT_NE(after.geometry.scale_cue.find("no sky"), std::string::npos)
-      << after.geometry.scale_cue;
+  ASSERT_NE(after.geometry.scale_cue.find("no sky"), std::string::npos) << after.geometry.scale_cue;
   const Looks b = measure(photo, before, "pool_refined");
   const Looks a = measure(photo, after, "pool_smooth");
   std::printf(
