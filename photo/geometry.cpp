@@ -591,6 +591,21 @@ Defocus estimate_defocus(ConstImageView photo, const std::vector<std::uint8_t>& 
   return out;
 }
 
+double smooth_max(double a, double b, double softness) {
+  const double m = std::max(a, b);
+  if (!(softness > 0) || !std::isfinite(softness)) return m;
+  return m + softness * std::log1p(std::exp(-std::abs(a - b) / softness));
+}
+
+double bounded_inverse_distance(double ray_up, double ray_forward, double camera_height_m,
+                                double far_forward_m, double focal_px, double soft_rows) {
+  // Rays nearly sideways meet the billboard at 20 x its forward distance at most (as the
+  // estimate's billboards).
+  const double billboard = std::max(ray_forward, 0.05) / far_forward_m;
+  const double ground = -ray_up / camera_height_m;
+  return smooth_max(ground, billboard, soft_rows / (focal_px * camera_height_m));
+}
+
 float sky_fold(float proximity) {
   if (!(proximity > 0)) return 1.0f;  // NaN too: apart from the sky
   const float t = std::clamp(1.0f - 2.0f * proximity, 0.0f, 1.0f);

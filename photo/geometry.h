@@ -168,6 +168,26 @@ std::vector<float> sky_proximity(ConstImageView photo, const std::vector<std::ui
 /// exp(-sigma d) ramps over many pixels rather than a few, for thin haze too).
 float sky_fold(float proximity);
 
+/// The smooth maximum max(a, b) + softness ln(1 + exp(-|a - b| / softness)) (softplus):
+/// at least max(a, b), at most max(a, b) + softness ln 2 (where a = b), within
+/// softness exp(-|a - b| / softness) of it, smooth, and increasing in a and in b. softness <= 0
+/// (or not finite): max(a, b) exactly.
+double smooth_max(double a, double b, double softness);
+
+/// The inverse distance of a bounded scene's pixel (issue 11 item 3: a photo with no sky, whose
+/// horizon is a guess and in which nothing is known to be far): the ground plane's and the far
+/// billboard's, joined by smooth_max. `ray_up` is the unit ray's upward component (world y,
+/// negative below the horizon), `ray_forward` its horizontal part along the camera's viewing
+/// direction, `camera_height_m` (> 0), `far_forward_m` the far billboard's forward distance.
+/// The ground's inverse distance -ray_up / camera_height_m is extended above the horizon as a
+/// negative number (linear in the image rows near the principal point), so the join is smooth
+/// across it. `soft_rows` (>= 0) is the join's width in image rows at focal length `focal_px`:
+/// softness = soft_rows / (focal_px camera_height_m), the ground's inverse distance per row at
+/// the principal point of a level camera. The result is >= both, so no distance is farther than
+/// the far billboard; 0 soft rows gives the plain nearer-of-the-two (the unrefined estimate).
+double bounded_inverse_distance(double ray_up, double ray_forward, double camera_height_m,
+                                double far_forward_m, double focal_px, double soft_rows);
+
 /// A smooth forward distance for a structure's columns (issue 11 item 3: no seam between
 /// columns). `forward[k]`, k < count: the structure's forward distance measured in column k
 /// (> 0), or <= 0 (or not finite) where none was measured. Fits a line q = a + b k to the

@@ -733,6 +733,20 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   const photo::DepthRefineOptions refine;
   std::vector<float> q(n), c(n);
   std::vector<std::uint8_t> blended(n, 0);  // on the sky's blurred edge
+  // Issue 11 item 3 (helper bounded13): a bounded scene (no sky: an interior, a still life, a
+  // close-up) has a guessed horizon and no pixel of known distance. Refined against the photo,
+  // the guessed ground's near distances ran up through whatever the photo bounds by edges (a
+  // clip hanging in a plant, a saucer's rim, a spoon) into the far billboard above the horizon:
+  // clear cut-outs outlined in dense fog, and a band where the two met. Nothing there says
+  // where the depth jumps, so it jumps nowhere: the ground plane and the far billboard joined
+  // smoothly (photo/geometry.h, bounded_inverse_distance), a fog that deepens gently up the
+  // frame. Annotated planes and distance hints keep the refinement that joins them to it.
+  const bool smooth_bounded = options.refine_depth && options.smooth_bounded_depth && bounded &&
+                              g.plane_pixels == 0 && g.hint_pixels == 0;
+  if (!(options.bounded_soft_rows >= 0) || !std::isfinite(options.bounded_soft_rows))
+    throw Error(ErrorCode::invalid_argument,
+                "bounded_soft_rows: must be >= 0, found " + fmt("%g", options.bounded_soft_rows));
+  const double soft_rows = options.bounded_soft_rows * h;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
@@ -758,6 +772,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         conf = r > 0 ? std::max(conf, ground_conf * r * r * r * r) : ground_conf;
       }
       float inv = std::isfinite(d) && d > 0 ? 1.0f / d : 0.0f;
+      if (smooth_bounded && std::isfinite(d) &&
+          (cls == kFar || cls == int(photo::Coverage::ground))) {
+        const Vec3 r = g.pose.ray_direction(camera, x, y);
+        inv = float(photo::bounded_inverse_distance(r.y, r.x * fwd.x + r.z * fwd.z, height,
+                                                    far_forward, camera.focal_px, soft_rows));
+      }
       if (std::isfinite(d) && alpha > 0 && cls != int(photo::Coverage::hint) &&
           cls != int(photo::Coverage::plane)) {
         // A blurred sky edge: the surface's inverse distance fades to the sky's 0 as the
@@ -771,7 +791,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       c[i] = conf;
     }
   steps.start("refine");
-  if (options.refine_depth) {
+  if (options.refine_depth && !smooth_bounded) {
     const std::vector<float> q_plane = q;  // before the refinement: the ground plane's
     q = photo::refine_inverse_distance(photo->view(), q, c, refine);
     // Only under a horizon that says where the water meets the sky (annotated, or found with
@@ -860,7 +880,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       if (!std::isfinite(d)) continue;  // sky stays sky
       const bool refined = options.refine_depth && photo::refine_keep_weight(c[i]) < 1.0f;
       const bool folded = !fold.empty() && fold[i] < 1.0f;
-      if (!refined && !blended[i] && !folded) continue;  // kept exactly
+      if (!refined && !blended[i] && !folded && !smooth_bounded) continue;  // kept exactly
       d = std::min(kMaxFiniteDistanceM, q[i] > 0 ? 1.0f / q[i] : kMaxFiniteDistanceM);
     }
   // Issue 11 (sun bank): the fragments of clouds the sky mask left out, held up by nothing and

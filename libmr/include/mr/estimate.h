@@ -89,6 +89,16 @@ struct MR_API EstimateOptions {
   /// scaled (through the camera height) so that its far billboard stands this many metres ahead
   /// (from 46 m at the defaults). The depth's shape is unchanged, only its metres.
   double bounded_scene_depth_m = 8.0;
+  /// With refine_depth, in such a bounded scene (and in a close-up left without sky) with no
+  /// annotated plane or distance hint: the depth is the ground plane and the far billboard
+  /// joined smoothly over `bounded_soft_rows` of the frame's height (photo/geometry.h,
+  /// bounded_inverse_distance), not refined against the photo. Its horizon is a guess and no
+  /// pixel's distance is known, and the refinement spread the guessed ground's near distances
+  /// up through whatever the photo bounds by edges (a clip hanging in a plant, a cup's rim)
+  /// into the far billboard: in dense fog clear cut-outs in the fogged frame, and a band along
+  /// the horizon where the two met (issue 11 item 3, helper bounded13). false: refined.
+  bool smooth_bounded_depth = true;
+  double bounded_soft_rows = 0.1;
   /// A close-up (issue 11 item 3): where at least `closeup_min_defocused` of the frame's blocks
   /// (sky left out) are strongly blurred and at least `closeup_min_sharp` are sharp
   /// (photo/geometry.h, estimate_defocus: a shallow depth of field, which means a subject
