@@ -40,6 +40,32 @@ std::vector<fs::path> sample_files() {
   return out;
 }
 
+// The first APPn segment of a JPEG whose data starts with `prefix` (marker, length and data),
+// or "" if none.
+std::string jpeg_segment(const std::string& jpeg, int marker, const std::string& prefix) {
+  std::size_t at = 2;
+  while (at + 4 <= jpeg.size() && static_cast<unsigned char>(jpeg[at]) == 0xFF) {
+    const int m = static_cast<unsigned char>(jpeg[at + 1]);
+    if (m == 0xDA) break;
+    const std::size_t len = std::size_t(static_cast<unsigned char>(jpeg[at + 2])) << 8 |
+                            static_cast<unsigned char>(jpeg[at + 3]);
+    if (m == marker && jpeg.compare(at + 4, prefix.size(), prefix) == 0)
+      return jpeg.substr(at, 2 + len);
+    at += 2 + len;
+  }
+  return "";
+}
+
+// `jpeg` with `segment` inserted right after its SOI marker.
+std::string with_segment(const std::string& jpeg, const std::string& segment) {
+  return jpeg.substr(0, 2) + segment + jpeg.substr(2);
+}
+
+// `jpeg` without the segment `segment` (one of its own).
+std::string without_segment(std::string jpeg, const std::string& segment) {
+  return jpeg.erase(jpeg.find(segment), segment.size());
+}
+
 void expect_same_attributes(const OIIO::ParamValueList& got, const OIIO::ParamValueList& want,
                             const std::string& what) {
   auto list = [](const OIIO::ParamValueList& l) {
@@ -124,6 +150,35 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
     write_image(dir / "half.exr", photo, half);
     write_image(dir / "photo.jpg", photo);
     files.insert(files.end(), {dir / "depth.exr", dir / "half.exr", dir / "photo.jpg"});
+    // Camera EXIF: the EXIF block of every sample and gallery JPEG (phones, Canon, Olympus,
+    // Minolta; both byte orders; GPS, maker notes) in a small JPEG of its own, in place of
+    // the one libmr wrote.
+    const std::string small = test::read_bytes(dir / "photo.jpg");
+    const std::string own = jpeg_segment(small, 0xE1, std::string("Exif\0", 5));
+    ASSERT_FALSE(own.empty());
+    const std::string bare = without_segment(small, own);
+    for (const fs::path& source : sample_files()) {
+      if (source.extension() != ".jpg") continue;
+      const std::string exif =
+          jpeg_segment(test::read_bytes(source), 0xE1, std::string("Exif\0", 5));
+      if (exif.empty()) continue;
+      const fs::path spliced = dir / ("exif_of_" + source.stem().string() + ".jpg");
+      test::write_bytes(spliced, with_segment(bare, exif));
+      files.push_back(spliced);
+    }
+    // A camera JPEG as OIIO writes one (bench/make_fog_inputs.py's): the iPhone photo's
+    // attributes but its XMP (which OIIO's reader turns into attributes of its own).
+    auto in = OIIO::ImageInput::open((fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg").string());
+    ASSERT_TRUE(in);
+    OIIO::ImageSpec spec(33, 17, 3, OIIO::TypeDesc::UINT8);
+    spec.extra_attribs = in->spec().extra_attribs;
+    std::vector<unsigned char> pixels(33 * 17 * 3);
+    for (std::size_t i = 0; i < pixels.size(); ++i) pixels[i] = static_cast<unsigned char>(i * 7);
+    auto out = OIIO::ImageOutput::create("jpg");
+    ASSERT_TRUE(out && out->open((dir / "oiio_camera.jpg").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+    out->close();
+    files.push_back(dir / "oiio_camera.jpg");
   }
   int direct = 0, total = 0;
   for (const fs::path& path : files) {
@@ -155,13 +210,18 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
   }
   std::printf("%d of %d files decoded directly\n", direct, total);
   EXPECT_GT(direct, 0);
+  // Camera EXIF is read directly: the iPhone's block (GPS, an Apple maker note) and OIIO's.
+  for (const char* name : {"exif_of_leuven.jpg", "oiio_camera.jpg"})
+    EXPECT_TRUE(detail::open_direct_reader(dir / name)) << name;
 }
 
 // What write_image stores for a photo with `metadata`: through the direct writer, and through
 // OIIO's (the module's writer given the same header), compared by OIIO's decode.
 // `colour` is the oiio:ColorSpace tag: write_image's (the config's sRGB) or OIIO's "sRGB".
+// `direct`: whether libmr's writer must write it itself (1), through OIIO's module (0), or
+// either (-1).
 void compare_writers(const Image& photo, const fs::path& dir, const std::string& name,
-                     const std::string& colour = colorspace::srgb) {
+                     const std::string& colour = colorspace::srgb, int direct = -1) {
   // The header write_image gives the writer: the photo's metadata with the encoding set.
   detail::ImageHeader h;
   h.width = photo.width(), h.height = photo.height(), h.nchannels = 3;
@@ -171,6 +231,9 @@ void compare_writers(const Image& photo, const fs::path& dir, const std::string&
   h.attribute("oiio:ColorSpace", colour);
   h.attribute("Compression", "jpeg:90");
   h.attribute("jpeg:subsampling", "4:4:4");
+  if (direct >= 0) {
+    EXPECT_EQ(detail::writes_jpeg_directly(h), direct == 1) << name;
+  }
   // OCIO's sRGB codes of the photo, as write_image makes them.
   ColorConfig config = ColorConfig::builtin();
   std::vector<unsigned char> codes(photo.pixel_count() * 3);
@@ -237,6 +300,58 @@ TEST(DirectCodecs, WritesJpegAsOiio) {
   // Attributes the direct writer leaves to OIIO's (EXIF sub-directory): the same file anyway.
   photo.metadata().impl().attributes.attribute("Exif:FocalLengthIn35mmFilm", 28);
   compare_writers(photo, dir.path(), "exif");
+}
+
+// A camera's metadata (as libmr reads it from a photo with an iPhone's EXIF block: Exif and
+// GPS directories, IPTC) written by libmr's writer itself, and OIIO's quirks with it: a float
+// whose inverse is whole written as 1/(int)f (0.5 reads back as infinity), a tag named twice,
+// integers for rationals and floats for integers (not written), empty texts (not written),
+// versions (OIIO's own), arrays for single values (their first), IPTC datasets from both names.
+TEST(DirectCodecs, WritesCameraJpegAsOiio) {
+  test::ScratchDir dir;
+  const Image small = test::make_test_photo(37, 21);
+  write_image(dir / "small.jpg", small);
+  const std::string bytes = test::read_bytes(dir / "small.jpg");
+  const std::string own = jpeg_segment(bytes, 0xE1, std::string("Exif\0", 5));
+  const std::string iphone =
+      jpeg_segment(test::read_bytes(fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg"),
+                   0xE1, std::string("Exif\0", 5));
+  ASSERT_FALSE(own.empty() || iphone.empty());
+  test::write_bytes(dir / "iphone.jpg", with_segment(without_segment(bytes, own), iphone));
+  Image photo = read_image(dir / "iphone.jpg");
+  ASSERT_TRUE(photo.metadata().impl().attributes.contains("GPS:Latitude"));
+  compare_writers(photo, dir.path(), "iphone", colorspace::srgb, 1);
+  compare_writers(photo, dir.path(), "iphone_srgb", "sRGB", 1);
+  auto& a = photo.metadata().impl().attributes;
+  using detail::DataType;
+  a.attribute("ExposureTime", 0.5f);
+  a.attribute("Exif:ShutterSpeedValue", -3.3f);
+  const std::uint16_t iso[] = {200, 400};
+  a.attribute("Exif:ISOSpeedRatings", detail::kTypeUInt16, iso);
+  a.attribute("Exif:PhotographicSensitivity", detail::kTypeUInt16, iso + 1);
+  a.attribute("Orientation", 3.0f);
+  a.attribute("Exif:MaxApertureValue", 2);
+  a.attribute("Exif:PixelXDimension", 4000);
+  a.attribute("Exif:ExifVersion", "0221");
+  a.attribute("Exif:CameraOwnerName", "");
+  a.attribute("Exif:YCbCrSubsampling", DataType(DataType::kUInt16, 1, 0, 2), iso);
+  a.attribute("GPS:AltitudeRef", 1);
+  const int version[] = {2, 3, 0, 0};
+  a.attribute("GPS:VersionID", DataType(DataType::kInt32, 1, 0, 4), version);
+  a.attribute("GPS:Speed", 3);
+  a.attribute("Artist", "Someone");
+  a.attribute("IPTC:Creator", "Someone Else");
+  a.attribute("IPTC:OriginatingProgram", "Program");
+  a.attribute("Copyright", "CC BY 4.0");
+  compare_writers(photo, dir.path(), "quirks", colorspace::srgb, 1);
+  compare_writers(photo, dir.path(), "quirks_srgb", "sRGB", 1);
+  // Left to OIIO's writer (the same file anyway): a Canon (OIIO writes a maker note from its
+  // Canon:* attributes), a Creator OIIO splits at ";".
+  a.attribute("Artist", "One; Two");
+  compare_writers(photo, dir.path(), "split", colorspace::srgb, 0);
+  a.attribute("Artist", "Someone");
+  a.attribute("Make", "Canon");
+  compare_writers(photo, dir.path(), "canon", colorspace::srgb, 0);
 }
 
 // mr's attribute list (core/attributes.h) against OIIO's ParamValueList on values of every

@@ -1,8 +1,10 @@
 // Private to libmr: JPEG and OpenEXR files read and written directly through libjpeg(-turbo)
 // and OpenEXR, the codec libraries OpenImageIO itself uses, with the pixels and attributes
 // OIIO 2.4 gives (tests/direct_codecs_test.cpp compares them file for file). Only what they
-// reproduce exactly is taken: a file or header with anything else (EXIF beyond the TIFF
-// fields, ICC profiles, XMP, IPTC, CMYK, tiles, several parts, ...) goes to OIIO's module.
+// reproduce exactly is taken: a file or header with anything else (a Canon maker note, ICC
+// profiles, XMP, IPTC beyond the TIFF fields, CMYK, tiles, several parts, ...) goes to OIIO's
+// module. Camera EXIF (the Exif, GPS and interoperability directories) is read and written here
+// (libmr/src/jpeg_metadata.h).
 #pragma once
 
 #include <filesystem>
@@ -23,5 +25,7 @@ std::unique_ptr<ImageWriter> create_direct_writer(const std::filesystem::path& p
 std::unique_ptr<ImageReader> open_jpeg_reader(const std::filesystem::path& path);
 std::unique_ptr<ImageReader> open_exr_reader(const std::filesystem::path& path);
 std::unique_ptr<ImageWriter> create_jpeg_writer(const std::filesystem::path& path);
+/// Whether create_jpeg_writer's writer writes `spec` itself (else through OIIO's module).
+bool writes_jpeg_directly(const ImageHeader& spec);
 
 }  // namespace mr::detail
