@@ -168,7 +168,8 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
     }
     // A camera JPEG as OIIO writes one (bench/make_fog_inputs.py's): the iPhone photo's
     // attributes but its XMP (which OIIO's reader turns into attributes of its own).
-    auto in = OIIO::ImageInput::open((fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg").string());
+    auto in =
+        OIIO::ImageInput::open((fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg").string());
     ASSERT_TRUE(in);
     OIIO::ImageSpec spec(33, 17, 3, OIIO::TypeDesc::UINT8);
     spec.extra_attribs = in->spec().extra_attribs;
@@ -314,8 +315,8 @@ TEST(DirectCodecs, WritesCameraJpegAsOiio) {
   const std::string bytes = test::read_bytes(dir / "small.jpg");
   const std::string own = jpeg_segment(bytes, 0xE1, std::string("Exif\0", 5));
   const std::string iphone =
-      jpeg_segment(test::read_bytes(fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg"),
-                   0xE1, std::string("Exif\0", 5));
+      jpeg_segment(test::read_bytes(fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg"), 0xE1,
+                   std::string("Exif\0", 5));
   ASSERT_FALSE(own.empty() || iphone.empty());
   test::write_bytes(dir / "iphone.jpg", with_segment(without_segment(bytes, own), iphone));
   Image photo = read_image(dir / "iphone.jpg");

@@ -412,7 +412,9 @@ std::unique_ptr<ImageReader> open_jpeg_reader(const std::filesystem::path& path)
   return reader;
 }
 
-bool writes_jpeg_directly(const ImageHeader& spec) { return writable_attributes(spec); }
+bool writes_jpeg_directly(const ImageHeader& spec) {
+  return writable_attributes(spec);
+}
 
 std::unique_ptr<ImageWriter> create_jpeg_writer(const std::filesystem::path& path) {
   return std::make_unique<JpegWriter>(path);

@@ -202,14 +202,14 @@ class ExifDecoder {
         if (len != 4) return true;
         for (int k = 0; k < 4; ++k)
           if (data_[at + k] == 0) return false;
-        out_.push_back(Attribute(name, std::string_view(reinterpret_cast<const char*>(data_ + at), 4)));
+        out_.push_back(
+            Attribute(name, std::string_view(reinterpret_cast<const char*>(data_ + at), 4)));
         return true;
       case Handler::version_ints: {
         if (len != 4) return true;
         const int v[4] = {data_[at], data_[at + 1], data_[at + 2], data_[at + 3]};
-        out_.push_back(Attribute(name, DataType(DataType::kInt32, DataType::kScalar,
-                                                DataType::kNoSemantics, 4),
-                                 1, v));
+        out_.push_back(Attribute(
+            name, DataType(DataType::kInt32, DataType::kScalar, DataType::kNoSemantics, 4), 1, v));
         return true;
       }
       case Handler::maker_note:
@@ -231,7 +231,9 @@ class ExifDecoder {
       for (std::size_t k = 0; k < count; ++k) v[k] = u16(at + 2 * k);
       if (name == "ResolutionUnit") {  // OIIO names the unit
         if (count != 1 || v[0] < 1 || v[0] > 3) return false;
-        out_.push_back(Attribute(name, std::string_view(v[0] == 1 ? "none" : v[0] == 2 ? "in" : "cm")));
+        out_.push_back(Attribute(name, std::string_view(v[0] == 1   ? "none"
+                                                        : v[0] == 2 ? "in"
+                                                                    : "cm")));
         return true;
       }
       out_.push_back(Attribute(name, typed(DataType::kUInt16), 1, v.data()));
@@ -243,9 +245,8 @@ class ExifDecoder {
       std::vector<float> v(count);
       for (std::size_t k = 0; k < count; ++k) {
         const std::uint32_t num = u32(at + 8 * k), den = u32(at + 8 * k + 4);
-        v[k] = type == kRational
-                   ? float(double(num) / double(den))
-                   : float(double(std::int32_t(num)) / double(std::int32_t(den)));
+        v[k] = type == kRational ? float(double(num) / double(den))
+                                 : float(double(std::int32_t(num)) / double(std::int32_t(den)));
       }
       if (count == 1)
         out_.push_back(Attribute(name, v[0]));
@@ -359,7 +360,9 @@ bool write_tag(std::string_view name, WriteTag& out) {
   return true;
 }
 
-bool is_gps_name(std::string_view name) { return name.substr(0, 4) == "GPS:"; }
+bool is_gps_name(std::string_view name) {
+  return name.substr(0, 4) == "GPS:";
+}
 
 // OIIO's float_to_rational (fmath.h), quirks included: a float whose inverse is whole gets the
 // denominator (int)f, 0 below 1 (0.5 is written 1/0 and reads back as infinity).
@@ -443,10 +446,18 @@ bool exif_entry(const Attribute& p, const WriteTag& t, Entry& entry, bool& ok) {
       if (type.aggregate != DataType::kScalar || p.bytes.empty()) return ok = false;
       std::int64_t v = 0;
       switch (type.basetype) {
-        case DataType::kUInt32: v = *reinterpret_cast<const std::uint32_t*>(p.bytes.data()); break;
-        case DataType::kInt32: v = *reinterpret_cast<const std::int32_t*>(p.bytes.data()); break;
-        case DataType::kUInt16: v = *reinterpret_cast<const std::uint16_t*>(p.bytes.data()); break;
-        case DataType::kInt16: v = *reinterpret_cast<const std::int16_t*>(p.bytes.data()); break;
+        case DataType::kUInt32:
+          v = *reinterpret_cast<const std::uint32_t*>(p.bytes.data());
+          break;
+        case DataType::kInt32:
+          v = *reinterpret_cast<const std::int32_t*>(p.bytes.data());
+          break;
+        case DataType::kUInt16:
+          v = *reinterpret_cast<const std::uint16_t*>(p.bytes.data());
+          break;
+        case DataType::kInt16:
+          v = *reinterpret_cast<const std::int16_t*>(p.bytes.data());
+          break;
         case DataType::kFloat:
         case DataType::kDouble:
         case DataType::kHalf:
