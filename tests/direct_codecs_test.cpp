@@ -10,6 +10,7 @@
 
 #include <cstring>
 #include <filesystem>
+#include <random>
 #include <vector>
 
 #include "core/metadata_impl.h"
@@ -214,6 +215,53 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
   // Camera EXIF is read directly: the iPhone's block (GPS, an Apple maker note) and OIIO's.
   for (const char* name : {"exif_of_leuven.jpg", "oiio_camera.jpg"})
     EXPECT_TRUE(detail::open_direct_reader(dir / name)) << name;
+}
+
+// Randomly damaged camera EXIF blocks (bytes changed anywhere in the TIFF structure: counts,
+// types, offsets, values; blocks cut short), each in a small JPEG: every one the direct reader
+// takes decodes to OIIO's attributes exactly (the rest goes to OIIO's module). Seeded, so the
+// same 400 files each run; the test fails if fewer than 40 are taken (it would test nothing).
+TEST(DirectCodecs, DamagedExifDecodesAsOiioOrGoesToIt) {
+  test::ScratchDir dir;
+  write_image(dir / "small.jpg", test::make_test_photo(16, 12));
+  const std::string small = test::read_bytes(dir / "small.jpg");
+  const std::string bare =
+      without_segment(small, jpeg_segment(small, 0xE1, std::string("Exif\0", 5)));
+  std::vector<std::string> blocks;
+  for (const fs::path& source : sample_files()) {
+    if (source.extension() != ".jpg") continue;
+    const std::string exif = jpeg_segment(test::read_bytes(source), 0xE1, std::string("Exif\0", 5));
+    if (!exif.empty()) blocks.push_back(exif.substr(4));  // "Exif\0\0" and the TIFF block
+  }
+  ASSERT_GT(blocks.size(), 10u);
+  std::mt19937 random(13);
+  auto below = [&](std::size_t n) { return std::size_t(random() % std::max<std::size_t>(n, 1)); };
+  int direct = 0;
+  for (int k = 0; k < 400; ++k) {
+    std::string b = blocks[below(blocks.size())];
+    const int changes = 1 + int(below(8));
+    for (int c = 0; c < changes; ++c) {
+      // Mostly in the first 200 bytes, where the directories are.
+      const std::size_t at = 6 + below(std::min<std::size_t>(b.size() - 6, k % 2 ? 200 : b.size()));
+      b[at] = char(random() % 4 == 0 ? 0xFF : random() % 3 == 0 ? 0 : random() & 0xFF);
+    }
+    if (k % 10 == 0) b.resize(6 + below(b.size() - 6));
+    const std::string segment =
+        std::string("\xFF\xE1", 2) + char((b.size() + 2) >> 8) + char((b.size() + 2) & 0xFF) + b;
+    const fs::path path = dir / ("damaged_" + std::to_string(k) + ".jpg");
+    test::write_bytes(path, with_segment(bare, segment));
+    SCOPED_TRACE(path.string());
+    auto mine = detail::open_direct_reader(path);
+    if (!mine) continue;  // OIIO's module reads it
+    ++direct;
+    auto oiio = OIIO::ImageInput::open(path.string());
+    ASSERT_TRUE(oiio);
+    expect_same_attributes(mine->spec().extra_attribs, oiio->spec().extra_attribs,
+                           path.filename().string());
+    expect_same_pixels(*mine, *oiio, OIIO::TypeDesc::UINT8, path.filename().string());
+  }
+  std::printf("%d of 400 damaged EXIF blocks decoded directly\n", direct);
+  EXPECT_GE(direct, 40);
 }
 
 // What write_image stores for a photo with `metadata`: through the direct writer, and through
