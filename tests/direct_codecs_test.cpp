@@ -167,6 +167,25 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
       test::write_bytes(spliced, with_segment(bare, exif));
       files.push_back(spliced);
     }
+    // Blocks OIIO's reader ignores (a phone's MPF APP2, an XMP extension, an APP1 that is not
+    // "Exif", makers' own APPn, an APP13 that is not "Photoshop 3.0") beside an iPhone's EXIF.
+    auto segment = [](int marker, const std::string& data) {
+      return std::string(1, '\xFF') + char(marker) + char((data.size() + 2) >> 8) +
+             char((data.size() + 2) & 0xFF) + data;
+    };
+    const std::string iphone =
+        jpeg_segment(test::read_bytes(fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg"),
+                     0xE1, std::string("Exif\0", 5));
+    test::write_bytes(
+        dir / "other_blocks.jpg",
+        with_segment(bare, iphone + segment(0xE2, std::string("MPF\0II*\0\x08\0\0\0", 12)) +
+                               segment(0xE1, std::string("http://ns.adobe.com/xmp/extension/\0"
+                                                         "0123456789ABCDEF0123456789ABCDEF",
+                                                         67)) +
+                               segment(0xE1, std::string("ExifX\0\0II*\0", 10)) +
+                               segment(0xE3, "Meta data of a maker") +
+                               segment(0xED, std::string("Adobe_CM\0\1\2", 11))));
+    files.push_back(dir / "other_blocks.jpg");
     // A camera JPEG as OIIO writes one (bench/make_fog_inputs.py's): the iPhone photo's
     // attributes but its XMP (which OIIO's reader turns into attributes of its own).
     auto in =
@@ -212,8 +231,9 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
   }
   std::printf("%d of %d files decoded directly\n", direct, total);
   EXPECT_GT(direct, 0);
-  // Camera EXIF is read directly: the iPhone's block (GPS, an Apple maker note) and OIIO's.
-  for (const char* name : {"exif_of_leuven.jpg", "oiio_camera.jpg"})
+  // Camera EXIF is read directly: the iPhone's block (GPS, an Apple maker note), OIIO's, and
+  // beside blocks OIIO ignores.
+  for (const char* name : {"exif_of_leuven.jpg", "oiio_camera.jpg", "other_blocks.jpg"})
     EXPECT_TRUE(detail::open_direct_reader(dir / name)) << name;
 }
 

@@ -156,25 +156,36 @@ class JpegReader final : public ImageReader {
  private:
   // The attributes OIIO's plugin sets, in its order; false for markers it leaves to OIIO.
   bool header_attributes() {
+    // OIIO's plugin reads an APP1 whose text (up to its NUL) is "Exif" (EXIF) or the XMP
+    // namespace, an APP13 "Photoshop 3.0" (IPTC), APP2 "ICC_PROFILE" blocks and COM; libjpeg
+    // reads APP0 JFIF and APP14 Adobe. Other blocks (an MPF APP2, XMP extensions, makers' own
+    // APPn) it ignores, and so does this.
+    const std::string xmp = "http://ns.adobe.com/xap/1.0/";
+    int exif_blocks = 0, iptc_blocks = 0;
     for (jpeg_saved_marker_ptr m = cinfo_.marker_list; m; m = m->next) {
-      const bool ok =
-          (m->marker == JPEG_APP0 && (starts_with(m, "JFIF", 5) || starts_with(m, "JFXX", 5))) ||
-          (m->marker == JPEG_APP0 + 14 && starts_with(m, "Adobe", 5)) ||
-          (m->marker == JPEG_APP0 + 1 && starts_with(m, "Exif\0", 5)) ||
-          (m->marker == JPEG_APP0 + 13 && starts_with(m, kPhotoshop, sizeof kPhotoshop)) ||
-          m->marker == JPEG_COM;
-      if (!ok) return false;  // XMP, an ICC profile, maker-specific blocks: OIIO's
+      const char* text = reinterpret_cast<const char*>(m->data);
+      const bool has_nul = std::memchr(m->data, 0, m->data_length) != nullptr;
+      if (m->marker == JPEG_APP0 + 1 || m->marker == JPEG_APP0 + 13) {
+        if (!has_nul) return false;  // OIIO's strcmp would read past the block
+        if (m->marker == JPEG_APP0 + 1 && text == xmp) return false;  // XMP: OIIO's
+        exif_blocks += m->marker == JPEG_APP0 + 1 && std::string_view(text) == "Exif";
+        iptc_blocks += m->marker == JPEG_APP0 + 13 && std::string_view(text) == kPhotoshop;
+      } else if (m->marker == JPEG_APP0 + 2 && starts_with(m, "ICC_PROFILE", 11)) {
+        return false;  // an ICC profile: OIIO's (it decodes the profile into attributes)
+      }
     }
+    if (exif_blocks > 1 || iptc_blocks > 1) return false;  // which wins: OIIO's business
     spec_.attribute("oiio:ColorSpace", "sRGB");
     const std::string subsampling = subsampling_name(cinfo_);
     if (!subsampling.empty()) spec_.attribute("jpeg:subsampling", subsampling);
     for (jpeg_saved_marker_ptr m = cinfo_.marker_list; m; m = m->next) {
-      if (m->marker == JPEG_APP0 + 1) {
+      const char* text = reinterpret_cast<const char*>(m->data);
+      if (m->marker == JPEG_APP0 + 1 && std::string_view(text) == "Exif") {
         AttributeList exif;
         if (m->data_length < 6 || !decode_exif(m->data + 6, m->data_length - 6, exif))
-          return false;  // more than the TIFF fields
+          return false;  // read otherwise by OIIO
         for (const Attribute& p : exif) spec_.set(p);
-      } else if (m->marker == JPEG_APP0 + 13) {
+      } else if (m->marker == JPEG_APP0 + 13 && std::string_view(text) == kPhotoshop) {
         AttributeList iptc;
         if (!decode_iptc(m->data + sizeof kPhotoshop, m->data_length - sizeof kPhotoshop, iptc))
           return false;  // more than the datasets OIIO writes for the TIFF fields
