@@ -264,19 +264,24 @@ class JpegReader final : public ImageReader {
 // The attributes the direct writer writes as OIIO's plugin would (the rest of the header goes
 // to OIIO's module).
 bool writable_attributes(const ImageHeader& spec) {
-  // ImageDescription is not written here: OIIO's plugin also writes it as a COM marker (and as
-  // IPTC Caption). Exif:ExifVersion, Exif:FlashPixVersion (UNDEFINED in OIIO's table) OIIO
-  // never writes from the attributes: it writes "0230" and "0100".
+  // ImageDescription: a COM marker (before the EXIF block), in IFD0 and as IPTC Caption, as
+  // OIIO's plugin writes it. Exif:ExifVersion, Exif:FlashPixVersion (UNDEFINED in OIIO's table)
+  // OIIO never writes from the attributes: it writes "0230" and "0100".
   static const std::set<std::string> handled = {"oiio:ColorSpace", "Compression",
                                                 "jpeg:subsampling", "ResolutionUnit"};
   for (const Attribute& p : spec.extra_attribs) {
     const std::string& name = p.name;
     if (handled.count(name)) continue;
-    if (iequals(name, "ImageDescription")) return false;
     const bool exif = is_exif_attribute(p), iptc = is_iptc_attribute(p);
     if (!exif && !iptc) return false;  // XMP, ICC, Canon:*, ...: OIIO's
   }
   if (!can_encode_exif(spec.extra_attribs) || !can_encode_iptc(spec.extra_attribs)) return false;
+  // Blocks beyond a JPEG marker's 65533 bytes: what OIIO does with them is its business.
+  const auto description = spec.extra_attribs.find("ImageDescription", kTypeString, false);
+  if ((description != spec.extra_attribs.cend() && description->string_value().size() > 65000) ||
+      encode_exif(spec.extra_attribs).size() > 65533 ||
+      encode_iptc(spec.extra_attribs).size() > 65533)
+    return false;
   // A Canon's attributes: OIIO writes a maker note from its Canon:* ones.
   const auto make = spec.extra_attribs.find("Make", kTypeUnknown, false);
   if (make != spec.extra_attribs.cend() && iequals(make->get_string(), "Canon")) return false;
@@ -361,7 +366,14 @@ class JpegWriter final : public ImageWriter {
     for (int c = 1; c < 3; ++c)
       cinfo_.comp_info[c].h_samp_factor = cinfo_.comp_info[c].v_samp_factor = 1;
     jpeg_start_compress(&cinfo_, TRUE);
-    // As OIIO's plugin: always an EXIF block (an empty one without fields), then IPTC.
+    // As OIIO's plugin: the description as a COM marker (with its NUL), always an EXIF block
+    // (an empty one without fields), then IPTC.
+    const auto description = spec.extra_attribs.find("ImageDescription", kTypeString, false);
+    if (description != spec.extra_attribs.cend() && !description->string_value().empty()) {
+      const std::string& text = description->string_value();
+      jpeg_write_marker(&cinfo_, JPEG_COM, reinterpret_cast<const JOCTET*>(text.c_str()),
+                        unsigned(text.size() + 1));
+    }
     jpeg_write_marker(&cinfo_, JPEG_APP0 + 1, reinterpret_cast<const JOCTET*>(exif.data()),
                       unsigned(exif.size()));
     if (!iptc.empty())

@@ -627,7 +627,8 @@ struct Dataset {
 };
 constexpr Dataset kDatasets[] = {{65, "Software", "IPTC:OriginatingProgram", false},
                                  {80, "Artist", "IPTC:Creator", true},
-                                 {116, "Copyright", "IPTC:CopyrightNotice", false}};
+                                 {116, "Copyright", "IPTC:CopyrightNotice", false},
+                                 {120, "ImageDescription", "IPTC:Caption", false}};
 
 }  // namespace
 
@@ -656,6 +657,10 @@ bool decode_iptc(const unsigned char* data, std::size_t size, AttributeList& out
       if (!d || n == 0) return false;  // empty values: OIIO's own handling
       const std::string_view value(reinterpret_cast<const char*>(data + q + 5), n);
       if (value.find('\0') != std::string_view::npos) return false;
+      // A repeatable dataset's value OIIO trims (31 spaces read as ""): left to OIIO.
+      if (d->repeatable && (std::isspace(static_cast<unsigned char>(value.front())) ||
+                            std::isspace(static_cast<unsigned char>(value.back()))))
+        return false;
       const auto it = out.find(d->name);
       if (it != out.end() && d->repeatable)
         *it = Attribute(d->name, it->string_value() + "; " + std::string(value));
@@ -680,12 +685,15 @@ bool can_encode_iptc(const AttributeList& attributes) {
     for (const Attribute& p : attributes) {
       if (!iequals(p.name, d.field) && !iequals(p.name, d.name)) continue;
       ++seen;
-      // A name twice (in two cases), a value OIIO would split at ";" or asserts on (empty),
-      // or not text: OIIO's.
+      // A name twice (in two cases), a value OIIO would split at ";", or not text: OIIO's.
+      // An empty text OIIO's writer asserts on (it aborts): written without the dataset.
       if (!p.type.is(DataType::kString)) return false;
       const std::string& v = p.string_value();
-      if (v.empty() || v.size() > 0x7FFF || v.find('\0') != std::string::npos) return false;
-      if (d.repeatable && v.find(';') != std::string::npos) return false;
+      if (v.size() > 0x7FFF || v.find('\0') != std::string::npos) return false;
+      if (d.repeatable && (v.find(';') != std::string::npos ||
+                           (!v.empty() && (std::isspace(static_cast<unsigned char>(v.front())) ||
+                                           std::isspace(static_cast<unsigned char>(v.back()))))))
+        return false;
     }
     if (seen > 2) return false;
     const auto a = attributes.find(d.field, kTypeUnknown, false);
@@ -704,6 +712,7 @@ std::vector<char> encode_iptc(const AttributeList& attributes) {
       const auto it = attributes.find(source, kTypeString, false);
       if (it == attributes.cend()) continue;
       const std::string& v = it->string_value();
+      if (v.empty()) continue;  // OIIO's writer aborts on it
       const std::size_t n = std::min<std::size_t>(v.size(), 0x7FFF);
       for (int c : {0x1C, 2, d.number, int(n >> 8), int(n & 0xFF)}) iim.push_back(char(c));
       iim.insert(iim.end(), v.begin(), v.begin() + std::ptrdiff_t(n));

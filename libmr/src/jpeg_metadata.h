@@ -30,17 +30,18 @@ bool can_encode_exif(const AttributeList& attributes);
 std::vector<char> encode_exif(const AttributeList& attributes);
 
 // IPTC-IIM (an APP13 "Photoshop 3.0" block): OIIO writes IPTC:OriginatingProgram, IPTC:Creator,
-// IPTC:CopyrightNotice and, after each, Software, Artist and Copyright as datasets 2:65, 2:80,
-// 2:116, and reads them back as the IPTC names (a repeated dataset replacing the value, Creator's
-// joined with "; ").
+// IPTC:CopyrightNotice, IPTC:Caption and, after each, Software, Artist, Copyright and
+// ImageDescription as datasets 2:65, 2:80, 2:116, 2:120, and reads them back as the IPTC names
+// (a repeated dataset replacing the value, Creator's joined with "; "). An empty text (on which
+// OIIO 2.4's writer asserts and aborts) is left out.
 
 /// Decodes the block after "Photoshop 3.0\0"; false if it holds anything but those datasets.
 bool decode_iptc(const unsigned char* data, std::size_t size, AttributeList& out);
-/// True if `p` is one of the six attributes above.
+/// True if `p` is one of the eight attributes above.
 bool is_iptc_attribute(const Attribute& p);
-/// True if encode_iptc writes what OIIO writes for them (texts, non-empty, no ";" to split).
+/// True if encode_iptc writes what OIIO writes for them (texts, no ";" for Creator to split).
 bool can_encode_iptc(const AttributeList& attributes);
-/// The APP13 block OIIO writes for `attributes`, or empty if none of the six is there.
+/// The APP13 block OIIO writes for `attributes`, or empty if none of the eight is there.
 std::vector<char> encode_iptc(const AttributeList& attributes);
 
 }  // namespace mr::detail
