@@ -186,6 +186,40 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
                                segment(0xE3, "Meta data of a maker") +
                                segment(0xED, std::string("Adobe_CM\0\1\2", 11))));
     files.push_back(dir / "other_blocks.jpg");
+    // PNGs as OIIO writes them: 8-bit RGB (sRGB), 16-bit grey (linear: gAMA 1), gamma 2.2,
+    // 1-bit-free text chunks and a resolution (pHYs, tIME, tEXt), and with alpha (OIIO's).
+    write_image(dir / "photo.png", photo);
+    auto write_png = [&](const std::string& name, int channels, OIIO::TypeDesc format,
+                         const std::vector<std::pair<std::string, std::string>>& texts,
+                         float resolution) {
+      OIIO::ImageSpec s(19, 13, channels, format);
+      for (const auto& [key, value] : texts) s.attribute(key, value);
+      if (resolution > 0) {
+        s.attribute("XResolution", resolution);
+        s.attribute("YResolution", resolution);
+        s.attribute("ResolutionUnit", "in");
+      }
+      std::vector<std::uint16_t> values(std::size_t(19 * 13 * channels));
+      for (std::size_t i = 0; i < values.size(); ++i)
+        values[i] = std::uint16_t((i * 7919u) % 65536u);
+      auto w = OIIO::ImageOutput::create("png");
+      ASSERT_TRUE(w && w->open((dir / name).string(), s));
+      ASSERT_TRUE(w->write_image(OIIO::TypeDesc::UINT16, values.data()));
+      w->close();
+      files.push_back(dir / name);
+    };
+    files.push_back(dir / "photo.png");
+    write_png("grey16.png", 1, OIIO::TypeDesc::UINT16, {{"oiio:ColorSpace", "Linear"}}, 0);
+    write_png("gamma.png", 3, OIIO::TypeDesc::UINT8, {{"oiio:ColorSpace", "Gamma2.2"}}, 0);
+    write_png("texts.png", 3, OIIO::TypeDesc::UINT8,
+              {{"ImageDescription", "A test; with text"},
+               {"Artist", "Someone"},
+               {"DocumentName", "Title"},
+               {"Software", "mr test"},
+               {"DateTime", "2026:12:03 16:00:00"},
+               {"Comment", "free text"}},
+              300);
+    write_png("alpha.png", 4, OIIO::TypeDesc::UINT8, {}, 0);
     // A camera JPEG as OIIO writes one (bench/make_fog_inputs.py's): the iPhone photo's
     // attributes but its XMP (which OIIO's reader turns into attributes of its own).
     auto in =
@@ -232,8 +266,9 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
   std::printf("%d of %d files decoded directly\n", direct, total);
   EXPECT_GT(direct, 0);
   // Camera EXIF is read directly: the iPhone's block (GPS, an Apple maker note), OIIO's, and
-  // beside blocks OIIO ignores.
-  for (const char* name : {"exif_of_leuven.jpg", "oiio_camera.jpg", "other_blocks.jpg"})
+  // beside blocks OIIO ignores; so are PNGs without alpha.
+  for (const char* name : {"exif_of_leuven.jpg", "oiio_camera.jpg", "other_blocks.jpg", "photo.png",
+                           "grey16.png", "gamma.png", "texts.png"})
     EXPECT_TRUE(detail::open_direct_reader(dir / name)) << name;
 }
 
