@@ -1,5 +1,6 @@
 // Issue 12, start-up: `mr` maps OpenImageIO and OpenCV's ximgproc / dnn only when a run needs
-// them. A streamed sky-only `mr fog` of a 16x12 JPEG with its depth EXR loads none of them
+// them. A streamed sky-only `mr fog` of a 16x12 JPEG (also one with a camera's EXIF, and a PNG)
+// with its depth EXR loads none of them
 // (the dynamic loader's own log, LD_DEBUG=files, lists every library a process maps); reading
 // a TIFF loads OIIO's module, and estimating geometry loads OpenCV's contrib module, and both
 // work. And libmr.so itself does not need them (readelf -d), nor libOpenImageIO_Util (its
@@ -120,6 +121,23 @@ TEST(Startup, CameraJpegLoadsNoHeavyLibrary) {
   const Metadata out = read_image(dir / "out" / "tiny_fog.jpg").metadata();
   EXPECT_EQ(out.get_string("Model").value_or(""), "iPhone 6");
   EXPECT_TRUE(out.contains("GPS:Latitude"));
+}
+
+TEST(Startup, PngInputLoadsNoHeavyLibrary) {
+  // A PNG photo (written by OIIO's module, in this process) fogged into a JPEG: read through
+  // libpng, no OIIO library in `mr`.
+  test::ScratchDir dir;
+  write_inputs(dir.path());
+  write_image(dir / "tiny.png", read_image(dir / "tiny.jpg"));
+  const test::CommandResult r =
+      run_mr("fog " + test::shell_quoted(dir / "tiny.png") + " --depth " +
+             test::shell_quoted(dir / "tiny_depth.exr") + " --out-dir " +
+             test::shell_quoted(dir / "out") + " --format jpg --visibility 150m --airlight 0.8 -q");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(dir / "out" / "tiny_fog.jpg")) << r.output;
+  for (const std::string& lib : kHeavy) EXPECT_FALSE(maps(r.output, lib)) << lib << " was loaded";
+  EXPECT_FALSE(maps(r.output, "libmr_oiio.so"));
+  EXPECT_FALSE(maps(r.output, "libOpenImageIO_Util"));
 }
 
 TEST(Startup, TiffAndEstimationLoadTheirModules) {
