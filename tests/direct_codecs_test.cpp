@@ -462,6 +462,13 @@ TEST(DirectCodecs, WritesCameraJpegAsOiio) {
   a.attribute("ImageDescription", "");
   compare_writers(photo, dir.path(), "empty_texts", colorspace::srgb, 1,
                   {"Copyright", "ImageDescription"});
+  // The same through OIIO's writer (a pixel aspect it writes itself): no abort either.
+  a.attribute("XResolution", 300.0f);
+  a.attribute("YResolution", 200.0f);
+  compare_writers(photo, dir.path(), "empty_texts_oiio", colorspace::srgb, 0,
+                  {"Copyright", "ImageDescription"});
+  a.attribute("XResolution", 72.0f);
+  a.attribute("YResolution", 72.0f);
   a.attribute("Copyright", "CC BY 4.0");
   a.remove("ImageDescription");
   // Left to OIIO's writer (the same file anyway): a Canon (OIIO writes a maker note from its

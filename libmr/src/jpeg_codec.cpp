@@ -327,7 +327,15 @@ class JpegWriter final : public ImageWriter {
     if (!writable_attributes(spec)) {
       fallback_.reset(oiio_module().create_writer(output_.string()));
       if (!fallback_) throw Error(ErrorCode::invalid_argument, name + ": no JPEG writer");
-      fallback_->open(path, name, spec);
+      // Without the empty texts OIIO's IPTC encoder asserts on (it aborts the process): the
+      // file OIIO would write if it did not.
+      ImageHeader header = spec;
+      for (auto it = header.extra_attribs.begin(); it != header.extra_attribs.end();)
+        if (is_iptc_attribute(*it) && it->type.is(DataType::kString) && it->string_value().empty())
+          it = header.extra_attribs.erase(it);
+        else
+          ++it;
+      fallback_->open(path, name, header);
       return;
     }
     file_ = std::fopen(path.c_str(), "wb");
