@@ -10,6 +10,7 @@
 
 #include <cstring>
 #include <filesystem>
+#include <random>
 #include <vector>
 
 #include "core/metadata_impl.h"
@@ -38,6 +39,32 @@ std::vector<fs::path> sample_files() {
     }
   std::sort(out.begin(), out.end());
   return out;
+}
+
+// The first APPn segment of a JPEG whose data starts with `prefix` (marker, length and data),
+// or "" if none.
+std::string jpeg_segment(const std::string& jpeg, int marker, const std::string& prefix) {
+  std::size_t at = 2;
+  while (at + 4 <= jpeg.size() && static_cast<unsigned char>(jpeg[at]) == 0xFF) {
+    const int m = static_cast<unsigned char>(jpeg[at + 1]);
+    if (m == 0xDA) break;
+    const std::size_t len = std::size_t(static_cast<unsigned char>(jpeg[at + 2])) << 8 |
+                            static_cast<unsigned char>(jpeg[at + 3]);
+    if (m == marker && jpeg.compare(at + 4, prefix.size(), prefix) == 0)
+      return jpeg.substr(at, 2 + len);
+    at += 2 + len;
+  }
+  return "";
+}
+
+// `jpeg` with `segment` inserted right after its SOI marker.
+std::string with_segment(const std::string& jpeg, const std::string& segment) {
+  return jpeg.substr(0, 2) + segment + jpeg.substr(2);
+}
+
+// `jpeg` without the segment `segment` (one of its own).
+std::string without_segment(std::string jpeg, const std::string& segment) {
+  return jpeg.erase(jpeg.find(segment), segment.size());
 }
 
 void expect_same_attributes(const OIIO::ParamValueList& got, const OIIO::ParamValueList& want,
@@ -124,6 +151,89 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
     write_image(dir / "half.exr", photo, half);
     write_image(dir / "photo.jpg", photo);
     files.insert(files.end(), {dir / "depth.exr", dir / "half.exr", dir / "photo.jpg"});
+    // Camera EXIF: the EXIF block of every sample and gallery JPEG (phones, Canon, Olympus,
+    // Minolta; both byte orders; GPS, maker notes) in a small JPEG of its own, in place of
+    // the one libmr wrote.
+    const std::string small = test::read_bytes(dir / "photo.jpg");
+    const std::string own = jpeg_segment(small, 0xE1, std::string("Exif\0", 5));
+    ASSERT_FALSE(own.empty());
+    const std::string bare = without_segment(small, own);
+    for (const fs::path& source : sample_files()) {
+      if (source.extension() != ".jpg") continue;
+      const std::string exif =
+          jpeg_segment(test::read_bytes(source), 0xE1, std::string("Exif\0", 5));
+      if (exif.empty()) continue;
+      const fs::path spliced = dir / ("exif_of_" + source.stem().string() + ".jpg");
+      test::write_bytes(spliced, with_segment(bare, exif));
+      files.push_back(spliced);
+    }
+    // Blocks OIIO's reader ignores (a phone's MPF APP2, an XMP extension, an APP1 that is not
+    // "Exif", makers' own APPn, an APP13 that is not "Photoshop 3.0") beside an iPhone's EXIF.
+    auto segment = [](int marker, const std::string& data) {
+      return std::string(1, '\xFF') + char(marker) + char((data.size() + 2) >> 8) +
+             char((data.size() + 2) & 0xFF) + data;
+    };
+    const std::string iphone =
+        jpeg_segment(test::read_bytes(fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg"),
+                     0xE1, std::string("Exif\0", 5));
+    test::write_bytes(
+        dir / "other_blocks.jpg",
+        with_segment(bare, iphone + segment(0xE2, std::string("MPF\0II*\0\x08\0\0\0", 12)) +
+                               segment(0xE1, std::string("http://ns.adobe.com/xmp/extension/\0"
+                                                         "0123456789ABCDEF0123456789ABCDEF",
+                                                         67)) +
+                               segment(0xE1, std::string("ExifX\0\0II*\0", 10)) +
+                               segment(0xE3, "Meta data of a maker") +
+                               segment(0xED, std::string("Adobe_CM\0\1\2", 11))));
+    files.push_back(dir / "other_blocks.jpg");
+    // PNGs as OIIO writes them: 8-bit RGB (sRGB), 16-bit grey (linear: gAMA 1), gamma 2.2,
+    // 1-bit-free text chunks and a resolution (pHYs, tIME, tEXt), and with alpha (OIIO's).
+    write_image(dir / "photo.png", photo);
+    auto write_png = [&](const std::string& name, int channels, OIIO::TypeDesc format,
+                         const std::vector<std::pair<std::string, std::string>>& texts,
+                         float resolution) {
+      OIIO::ImageSpec s(19, 13, channels, format);
+      for (const auto& [key, value] : texts) s.attribute(key, value);
+      if (resolution > 0) {
+        s.attribute("XResolution", resolution);
+        s.attribute("YResolution", resolution);
+        s.attribute("ResolutionUnit", "in");
+      }
+      std::vector<std::uint16_t> values(std::size_t(19 * 13 * channels));
+      for (std::size_t i = 0; i < values.size(); ++i)
+        values[i] = std::uint16_t((i * 7919u) % 65536u);
+      auto w = OIIO::ImageOutput::create("png");
+      ASSERT_TRUE(w && w->open((dir / name).string(), s));
+      ASSERT_TRUE(w->write_image(OIIO::TypeDesc::UINT16, values.data()));
+      w->close();
+      files.push_back(dir / name);
+    };
+    files.push_back(dir / "photo.png");
+    write_png("grey16.png", 1, OIIO::TypeDesc::UINT16, {{"oiio:ColorSpace", "Linear"}}, 0);
+    write_png("gamma.png", 3, OIIO::TypeDesc::UINT8, {{"oiio:ColorSpace", "Gamma2.2"}}, 0);
+    write_png("texts.png", 3, OIIO::TypeDesc::UINT8,
+              {{"ImageDescription", "A test; with text"},
+               {"Artist", "Someone"},
+               {"DocumentName", "Title"},
+               {"Software", "mr test"},
+               {"DateTime", "2026:12:03 16:00:00"},
+               {"Comment", "free text"}},
+              300);
+    write_png("alpha.png", 4, OIIO::TypeDesc::UINT8, {}, 0);
+    // A camera JPEG as OIIO writes one (bench/make_fog_inputs.py's): the iPhone photo's
+    // attributes but its XMP (which OIIO's reader turns into attributes of its own).
+    auto in =
+        OIIO::ImageInput::open((fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg").string());
+    ASSERT_TRUE(in);
+    OIIO::ImageSpec spec(33, 17, 3, OIIO::TypeDesc::UINT8);
+    spec.extra_attribs = in->spec().extra_attribs;
+    std::vector<unsigned char> pixels(33 * 17 * 3);
+    for (std::size_t i = 0; i < pixels.size(); ++i) pixels[i] = static_cast<unsigned char>(i * 7);
+    auto out = OIIO::ImageOutput::create("jpg");
+    ASSERT_TRUE(out && out->open((dir / "oiio_camera.jpg").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+    out->close();
+    files.push_back(dir / "oiio_camera.jpg");
   }
   int direct = 0, total = 0;
   for (const fs::path& path : files) {
@@ -155,13 +265,69 @@ TEST(DirectCodecs, DecodesEverySampleAsOiio) {
   }
   std::printf("%d of %d files decoded directly\n", direct, total);
   EXPECT_GT(direct, 0);
+  // Camera EXIF is read directly: the iPhone's block (GPS, an Apple maker note), OIIO's, and
+  // beside blocks OIIO ignores; so are PNGs without alpha.
+  for (const char* name : {"exif_of_leuven.jpg", "oiio_camera.jpg", "other_blocks.jpg", "photo.png",
+                           "grey16.png", "gamma.png", "texts.png"})
+    EXPECT_TRUE(detail::open_direct_reader(dir / name)) << name;
+}
+
+// Randomly damaged camera EXIF blocks (bytes changed anywhere in the TIFF structure: counts,
+// types, offsets, values; blocks cut short), each in a small JPEG: every one the direct reader
+// takes decodes to OIIO's attributes exactly (the rest goes to OIIO's module). Seeded, so the
+// same 400 files each run; the test fails if fewer than 40 are taken (it would test nothing).
+TEST(DirectCodecs, DamagedExifDecodesAsOiioOrGoesToIt) {
+  test::ScratchDir dir;
+  write_image(dir / "small.jpg", test::make_test_photo(16, 12));
+  const std::string small = test::read_bytes(dir / "small.jpg");
+  const std::string bare =
+      without_segment(small, jpeg_segment(small, 0xE1, std::string("Exif\0", 5)));
+  std::vector<std::string> blocks;
+  for (const fs::path& source : sample_files()) {
+    if (source.extension() != ".jpg") continue;
+    const std::string exif = jpeg_segment(test::read_bytes(source), 0xE1, std::string("Exif\0", 5));
+    if (!exif.empty()) blocks.push_back(exif.substr(4));  // "Exif\0\0" and the TIFF block
+  }
+  ASSERT_GT(blocks.size(), 10u);
+  std::mt19937 random(13);
+  auto below = [&](std::size_t n) { return std::size_t(random() % std::max<std::size_t>(n, 1)); };
+  int direct = 0;
+  for (int k = 0; k < 400; ++k) {
+    std::string b = blocks[below(blocks.size())];
+    const int changes = 1 + int(below(8));
+    for (int c = 0; c < changes; ++c) {
+      // Mostly in the first 200 bytes, where the directories are.
+      const std::size_t at = 6 + below(std::min<std::size_t>(b.size() - 6, k % 2 ? 200 : b.size()));
+      b[at] = char(random() % 4 == 0 ? 0xFF : random() % 3 == 0 ? 0 : random() & 0xFF);
+    }
+    if (k % 10 == 0) b.resize(6 + below(b.size() - 6));
+    const std::string segment =
+        std::string("\xFF\xE1", 2) + char((b.size() + 2) >> 8) + char((b.size() + 2) & 0xFF) + b;
+    const fs::path path = dir / ("damaged_" + std::to_string(k) + ".jpg");
+    test::write_bytes(path, with_segment(bare, segment));
+    SCOPED_TRACE(path.string());
+    auto mine = detail::open_direct_reader(path);
+    if (!mine) continue;  // OIIO's module reads it
+    ++direct;
+    auto oiio = OIIO::ImageInput::open(path.string());
+    ASSERT_TRUE(oiio);
+    expect_same_attributes(mine->spec().extra_attribs, oiio->spec().extra_attribs,
+                           path.filename().string());
+    expect_same_pixels(*mine, *oiio, OIIO::TypeDesc::UINT8, path.filename().string());
+  }
+  std::printf("%d of 400 damaged EXIF blocks decoded directly\n", direct);
+  EXPECT_GE(direct, 40);
 }
 
 // What write_image stores for a photo with `metadata`: through the direct writer, and through
 // OIIO's (the module's writer given the same header), compared by OIIO's decode.
 // `colour` is the oiio:ColorSpace tag: write_image's (the config's sRGB) or OIIO's "sRGB".
+// `direct`: whether libmr's writer must write it itself (1), through OIIO's module (0), or
+// either (-1).
+// `not_for_oiio`: attributes left out of OIIO's header (ones its writer aborts on).
 void compare_writers(const Image& photo, const fs::path& dir, const std::string& name,
-                     const std::string& colour = colorspace::srgb) {
+                     const std::string& colour = colorspace::srgb, int direct = -1,
+                     const std::vector<std::string>& not_for_oiio = {}) {
   // The header write_image gives the writer: the photo's metadata with the encoding set.
   detail::ImageHeader h;
   h.width = photo.width(), h.height = photo.height(), h.nchannels = 3;
@@ -171,6 +337,9 @@ void compare_writers(const Image& photo, const fs::path& dir, const std::string&
   h.attribute("oiio:ColorSpace", colour);
   h.attribute("Compression", "jpeg:90");
   h.attribute("jpeg:subsampling", "4:4:4");
+  if (direct >= 0) {
+    EXPECT_EQ(detail::writes_jpeg_directly(h), direct == 1) << name;
+  }
   // OCIO's sRGB codes of the photo, as write_image makes them.
   ColorConfig config = ColorConfig::builtin();
   std::vector<unsigned char> codes(photo.pixel_count() * 3);
@@ -185,7 +354,10 @@ void compare_writers(const Image& photo, const fs::path& dir, const std::string&
                        : std::unique_ptr<detail::ImageWriter>(
                              detail::oiio_module().create_writer(path.string()));
     ASSERT_TRUE(w);
-    w->open(path.string(), path.string(), h);
+    detail::ImageHeader header = h;
+    if (path == theirs)
+      for (const std::string& n : not_for_oiio) header.extra_attribs.remove(n);
+    w->open(path.string(), path.string(), header);
     w->write_image(detail::kTypeUInt8, codes.data());
     w->close();
   }
@@ -237,6 +409,75 @@ TEST(DirectCodecs, WritesJpegAsOiio) {
   // Attributes the direct writer leaves to OIIO's (EXIF sub-directory): the same file anyway.
   photo.metadata().impl().attributes.attribute("Exif:FocalLengthIn35mmFilm", 28);
   compare_writers(photo, dir.path(), "exif");
+}
+
+// A camera's metadata (as libmr reads it from a photo with an iPhone's EXIF block: Exif and
+// GPS directories, IPTC) written by libmr's writer itself, and OIIO's quirks with it: a float
+// whose inverse is whole written as 1/(int)f (0.5 reads back as infinity), a tag named twice,
+// integers for rationals and floats for integers (not written), empty texts (not written),
+// versions (OIIO's own), arrays for single values (their first), IPTC datasets from both names.
+TEST(DirectCodecs, WritesCameraJpegAsOiio) {
+  test::ScratchDir dir;
+  const Image small = test::make_test_photo(37, 21);
+  write_image(dir / "small.jpg", small);
+  const std::string bytes = test::read_bytes(dir / "small.jpg");
+  const std::string own = jpeg_segment(bytes, 0xE1, std::string("Exif\0", 5));
+  const std::string iphone =
+      jpeg_segment(test::read_bytes(fs::path(MR_SOURCE_DIR) / "sample_photos" / "leuven.jpg"), 0xE1,
+                   std::string("Exif\0", 5));
+  ASSERT_FALSE(own.empty() || iphone.empty());
+  test::write_bytes(dir / "iphone.jpg", with_segment(without_segment(bytes, own), iphone));
+  Image photo = read_image(dir / "iphone.jpg");
+  ASSERT_TRUE(photo.metadata().impl().attributes.contains("GPS:Latitude"));
+  compare_writers(photo, dir.path(), "iphone", colorspace::srgb, 1);
+  compare_writers(photo, dir.path(), "iphone_srgb", "sRGB", 1);
+  auto& a = photo.metadata().impl().attributes;
+  using detail::DataType;
+  a.attribute("ExposureTime", 0.5f);
+  a.attribute("Exif:ShutterSpeedValue", -3.3f);
+  const std::uint16_t iso[] = {200, 400};
+  a.attribute("Exif:ISOSpeedRatings", detail::kTypeUInt16, iso);
+  a.attribute("Exif:PhotographicSensitivity", detail::kTypeUInt16, iso + 1);
+  a.attribute("Orientation", 3.0f);
+  a.attribute("Exif:MaxApertureValue", 2);
+  a.attribute("Exif:PixelXDimension", 4000);
+  a.attribute("Exif:ExifVersion", "0221");
+  a.attribute("Exif:CameraOwnerName", "");
+  a.attribute("Exif:YCbCrSubsampling", DataType(DataType::kUInt16, 1, 0, 2), iso);
+  a.attribute("GPS:AltitudeRef", 1);
+  const int version[] = {2, 3, 0, 0};
+  a.attribute("GPS:VersionID", DataType(DataType::kInt32, 1, 0, 4), version);
+  a.attribute("GPS:Speed", 3);
+  a.attribute("Artist", "Someone");
+  a.attribute("IPTC:Creator", "Someone Else");
+  a.attribute("IPTC:OriginatingProgram", "Program");
+  a.attribute("Copyright", "CC BY 4.0");
+  a.attribute("ImageDescription", "Fog; a test");  // a COM marker, EXIF and IPTC Caption
+  compare_writers(photo, dir.path(), "quirks", colorspace::srgb, 1);
+  compare_writers(photo, dir.path(), "quirks_srgb", "sRGB", 1);
+  // Empty texts of the IPTC fields (a camera's blank Copyright): OIIO 2.4's writer aborts on
+  // them (an assertion in its IPTC encoder); libmr's leaves them out, and the file decodes as
+  // OIIO's writes it without them.
+  a.attribute("Copyright", "");
+  a.attribute("ImageDescription", "");
+  compare_writers(photo, dir.path(), "empty_texts", colorspace::srgb, 1,
+                  {"Copyright", "ImageDescription"});
+  // The same through OIIO's writer (a pixel aspect it writes itself): no abort either.
+  a.attribute("XResolution", 300.0f);
+  a.attribute("YResolution", 200.0f);
+  compare_writers(photo, dir.path(), "empty_texts_oiio", colorspace::srgb, 0,
+                  {"Copyright", "ImageDescription"});
+  a.attribute("XResolution", 72.0f);
+  a.attribute("YResolution", 72.0f);
+  a.attribute("Copyright", "CC BY 4.0");
+  a.remove("ImageDescription");
+  // Left to OIIO's writer (the same file anyway): a Canon (OIIO writes a maker note from its
+  // Canon:* attributes), a Creator OIIO splits at ";".
+  a.attribute("Artist", "One; Two");
+  compare_writers(photo, dir.path(), "split", colorspace::srgb, 0);
+  a.attribute("Artist", "Someone");
+  a.attribute("Make", "Canon");
+  compare_writers(photo, dir.path(), "canon", colorspace::srgb, 0);
 }
 
 // mr's attribute list (core/attributes.h) against OIIO's ParamValueList on values of every

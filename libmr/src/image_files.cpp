@@ -21,6 +21,7 @@ std::string lower(std::string s) {
 
 std::unique_ptr<ImageReader> open_direct_reader(const std::filesystem::path& path) {
   if (auto jpeg = open_jpeg_reader(path)) return jpeg;
+  if (auto png = open_png_reader(path)) return png;
   return open_exr_reader(path);
 }
 

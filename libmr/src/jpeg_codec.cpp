@@ -2,8 +2,8 @@
 // (libmr/src/direct_codecs.h): libjpeg's defaults for decoding (ISLOW DCT, fancy upsampling, RGB or
 // grey out), the same attributes (oiio:ColorSpace, jpeg:subsampling, the JFIF density as
 // XResolution, YResolution, ResolutionUnit and PixelAspectRatio, a COM marker as ImageDescription,
-// the TIFF fields of an EXIF block), and for writing the same quality, chroma subsampling, JFIF
-// density and EXIF. libjpeg's errors longjmp back here (its default error_exit would exit the
+// a camera's EXIF block), and for writing the same quality, chroma subsampling, JFIF density,
+// EXIF and IPTC. libjpeg's errors longjmp back here (its default error_exit would exit the
 // process).
 #include <algorithm>
 #include <cmath>
@@ -156,25 +156,36 @@ class JpegReader final : public ImageReader {
  private:
   // The attributes OIIO's plugin sets, in its order; false for markers it leaves to OIIO.
   bool header_attributes() {
+    // OIIO's plugin reads an APP1 whose text (up to its NUL) is "Exif" (EXIF) or the XMP
+    // namespace, an APP13 "Photoshop 3.0" (IPTC), APP2 "ICC_PROFILE" blocks and COM; libjpeg
+    // reads APP0 JFIF and APP14 Adobe. Other blocks (an MPF APP2, XMP extensions, makers' own
+    // APPn) it ignores, and so does this.
+    const std::string xmp = "http://ns.adobe.com/xap/1.0/";
+    int exif_blocks = 0, iptc_blocks = 0;
     for (jpeg_saved_marker_ptr m = cinfo_.marker_list; m; m = m->next) {
-      const bool ok =
-          (m->marker == JPEG_APP0 && (starts_with(m, "JFIF", 5) || starts_with(m, "JFXX", 5))) ||
-          (m->marker == JPEG_APP0 + 14 && starts_with(m, "Adobe", 5)) ||
-          (m->marker == JPEG_APP0 + 1 && starts_with(m, "Exif\0", 5)) ||
-          (m->marker == JPEG_APP0 + 13 && starts_with(m, kPhotoshop, sizeof kPhotoshop)) ||
-          m->marker == JPEG_COM;
-      if (!ok) return false;  // XMP, an ICC profile, maker-specific blocks: OIIO's
+      const char* text = reinterpret_cast<const char*>(m->data);
+      const bool has_nul = std::memchr(m->data, 0, m->data_length) != nullptr;
+      if (m->marker == JPEG_APP0 + 1 || m->marker == JPEG_APP0 + 13) {
+        if (!has_nul) return false;  // OIIO's strcmp would read past the block
+        if (m->marker == JPEG_APP0 + 1 && text == xmp) return false;  // XMP: OIIO's
+        exif_blocks += m->marker == JPEG_APP0 + 1 && std::string_view(text) == "Exif";
+        iptc_blocks += m->marker == JPEG_APP0 + 13 && std::string_view(text) == kPhotoshop;
+      } else if (m->marker == JPEG_APP0 + 2 && starts_with(m, "ICC_PROFILE", 11)) {
+        return false;  // an ICC profile: OIIO's (it decodes the profile into attributes)
+      }
     }
+    if (exif_blocks > 1 || iptc_blocks > 1) return false;  // which wins: OIIO's business
     spec_.attribute("oiio:ColorSpace", "sRGB");
     const std::string subsampling = subsampling_name(cinfo_);
     if (!subsampling.empty()) spec_.attribute("jpeg:subsampling", subsampling);
     for (jpeg_saved_marker_ptr m = cinfo_.marker_list; m; m = m->next) {
-      if (m->marker == JPEG_APP0 + 1) {
+      const char* text = reinterpret_cast<const char*>(m->data);
+      if (m->marker == JPEG_APP0 + 1 && std::string_view(text) == "Exif") {
         AttributeList exif;
-        if (m->data_length < 6 || !decode_tiff_fields(m->data + 6, m->data_length - 6, exif))
-          return false;  // more than the TIFF fields
+        if (m->data_length < 6 || !decode_exif(m->data + 6, m->data_length - 6, exif))
+          return false;  // read otherwise by OIIO
         for (const Attribute& p : exif) spec_.set(p);
-      } else if (m->marker == JPEG_APP0 + 13) {
+      } else if (m->marker == JPEG_APP0 + 13 && std::string_view(text) == kPhotoshop) {
         AttributeList iptc;
         if (!decode_iptc(m->data + sizeof kPhotoshop, m->data_length - sizeof kPhotoshop, iptc))
           return false;  // more than the datasets OIIO writes for the TIFF fields
@@ -186,28 +197,43 @@ class JpegReader final : public ImageReader {
                           std::string_view(reinterpret_cast<const char*>(m->data), m->data_length));
       }
     }
-    // The JFIF density, after the EXIF block, wins over its resolution; a density of 1 gives
-    // only a pixel aspect (libjpeg's default 1:1 says nothing), and the EXIF values stand.
-    if (cinfo_.X_density > 1 && cinfo_.Y_density > 1) {
-      if (cinfo_.X_density != cinfo_.Y_density) return false;  // a pixel aspect: OIIO's
-      spec_.set(Attribute("XResolution", float(cinfo_.X_density)));
-      spec_.set(Attribute("YResolution", float(cinfo_.Y_density)));
-      switch (cinfo_.density_unit) {
-        case 0:
-          spec_.attribute("ResolutionUnit", "none");
-          break;
-        case 1:
-          spec_.attribute("ResolutionUnit", "in");
-          break;
-        case 2:
-          spec_.attribute("ResolutionUnit", "cm");
-          break;
-        default:
-          return false;
+    // The JFIF density, after the EXIF block: a density (both above 1) replaces the EXIF
+    // resolution, a density of 1 (libjpeg's default 1:1) leaves it; either gives the pixel
+    // aspect (a density of 0, no JFIF, leaves the EXIF's). Then, if there is a resolution, the
+    // JFIF unit replaces any EXIF one (as OIIO 2.4's plugin does).
+    float xdensity = spec_.extra_attribs.get_float("XResolution");
+    float ydensity = spec_.extra_attribs.get_float("YResolution");
+    if (cinfo_.X_density && cinfo_.Y_density) {
+      xdensity = float(cinfo_.X_density), ydensity = float(cinfo_.Y_density);
+      if (xdensity > 1 && ydensity > 1) {
+        spec_.set(Attribute("XResolution", xdensity));
+        spec_.set(Attribute("YResolution", ydensity));
       }
-    } else if (cinfo_.X_density != cinfo_.Y_density) {
-      return false;
     }
+    const bool has_resolution = spec_.extra_attribs.contains("XResolution");
+    if (xdensity != 0 && ydensity != 0) {
+      if (xdensity != ydensity) return false;  // a pixel aspect: OIIO's (it also swaps them)
+      if (has_resolution) {
+        switch (cinfo_.density_unit) {
+          case 0:
+            spec_.attribute("ResolutionUnit", "none");
+            break;
+          case 1:
+            spec_.attribute("ResolutionUnit", "in");
+            break;
+          case 2:
+            spec_.attribute("ResolutionUnit", "cm");
+            break;
+          default:
+            return false;
+        }
+      }
+    }
+    // An EXIF unit that stands (no resolution to go with it): which type OIIO gives it is its
+    // own business.
+    if (!(has_resolution && xdensity != 0 && ydensity != 0) &&
+        spec_.extra_attribs.contains("ResolutionUnit"))
+      return false;
     return true;
   }
 
@@ -238,17 +264,27 @@ class JpegReader final : public ImageReader {
 // The attributes the direct writer writes as OIIO's plugin would (the rest of the header goes
 // to OIIO's module).
 bool writable_attributes(const ImageHeader& spec) {
-  // ImageDescription is not written here: OIIO's plugin also writes it as a COM marker.
-  // The Exif directory's fields OIIO writes for sRGB itself (as "0230", "0100", 1).
-  static const std::set<std::string> handled = {"oiio:ColorSpace",      "Compression",
-                                                "jpeg:subsampling",     "Exif:ExifVersion",
-                                                "Exif:FlashPixVersion", "Exif:ColorSpace"};
+  // ImageDescription: a COM marker (before the EXIF block), in IFD0 and as IPTC Caption, as
+  // OIIO's plugin writes it. Exif:ExifVersion, Exif:FlashPixVersion (UNDEFINED in OIIO's table)
+  // OIIO never writes from the attributes: it writes "0230" and "0100".
+  static const std::set<std::string> handled = {"oiio:ColorSpace", "Compression",
+                                                "jpeg:subsampling", "ResolutionUnit"};
   for (const Attribute& p : spec.extra_attribs) {
     const std::string& name = p.name;
     if (handled.count(name)) continue;
-    if (name != "ImageDescription" && is_tiff_field(p)) continue;  // EXIF (some also IPTC)
-    return false;
+    const bool exif = is_exif_attribute(p), iptc = is_iptc_attribute(p);
+    if (!exif && !iptc) return false;  // XMP, ICC, Canon:*, ...: OIIO's
   }
+  if (!can_encode_exif(spec.extra_attribs) || !can_encode_iptc(spec.extra_attribs)) return false;
+  // Blocks beyond a JPEG marker's 65533 bytes: what OIIO does with them is its business.
+  const auto description = spec.extra_attribs.find("ImageDescription", kTypeString, false);
+  if ((description != spec.extra_attribs.cend() && description->string_value().size() > 65000) ||
+      encode_exif(spec.extra_attribs).size() > 65533 ||
+      encode_iptc(spec.extra_attribs).size() > 65533)
+    return false;
+  // A Canon's attributes: OIIO writes a maker note from its Canon:* ones.
+  const auto make = spec.extra_attribs.find("Make", kTypeUnknown, false);
+  if (make != spec.extra_attribs.cend() && iequals(make->get_string(), "Canon")) return false;
   // A resolution: equal in x and y and whole (the JFIF density holds it exactly).
   const bool has_x = spec.extra_attribs.contains("XResolution");
   const bool has_y = spec.extra_attribs.contains("YResolution");
@@ -257,13 +293,9 @@ bool writable_attributes(const ImageHeader& spec) {
                                    xres != std::floor(xres) || !(xres >= 1 && xres <= 65535))))
     return false;
   const std::string colour = spec.get_string_attribute("oiio:ColorSpace");
-  if (spec.get_string_attribute("Exif:ExifVersion") != "0230" &&
-      spec.extra_attribs.contains("Exif:ExifVersion"))
-    return false;
-  if (spec.get_string_attribute("Exif:FlashPixVersion") != "0100" &&
-      spec.extra_attribs.contains("Exif:FlashPixVersion"))
-    return false;
-  if (spec.extra_attribs.contains("Exif:ColorSpace") &&
+  // An sRGB image's Exif ColorSpace 1 against another value from the attributes: which one
+  // OIIO keeps is its business.
+  if (colour == "sRGB" && spec.extra_attribs.contains("Exif:ColorSpace", kTypeUnknown, false) &&
       spec.get_int_attribute("Exif:ColorSpace") != 1)
     return false;
   const std::string sub = spec.get_string_attribute("jpeg:subsampling");
@@ -295,7 +327,15 @@ class JpegWriter final : public ImageWriter {
     if (!writable_attributes(spec)) {
       fallback_.reset(oiio_module().create_writer(output_.string()));
       if (!fallback_) throw Error(ErrorCode::invalid_argument, name + ": no JPEG writer");
-      fallback_->open(path, name, spec);
+      // Without the empty texts OIIO's IPTC encoder asserts on (it aborts the process): the
+      // file OIIO would write if it did not.
+      ImageHeader header = spec;
+      for (auto it = header.extra_attribs.begin(); it != header.extra_attribs.end();)
+        if (is_iptc_attribute(*it) && it->type.is(DataType::kString) && it->string_value().empty())
+          it = header.extra_attribs.erase(it);
+        else
+          ++it;
+      fallback_->open(path, name, header);
       return;
     }
     file_ = std::fopen(path.c_str(), "wb");
@@ -304,7 +344,7 @@ class JpegWriter final : public ImageWriter {
     int quality = 98;  // OIIO's default
     const std::string compression = spec.get_string_attribute("Compression");
     if (compression.size() > 5) quality = std::clamp(std::atoi(compression.c_str() + 5), 1, 100);
-    const std::vector<char> exif = encode_tiff_fields(spec.extra_attribs);
+    const std::vector<char> exif = encode_exif(spec.extra_attribs);
     const std::vector<char> iptc = encode_iptc(spec.extra_attribs);
     const std::string sub = spec.get_string_attribute("jpeg:subsampling");
     const std::string unit = spec.get_string_attribute("ResolutionUnit");
@@ -334,7 +374,14 @@ class JpegWriter final : public ImageWriter {
     for (int c = 1; c < 3; ++c)
       cinfo_.comp_info[c].h_samp_factor = cinfo_.comp_info[c].v_samp_factor = 1;
     jpeg_start_compress(&cinfo_, TRUE);
-    // As OIIO's plugin: always an EXIF block (an empty one without fields), then IPTC.
+    // As OIIO's plugin: the description as a COM marker (with its NUL), always an EXIF block
+    // (an empty one without fields), then IPTC.
+    const auto description = spec.extra_attribs.find("ImageDescription", kTypeString, false);
+    if (description != spec.extra_attribs.cend() && !description->string_value().empty()) {
+      const std::string& text = description->string_value();
+      jpeg_write_marker(&cinfo_, JPEG_COM, reinterpret_cast<const JOCTET*>(text.c_str()),
+                        unsigned(text.size() + 1));
+    }
     jpeg_write_marker(&cinfo_, JPEG_APP0 + 1, reinterpret_cast<const JOCTET*>(exif.data()),
                       unsigned(exif.size()));
     if (!iptc.empty())
@@ -394,6 +441,10 @@ std::unique_ptr<ImageReader> open_jpeg_reader(const std::filesystem::path& path)
   auto reader = std::make_unique<JpegReader>(path.string());
   if (!reader->open()) return nullptr;
   return reader;
+}
+
+bool writes_jpeg_directly(const ImageHeader& spec) {
+  return writable_attributes(spec);
 }
 
 std::unique_ptr<ImageWriter> create_jpeg_writer(const std::filesystem::path& path) {
