@@ -8,6 +8,8 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "mr/mr.h"
 #include "test_support.h"
@@ -40,6 +42,21 @@ test::CommandResult run_mr(const std::string& args) {
   return test::run("LD_DEBUG=files " + std::string(MR_CLI_PATH) + " " + args + " 2>&1");
 }
 
+// `mr fog` of `photo` (in dir) with tiny_depth.exr, a sky-only fog, into dir/out.
+test::CommandResult fog_tiny(const test::ScratchDir& dir, const std::string& photo,
+                             const std::string& extra = "") {
+  return run_mr("fog " + test::shell_quoted(dir / photo) + " --depth " +
+                test::shell_quoted(dir / "tiny_depth.exr") + " --out-dir " +
+                test::shell_quoted(dir / "out") + extra + " --visibility 150m --airlight 0.8 -q");
+}
+
+// Neither OIIO (its module or its libraries) nor OpenCV's contrib libraries were mapped.
+void expect_no_heavy_library(const std::string& log) {
+  for (const std::string& lib : kHeavy) EXPECT_FALSE(maps(log, lib)) << lib << " was loaded";
+  EXPECT_FALSE(maps(log, "libmr_oiio.so"));
+  EXPECT_FALSE(maps(log, "libOpenImageIO_Util")) << "OIIO's Util library was loaded";
+}
+
 TEST(Startup, LibmrDoesNotNeedTheHeavyLibraries) {
   const test::CommandResult r = test::run("readelf -d " + std::string(MR_LIBRARY_PATH));
   ASSERT_EQ(r.exit_code, 0) << r.output;
@@ -51,16 +68,11 @@ TEST(Startup, LibmrDoesNotNeedTheHeavyLibraries) {
 TEST(Startup, SkyOnlyFogLoadsNoHeavyLibrary) {
   test::ScratchDir dir;
   write_inputs(dir.path());
-  const test::CommandResult r =
-      run_mr("fog " + test::shell_quoted(dir / "tiny.jpg") + " --depth " +
-             test::shell_quoted(dir / "tiny_depth.exr") + " --out-dir " +
-             test::shell_quoted(dir / "out") + " --visibility 150m --airlight 0.8 -q");
+  const test::CommandResult r = fog_tiny(dir, "tiny.jpg");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   ASSERT_TRUE(fs::exists(dir / "out" / "tiny_fog.jpg")) << r.output;
-  for (const std::string& lib : kHeavy) EXPECT_FALSE(maps(r.output, lib)) << lib << " was loaded";
-  EXPECT_FALSE(maps(r.output, "libmr_oiio.so"));
+  expect_no_heavy_library(r.output);
   EXPECT_FALSE(maps(r.output, "libmr_opencv_contrib.so"));
-  EXPECT_FALSE(maps(r.output, "libOpenImageIO_Util")) << "OIIO's Util library was loaded";
   // `mr --version` neither.
   const test::CommandResult v = run_mr("--version");
   ASSERT_EQ(v.exit_code, 0) << v.output;
@@ -68,33 +80,40 @@ TEST(Startup, SkyOnlyFogLoadsNoHeavyLibrary) {
   EXPECT_FALSE(maps(v.output, "libOpenImageIO_Util"));
 }
 
+// The marker segments of a JPEG file before its scan: (offset, length with the marker).
+std::vector<std::pair<std::size_t, std::size_t>> segments(const std::string& jpeg) {
+  std::vector<std::pair<std::size_t, std::size_t>> out;
+  std::size_t at = 2;
+  while (at + 4 <= jpeg.size() && static_cast<unsigned char>(jpeg[at]) == 0xFF &&
+         static_cast<unsigned char>(jpeg[at + 1]) != 0xDA) {
+    const std::size_t len = std::size_t(static_cast<unsigned char>(jpeg[at + 2])) << 8 |
+                            static_cast<unsigned char>(jpeg[at + 3]);
+    out.emplace_back(at, 2 + len);
+    at += 2 + len;
+  }
+  return out;
+}
+
+bool is_exif(const std::string& jpeg, std::size_t at) {
+  return static_cast<unsigned char>(jpeg[at + 1]) == 0xE1 &&
+         jpeg.compare(at + 4, 5, std::string("Exif\0", 5)) == 0;
+}
+
 // `jpeg` with its EXIF block (APP1 "Exif") replaced by `exif` (a whole segment).
 std::string with_exif(const std::string& jpeg, const std::string& exif) {
   std::string out = jpeg.substr(0, 2) + exif;
-  std::size_t at = 2;
-  while (at + 4 <= jpeg.size() && static_cast<unsigned char>(jpeg[at]) == 0xFF) {
-    const std::size_t len = std::size_t(static_cast<unsigned char>(jpeg[at + 2])) << 8 |
-                            static_cast<unsigned char>(jpeg[at + 3]);
-    if (static_cast<unsigned char>(jpeg[at + 1]) == 0xDA) break;
-    if (!(static_cast<unsigned char>(jpeg[at + 1]) == 0xE1 &&
-          jpeg.compare(at + 4, 5, std::string("Exif\0", 5)) == 0))
-      out += jpeg.substr(at, 2 + len);
-    at += 2 + len;
+  std::size_t end = 2;
+  for (const auto& [at, len] : segments(jpeg)) {
+    if (!is_exif(jpeg, at)) out += jpeg.substr(at, len);
+    end = at + len;
   }
-  return out + jpeg.substr(at);
+  return out + jpeg.substr(end);
 }
 
 // The first EXIF segment of a JPEG file.
 std::string exif_segment(const std::string& jpeg) {
-  std::size_t at = 2;
-  while (at + 4 <= jpeg.size() && static_cast<unsigned char>(jpeg[at]) == 0xFF) {
-    const std::size_t len = std::size_t(static_cast<unsigned char>(jpeg[at + 2])) << 8 |
-                            static_cast<unsigned char>(jpeg[at + 3]);
-    if (static_cast<unsigned char>(jpeg[at + 1]) == 0xE1 &&
-        jpeg.compare(at + 4, 5, std::string("Exif\0", 5)) == 0)
-      return jpeg.substr(at, 2 + len);
-    at += 2 + len;
-  }
+  for (const auto& [at, len] : segments(jpeg))
+    if (is_exif(jpeg, at)) return jpeg.substr(at, len);
   return "";
 }
 
@@ -108,15 +127,10 @@ TEST(Startup, CameraJpegLoadsNoHeavyLibrary) {
   ASSERT_FALSE(iphone.empty());
   test::write_bytes(dir / "tiny.jpg", with_exif(test::read_bytes(dir / "tiny.jpg"), iphone));
   ASSERT_TRUE(read_image(dir / "tiny.jpg").metadata().contains("GPS:Latitude"));
-  const test::CommandResult r =
-      run_mr("fog " + test::shell_quoted(dir / "tiny.jpg") + " --depth " +
-             test::shell_quoted(dir / "tiny_depth.exr") + " --out-dir " +
-             test::shell_quoted(dir / "out") + " --visibility 150m --airlight 0.8 -q");
+  const test::CommandResult r = fog_tiny(dir, "tiny.jpg");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   ASSERT_TRUE(fs::exists(dir / "out" / "tiny_fog.jpg")) << r.output;
-  for (const std::string& lib : kHeavy) EXPECT_FALSE(maps(r.output, lib)) << lib << " was loaded";
-  EXPECT_FALSE(maps(r.output, "libmr_oiio.so"));
-  EXPECT_FALSE(maps(r.output, "libOpenImageIO_Util"));
+  expect_no_heavy_library(r.output);
   // The camera's metadata went into the output.
   const Metadata out = read_image(dir / "out" / "tiny_fog.jpg").metadata();
   EXPECT_EQ(out.get_string("Model").value_or(""), "iPhone 6");
@@ -129,25 +143,17 @@ TEST(Startup, PngInputLoadsNoHeavyLibrary) {
   test::ScratchDir dir;
   write_inputs(dir.path());
   write_image(dir / "tiny.png", read_image(dir / "tiny.jpg"));
-  const test::CommandResult r =
-      run_mr("fog " + test::shell_quoted(dir / "tiny.png") + " --depth " +
-             test::shell_quoted(dir / "tiny_depth.exr") + " --out-dir " +
-             test::shell_quoted(dir / "out") + " --format jpg --visibility 150m --airlight 0.8 -q");
+  const test::CommandResult r = fog_tiny(dir, "tiny.png", " --format jpg");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   ASSERT_TRUE(fs::exists(dir / "out" / "tiny_fog.jpg")) << r.output;
-  for (const std::string& lib : kHeavy) EXPECT_FALSE(maps(r.output, lib)) << lib << " was loaded";
-  EXPECT_FALSE(maps(r.output, "libmr_oiio.so"));
-  EXPECT_FALSE(maps(r.output, "libOpenImageIO_Util"));
+  expect_no_heavy_library(r.output);
 }
 
 TEST(Startup, TiffAndEstimationLoadTheirModules) {
   test::ScratchDir dir;
   write_inputs(dir.path());
   write_image(dir / "tiny.tif", read_image(dir / "tiny.jpg"));  // through OIIO's module
-  const test::CommandResult r =
-      run_mr("fog " + test::shell_quoted(dir / "tiny.tif") + " --depth " +
-             test::shell_quoted(dir / "tiny_depth.exr") + " --out-dir " +
-             test::shell_quoted(dir / "out") + " --visibility 150m --airlight 0.8 -q");
+  const test::CommandResult r = fog_tiny(dir, "tiny.tif");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_TRUE(maps(r.output, "libOpenImageIO.so")) << "the TIFF was not read through OIIO";
   EXPECT_TRUE(fs::exists(dir / "out" / "tiny_fog.tif"));
