@@ -574,6 +574,43 @@ void paint_tree(const Tree& t, int x, int y, std::uniform_real_distribution<floa
   }
 }
 
+// A blue sky graded to the horizon under cumulus: cover `envelope` (0-1) with cauliflower
+// `noise`; a meadow below the horizon (the frame's middle) and a tree on it (marked in
+// `canopy`); then a lens blur. The photo's display-referred colours.
+cv::Mat cumulus_landscape(const cv::Mat& envelope, const cv::Mat& noise, std::mt19937& rng,
+                          cv::Mat& canopy) {
+  const int w = envelope.cols, h = envelope.rows, horizon = h / 2;
+  cv::Mat display(h, w, CV_32FC3);
+  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float t = float(y) / horizon;
+      const cv::Vec3f sky =
+          cv::Vec3f(0.12f, 0.30f, 0.72f) * (1 - t) + cv::Vec3f(0.45f, 0.60f, 0.85f) * t;
+      const float cover =
+          envelope.at<float>(y, x) * std::clamp(0.55f + 0.6f * noise.at<float>(y, x), 0.0f, 1.0f);
+      const cv::Vec3f cloud =
+          cv::Vec3f(0.93f, 0.94f, 0.97f) * (0.8f + 0.2f * noise.at<float>(y, x));
+      cv::Vec3f c = sky * (1 - cover) + cloud * cover;
+      if (y >= horizon)
+        c = meadow(y, horizon, h, grain(rng));
+      else
+        paint_tree(Tree{90, 175, 34, 30, 200}, x, y, grain, rng, c, canopy);
+      display.at<cv::Vec3f>(y, x) = c;
+    }
+  cv::GaussianBlur(display, display, cv::Size(0, 0), 0.7);  // a lens
+  return display;
+}
+
+// The pixels above the horizon (the frame's middle) where `cover` exceeds 0.7, as a CV_8U mask.
+cv::Mat cloud_mask(const cv::Mat& cover) {
+  cv::Mat mask(cover.rows, cover.cols, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < cover.rows / 2; ++y)
+    for (int x = 0; x < cover.cols; ++x)
+      if (cover.at<float>(y, x) > 0.7f) mask.at<std::uint8_t>(y, x) = 1;
+  return mask;
+}
+
 // A level horizon through the frame's middle, as a user marks it.
 Annotations level_horizon(int w, int h) {
   Annotations a;
@@ -1014,9 +1051,8 @@ struct CornerCloudScene {
   cv::Mat cloud, canopy;  // CV_8U masks of the parts
 };
 CornerCloudScene corner_cloud_scene() {
-  constexpr int w = kCornerW, h = kCornerH, horizon = h / 2;
+  constexpr int w = kCornerW, h = kCornerH;
   CornerCloudScene s;
-  s.display = cv::Mat(h, w, CV_32FC3);
   // The cloud: a cumulus filling the top right corner (rows 0-200 at the right border), the
   // look's sun (azimuth 20, elevation 8 degrees: about pixel (522, 157)) behind its lower part,
   // cut off by the top and right borders along more of its outline than the sky rings.
@@ -1025,27 +1061,9 @@ CornerCloudScene corner_cloud_scene() {
   cv::GaussianBlur(envelope, envelope, cv::Size(0, 0), 6);
   std::mt19937 rng(29);
   const cv::Mat noise = cloud_noise(h, w, rng, 1.5, 1.5);  // a cumulus' cauliflower detail
-  s.cloud = cv::Mat(h, w, CV_8U, cv::Scalar(0));
   s.canopy = cv::Mat(h, w, CV_8U, cv::Scalar(0));
-  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const float t = float(y) / horizon;
-      const cv::Vec3f sky =
-          cv::Vec3f(0.12f, 0.30f, 0.72f) * (1 - t) + cv::Vec3f(0.45f, 0.60f, 0.85f) * t;
-      const float e = envelope.at<float>(y, x);
-      const float cover = e * std::clamp(0.55f + 0.6f * noise.at<float>(y, x), 0.0f, 1.0f);
-      const cv::Vec3f cloud =
-          cv::Vec3f(0.93f, 0.94f, 0.97f) * (0.8f + 0.2f * noise.at<float>(y, x));
-      cv::Vec3f c = sky * (1 - cover) + cloud * cover;
-      if (e > 0.7f && y < horizon) s.cloud.at<std::uint8_t>(y, x) = 1;
-      if (y >= horizon)
-        c = meadow(y, horizon, h, grain(rng));
-      else
-        paint_tree(Tree{90, 175, 34, 30, 200}, x, y, grain, rng, c, s.canopy);
-      s.display.at<cv::Vec3f>(y, x) = c;
-    }
-  cv::GaussianBlur(s.display, s.display, cv::Size(0, 0), 0.7);  // a lens
+  s.display = cumulus_landscape(envelope, noise, rng, s.canopy);
+  s.cloud = cloud_mask(envelope);
   return s;
 }
 
@@ -1101,9 +1119,8 @@ struct JoinedCloudScene {
   cv::Mat high, bank, canopy;  // CV_8U masks of the parts
 };
 JoinedCloudScene joined_cloud_scene() {
-  constexpr int w = kJoinedW, h = kJoinedH, horizon = h / 2;
+  constexpr int w = kJoinedW, h = kJoinedH;
   JoinedCloudScene s;
-  s.display = cv::Mat(h, w, CV_32FC3);
   cv::Mat high(h, w, CV_32F, cv::Scalar(0)), low(h, w, CV_32F, cv::Scalar(0));
   cv::ellipse(high, cv::Point(540, 115), cv::Size(115, 50), 0, 0, 360, cv::Scalar(1), cv::FILLED);
   cv::ellipse(low, cv::Point(470, 250), cv::Size(200, 50), 0, 0, 360, cv::Scalar(1), cv::FILLED);
@@ -1116,29 +1133,10 @@ JoinedCloudScene joined_cloud_scene() {
   cv::GaussianBlur(low, low, cv::Size(0, 0), 6);
   std::mt19937 rng(31);
   const cv::Mat noise = cloud_noise(h, w, rng, 1.5, 1.5);  // a cumulus' cauliflower detail
-  s.high = cv::Mat(h, w, CV_8U, cv::Scalar(0));
-  s.bank = cv::Mat(h, w, CV_8U, cv::Scalar(0));
   s.canopy = cv::Mat(h, w, CV_8U, cv::Scalar(0));
-  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const float t = float(y) / horizon;
-      const cv::Vec3f sky =
-          cv::Vec3f(0.12f, 0.30f, 0.72f) * (1 - t) + cv::Vec3f(0.45f, 0.60f, 0.85f) * t;
-      const float e = envelope.at<float>(y, x);
-      const float cover = e * std::clamp(0.55f + 0.6f * noise.at<float>(y, x), 0.0f, 1.0f);
-      const cv::Vec3f cloud =
-          cv::Vec3f(0.93f, 0.94f, 0.97f) * (0.8f + 0.2f * noise.at<float>(y, x));
-      cv::Vec3f c = sky * (1 - cover) + cloud * cover;
-      if (high.at<float>(y, x) > 0.7f && y < horizon) s.high.at<std::uint8_t>(y, x) = 1;
-      if (low.at<float>(y, x) > 0.7f && y < horizon) s.bank.at<std::uint8_t>(y, x) = 1;
-      if (y >= horizon)
-        c = meadow(y, horizon, h, grain(rng));
-      else
-        paint_tree(Tree{90, 175, 34, 30, 200}, x, y, grain, rng, c, s.canopy);
-      s.display.at<cv::Vec3f>(y, x) = c;
-    }
-  cv::GaussianBlur(s.display, s.display, cv::Size(0, 0), 0.7);  // a lens
+  s.display = cumulus_landscape(envelope, noise, rng, s.canopy);
+  s.high = cloud_mask(high);
+  s.bank = cloud_mask(low);
   return s;
 }
 
