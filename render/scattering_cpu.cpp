@@ -1064,20 +1064,24 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
             continue;
           }
           const double fx = double(x - x0) / (x1 - x0);
-          double acc[kValues] = {};
+          // The sums in scalars (registers), each over the corners in order 0..3 from 0.
+          double r0 = 0, r1 = 0, r2 = 0, ao = 0, acc_od[3] = {0, 0, 0};
           for (int k = 0; k < 4; ++k) {
             const double weight = physics::corner_weight(k, fx, fy);
-            const double dx = x - corner_x[k];
+            const double dx = x - corner_x[k], dyk = dy[k];
             const double* v = value[k];
             const double* gxk = grad_x[k];
             const double* gyk = grad_y[k];
-            for (int c = 0; c < 3; ++c)
-              acc[c] += weight * physics::extrapolate(v[c], gxk[c], gyk[c], dx, dy[k]);
+            r0 += weight * physics::extrapolate(v[0], gxk[0], gyk[0], dx, dyk);
+            r1 += weight * physics::extrapolate(v[1], gxk[1], gyk[1], dx, dyk);
+            r2 += weight * physics::extrapolate(v[2], gxk[2], gyk[2], dx, dyk);
+            ao += weight * physics::extrapolate(v[6], gxk[6], gyk[6], dx, dyk);
             if (interpolate_od)
-              for (int c = 3; c < 6; ++c)
-                acc[c] += weight * physics::extrapolate(v[c], gxk[c], gyk[c], dx, dy[k]);
-            acc[6] += weight * physics::extrapolate(v[6], gxk[6], gyk[6], dx, dy[k]);
+              for (int c = 0; c < 3; ++c)
+                acc_od[c] +=
+                    weight * physics::extrapolate(v[3 + c], gxk[3 + c], gyk[3 + c], dx, dyk);
           }
+          const double acc[kValues] = {r0, r1, r2, acc_od[0], acc_od[1], acc_od[2], ao};
           PixelSample p;
           for (int c = 0; c < 3; ++c) {
             p.inscatter[c] = std::max(0.0, acc[c]);
