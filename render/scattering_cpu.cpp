@@ -433,8 +433,9 @@ class Core {
 
   // T's surface factor S (DESIGN.md section 3) at a surface pixel; writes the sun visibility.
   // known_sun_disk: the pixel's sun_disk_visibility when already known (interpolation), else -1.
+  // camera_ray: ray(x, y) when the caller has it (pass 3 computes it once for both terms).
   void surface_term(int x, int y, double ao, double known_sun_disk, double S[3],
-                    float* sun_visibility) const {
+                    float* sun_visibility, const Vec3d* camera_ray = nullptr) const {
     S[0] = S[1] = S[2] = 1.0;
     *sun_visibility = 1.0f;
     const double distance = in_.distance_m.at(x, y, 0);
@@ -443,7 +444,7 @@ class Core {
     const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
     if (dot(n, n) < 0.5) return;
     const Medium& m = scene_.medium;
-    const Vec3d x0 = add(origin_, ray(x, y), distance);
+    const Vec3d x0 = add(origin_, camera_ray ? *camera_ray : ray(x, y), distance);
     // Lamp shadow rays leave from here (traced only where the pixel has a lamp in front of it).
     std::optional<Vec3d> xo_cache;
     auto xo = [&] {
@@ -491,7 +492,10 @@ class Core {
 
   // Camera transmittance in closed form (exact unless noise modulates the view ray).
   void camera_optical_depth(int x, int y, double od[3]) const {
-    const Vec3d w = ray(x, y);
+    camera_optical_depth(ray(x, y), x, y, od);
+  }
+  // The same along w = ray(x, y).
+  void camera_optical_depth(const Vec3d& w, int x, int y, double od[3]) const {
     const RayDensity rd(scene_.medium, origin_, w);
     const double length = march_length(rd, in_.distance_m.at(x, y, 0));
     const double unit =
@@ -1152,7 +1156,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       for (int x = 0; x < w; ++x) {
         const PixelSample& s = sparse.at(x, y);
         double od[3] = {s.camera_od[0], s.camera_od[1], s.camera_od[2]};
-        if (closed_form_camera) core.camera_optical_depth(x, y, od);
+        const Vec3d view = core.ray(x, y);  // once for both terms below
+        if (closed_form_camera) core.camera_optical_depth(view, x, y, od);
         double S[3];
         float sun_visible = 1.0f;
         double sun_disk = s.sun_disk;
@@ -1161,7 +1166,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           if (sun_disk >= 0 && sun_disk < 1 && fallback->shows_sunlit(x, y, s.ao, disk->data()))
             sun_disk = 1;
         }
-        core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible);
+        core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible, &view);
         for (int c = 0; c < 3; ++c) {
           out.transmittance.at(x, y, c) = float(std::exp(-od[c]) * S[c]);  // R: pass 1 or 2
           out.optical_depth.at(x, y, c) = float(od[c]);
