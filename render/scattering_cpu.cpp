@@ -433,8 +433,9 @@ class Core {
 
   // T's surface factor S (DESIGN.md section 3) at a surface pixel; writes the sun visibility.
   // known_sun_disk: the pixel's sun_disk_visibility when already known (interpolation), else -1.
+  // camera_ray: ray(x, y) when the caller has it (pass 3 computes it once for both terms).
   void surface_term(int x, int y, double ao, double known_sun_disk, double S[3],
-                    float* sun_visibility) const {
+                    float* sun_visibility, const Vec3d* camera_ray = nullptr) const {
     S[0] = S[1] = S[2] = 1.0;
     *sun_visibility = 1.0f;
     const double distance = in_.distance_m.at(x, y, 0);
@@ -443,7 +444,7 @@ class Core {
     const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
     if (dot(n, n) < 0.5) return;
     const Medium& m = scene_.medium;
-    const Vec3d x0 = add(origin_, ray(x, y), distance);
+    const Vec3d x0 = add(origin_, camera_ray ? *camera_ray : ray(x, y), distance);
     // Lamp shadow rays leave from here (traced only where the pixel has a lamp in front of it).
     std::optional<Vec3d> xo_cache;
     auto xo = [&] {
@@ -491,7 +492,10 @@ class Core {
 
   // Camera transmittance in closed form (exact unless noise modulates the view ray).
   void camera_optical_depth(int x, int y, double od[3]) const {
-    const Vec3d w = ray(x, y);
+    camera_optical_depth(ray(x, y), x, y, od);
+  }
+  // The same along w = ray(x, y).
+  void camera_optical_depth(const Vec3d& w, int x, int y, double od[3]) const {
     const RayDensity rd(scene_.medium, origin_, w);
     const double length = march_length(rd, in_.distance_m.at(x, y, 0));
     const double unit =
@@ -1002,12 +1006,19 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     });
     throw_if_stopped();
     // Pixels on a cell's right (bottom) edge belong to the next cell, except on the last.
-    auto resolve_cell = [&](std::size_t i0, std::size_t i1, std::size_t j0, std::size_t j1) {
+    // Everything that depends on the cell alone (corner values, gradients, depths, the edge
+    // and sun-disk tests) is read once; per pixel only the weights and the sums remain, in
+    // the same order of operations (the output is bit-identical to the per-pixel form).
+    // The counts go to the caller's locals: a tbb::combinable's local() per pixel was a
+    // thread-local lookup for each of ~2 M pixels.
+    auto resolve_cell = [&](std::size_t i0, std::size_t i1, std::size_t j0, std::size_t j1,
+                            std::size_t& interpolated_n, std::size_t& exact_n) {
       const int x0 = gx[i0], x1 = gx[i1], y0 = gy[j0], y1 = gy[j1];
       const std::array<std::pair<std::size_t, std::size_t>, 4> corners{
           {{i0, j0}, {i1, j0}, {i0, j1}, {i1, j1}}};
+      const int corner_x[4] = {x0, x1, x0, x1}, corner_y[4] = {y0, y0, y1, y1};
       // The corners' gradients, once per cell.
-      double value[4][kValues], grad_x[4][kValues], grad_y[4][kValues];
+      double value[4][kValues], grad_x[4][kValues], grad_y[4][kValues], corner_d[4];
       double shaft_min = 1, shaft_max = 0;
       for (int k = 0; k < 4; ++k) {
         const auto [ci, cj] = corners[k];
@@ -1019,6 +1030,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         }
         shaft_min = std::min(shaft_min, s.shaft);
         shaft_max = std::max(shaft_max, s.shaft);
+        corner_d[k] = d(corner_x[k], corner_y[k]);
       }
       // A shadow boundary crosses the cell, or the in-scatter changes too fast across it
       // (the core of a lamp's glow) for gradients to follow: its pixels get their own
@@ -1034,33 +1046,47 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       const bool sun_disk_agrees = disk0 >= 0 && sparse.grid_at(i1, j0).sun_disk == disk0 &&
                                    sparse.grid_at(i0, j1).sun_disk == disk0 &&
                                    sparse.grid_at(i1, j1).sun_disk == disk0;
-      for (int y = y0; y <= y1; ++y)
-        for (int x = x0; x <= x1; ++x) {
-          if ((x == x1 && i1 + 1 < nx) || (y == y1 && j1 + 1 < ny)) continue;
+      // The camera's optical depth is pass 3's closed form unless noise modulates it.
+      const bool interpolate_od = !closed_form_camera;
+      const int x_last = i1 + 1 < nx ? x1 - 1 : x1, y_last = j1 + 1 < ny ? y1 - 1 : y1;
+      for (int y = y0; y <= y_last; ++y) {
+        const double fy = double(y - y0) / (y1 - y0);
+        double dy[4];
+        for (int k = 0; k < 4; ++k) dy[k] = y - corner_y[k];
+        for (int x = x0; x <= x_last; ++x) {
           if (sparse.has(x, y)) continue;
           bool ok = !shadow_edge;
-          for (int k = 0; k < 4 && ok; ++k)
-            ok = depth_continuous(d(x, y), d(gx[corners[k].first], gy[corners[k].second]));
+          if (ok) {
+            const double dp = d(x, y);
+            for (int k = 0; k < 4 && ok; ++k) ok = depth_continuous(dp, corner_d[k]);
+          }
           if (!ok) {
             // A shaft's edge crosses the cell: its pixels get finer steps, or thin slivers
             // of shadow that one step misses or catches would show as grain.
             exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
-            ++exact_more.local();
+            ++exact_n;
             continue;
           }
-          const double fx = double(x - x0) / (x1 - x0), fy = double(y - y0) / (y1 - y0);
-          PixelSample p;
-          double acc[kValues] = {};
+          const double fx = double(x - x0) / (x1 - x0);
+          // The sums in scalars (registers), each over the corners in order 0..3 from 0.
+          double r0 = 0, r1 = 0, r2 = 0, ao = 0, acc_od[3] = {0, 0, 0};
           for (int k = 0; k < 4; ++k) {
             const double weight = physics::corner_weight(k, fx, fy);
-            const double dx = x - gx[corners[k].first], dy = y - gy[corners[k].second];
-            for (int c = 0; c < kValues; ++c) {
-              // The camera's optical depth is pass 3's closed form unless noise modulates it.
-              if (closed_form_camera && c >= 3 && c < 6) continue;
-              acc[c] +=
-                  weight * physics::extrapolate(value[k][c], grad_x[k][c], grad_y[k][c], dx, dy);
-            }
+            const double dx = x - corner_x[k], dyk = dy[k];
+            const double* v = value[k];
+            const double* gxk = grad_x[k];
+            const double* gyk = grad_y[k];
+            r0 += weight * physics::extrapolate(v[0], gxk[0], gyk[0], dx, dyk);
+            r1 += weight * physics::extrapolate(v[1], gxk[1], gyk[1], dx, dyk);
+            r2 += weight * physics::extrapolate(v[2], gxk[2], gyk[2], dx, dyk);
+            ao += weight * physics::extrapolate(v[6], gxk[6], gyk[6], dx, dyk);
+            if (interpolate_od)
+              for (int c = 0; c < 3; ++c)
+                acc_od[c] +=
+                    weight * physics::extrapolate(v[3 + c], gxk[3 + c], gyk[3 + c], dx, dyk);
           }
+          const double acc[kValues] = {r0, r1, r2, acc_od[0], acc_od[1], acc_od[2], ao};
+          PixelSample p;
           for (int c = 0; c < 3; ++c) {
             p.inscatter[c] = std::max(0.0, acc[c]);
             p.camera_od[c] = std::max(0.0, acc[3 + c]);
@@ -1072,24 +1098,28 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           p.sun_disk = -1;
           if (sun_disk_agrees) p.sun_disk = disk0;
           sparse.set(x, y, p);
-          ++interpolated.local();
+          ++interpolated_n;
         }
+      }
     };
     tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, ncy, 0, ncx),
                       [&](const tbb::blocked_range2d<std::size_t>& r) {
                         for (std::size_t b = r.rows().begin(); b < r.rows().end(); ++b) {
                           if (stop()) return;
-                          std::size_t work = 0;
+                          std::size_t work = 0, interpolated_n = 0, exact_n = 0;
                           for (std::size_t a = r.cols().begin(); a < r.cols().end(); ++a) {
                             work += (cx[a + 1] - cx[a]) * (cy[b + 1] - cy[b]) * kCellWork;
                             if (!refine[b * ncx + a] && k_coarse > 1) {
-                              resolve_cell(cx[a], cx[a + 1], cy[b], cy[b + 1]);
+                              resolve_cell(cx[a], cx[a + 1], cy[b], cy[b + 1], interpolated_n,
+                                           exact_n);
                               continue;
                             }
                             for (std::size_t j = cy[b]; j < cy[b + 1]; ++j)
                               for (std::size_t i = cx[a]; i < cx[a + 1]; ++i)
-                                resolve_cell(i, i + 1, j, j + 1);
+                                resolve_cell(i, i + 1, j, j + 1, interpolated_n, exact_n);
                           }
+                          interpolated.local() += interpolated_n;
+                          exact_more.local() += exact_n;
                           progress.add(work);
                         }
                       });
@@ -1126,7 +1156,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       for (int x = 0; x < w; ++x) {
         const PixelSample& s = sparse.at(x, y);
         double od[3] = {s.camera_od[0], s.camera_od[1], s.camera_od[2]};
-        if (closed_form_camera) core.camera_optical_depth(x, y, od);
+        const Vec3d view = core.ray(x, y);  // once for both terms below
+        if (closed_form_camera) core.camera_optical_depth(view, x, y, od);
         double S[3];
         float sun_visible = 1.0f;
         double sun_disk = s.sun_disk;
@@ -1135,7 +1166,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           if (sun_disk >= 0 && sun_disk < 1 && fallback->shows_sunlit(x, y, s.ao, disk->data()))
             sun_disk = 1;
         }
-        core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible);
+        core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible, &view);
         for (int c = 0; c < 3; ++c) {
           out.transmittance.at(x, y, c) = float(std::exp(-od[c]) * S[c]);  // R: pass 1 or 2
           out.optical_depth.at(x, y, c) = float(od[c]);
