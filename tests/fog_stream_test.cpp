@@ -389,7 +389,14 @@ TEST(FogStream, TwelveMegapixelRunStaysUnderTheMemoryTarget) {
   ASSERT_TRUE(fs::exists(dir / "out" / "big_fog.jpg"));
   const double peak_mib = double(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
   std::printf("12 MP mr fog: peak RSS %.1f MiB\n", peak_mib);
+#if !defined(__SANITIZE_ADDRESS__)
   EXPECT_LT(peak_mib, 400.0);
+#else
+  // Under AddressSanitizer the peak is its quarantine (256 MiB by default) and shadow memory,
+  // 380-406 MiB from run to run against ~62 MiB in the normal build, which holds the bar (as
+  // ReadMemory.* does); the fog's pixels are still checked below.
+  (void)peak_mib;
+#endif
   // And the image is fogged, not black or blank: the sky rows are the airlight, and the
   // nearest row's dark corner (red ~ 0 in the test photo) holds Koschmieder's in-scatter.
   const Image result = read_image(dir / "out" / "big_fog.jpg");
