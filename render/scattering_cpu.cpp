@@ -509,6 +509,17 @@ class Core {
   bool needs_ao() const {
     return in_.occluders && (scene_.lighting.sun || !scene_.lighting.lamps.empty());
   }
+  // Whether T at pixel (x, y) can depend on its AO. S = (fogged direct + ambient) / (direct +
+  // ambient) (physics::surface_factor) is exactly 1 whatever the AO where there is no direct
+  // light: a surface facing away from the sun, without lamps (the photo fallback only ever
+  // looks at sun-facing pixels); the sky and pixels without a normal take no surface term.
+  bool ao_matters_at(int x, int y) const {
+    if (!needs_ao() || in_.normals.data == nullptr) return false;
+    if (!std::isfinite(in_.distance_m.at(x, y, 0))) return false;
+    const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
+    if (dot(n, n) < 0.5) return false;
+    return !scene_.lighting.lamps.empty() || dot(n, sun_dir_) > 0;
+  }
 
  private:
   const CoreInputs& in_;
@@ -669,9 +680,45 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   sparse.init(w, h, out.inscatter, !closed_form_camera, gx, gy, g > 1);
 
   // known_sun_disk: the pixel's sun_disk_visibility when already traced (a probe below).
+  // Where AO is traced: at the samples and exact pixels within kAoReach pixels (in x and y)
+  // of a pixel whose T can depend on its AO (Core::ao_matters_at). Everywhere else its value
+  // reaches no T: an interpolated pixel reads its cell's corners (at most one coarse cell,
+  // g * kCoarseFactor pixels, away) and their gradients (their nearest traced neighbours, one
+  // more cell), and which fine points exist there depends on the AO of the corners of the cells
+  // around them (a third cell). The rest keep AO 1; T is bit-identical, and only
+  // the coarse cells refined for the AO test alone (kRefineAo) change: on surfaces facing away
+  // from the sun no longer, whose R then comes from the coarse cell's interpolation instead of
+  // the fine grid's interpolation of the same (render_scattering_cpu's surface samples).
+  // The test is a box sum over a summed-area table of ao_matters_at.
+  const int ao_reach = 3 * g * int(kCoarseFactor) + 1;
+  std::vector<std::uint32_t> ao_table;  // (w + 1) x (h + 1) summed-area table, or empty: all
+  const bool ao_everywhere = !core.needs_ao() || !in.scene->lighting.lamps.empty();
+  if (!ao_everywhere) {
+    const std::size_t tw = std::size_t(w) + 1;
+    ao_table.assign(tw * (std::size_t(h) + 1), 0);
+    tbb::parallel_for(0, h, [&](int y) {  // row prefix sums
+      std::uint32_t sum = 0;
+      std::uint32_t* row = &ao_table[(std::size_t(y) + 1) * tw];
+      for (int x = 0; x < w; ++x) row[x + 1] = sum += core.ao_matters_at(x, y) ? 1u : 0u;
+    });
+    tbb::parallel_for(std::size_t(1), tw, [&](std::size_t x) {  // then down the columns
+      for (int y = 1; y < h; ++y)
+        ao_table[(std::size_t(y) + 1) * tw + x] += ao_table[std::size_t(y) * tw + x];
+    });
+  }
+  auto ao_wanted = [&](int x, int y) {
+    if (ao_everywhere) return core.needs_ao();
+    const std::size_t tw = std::size_t(w) + 1;
+    const std::size_t x0 = std::size_t(std::max(0, x - ao_reach)),
+                      x1 = std::size_t(std::min(w, x + ao_reach + 1));
+    const std::size_t y0 = std::size_t(std::max(0, y - ao_reach)),
+                      y1 = std::size_t(std::min(h, y + ao_reach + 1));
+    return ao_table[y1 * tw + x1] + ao_table[y0 * tw + x0] !=
+           ao_table[y0 * tw + x1] + ao_table[y1 * tw + x0];
+  };
   auto exact = [&](int x, int y, int steps, double known_sun_disk = kNaN) {
     PixelSample s = core.march(x, y, steps);
-    if (core.needs_ao()) s.ao = core.ambient_occlusion_at(x, y);
+    if (ao_wanted(x, y)) s.ao = core.ambient_occlusion_at(x, y);
     s.sun_disk = std::isnan(known_sun_disk) ? core.sun_disk_visibility(x, y) : known_sun_disk;
     sparse.set(x, y, s);
     return s;
@@ -951,7 +998,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         p.camera_od[c] = std::max(0.0, acc[3 + c]);
       }
       p.shaft = shaft;
-      if (core.needs_ao()) p.ao = core.ambient_occlusion_at(x, y);
+      if (ao_wanted(x, y)) p.ao = core.ambient_occlusion_at(x, y);
       p.sun_disk = std::isnan(known_sun_disk) ? core.sun_disk_visibility(x, y) : known_sun_disk;
       sparse.set(x, y, p);
       return p;
