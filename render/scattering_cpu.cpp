@@ -679,8 +679,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   Sparse sparse;
   sparse.init(w, h, out.inscatter, !closed_form_camera, gx, gy, g > 1);
 
-  // known_sun_disk: the pixel's sun_disk_visibility when already traced (a probe below).
-  // Where AO is traced: at the samples and exact pixels within kAoReach pixels (in x and y)
+  // Where AO is traced: at the samples and exact pixels within ao_reach pixels (in x and y)
   // of a pixel whose T can depend on its AO (Core::ao_matters_at). Everywhere else its value
   // reaches no T: an interpolated pixel reads its cell's corners (at most one coarse cell,
   // g * kCoarseFactor pixels, away) and their gradients (their nearest traced neighbours, one
@@ -716,6 +715,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     return ao_table[y1 * tw + x1] + ao_table[y0 * tw + x0] !=
            ao_table[y0 * tw + x1] + ao_table[y1 * tw + x0];
   };
+  // known_sun_disk: the pixel's sun_disk_visibility when already traced (a probe below).
   auto exact = [&](int x, int y, int steps, double known_sun_disk = kNaN) {
     PixelSample s = core.march(x, y, steps);
     if (ao_wanted(x, y)) s.ao = core.ambient_occlusion_at(x, y);
