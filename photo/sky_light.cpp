@@ -2,8 +2,12 @@
 
 #include <tbb/parallel_for.h>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <numbers>
 #include <vector>
 
@@ -18,6 +22,78 @@ constexpr double kPi = std::numbers::pi;
 
 double texel_elevation(int height, double row) {
   return 0.5 * kPi - row / height * kPi;
+}
+
+// Display luma (Rec.709 weights on the gamma-2.2 encoded values, as the gallery's measure and
+// SkyMask take it) of scene-linear RGB. Scaling the colour by s scales it by s^(1 / 2.2).
+constexpr double kDisplayGamma = 2.2;
+double display_luma(double r, double g, double b) {
+  auto encode = [](double v) { return std::pow(std::max(0.0, v), 1 / kDisplayGamma); };
+  return 0.2126 * encode(r) + 0.7152 * encode(g) + 0.0722 * encode(b);
+}
+
+// The domain transform's recursive filter (Gastal and Oliveira 2011, "Domain transform for
+// edge-aware image and video processing", RF with three iterations) of the `n` interleaved
+// channels of `data` (w x h, in place), guided by `guide` (w x h x 3): a pixel's neighbour
+// across a step of the guide lies sigma_s / sigma_r times that step (summed over the channels)
+// farther away, so the filter averages over sigma_s pixels inside a region and stops at its
+// edges, soft ones included (their steps add up along the ramp).
+void domain_transform_filter(std::vector<float>& data, int n, const std::vector<float>& guide,
+                             int w, int h, double sigma_s, double sigma_r) {
+  const std::size_t count = std::size_t(w) * h;
+  // Distances in the transformed domain: dx[i] between (x - 1, y) and (x, y), dy[i] between
+  // (x, y - 1) and (x, y).
+  std::vector<float> dx(count, 1.0f), dy(count, 1.0f);
+  const double ratio = sigma_s / sigma_r;
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      double sx = 0, sy = 0;
+      for (int c = 0; c < 3; ++c) {
+        if (x > 0) sx += std::abs(guide[3 * i + c] - guide[3 * (i - 1) + c]);
+        if (y > 0) sy += std::abs(guide[3 * i + c] - guide[3 * (i - w) + c]);
+      }
+      dx[i] = float(1 + ratio * sx);
+      dy[i] = float(1 + ratio * sy);
+    }
+  });
+  constexpr int kIterations = 3;
+  constexpr int kColumnBlock = 64;
+  for (int it = 0; it < kIterations; ++it) {
+    // The paper's sigma_H for this iteration: the iterations' variances add up to sigma_s^2.
+    const double sigma_h = sigma_s * std::sqrt(3.0) * std::pow(2.0, kIterations - it - 1) /
+                           std::sqrt(std::pow(4.0, kIterations) - 1);
+    const double log_a = -std::sqrt(2.0) / sigma_h;
+    tbb::parallel_for(0, h, [&](int y) {
+      float* row = data.data() + std::size_t(y) * w * n;
+      const float* d = dx.data() + std::size_t(y) * w;
+      for (int x = 1; x < w; ++x) {
+        const float v = float(std::exp(log_a * d[x]));
+        for (int c = 0; c < n; ++c) row[x * n + c] += v * (row[(x - 1) * n + c] - row[x * n + c]);
+      }
+      for (int x = w - 2; x >= 0; --x) {
+        const float v = float(std::exp(log_a * d[x + 1]));
+        for (int c = 0; c < n; ++c) row[x * n + c] += v * (row[(x + 1) * n + c] - row[x * n + c]);
+      }
+    });
+    tbb::parallel_for(0, (w + kColumnBlock - 1) / kColumnBlock, [&](int block) {
+      const int x0 = block * kColumnBlock, x1 = std::min(w, x0 + kColumnBlock);
+      for (int y = 1; y < h; ++y)
+        for (int x = x0; x < x1; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          const float v = float(std::exp(log_a * dy[i]));
+          for (int c = 0; c < n; ++c)
+            data[i * n + c] += v * (data[(i - w) * n + c] - data[i * n + c]);
+        }
+      for (int y = h - 2; y >= 0; --y)
+        for (int x = x0; x < x1; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          const float v = float(std::exp(log_a * dy[i + w]));
+          for (int c = 0; c < n; ++c)
+            data[i * n + c] += v * (data[(i + w) * n + c] - data[i * n + c]);
+        }
+    });
+  }
 }
 
 }  // namespace
@@ -194,6 +270,111 @@ bool all_zero(const Image& map) {
   for (float v : map.pixels())
     if (v != 0) return false;
   return true;
+}
+
+Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, const Camera& camera,
+                           const CameraPose& pose, const Image& deviation,
+                           const std::array<float, 3>& sky_radiance) {
+  const int w = photo.width, h = photo.height;
+  if (w < 1 || h < 1 || photo.channels < 3 || deviation.empty()) return {};
+  const std::size_t count = std::size_t(w) * h;
+  // The sky's luminance, its mask and the display-referred guide.
+  std::vector<float> guide(3 * count), luma(count, 0.0f);
+  cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
+  bool any_sky = false;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* p = photo.pixel(x, y);
+      const std::size_t i = std::size_t(y) * w + x;
+      const bool finite = std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
+      for (int c = 0; c < 3; ++c)
+        guide[3 * i + c] = finite ? std::pow(std::clamp(p[c], 0.0f, 1.0f), 1 / 2.2f) : 0.0f;
+      if (!finite) continue;
+      luma[i] = float(display_luma(p[0], p[1], p[2]));
+      if (render::physics::is_sky(distance_m.at(x, y, 0))) {
+        sky.at<std::uint8_t>(y, x) = 1;
+        any_sky = true;
+      }
+    }
+  if (!any_sky) return {};
+  // The core of the sky: the binary sky's outer pixels along a surface are mixed with it (the
+  // matte's band), so only sky pixels with sky all around within kCorePx feed the average.
+  constexpr int kCorePx = 2;
+  cv::Mat core;
+  cv::erode(sky, core,
+            cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kCorePx + 1, 2 * kCorePx + 1)));
+  // Normalized convolution: the filter of (core Y, core), their ratio.
+  std::vector<float> data(2 * count);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      const float m = core.at<std::uint8_t>(y, x) ? 1.0f : 0.0f;
+      data[2 * i] = m * luma[i];
+      data[2 * i + 1] = m;
+    }
+  // Smoothing over about 3 % of the frame (the haze hides the sky's fine texture), stopped by
+  // steps of the guide's channels summing to about kEdgeSigma.
+  constexpr double kSmoothingFraction = 0.03, kEdgeSigma = 0.2;
+  domain_transform_filter(data, 2, guide, w, h, kSmoothingFraction * std::max(w, h), kEdgeSigma);
+  // The scale on the sky: the local luma against the sky light's along the pixel's ray.
+  constexpr float kMinWeight = 1e-3f;
+  constexpr double kMinScale = 0.1, kMaxScale = 10;
+  std::vector<float> scale(count, 1.0f);
+  cv::Mat sky_scale(h, w, CV_32F, cv::Scalar(0)), sky_weight(h, w, CV_32F, cv::Scalar(0));
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      if (!sky.at<std::uint8_t>(y, x) || !(data[2 * i + 1] > kMinWeight)) continue;
+      const double local = double(data[2 * i]) / double(data[2 * i + 1]);
+      const auto d = sample_latlong(deviation, pose.ray_direction(camera, x, y));
+      const double light = display_luma(sky_radiance[0] + d[0], sky_radiance[1] + d[1],
+                                        sky_radiance[2] + d[2]);
+      if (!(light > 0) || !(local >= 0)) continue;
+      const float s =
+          float(std::clamp(std::pow(local / light, kDisplayGamma), kMinScale, kMaxScale));
+      scale[i] = s;
+      sky_scale.at<float>(y, x) = s;
+      sky_weight.at<float>(y, x) = 1;
+    }
+  });
+  // Elsewhere: plain averages of the sky's scale nearby (Gaussian normalized convolutions at a
+  // reduced size), the finest whose window holds enough sky: beside the sky (a far hill under
+  // it, at T ~ 0, shows the same fog) the nearby sky's own scale, farther from it a broader
+  // average, and 1 where the sky covers little even of the broadest window.
+  constexpr int kFillSize = 160;  // the reduced frame's longer side
+  constexpr double kFillSigmas[] = {16, 5, 1.5};  // reduced pixels, coarse to fine
+  constexpr float kFullCoverage = 0.2f;
+  const double shrink = std::min(1.0, double(kFillSize) / std::max(w, h));
+  const cv::Size small(std::max(1, int(std::lround(w * shrink))),
+                       std::max(1, int(std::lround(h * shrink))));
+  cv::Mat weighted_small, weight_small;
+  cv::resize(sky_scale.mul(sky_weight), weighted_small, small, 0, 0, cv::INTER_AREA);
+  cv::resize(sky_weight, weight_small, small, 0, 0, cv::INTER_AREA);
+  cv::Mat fill(small, CV_32F, cv::Scalar(1));
+  for (const double sigma : kFillSigmas) {
+    cv::Mat weighted, weight;
+    cv::GaussianBlur(weighted_small, weighted, cv::Size(0, 0), sigma, sigma, cv::BORDER_REPLICATE);
+    cv::GaussianBlur(weight_small, weight, cv::Size(0, 0), sigma, sigma, cv::BORDER_REPLICATE);
+    for (int y = 0; y < small.height; ++y)
+      for (int x = 0; x < small.width; ++x) {
+        const float cover = weight.at<float>(y, x);
+        if (!(cover > 1e-6f)) continue;
+        float& f = fill.at<float>(y, x);
+        f += std::min(1.0f, cover / kFullCoverage) * (weighted.at<float>(y, x) / cover - f);
+      }
+  }
+  cv::resize(fill, fill, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+  bool any = false;
+  Image out(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float s = sky_weight.at<float>(y, x) > 0 ? scale[std::size_t(y) * w + x]
+                                                       : fill.at<float>(y, x);
+      out.at(x, y, 0) = s;
+      any |= s != 1.0f;
+    }
+  if (!any) return {};
+  return out;
 }
 
 }  // namespace mr::photo
