@@ -278,8 +278,8 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   const int w = photo.width, h = photo.height;
   if (w < 1 || h < 1 || photo.channels < 3 || deviation.empty()) return {};
   const std::size_t count = std::size_t(w) * h;
-  // The sky's luminance, its mask and the display-referred guide.
-  std::vector<float> guide(3 * count), luma(count, 0.0f);
+  // The sky mask and the display-referred guide.
+  std::vector<float> guide(3 * count), luma(count);
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
   bool any_sky = false;
   for (int y = 0; y < h; ++y)
@@ -289,21 +289,41 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       const bool finite = std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
       for (int c = 0; c < 3; ++c)
         guide[3 * i + c] = finite ? std::pow(std::clamp(p[c], 0.0f, 1.0f), 1 / 2.2f) : 0.0f;
-      if (!finite) continue;
-      luma[i] = float(display_luma(p[0], p[1], p[2]));
-      if (render::physics::is_sky(distance_m.at(x, y, 0))) {
+      if (finite && render::physics::is_sky(distance_m.at(x, y, 0))) {
         sky.at<std::uint8_t>(y, x) = 1;
         any_sky = true;
       }
     }
   if (!any_sky) return {};
-  // The core of the sky: the binary sky's outer pixels along a surface are mixed with it (the
-  // matte's band), so only sky pixels with sky all around within kCorePx feed the average.
-  constexpr int kCorePx = 2;
+  // Thin structures the sky mask took for sky (cables, a ladder's rails, a lattice's struts:
+  // rocket, bridge, coldripple) would keep part of their contrast in the average, fading in
+  // and out along their length: a median over kMedianFraction of the frame removes them from
+  // the guide and the luma, and keeps the edges of anything wider (a cloud's body).
+  constexpr double kMedianFraction = 0.012;
+  const int median_px =
+      std::clamp(int(std::lround(kMedianFraction * std::max(w, h))) / 2 * 2 + 1, 5, 31);
+  {
+    cv::Mat g8(h, w, CV_8UC3);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        for (int c = 0; c < 3; ++c)
+          g8.at<cv::Vec3b>(y, x)[c] =
+              cv::saturate_cast<std::uint8_t>(255 * guide[3 * (std::size_t(y) * w + x) + c]);
+    cv::medianBlur(g8, g8, median_px);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        const cv::Vec3b& v = g8.at<cv::Vec3b>(y, x);
+        for (int c = 0; c < 3; ++c) guide[3 * i + c] = v[c] / 255.0f;
+        luma[i] = 0.2126f * guide[3 * i] + 0.7152f * guide[3 * i + 1] + 0.0722f * guide[3 * i + 2];
+      }
+  }
+  // The core of the sky: sky pixels whose whole median window is sky (the binary sky's outer
+  // pixels are mixed with the surface along its edge, and a window reaching past it would take
+  // in the surface).
   cv::Mat core;
-  cv::erode(sky, core,
-            cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kCorePx + 1, 2 * kCorePx + 1)));
-  // Normalized convolution: the filter of (core Y, core), their ratio.
+  cv::erode(sky, core, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px)));
+  // Normalized convolution: the filter of (core Y', core), their ratio.
   std::vector<float> data(2 * count);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {

@@ -76,9 +76,9 @@ bool all_zero(const Image& map);
 /// luminance looks brighter than the blue), Y'_local an edge-aware average of the sky's display
 /// luma (a normalized convolution with the domain
 /// transform's recursive filter, Gastal and Oliveira 2011, guided by the display-referred
-/// photo: the core of the sky feeds it, surface pixels and the mixed pixels along the sky's
-/// edge never do, and a photo edge, such as a dark cloud's rim against its bright glow, stops
-/// it). Surface pixels take a broad, plain average of the sky's scale nearby (the fog in front
+/// photo after a median that removes thin structures taken for sky: the core of the sky feeds
+/// it, surface pixels and the mixed pixels along the sky's edge never do, and a photo edge,
+/// such as a dark cloud's rim against its bright glow, stops it). Surface pixels take a broad, plain average of the sky's scale nearby (the fog in front
 /// of a far hill is the same light as the sky's above it), fading to 1 where there is no sky
 /// around. The scale is a scalar, so the fog's colour (its chroma) is the map's.
 /// `photo`: scene-linear, >= 3 channels; `distance_m`: 1 channel, the same size (is_sky:
