@@ -337,7 +337,10 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   constexpr double kSmoothingFraction = 0.03, kEdgeSigma = 0.2;
   domain_transform_filter(data, 2, guide, w, h, kSmoothingFraction * std::max(w, h), kEdgeSigma);
   // The scale on the sky: the local luma against the sky light's along the pixel's ray.
-  constexpr float kMinWeight = 1e-3f;
+  // The average's own weight (the share of core sky that reached the pixel) says how much it
+  // holds: below kFullWeight the scale fades into the plain average below (a sky pocket
+  // narrower than the core's window, far along the filter from any core), with no step.
+  constexpr float kMinWeight = 1e-6f, kFullWeight = 0.1f;
   constexpr double kMinScale = 0.1, kMaxScale = 10;
   std::vector<float> scale(count, 1.0f);
   cv::Mat sky_scale(h, w, CV_32F, cv::Scalar(0)), sky_weight(h, w, CV_32F, cv::Scalar(0));
@@ -354,7 +357,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
           float(std::clamp(std::pow(local / light, kDisplayGamma), kMinScale, kMaxScale));
       scale[i] = s;
       sky_scale.at<float>(y, x) = s;
-      sky_weight.at<float>(y, x) = 1;
+      sky_weight.at<float>(y, x) = std::min(1.0f, data[2 * i + 1] / kFullWeight);
     }
   });
   // Elsewhere: plain averages of the sky's scale nearby (Gaussian normalized convolutions at a
@@ -388,8 +391,8 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   Image out(w, h, 1);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const float s = sky_weight.at<float>(y, x) > 0 ? scale[std::size_t(y) * w + x]
-                                                       : fill.at<float>(y, x);
+      const float b = sky_weight.at<float>(y, x), f = fill.at<float>(y, x);
+      const float s = b > 0 ? f + b * (scale[std::size_t(y) * w + x] - f) : f;
       out.at(x, y, 0) = s;
       any |= s != 1.0f;
     }
