@@ -341,7 +341,11 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // holds: below kFullWeight the scale fades into the plain average below (a sky pocket
   // narrower than the core's window, far along the filter from any core), with no step.
   constexpr float kMinWeight = 1e-6f, kFullWeight = 0.1f;
-  constexpr double kMinScale = 0.1, kMaxScale = 10;
+  // Only ever darker: where the photo's sky is brighter than the light (a glow, white clouds,
+  // a pale tower taken for sky) the haze keeps its flat light, as before; brightening it
+  // brought back structures the sky mask took in and made the matte's spill at a bright
+  // horizon stand out (a mixed pixel given the sky's fog).
+  constexpr double kMinScale = 0.1, kMaxScale = 1;
   std::vector<float> scale(count, 1.0f);
   cv::Mat sky_scale(h, w, CV_32F, cv::Scalar(0)), sky_weight(h, w, CV_32F, cv::Scalar(0));
   tbb::parallel_for(0, h, [&](int y) {
