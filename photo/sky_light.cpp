@@ -11,6 +11,7 @@
 #include <numbers>
 #include <vector>
 
+#include "photo/sky_matte.h"
 #include "render/physics/medium.h"
 #include "render/physics/scattering.h"
 
@@ -347,7 +348,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // horizon stand out (a mixed pixel given the sky's fog).
   constexpr double kMinScale = 0.1, kMaxScale = 1;
   std::vector<float> scale(count, 1.0f);
-  cv::Mat sky_scale(h, w, CV_32F, cv::Scalar(0)), sky_weight(h, w, CV_32F, cv::Scalar(0));
+  cv::Mat sky_weight(h, w, CV_32F, cv::Scalar(0));
   tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
@@ -360,43 +361,47 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       const float s =
           float(std::clamp(std::pow(local / light, kDisplayGamma), kMinScale, kMaxScale));
       scale[i] = s;
-      sky_scale.at<float>(y, x) = s;
       sky_weight.at<float>(y, x) = std::min(1.0f, data[2 * i + 1] / kFullWeight);
     }
   });
-  // Elsewhere: plain averages of the sky's scale nearby (Gaussian normalized convolutions at a
-  // reduced size), the finest whose window holds enough sky: beside the sky (a far hill under
-  // it, at T ~ 0, shows the same fog) the nearby sky's own scale, farther from it a broader
-  // average, and 1 where the sky covers little even of the broadest window.
-  constexpr int kFillSize = 160;  // the reduced frame's longer side
-  constexpr double kFillSigmas[] = {16, 5, 1.5};  // reduced pixels, coarse to fine
-  constexpr float kFullCoverage = 0.2f;
-  const double shrink = std::min(1.0, double(kFillSize) / std::max(w, h));
-  const cv::Size small(std::max(1, int(std::lround(w * shrink))),
-                       std::max(1, int(std::lround(h * shrink))));
-  cv::Mat weighted_small, weight_small;
-  cv::resize(sky_scale.mul(sky_weight), weighted_small, small, 0, 0, cv::INTER_AREA);
-  cv::resize(sky_weight, weight_small, small, 0, 0, cv::INTER_AREA);
-  cv::Mat fill(small, CV_32F, cv::Scalar(1));
-  for (const double sigma : kFillSigmas) {
-    cv::Mat weighted, weight;
-    cv::GaussianBlur(weighted_small, weighted, cv::Size(0, 0), sigma, sigma, cv::BORDER_REPLICATE);
-    cv::GaussianBlur(weight_small, weight, cv::Size(0, 0), sigma, sigma, cv::BORDER_REPLICATE);
-    for (int y = 0; y < small.height; ++y)
-      for (int x = 0; x < small.width; ++x) {
-        const float cover = weight.at<float>(y, x);
-        if (!(cover > 1e-6f)) continue;
-        float& f = fill.at<float>(y, x);
-        f += std::min(1.0f, cover / kFullCoverage) * (weighted.at<float>(y, x) / cover - f);
-      }
-  }
-  cv::resize(fill, fill, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+  // Elsewhere, and where the average holds little: the scale of the nearest sky pixel whose
+  // average is sound (a far hill under the sky, at T ~ 0, shows the same fog as the sky just
+  // above it, not a broad average that takes in a darker zenith), smoothed over kSpreadFraction
+  // of the frame so the nearest pixels' cells leave no seams, and fading to 1 with the distance
+  // from the sky (kFadeFraction of the frame; near surfaces are nearly clear anyway).
+  constexpr double kSpreadFraction = 0.01, kFadeFraction = 0.05;
+  std::vector<std::uint8_t> sound(count, 0);
+  bool any_sound = false;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      sound[std::size_t(y) * w + x] = sky_weight.at<float>(y, x) >= 1.0f;
+      any_sound |= sky_weight.at<float>(y, x) >= 1.0f;
+    }
+  if (!any_sound) return {};
+  const std::vector<std::int32_t> nearest = nearest_source(w, h, sound);
+  cv::Mat spread(h, w, CV_32F);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::int32_t k = nearest[std::size_t(y) * w + x];
+      spread.at<float>(y, x) = k >= 0 ? scale[std::size_t(k)] : 1.0f;
+    }
+  const double spread_px = std::max(1.0, kSpreadFraction * std::max(w, h));
+  cv::GaussianBlur(spread, spread, cv::Size(0, 0), spread_px, spread_px, cv::BORDER_REPLICATE);
+  const double fade_px = kFadeFraction * std::max(w, h);
   bool any = false;
   Image out(w, h, 1);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const float b = sky_weight.at<float>(y, x), f = fill.at<float>(y, x);
-      const float s = b > 0 ? f + b * (scale[std::size_t(y) * w + x] - f) : f;
+      const std::size_t i = std::size_t(y) * w + x;
+      const float b = sky_weight.at<float>(y, x), f = spread.at<float>(y, x);
+      float s;
+      if (sky.at<std::uint8_t>(y, x)) {
+        s = f + b * (scale[i] - f);
+      } else {
+        const std::int32_t k = nearest[i];
+        const double d = k >= 0 ? std::hypot(double(k % w - x), double(k / w - y)) : 1e30;
+        s = float(1.0 + std::exp(-d / fade_px) * (f - 1.0));
+      }
       out.at(x, y, 0) = s;
       any |= s != 1.0f;
     }

@@ -78,9 +78,11 @@ bool all_zero(const Image& map);
 /// transform's recursive filter, Gastal and Oliveira 2011, guided by the display-referred
 /// photo after a median that removes thin structures taken for sky: the core of the sky feeds
 /// it, surface pixels and the mixed pixels along the sky's edge never do, and a photo edge,
-/// such as a dark cloud's rim against its bright glow, stops it). Surface pixels take a broad, plain average of the sky's scale nearby (the fog in front
-/// of a far hill is the same light as the sky's above it), fading to 1 where there is no sky
-/// around. The scale is a scalar, so the fog's colour (its chroma) is the map's.
+/// such as a dark cloud's rim against its bright glow, stops it). The scale only ever darkens
+/// (at most 1): a glow, white clouds or a pale structure taken for sky keep the flat light.
+/// Surface pixels take the scale of the nearest sky (the fog in front of a far hill is the
+/// same light as the sky's just above it), smoothed, fading to 1 away from the sky. The scale
+/// is a scalar, so the fog's colour (its chroma) is the map's.
 /// `photo`: scene-linear, >= 3 channels; `distance_m`: 1 channel, the same size (is_sky:
 /// sky); `deviation`: the convolved (and bounded) map of L_in - sky_radiance. Returns a
 /// 1-channel map of the photo's size, or an empty image when every scale is exactly 1.
