@@ -290,6 +290,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       const bool finite = std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
       for (int c = 0; c < 3; ++c)
         guide[3 * i + c] = finite ? std::pow(std::clamp(p[c], 0.0f, 1.0f), 1 / 2.2f) : 0.0f;
+      luma[i] = finite ? float(display_luma(p[0], p[1], p[2])) : 0.0f;
       if (finite && render::physics::is_sky(distance_m.at(x, y, 0))) {
         sky.at<std::uint8_t>(y, x) = 1;
         any_sky = true;
@@ -299,10 +300,14 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // Thin structures the sky mask took for sky (cables, a ladder's rails, a lattice's struts:
   // rocket, bridge, coldripple) would keep part of their contrast in the average, fading in
   // and out along their length: a median over kMedianFraction of the frame removes them from
-  // the guide and the luma, and keeps the edges of anything wider (a cloud's body).
+  // the guide (anything wider, a cloud's body, keeps its edges), and the pixels that stand off
+  // the median by more than kStructureLuma do not feed the average (its luma stays the photo's
+  // own, unquantized and unclamped: a uniform sky gives exactly the light's luma back).
   constexpr double kMedianFraction = 0.012;
+  constexpr float kStructureLuma = 0.03f;
   const int median_px =
       std::clamp(int(std::lround(kMedianFraction * std::max(w, h))) / 2 * 2 + 1, 5, 31);
+  cv::Mat structure(h, w, CV_8U, cv::Scalar(0));
   {
     cv::Mat g8(h, w, CV_8UC3);
     for (int y = 0; y < h; ++y)
@@ -310,20 +315,27 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
         for (int c = 0; c < 3; ++c)
           g8.at<cv::Vec3b>(y, x)[c] =
               cv::saturate_cast<std::uint8_t>(255 * guide[3 * (std::size_t(y) * w + x) + c]);
-    cv::medianBlur(g8, g8, median_px);
+    cv::Mat m8;
+    cv::medianBlur(g8, m8, median_px);
+    auto luma8 = [](const cv::Vec3b& v) {
+      return (0.2126f * v[0] + 0.7152f * v[1] + 0.0722f * v[2]) / 255.0f;
+    };
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         const std::size_t i = std::size_t(y) * w + x;
-        const cv::Vec3b& v = g8.at<cv::Vec3b>(y, x);
+        const cv::Vec3b& v = m8.at<cv::Vec3b>(y, x);
         for (int c = 0; c < 3; ++c) guide[3 * i + c] = v[c] / 255.0f;
-        luma[i] = 0.2126f * guide[3 * i] + 0.7152f * guide[3 * i + 1] + 0.0722f * guide[3 * i + 2];
+        structure.at<std::uint8_t>(y, x) =
+            std::abs(luma8(g8.at<cv::Vec3b>(y, x)) - luma8(v)) > kStructureLuma;
       }
   }
-  // The core of the sky: sky pixels whose whole median window is sky (the binary sky's outer
-  // pixels are mixed with the surface along its edge, and a window reaching past it would take
-  // in the surface).
+  // The core of the sky: sky pixels with sky all around within kCorePx (the binary sky's outer
+  // pixels are mixed with the surface along its edge) that are not structure.
+  constexpr int kCorePx = 2;
   cv::Mat core;
-  cv::erode(sky, core, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px)));
+  cv::erode(sky, core,
+            cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kCorePx + 1, 2 * kCorePx + 1)));
+  core.setTo(0, structure);
   // Normalized convolution: the filter of (core Y', core), their ratio.
   std::vector<float> data(2 * count);
   for (int y = 0; y < h; ++y)

@@ -1249,15 +1249,16 @@ TEST(SkyLight, SceneDocumentField) {
 // clear (T ~ 0.98); the photo's edge, mostly hue, became a luma step. The geometry is exact
 // (the tree's coverage from 4 x 4 samples a pixel: its matte and, at half coverage, its
 // distance), so the case is the sky light alone.
-// mr::fog's steps (render, sky light by direction, matte, composite) with the sky light's
-// brightness scale left out: the render before haze14.
-FogLayers fog_without_sky_brightness(const Image& photo, const Image& distance, const Image& alpha,
-                                     const FogScene& scene) {
+// mr::fog's steps (render, sky light by direction, matte, composite), with or without the sky
+// light's brightness scale (without: the render before haze14).
+FogLayers fog_with_sky_light(const Image& photo, const Image& distance, const Image& alpha,
+                             const FogScene& scene, bool brightness_from_photo) {
   FogScene plain = scene;
   plain.lighting.sky_by_direction = false;
   ScatteringLayers layers = render_scattering(photo, distance, kCamera, plain);
   const SkyLight light =
-      sky_light_from_photo(photo, distance, kCamera, scene, layers.sky_radiance, false);
+      sky_light_from_photo(photo, distance, kCamera, scene, layers.sky_radiance,
+                           brightness_from_photo);
   add_sky_light(light, scene.medium, kCamera, scene.pose, layers.optical_depth, layers.inscatter);
   if (!alpha.empty())
     photo::apply_sky_matte(alpha.view(), layers.transmittance.view(), layers.inscatter.view());
@@ -1318,8 +1319,8 @@ TEST(SkyLight, HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze) {
   scene.lighting.sky_by_direction = true;
   scene.lighting.sky_radiance = estimate_airlight(t.photo);
   Image map_before, map_after;
-  const FogLayers fog_before = fog_without_sky_brightness(t.photo, t.distance, t.alpha, scene);
-  const FogLayers fog_after = fog(t.photo, t.distance, t.alpha, kCamera, scene);
+  const FogLayers fog_before = fog_with_sky_light(t.photo, t.distance, t.alpha, scene, false);
+  const FogLayers fog_after = fog_with_sky_light(t.photo, t.distance, t.alpha, scene, true);
   const double e_before = test::gallery_created_edges(t.photo, fog_before.composite, &map_before);
   const double e_after = test::gallery_created_edges(t.photo, fog_after.composite, &map_after);
   if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
@@ -1369,8 +1370,8 @@ TEST(SkyLight, DarkCloudBesideItsGlowKeepsItsBrightnessInHaze) {
     }
   scene.lighting.sky_by_direction = true;
   scene.lighting.sky_radiance = estimate_airlight(photo);
-  const FogLayers fog_before = fog_without_sky_brightness(photo, distance, Image(), scene);
-  const FogLayers fog_after = fog(photo, distance, kCamera, scene);
+  const FogLayers fog_before = fog_with_sky_light(photo, distance, Image(), scene, false);
+  const FogLayers fog_after = fog_with_sky_light(photo, distance, Image(), scene, true);
   auto lum = [](const Image& img, int x, int y) {  // display luma
     auto e = [&](int c) { return std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f); };
     return 0.2126 * e(0) + 0.7152 * e(1) + 0.0722 * e(2);
