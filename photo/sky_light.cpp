@@ -329,12 +329,11 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
             std::abs(luma8(g8.at<cv::Vec3b>(y, x)) - luma8(v)) > kStructureLuma;
       }
   }
-  // The core of the sky: sky pixels with sky all around within kCorePx (the binary sky's outer
-  // pixels are mixed with the surface along its edge) that are not structure.
-  constexpr int kCorePx = 2;
+  // The core of the sky: sky pixels whose whole median window is sky (the binary sky's outer
+  // pixels are mixed with the surface along its edge, and a window reaching past it judges
+  // structure against the surface) that are not structure.
   cv::Mat core;
-  cv::erode(sky, core,
-            cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kCorePx + 1, 2 * kCorePx + 1)));
+  cv::erode(sky, core, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px)));
   core.setTo(0, structure);
   // Normalized convolution: the filter of (core Y', core), their ratio.
   std::vector<float> data(2 * count);
