@@ -366,8 +366,8 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       if (!sky.at<std::uint8_t>(y, x) || !(data[2 * i + 1] > kMinWeight)) continue;
       const double local = double(data[2 * i]) / double(data[2 * i + 1]);
       const auto d = sample_latlong(deviation, pose.ray_direction(camera, x, y));
-      const double light = display_luma(sky_radiance[0] + d[0], sky_radiance[1] + d[1],
-                                        sky_radiance[2] + d[2]);
+      const double light =
+          display_luma(sky_radiance[0] + d[0], sky_radiance[1] + d[1], sky_radiance[2] + d[2]);
       if (!(light > 0) || !(local >= 0)) continue;
       const float s =
           float(std::clamp(std::pow(local / light, kDisplayGamma), kMinScale, kMaxScale));

@@ -1256,9 +1256,8 @@ FogLayers fog_with_sky_light(const Image& photo, const Image& distance, const Im
   FogScene plain = scene;
   plain.lighting.sky_by_direction = false;
   ScatteringLayers layers = render_scattering(photo, distance, kCamera, plain);
-  const SkyLight light =
-      sky_light_from_photo(photo, distance, kCamera, scene, layers.sky_radiance,
-                           brightness_from_photo);
+  const SkyLight light = sky_light_from_photo(photo, distance, kCamera, scene, layers.sky_radiance,
+                                              brightness_from_photo);
   add_sky_light(light, scene.medium, kCamera, scene.pose, layers.optical_depth, layers.inscatter);
   if (!alpha.empty())
     photo::apply_sky_matte(alpha.view(), layers.transmittance.view(), layers.inscatter.view());
