@@ -2,11 +2,16 @@
 
 #include <tbb/parallel_for.h>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <numbers>
 #include <vector>
 
+#include "photo/sky_matte.h"
 #include "render/physics/medium.h"
 #include "render/physics/scattering.h"
 
@@ -18,6 +23,78 @@ constexpr double kPi = std::numbers::pi;
 
 double texel_elevation(int height, double row) {
   return 0.5 * kPi - row / height * kPi;
+}
+
+// Display luma (Rec.709 weights on the gamma-2.2 encoded values, as the gallery's measure and
+// SkyMask take it) of scene-linear RGB. Scaling the colour by s scales it by s^(1 / 2.2).
+constexpr double kDisplayGamma = 2.2;
+double display_luma(double r, double g, double b) {
+  auto encode = [](double v) { return std::pow(std::max(0.0, v), 1 / kDisplayGamma); };
+  return 0.2126 * encode(r) + 0.7152 * encode(g) + 0.0722 * encode(b);
+}
+
+// The domain transform's recursive filter (Gastal and Oliveira 2011, "Domain transform for
+// edge-aware image and video processing", RF with three iterations) of the `n` interleaved
+// channels of `data` (w x h, in place), guided by `guide` (w x h x 3): a pixel's neighbour
+// across a step of the guide lies sigma_s / sigma_r times that step (summed over the channels)
+// farther away, so the filter averages over sigma_s pixels inside a region and stops at its
+// edges, soft ones included (their steps add up along the ramp).
+void domain_transform_filter(std::vector<float>& data, int n, const std::vector<float>& guide,
+                             int w, int h, double sigma_s, double sigma_r) {
+  const std::size_t count = std::size_t(w) * h;
+  // Distances in the transformed domain: dx[i] between (x - 1, y) and (x, y), dy[i] between
+  // (x, y - 1) and (x, y).
+  std::vector<float> dx(count, 1.0f), dy(count, 1.0f);
+  const double ratio = sigma_s / sigma_r;
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      double sx = 0, sy = 0;
+      for (int c = 0; c < 3; ++c) {
+        if (x > 0) sx += std::abs(guide[3 * i + c] - guide[3 * (i - 1) + c]);
+        if (y > 0) sy += std::abs(guide[3 * i + c] - guide[3 * (i - w) + c]);
+      }
+      dx[i] = float(1 + ratio * sx);
+      dy[i] = float(1 + ratio * sy);
+    }
+  });
+  constexpr int kIterations = 3;
+  constexpr int kColumnBlock = 64;
+  for (int it = 0; it < kIterations; ++it) {
+    // The paper's sigma_H for this iteration: the iterations' variances add up to sigma_s^2.
+    const double sigma_h = sigma_s * std::sqrt(3.0) * std::pow(2.0, kIterations - it - 1) /
+                           std::sqrt(std::pow(4.0, kIterations) - 1);
+    const double log_a = -std::sqrt(2.0) / sigma_h;
+    tbb::parallel_for(0, h, [&](int y) {
+      float* row = data.data() + std::size_t(y) * w * n;
+      const float* d = dx.data() + std::size_t(y) * w;
+      for (int x = 1; x < w; ++x) {
+        const float v = float(std::exp(log_a * d[x]));
+        for (int c = 0; c < n; ++c) row[x * n + c] += v * (row[(x - 1) * n + c] - row[x * n + c]);
+      }
+      for (int x = w - 2; x >= 0; --x) {
+        const float v = float(std::exp(log_a * d[x + 1]));
+        for (int c = 0; c < n; ++c) row[x * n + c] += v * (row[(x + 1) * n + c] - row[x * n + c]);
+      }
+    });
+    tbb::parallel_for(0, (w + kColumnBlock - 1) / kColumnBlock, [&](int block) {
+      const int x0 = block * kColumnBlock, x1 = std::min(w, x0 + kColumnBlock);
+      for (int y = 1; y < h; ++y)
+        for (int x = x0; x < x1; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          const float v = float(std::exp(log_a * dy[i]));
+          for (int c = 0; c < n; ++c)
+            data[i * n + c] += v * (data[(i - w) * n + c] - data[i * n + c]);
+        }
+      for (int y = h - 2; y >= 0; --y)
+        for (int x = x0; x < x1; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          const float v = float(std::exp(log_a * dy[i + w]));
+          for (int c = 0; c < n; ++c)
+            data[i * n + c] += v * (data[(i + w) * n + c] - data[i * n + c]);
+        }
+    });
+  }
 }
 
 }  // namespace
@@ -194,6 +271,153 @@ bool all_zero(const Image& map) {
   for (float v : map.pixels())
     if (v != 0) return false;
   return true;
+}
+
+Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, const Camera& camera,
+                           const CameraPose& pose, const Image& deviation,
+                           const std::array<float, 3>& sky_radiance) {
+  const int w = photo.width, h = photo.height;
+  if (w < 1 || h < 1 || photo.channels < 3 || deviation.empty()) return {};
+  const std::size_t count = std::size_t(w) * h;
+  // The sky mask and the display-referred guide.
+  std::vector<float> guide(3 * count), luma(count);
+  cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
+  bool any_sky = false;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* p = photo.pixel(x, y);
+      const std::size_t i = std::size_t(y) * w + x;
+      const bool finite = std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
+      for (int c = 0; c < 3; ++c)
+        guide[3 * i + c] = finite ? std::pow(std::clamp(p[c], 0.0f, 1.0f), 1 / 2.2f) : 0.0f;
+      luma[i] = finite ? float(display_luma(p[0], p[1], p[2])) : 0.0f;
+      if (finite && render::physics::is_sky(distance_m.at(x, y, 0))) {
+        sky.at<std::uint8_t>(y, x) = 1;
+        any_sky = true;
+      }
+    }
+  if (!any_sky) return {};
+  // Thin structures the sky mask took for sky (cables, a ladder's rails, a lattice's struts:
+  // rocket, bridge, coldripple) would keep part of their contrast in the average, fading in
+  // and out along their length: a median over kMedianFraction of the frame removes them from
+  // the guide (anything wider, a cloud's body, keeps its edges), and the pixels that stand off
+  // the median by more than kStructureLuma do not feed the average (its luma stays the photo's
+  // own, unquantized and unclamped: a uniform sky gives exactly the light's luma back).
+  constexpr double kMedianFraction = 0.012;
+  constexpr float kStructureLuma = 0.03f;
+  const int median_px =
+      std::clamp(int(std::lround(kMedianFraction * std::max(w, h))) / 2 * 2 + 1, 5, 31);
+  cv::Mat structure(h, w, CV_8U, cv::Scalar(0));
+  {
+    cv::Mat g8(h, w, CV_8UC3);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        for (int c = 0; c < 3; ++c)
+          g8.at<cv::Vec3b>(y, x)[c] =
+              cv::saturate_cast<std::uint8_t>(255 * guide[3 * (std::size_t(y) * w + x) + c]);
+    cv::Mat m8;
+    cv::medianBlur(g8, m8, median_px);
+    auto luma8 = [](const cv::Vec3b& v) {
+      return (0.2126f * v[0] + 0.7152f * v[1] + 0.0722f * v[2]) / 255.0f;
+    };
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        const cv::Vec3b& v = m8.at<cv::Vec3b>(y, x);
+        for (int c = 0; c < 3; ++c) guide[3 * i + c] = v[c] / 255.0f;
+        structure.at<std::uint8_t>(y, x) =
+            std::abs(luma8(g8.at<cv::Vec3b>(y, x)) - luma8(v)) > kStructureLuma;
+      }
+  }
+  // The core of the sky: sky pixels whose whole median window is sky (the binary sky's outer
+  // pixels are mixed with the surface along its edge, and a window reaching past it judges
+  // structure against the surface) that are not structure.
+  cv::Mat core;
+  cv::erode(sky, core, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px)));
+  core.setTo(0, structure);
+  // Normalized convolution: the filter of (core Y', core), their ratio.
+  std::vector<float> data(2 * count);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      const float m = core.at<std::uint8_t>(y, x) ? 1.0f : 0.0f;
+      data[2 * i] = m * luma[i];
+      data[2 * i + 1] = m;
+    }
+  // Smoothing over about 3 % of the frame (the haze hides the sky's fine texture), stopped by
+  // steps of the guide's channels summing to about kEdgeSigma.
+  constexpr double kSmoothingFraction = 0.03, kEdgeSigma = 0.2;
+  domain_transform_filter(data, 2, guide, w, h, kSmoothingFraction * std::max(w, h), kEdgeSigma);
+  // The scale on the sky: the local luma against the sky light's along the pixel's ray.
+  // The average's own weight (the share of core sky that reached the pixel) says how much it
+  // holds: below kFullWeight the scale fades into the plain average below (a sky pocket
+  // narrower than the core's window, far along the filter from any core), with no step.
+  constexpr float kMinWeight = 1e-6f, kFullWeight = 0.1f;
+  // Only ever darker: where the photo's sky is brighter than the light (a glow, white clouds,
+  // a pale tower taken for sky) the haze keeps its flat light, as before; brightening it
+  // brought back structures the sky mask took in and made the matte's spill at a bright
+  // horizon stand out (a mixed pixel given the sky's fog).
+  constexpr double kMinScale = 0.1, kMaxScale = 1;
+  std::vector<float> scale(count, 1.0f);
+  cv::Mat sky_weight(h, w, CV_32F, cv::Scalar(0));
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      if (!sky.at<std::uint8_t>(y, x) || !(data[2 * i + 1] > kMinWeight)) continue;
+      const double local = double(data[2 * i]) / double(data[2 * i + 1]);
+      const auto d = sample_latlong(deviation, pose.ray_direction(camera, x, y));
+      const double light =
+          display_luma(sky_radiance[0] + d[0], sky_radiance[1] + d[1], sky_radiance[2] + d[2]);
+      if (!(light > 0) || !(local >= 0)) continue;
+      const float s =
+          float(std::clamp(std::pow(local / light, kDisplayGamma), kMinScale, kMaxScale));
+      scale[i] = s;
+      sky_weight.at<float>(y, x) = std::min(1.0f, data[2 * i + 1] / kFullWeight);
+    }
+  });
+  // Elsewhere, and where the average holds little: the scale of the nearest sky pixel whose
+  // average is sound (a far hill under the sky, at T ~ 0, shows the same fog as the sky just
+  // above it, not a broad average that takes in a darker zenith), smoothed over kSpreadFraction
+  // of the frame so the nearest pixels' cells leave no seams, and fading to 1 with the distance
+  // from the sky (kFadeFraction of the frame; near surfaces are nearly clear anyway).
+  constexpr double kSpreadFraction = 0.01, kFadeFraction = 0.05;
+  std::vector<std::uint8_t> sound(count, 0);
+  bool any_sound = false;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      sound[std::size_t(y) * w + x] = sky_weight.at<float>(y, x) >= 1.0f;
+      any_sound |= sky_weight.at<float>(y, x) >= 1.0f;
+    }
+  if (!any_sound) return {};
+  const std::vector<std::int32_t> nearest = nearest_source(w, h, sound);
+  cv::Mat spread(h, w, CV_32F);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::int32_t k = nearest[std::size_t(y) * w + x];
+      spread.at<float>(y, x) = k >= 0 ? scale[std::size_t(k)] : 1.0f;
+    }
+  const double spread_px = std::max(1.0, kSpreadFraction * std::max(w, h));
+  cv::GaussianBlur(spread, spread, cv::Size(0, 0), spread_px, spread_px, cv::BORDER_REPLICATE);
+  const double fade_px = kFadeFraction * std::max(w, h);
+  bool any = false;
+  Image out(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      const float b = sky_weight.at<float>(y, x), f = spread.at<float>(y, x);
+      float s;
+      if (sky.at<std::uint8_t>(y, x)) {
+        s = f + b * (scale[i] - f);
+      } else {
+        const std::int32_t k = nearest[i];
+        const double d = k >= 0 ? std::hypot(double(k % w - x), double(k / w - y)) : 1e30;
+        s = float(1.0 + std::exp(-d / fade_px) * (f - 1.0));
+      }
+      out.at(x, y, 0) = s;
+      any |= s != 1.0f;
+    }
+  if (!any) return {};
+  return out;
 }
 
 }  // namespace mr::photo

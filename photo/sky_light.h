@@ -64,4 +64,30 @@ Image environment_deviation(ConstImageView photo, ConstImageView distance_m, con
 /// True when every value of the map is exactly 0 (a uniform environment: no correction).
 bool all_zero(const Image& map);
 
+/// Issue 11 (helper haze14): the sky's brightness where the photo shows it. The phase-convolved
+/// map above is smooth at the scale of the phase lobe (tens of degrees) and, through the neutral
+/// prior, of a daylight colour: in haze, where the sky behind a near surface is seen through the
+/// whole layer (T ~ 0), a deep blue sky (dark in luma) turned into a flat, much brighter grey,
+/// and a leaf or a steel strut whose edge against it was mostly hue became a luma step the
+/// photo did not have. The light the haze scatters toward the camera along a direction is what
+/// the photo's sky shows there, so the sky term's light along each pixel's ray is scaled to the
+/// brightness of the photo's own sky around the pixel: s = (Y'_local / Y'(L_in(w)))^2.2, Y' the
+/// display luma (Rec.709 weights on gamma-2.2 encoded values: a neutral grey of a blue sky's
+/// luminance looks brighter than the blue), Y'_local an edge-aware average of the sky's display
+/// luma (a normalized convolution with the domain
+/// transform's recursive filter, Gastal and Oliveira 2011, guided by the display-referred
+/// photo after a median that removes thin structures taken for sky: the core of the sky feeds
+/// it, surface pixels and the mixed pixels along the sky's edge never do, and a photo edge,
+/// such as a dark cloud's rim against its bright glow, stops it). The scale only ever darkens
+/// (at most 1): a glow, white clouds or a pale structure taken for sky keep the flat light.
+/// Surface pixels take the scale of the nearest sky (the fog in front of a far hill is the
+/// same light as the sky's just above it), smoothed, fading to 1 away from the sky. The scale
+/// is a scalar, so the fog's colour (its chroma) is the map's.
+/// `photo`: scene-linear, >= 3 channels; `distance_m`: 1 channel, the same size (is_sky:
+/// sky); `deviation`: the convolved (and bounded) map of L_in - sky_radiance. Returns a
+/// 1-channel map of the photo's size, or an empty image when every scale is exactly 1.
+Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, const Camera& camera,
+                           const CameraPose& pose, const Image& deviation,
+                           const std::array<float, 3>& sky_radiance);
+
 }  // namespace mr::photo

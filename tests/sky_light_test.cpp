@@ -28,8 +28,10 @@
 #include "mr/scene_json.h"
 #include "mr/sky_light.h"
 #include "photo/clouds.h"
+#include "photo/composite.h"
 #include "photo/sky_light.h"
 #include "photo/sky_mask.h"
+#include "photo/sky_matte.h"
 #include "render/physics/scattering.h"
 #include "tests/display_luma.h"
 #include "tests/gallery_look.h"
@@ -1238,6 +1240,180 @@ TEST(SkyLight, SceneDocumentField) {
   EXPECT_THROW(scene_from_json(R"({"format": "libmr-scene", "version": 2,
                                    "lighting": {"sky_by_direction": "yes"}})"),
                Error);
+}
+
+// Issue 11, class 2 of gallery/results/haze11b_tune.md (helper haze14): a hue edge becoming a
+// luma edge at the sky. A tree of brown leaves 12 m away against a deep blue sky of about the
+// leaves' luma: in haze the sky behind it is seen through the whole layer (T ~ 0) and took the
+// fog's flat, neutral light, much brighter than the deep blue, while the leaves stay nearly
+// clear (T ~ 0.98); the photo's edge, mostly hue, became a luma step. The geometry is exact
+// (the tree's coverage from 4 x 4 samples a pixel: its matte and, at half coverage, its
+// distance), so the case is the sky light alone.
+// mr::fog's steps (render, sky light by direction, matte, composite), with or without the sky
+// light's brightness scale (without: the render before haze14).
+FogLayers fog_with_sky_light(const Image& photo, const Image& distance, const Image& alpha,
+                             const FogScene& scene, bool brightness_from_photo) {
+  FogScene plain = scene;
+  plain.lighting.sky_by_direction = false;
+  ScatteringLayers layers = render_scattering(photo, distance, kCamera, plain);
+  const SkyLight light = sky_light_from_photo(photo, distance, kCamera, scene, layers.sky_radiance,
+                                              brightness_from_photo);
+  add_sky_light(light, scene.medium, kCamera, scene.pose, layers.optical_depth, layers.inscatter);
+  if (!alpha.empty())
+    photo::apply_sky_matte(alpha.view(), layers.transmittance.view(), layers.inscatter.view());
+  FogLayers out;
+  out.composite = Image(photo.width(), photo.height(), 3);
+  photo::composite(photo.view(), layers.transmittance.view(), layers.inscatter.view(),
+                   out.composite.view());
+  return out;
+}
+
+struct TreeScene {
+  Image photo, distance, alpha;
+};
+TreeScene leaves_against_a_deep_blue_sky(const FogScene& scene) {  // all sky behind the tree
+  std::mt19937 rng(14);
+  std::uniform_real_distribution<double> unit(0, 1);
+  std::vector<std::array<double, 3>> leaves;  // x, y, radius (pixels)
+  for (int i = 0; i < 70; ++i)
+    leaves.push_back({105 + 110 * unit(rng), 35 + 70 * unit(rng), 6 + 9 * unit(rng)});
+  auto covered = [&](double x, double y) {
+    if (x >= 156 && x < 166 && y >= 90) return true;  // the trunk, down to the ground
+    for (const auto& l : leaves)
+      if (std::hypot(x - l[0], y - l[1]) < l[2]) return true;
+    return false;
+  };
+  std::uniform_real_distribution<float> grain(-0.035f, 0.035f);
+  TreeScene t{Image(kW, kH, 3), ground_plane_distance(scene), Image(kW, kH, 1)};
+  constexpr double kTreeDistanceM = 12;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      int n = 0;
+      for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) n += covered(x + (i + 0.5) / 4, y + (j + 0.5) / 4);
+      const double cover = n / 16.0;
+      const Vec3 w = scene.pose.ray_direction(kCamera, x, y);
+      const bool sky = std::isinf(t.distance.at(x, y, 0));
+      // Deep blue sky, lighter toward the horizon (display luma 0.33 .. 0.40); dark olive ground.
+      const float up = std::clamp(float(w.y / 0.5), 0.0f, 1.0f);
+      const std::array<float, 3> back =
+          sky ? std::array<float, 3>{0.28f - 0.12f * up, 0.43f - 0.09f * up, 0.80f - 0.06f * up}
+              : std::array<float, 3>{0.22f + grain(rng), 0.24f + grain(rng), 0.14f};
+      // Brown leaves of about the sky's luma (0.35), textured.
+      const float g = grain(rng);
+      const std::array<float, 3> leaf{0.52f + g, 0.33f + g, 0.15f + 0.5f * g};
+      for (int c = 0; c < 3; ++c)
+        t.photo.at(x, y, c) =
+            float(cover * linear(leaf[c]) + (1 - cover) * linear(std::clamp(back[c], 0.0f, 1.0f)));
+      if (cover >= 0.5) t.distance.at(x, y, 0) = float(kTreeDistanceM);
+      t.alpha.at(x, y, 0) = sky ? float(1 - cover) : 0.0f;  // the sky's share of the pixel
+    }
+  return t;
+}
+
+TEST(SkyLight, HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze) {
+  FogScene scene = haze_scene();
+  scene.pose.pitch_deg = 25;  // looking up: no ground in the frame (its horizon is another case)
+  const TreeScene t = leaves_against_a_deep_blue_sky(scene);
+  scene.lighting.sky_by_direction = true;
+  scene.lighting.sky_radiance = estimate_airlight(t.photo);
+  Image map_before, map_after;
+  const FogLayers fog_before = fog_with_sky_light(t.photo, t.distance, t.alpha, scene, false);
+  const FogLayers fog_after = fog_with_sky_light(t.photo, t.distance, t.alpha, scene, true);
+  const double e_before = test::gallery_created_edges(t.photo, fog_before.composite, &map_before);
+  const double e_after = test::gallery_created_edges(t.photo, fog_after.composite, &map_after);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
+    const std::string f(folder);
+    write_image(f + "/leaves_photo.png", t.photo);
+    write_image(f + "/leaves_haze_before.png", fog_before.composite);
+    write_image(f + "/leaves_haze_after.png", fog_after.composite);
+    write_image(f + "/leaves_edges_before.png", map_before);
+    write_image(f + "/leaves_edges_after.png", map_after);
+  }
+  std::printf("leaves against a deep blue sky, haze: created-edge pixels %.4f %% -> %.4f %%\n",
+              100 * e_before, 100 * e_after);
+  EXPECT_GT(e_before, 2e-4);  // the class reproduced
+  EXPECT_LE(e_after, 2e-4);   // the issue's target
+}
+
+// A dark cloud's flat body beside the bright glow around a hidden sun, all sky: the sky's
+// brightness is averaged within each side of the cloud's edge, never across it (a plain blur
+// mixed the two: the body near its edge brightened, the glow dimmed, each a new gradient). The
+// body, darker than the fog's light, keeps its own brightness; the glow, brighter, keeps the
+// fog's light as before (the scale only ever darkens).
+TEST(SkyLight, DarkCloudBesideItsGlowKeepsItsBrightnessInHaze) {
+  FogScene scene = haze_scene();
+  scene.pose.pitch_deg = 25;  // looking up: all sky
+  Image photo(kW, kH, 3);
+  const Image distance = ground_plane_distance(scene);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> grain(-0.01f, 0.01f);
+  auto cloud_cover = [](double x, double y) {  // a soft-edged ellipse (about 3 px ramp)
+    const double r = std::hypot((x - 120) / 70, (y - 55) / 28);
+    return std::clamp((1.0 - r) * 28 / 3 + 0.5, 0.0, 1.0);
+  };
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      std::array<float, 3> c;
+      if (std::isinf(distance.at(x, y, 0))) {
+        const double glow = 0.45 * std::exp(-std::pow(std::hypot(x - 175.0, y - 60.0) / 70, 2));
+        const std::array<float, 3> sky{float(0.52 + glow), float(0.58 + 0.95 * glow),
+                                       float(0.70 + 0.85 * glow)};
+        const float k = float(cloud_cover(x, y));
+        const std::array<float, 3> body{0.25f, 0.26f, 0.30f};
+        for (int i = 0; i < 3; ++i) c[i] = sky[i] * (1 - k) + body[i] * k;
+      } else {
+        c = {0.20f + grain(rng), 0.22f + grain(rng), 0.15f};
+      }
+      for (int i = 0; i < 3; ++i) photo.at(x, y, i) = linear(std::clamp(c[i], 0.0f, 1.0f));
+    }
+  scene.lighting.sky_by_direction = true;
+  scene.lighting.sky_radiance = estimate_airlight(photo);
+  const FogLayers fog_before = fog_with_sky_light(photo, distance, Image(), scene, false);
+  const FogLayers fog_after = fog_with_sky_light(photo, distance, Image(), scene, true);
+  auto lum = [](const Image& img, int x, int y) {  // display luma
+    auto e = [&](int c) { return std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f); };
+    return 0.2126 * e(0) + 0.7152 * e(1) + 0.0722 * e(2);
+  };
+  // Pixels 4-8 px inside the body along its edge, and 4-8 px outside it in the glow: the
+  // fogged sky's display luma against the photo's there (in haze the sky is all fog, T ~ 0).
+  double worst_before = 0, worst_after = 0, glow_change = 0;
+  std::size_t body = 0, glow = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const double r = std::hypot((x - 120.0) / 70, (y - 55.0) / 28);
+      const double px = (r - 1) * 28;  // about the distance from the edge in pixels (minor axis)
+      const bool in_body = px > -8 && px < -4, in_glow = px > 4 && px < 8 && x > 150;
+      if (!in_body && !in_glow) continue;
+      body += in_body, glow += in_glow;
+      const double p = lum(photo, x, y), b = lum(fog_before.composite, x, y);
+      const double a = lum(fog_after.composite, x, y);
+      if (in_body) {
+        worst_before = std::max(worst_before, std::abs(b / p - 1));
+        worst_after = std::max(worst_after, std::abs(a / p - 1));
+      } else {
+        glow_change = std::max(glow_change, std::abs(a / b - 1));
+      }
+    }
+  const double e_before = test::gallery_created_edges(photo, fog_before.composite);
+  const double e_after = test::gallery_created_edges(photo, fog_after.composite);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
+    const std::string f(folder);
+    write_image(f + "/cloud_glow_photo.png", photo);
+    write_image(f + "/cloud_glow_haze_before.png", fog_before.composite);
+    write_image(f + "/cloud_glow_haze_after.png", fog_after.composite);
+  }
+  std::printf(
+      "dark cloud beside its glow (%zu body, %zu glow pixels): the body's worst luma change "
+      "from the photo %.3f -> %.3f, the glow's from before %.4f; created-edge pixels %.4f %% "
+      "-> %.4f %%\n",
+      body, glow, worst_before, worst_after, glow_change, 100 * e_before, 100 * e_after);
+  ASSERT_GT(body, 100u);
+  ASSERT_GT(glow, 100u);
+  EXPECT_GT(worst_before, 0.3);  // the flat fog: the body much brighter
+  EXPECT_LT(worst_after, 0.1);   // the body keeps its own brightness up to its edge
+  EXPECT_LT(glow_change, 1e-3);  // the glow as before, not dimmed by the body beside it
+  EXPECT_LE(e_after, 2e-4);
 }
 
 }  // namespace

@@ -211,6 +211,9 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                                               std::to_string(camera.width) + "x" +
                                               std::to_string(camera.height) + ", photo is " +
                                               std::to_string(w) + "x" + std::to_string(h));
+  if (by_direction && !req.sky_light->scale.empty() &&
+      (req.sky_light->scale.width() != w || req.sky_light->scale.height() != h))
+    return decline("the sky light's scale is not the photo's size");
   result.camera = camera;
   result.width = w;
   result.height = h;
@@ -383,7 +386,7 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
                       // As mr::add_sky_light on the full-frame path's float layers: the
                       // deviation from L_sky along this pixel's ray.
                       const Rgb deviation =
-                          req.sky_light->deviation_at(scene.pose.ray_direction(camera, x, y));
+                          req.sky_light->deviation_at(scene.pose.ray_direction(camera, x, y), x, y);
                       const double od_stored[3] = {float(od[0]), float(od[1]), float(od[2])};
                       double extra[3];
                       render::sky_only_inscatter(od_stored, medium.albedo, deviation, extra);

@@ -29,8 +29,19 @@ Rgb SkyLight::deviation_at(const Vec3& direction) const {
   return {float(d[0]), float(d[1]), float(d[2])};
 }
 
+Rgb SkyLight::deviation_at(const Vec3& direction, int x, int y) const {
+  const Rgb d = deviation_at(direction);
+  if (scale.empty()) return d;
+  const float s = scale.at(x, y, 0);
+  if (s == 1.0f) return d;
+  Rgb out;
+  for (int c = 0; c < 3; ++c) out[c] = s * (sky_radiance[c] + d[c]) - sky_radiance[c];
+  return out;
+}
+
 SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m, const Camera& camera,
-                              const FogScene& scene, const Rgb& sky_radiance) {
+                              const FogScene& scene, const Rgb& sky_radiance,
+                              bool brightness_from_photo) {
   if (photo.empty() || photo.channels() < 3)
     throw Error(ErrorCode::invalid_argument,
                 "sky_light_from_photo: the photo must have at least 3 channels, has " +
@@ -67,6 +78,9 @@ SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m, const
       const std::array<float, 3> bounded = photo::neutral_fog_colour(light);
       for (int c = 0; c < 3; ++c) d[c] = bounded[c] - sky_radiance[c];
     }
+  if (brightness_from_photo)
+    out.scale = photo::sky_brightness_scale(photo.view(), distance_m.view(), camera, scene.pose,
+                                            out.deviation, sky_radiance);
   return out;
 }
 
@@ -81,9 +95,16 @@ void add_sky_light(const SkyLight& sky_light, const Medium& medium, const Camera
                     size_text(inscatter.width(), inscatter.height()) +
                     " must be 3-channel and the camera's " + size_text(camera.width, camera.height));
   if (sky_light.deviation.empty()) return;
+  if (!sky_light.scale.empty() &&
+      (sky_light.scale.width() != camera.width || sky_light.scale.height() != camera.height ||
+       sky_light.scale.channels() != 1))
+    throw Error(ErrorCode::size_mismatch,
+                "add_sky_light: the sky light's scale is " +
+                    size_text(sky_light.scale.width(), sky_light.scale.height()) +
+                    ", the camera " + size_text(camera.width, camera.height));
   tbb::parallel_for(0, camera.height, [&](int y) {
     for (int x = 0; x < camera.width; ++x) {
-      const Rgb deviation = sky_light.deviation_at(pose.ray_direction(camera, x, y));
+      const Rgb deviation = sky_light.deviation_at(pose.ray_direction(camera, x, y), x, y);
       const double od[3] = {optical_depth.at(x, y, 0), optical_depth.at(x, y, 1),
                             optical_depth.at(x, y, 2)};
       double extra[3];

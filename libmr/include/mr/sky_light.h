@@ -32,16 +32,29 @@ struct MR_API SkyLight {
   Image deviation;
   /// L_in(w) - L_sky at a world direction (bilinear in the map; 0 for an empty map).
   Rgb deviation_at(const Vec3& direction) const;
+  /// Issue 11 (haze14): the factor on the sky light along each pixel's ray that brings it to
+  /// the luminance of the photo's own sky around the pixel (photo/sky_light.h,
+  /// sky_brightness_scale), 1 channel at the camera's size; empty: 1 everywhere.
+  Image scale;
+  /// The light's deviation for pixel (x, y) seen along `direction`: s (L_sky + deviation) -
+  /// L_sky with s = scale(x, y), exactly deviation_at(direction) where the scale is 1 or empty.
+  Rgb deviation_at(const Vec3& direction, int x, int y) const;
 };
 
 /// The sky light of `photo` (scene-linear RGB, the camera's size) with its distance map
 /// (1 channel, +inf = sky) seen by `camera` from `scene.pose`, convolved with scene.medium.g,
 /// relative to `sky_radiance` (the L_sky the render uses). A photo whose sky and ground are both
-/// exactly sky_radiance gives an empty map. Throws mr::Error(size_mismatch / invalid_argument)
-/// for inputs of another size or channel count.
+/// exactly sky_radiance gives an empty map. `brightness_from_photo` (issue 11, helper haze14):
+/// also the scale that darkens the light along each pixel's ray to the display luma of the
+/// photo's own sky around the pixel (SkyLight::scale, photo/sky_light.h). Off by default, and
+/// the render (render_scattering, `mr fog`) does not ask for it yet: on the gallery's tuning
+/// half it lowered the haze misses (rocket 0.183 -> 0.077 %, summer_1am 0.087 -> 0.042 %,
+/// palace 0.076 -> 0.046 %) but put other photos or tests over the target
+/// (gallery/results/haze14_tune.md). Throws mr::Error(size_mismatch / invalid_argument) for
+/// inputs of another size or channel count.
 MR_API SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m,
                                      const Camera& camera, const FogScene& scene,
-                                     const Rgb& sky_radiance);
+                                     const Rgb& sky_radiance, bool brightness_from_photo = false);
 
 /// Adds the sky light's correction albedo (L_in(w) - L_sky) (1 - exp(-optical_depth)) to
 /// `inscatter` (3 channels) at every pixel, w the pixel's view ray from `pose`, optical_depth
