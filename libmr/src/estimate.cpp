@@ -901,7 +901,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           const float lb = 0.2126f * b[0] + 0.7152f * b[1] + 0.0722f * b[2];
           const float dl = std::abs(la - lb) / std::max({la, lb, 1e-6f});
           mirrors.at<float>(y, x) = std::clamp(1.0f - dl / kMirrorLumaTolerance, 0.0f, 1.0f);
-          if (sky_m) sky_mirrors.at<float>(y, x) = mirrors.at<float>(y, x);
+          if (mask.sky[im]) sky_mirrors.at<float>(y, x) = mirrors.at<float>(y, x);
         }
       cv::blur(mirrors, mirrors, cv::Size(std::max(3, w / 40) | 1, std::max(3, h / 80) | 1));
       cv::blur(sky_mirrors, sky_mirrors,
@@ -933,7 +933,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       for (int x = 0; x < w; ++x) {
         const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
         if (top < 0) continue;
-        const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2);
+        // (Its reflection spans as many rows below the horizon as the band above it, and a
+        // line's width more for the horizon's error.)
+        const int reflection =
+            std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
         float mirror = 0.0f, water = 0.0f;
         for (int y = bottom + 1; y <= std::min(h - 1, reflection); ++y)
           mirror = std::max(mirror, mirrors.at<float>(y, x));
@@ -953,7 +956,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       for (int x = 0; x < w; ++x) {
         const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
         if (top < 0) continue;
-        const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2);
+        // (Its reflection spans as many rows below the horizon as the band above it, and a
+        // line's width more for the horizon's error.)
+        const int reflection =
+            std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
         const float mirror = std::min(band_weight[std::size_t(x)], band_smooth[std::size_t(x)]);
         for (int y = top; y < h; ++y) {
           const std::size_t i = std::size_t(y) * w + x;
