@@ -93,9 +93,10 @@ TEST(FarShore, ThinBandOnASeaHorizonIsFarAndHazeVeilsIt) {
   const SceneEstimate est = estimate_scene(photo, camera, horizon, with_rule);
   const SceneEstimate est_before = estimate_scene(photo, camera, horizon, before);
   const test::GalleryLooks after = haze_and_dense_looks(photo, camera, est, "far_shore");
-  const test::GalleryLooks base = haze_and_dense_looks(photo, camera, est_before, "far_shore_before");
+  const test::GalleryLooks base =
+      haze_and_dense_looks(photo, camera, est_before, "far_shore_before");
   auto d = [](const SceneEstimate& e, int x, int y) { return e.geometry.distance_m.at(x, y, 0); };
-  // The band's middle row at a column where it is 8+ px tall, the water 4 px below the horizon
+  // The band's middle row at its tallest column, the water 4 px below the horizon
   // there, the post 30 px above the horizon and 40 px below it.
   int xb = 0;
   for (int x = 0; x < 430; ++x)

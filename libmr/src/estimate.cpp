@@ -854,8 +854,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           const std::size_t i = std::size_t(y) * w + x;
           if (sky_like(i)) break;
           const int cls = pixel_class[i];
-          if (cls != kFar && !(cls == kContact && contact_forward[i] >= 0.99f * far_forward))
-            break;
+          if (cls != kFar && !(cls == kContact && contact_forward[i] >= 0.99f * far_forward)) break;
         }
         if (y < 0 || !sky_like(std::size_t(y) * w + x)) continue;  // not open sky above it
         band_top[std::size_t(x)] = y + 1, band_bottom[std::size_t(x)] = yh;
@@ -909,8 +908,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
           const std::size_t i = std::size_t(y) * w + x;
-          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 ||
-              blended[i] || band_top[std::size_t(x)] >= 0)
+          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i] ||
+              band_top[std::size_t(x)] >= 0)
             continue;
           const float weight = open[std::size_t(x)] * mirrors.at<float>(y, x);
           const float bound = c[i] * q_plane[i];
@@ -935,8 +934,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         if (top < 0) continue;
         // (Its reflection spans as many rows below the horizon as the band above it, and a
         // line's width more for the horizon's error.)
-        const int reflection =
-            std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
+        const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
         float mirror = 0.0f, water = 0.0f;
         for (int y = bottom + 1; y <= std::min(h - 1, reflection); ++y)
           mirror = std::max(mirror, mirrors.at<float>(y, x));
@@ -951,15 +949,15 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       std::vector<float> band_smooth(std::size_t(w), 0.0f);
       for (int x = 0; x < w; ++x) {
         const int a = std::max(0, x - reach), b = std::min(w, x + reach + 1);
-        band_smooth[std::size_t(x)] = (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a);
+        band_smooth[std::size_t(x)] =
+            (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a);
       }
       for (int x = 0; x < w; ++x) {
         const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
         if (top < 0) continue;
         // (Its reflection spans as many rows below the horizon as the band above it, and a
         // line's width more for the horizon's error.)
-        const int reflection =
-            std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
+        const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
         const float mirror = std::min(band_weight[std::size_t(x)], band_smooth[std::size_t(x)]);
         for (int y = top; y < h; ++y) {
           const std::size_t i = std::size_t(y) * w + x;
@@ -976,8 +974,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
             // The band's mirror weight over its reflection, fading over as many rows below
             // it: the refinement's own step at the reflection's lower edge (the nearer
             // water's distance stops at that faint line) is not kept at full strength there.
-            const float fade = std::clamp(1.0f - float(y - reflection) / float(reflection - bottom),
-                                          0.0f, 1.0f);
+            const float fade =
+                std::clamp(1.0f - float(y - reflection) / float(reflection - bottom), 0.0f, 1.0f);
             weight = open[std::size_t(x)] * std::max(sky_mirrors.at<float>(y, x), mirror * fade);
           }
           if (q[i] > bound)
