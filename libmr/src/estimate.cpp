@@ -791,6 +791,23 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       c[i] = conf;
     }
   steps.start("refine");
+  // (The sky fold of issue 11 item 4 below, computed here: a far band's walk up to the sky
+  // passes through what the fold makes sky, a glow the mask left out.)
+  std::vector<float> fold;
+  if (options.refine_depth && options.sky_fold && mask.pixels > 0) {
+    fold = photo::sky_proximity(photo->view(), mask.sky);
+    for (std::size_t i = 0; i < n; ++i) {
+      const int cls = pixel_class[i];
+      fold[i] = cls == int(photo::Coverage::hint) || cls == int(photo::Coverage::plane)
+                    ? 1.0f
+                    : photo::sky_fold(fold[i]);
+    }
+  }
+  // Sky, or a surface the fold takes to the sky's distance (a glow over the horizon).
+  constexpr float kSkyLikeFold = 0.05f;
+  auto sky_like = [&](std::size_t i) {
+    return mask.sky[i] || (!fold.empty() && fold[i] <= kSkyLikeFold);
+  };
   if (options.refine_depth && !smooth_bounded) {
     const std::vector<float> q_plane = q;  // before the refinement: the ground plane's
     q = photo::refine_inverse_distance(photo->view(), q, c, refine);
@@ -815,10 +832,44 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // horizon, blurred: a pier's dark deck on the water does not; coldripple).
       const int line_px = std::max(3, h / 100);  // a far shore's line, not a structure
       std::vector<float> open(std::size_t(w), 0.0f);
+      // Issue 11 (far shores, helper shore14): the rows of a thin band of far land resting on
+      // the horizon in each column (band_top to band_bottom; -1: none). Whatever stands on the
+      // horizon and rises less above it than the far billboard's depression before the open
+      // sky is seen (a far shore's trees, hills, a skyline) is kilometres away when water
+      // mirrors it in front: from the horizon a structure on the ground rises by its height
+      // over its distance, so 2 degrees is 35 m at 1 km and a near object standing on the water
+      // (a person, a post, a boat) spans far more below the horizon than above it, which a
+      // contact nearer than the far billboard shows; such a column is no band.
+      const int band_px = std::max(line_px, int(camera.focal_px * std::tan(depression * kDeg)));
+      std::vector<int> band_top(std::size_t(w), -1), band_bottom(std::size_t(w), -1),
+          band_foot(std::size_t(w), -1);
       for (int x = 0; x < w; ++x) {
         const int yh = int(std::ceil(horizon_y(x))) - 1;
         for (int y = std::max(0, yh - line_px); y <= std::min(h - 1, yh); ++y)
           if (mask.sky[std::size_t(y) * w + x]) open[std::size_t(x)] = 1.0f;
+        // (A band lower than a line's width leaves the column open, and is a band all the same.)
+        if (!options.far_shore || yh < 0 || yh >= h || sky_like(std::size_t(yh) * w + x)) continue;
+        int y = yh;
+        for (; y >= 0 && yh - y <= band_px; --y) {
+          const std::size_t i = std::size_t(y) * w + x;
+          if (sky_like(i)) break;
+          const int cls = pixel_class[i];
+          if (cls != kFar && !(cls == kContact && contact_forward[i] >= 0.99f * far_forward)) break;
+        }
+        if (y < 0 || !sky_like(std::size_t(y) * w + x)) continue;  // not open sky above it
+        band_top[std::size_t(x)] = y + 1, band_bottom[std::size_t(x)] = yh;
+        open[std::size_t(x)] = 1.0f;
+        // Its foot below the horizon: the structure standing on the far billboard's contact
+        // (a shore's dark foot, its reflection joined to it), and ground cut by it.
+        int foot = yh;
+        for (int yf = yh + 1; yf < h; ++yf) {
+          const std::size_t i = std::size_t(yf) * w + x;
+          if (!((pixel_class[i] == kContact && contact_forward[i] >= 0.99f * far_forward) ||
+                ground_ratio[i] > 0))
+            break;
+          foot = yf;
+        }
+        band_foot[std::size_t(x)] = foot;
       }
       // A box over 1/10 of the width, squared: the bound fades in across columns, no seam.
       const int reach = std::max(1, w / 20);
@@ -831,45 +882,112 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         open[std::size_t(x)] = m * m;
       }
       constexpr float kMirrorLumaTolerance = 0.8f;  // |la - lb| / max(la, lb) at which it is 0
-      cv::Mat mirrors(h, w, CV_32F, cv::Scalar(0));
+      cv::Mat mirrors(h, w, CV_32F, cv::Scalar(0)), sky_mirrors(h, w, CV_32F, cv::Scalar(0));
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
           const int ym = int(std::lround(2 * horizon_y(x) - y));
-          if (!(y > horizon_y(x)) || ym < 0 || ym >= h || !mask.sky[std::size_t(ym) * w + x])
-            continue;
+          if (!(y > horizon_y(x)) || ym < 0 || ym >= h) continue;
+          // In a far band's column: the sky, what the fold makes sky, or the band (its
+          // reflection); elsewhere the sky.
+          const std::size_t im = std::size_t(ym) * w + x;
+          const bool in_band_column = band_top[std::size_t(x)] >= 0;
+          const bool sky_m = mask.sky[im] || (in_band_column && sky_like(im));
+          const bool band = ym >= band_top[std::size_t(x)] && ym <= band_bottom[std::size_t(x)];
+          if (!sky_m && !band) continue;
           const float* a = photo->pixel(x, y);
           const float* b = photo->pixel(x, ym);
           const float la = 0.2126f * a[0] + 0.7152f * a[1] + 0.0722f * a[2];
           const float lb = 0.2126f * b[0] + 0.7152f * b[1] + 0.0722f * b[2];
           const float dl = std::abs(la - lb) / std::max({la, lb, 1e-6f});
           mirrors.at<float>(y, x) = std::clamp(1.0f - dl / kMirrorLumaTolerance, 0.0f, 1.0f);
+          if (mask.sky[im]) sky_mirrors.at<float>(y, x) = mirrors.at<float>(y, x);
         }
       cv::blur(mirrors, mirrors, cv::Size(std::max(3, w / 40) | 1, std::max(3, h / 80) | 1));
+      cv::blur(sky_mirrors, sky_mirrors,
+               cv::Size(std::max(3, w / 40) | 1, std::max(3, h / 80) | 1));
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
           const std::size_t i = std::size_t(y) * w + x;
-          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i])
+          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i] ||
+              band_top[std::size_t(x)] >= 0)
             continue;
           const float weight = open[std::size_t(x)] * mirrors.at<float>(y, x);
           const float bound = c[i] * q_plane[i];
           if (q[i] > bound) q[i] = (1 - weight) * q[i] + weight * bound;
         }
+      // The band itself: as far as the horizon where the water at its foot mirrors it (the
+      // water's bound there is a few kilometres), no nearer than the sea's geometric horizon
+      // seen from the camera's height, sqrt(2 R h) (4.5 km from 1.6 m; a shore farther than
+      // that shows its foot hidden behind the sea's curve, still on the horizon). Below it, its
+      // foot, its reflection and the water in front get the open water's bound (the plane's
+      // inverse distance times the ground's confidence, meeting the band's at the horizon).
+      // Blended in log inverse distance: the band's refined distance is tens of metres, and a
+      // linear blend at 90 % weight would leave it within a tenth of that, clear in haze.
+      constexpr double kEarthRadiusM = 6.371e6;
+      const float q_far = float(1.0 / std::sqrt(2 * kEarthRadiusM * height));
+      // Per column: how plainly the water in front mirrors the band and the sky; smoothed
+      // across columns (a box over 1/10 of the width, as `open`), so that where a band ends
+      // (a taller structure, a gap) its distance returns gradually, not in a vertical seam.
+      std::vector<float> band_weight(std::size_t(w), 0.0f);
+      for (int x = 0; x < w; ++x) {
+        const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
+        if (top < 0) continue;
+        // (Its reflection spans as many rows below the horizon as the band above it, and a
+        // line's width more for the horizon's error.)
+        const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
+        float mirror = 0.0f, water = 0.0f;
+        for (int y = bottom + 1; y <= std::min(h - 1, reflection); ++y)
+          mirror = std::max(mirror, mirrors.at<float>(y, x));
+        // Water: in front of the reflection, the pixels mirror the sky (a dark field in front
+        // of a dark ridge matches it in luma too, and mirrors nothing).
+        for (int y = reflection + 1; y <= std::min(h - 1, reflection + 2 * band_px); ++y)
+          water = std::max(water, sky_mirrors.at<float>(y, x));
+        band_weight[std::size_t(x)] = std::min(mirror, water);
+      }
+      for (int x = 0; x < w; ++x)
+        prefix[std::size_t(x) + 1] = prefix[std::size_t(x)] + band_weight[std::size_t(x)];
+      std::vector<float> band_smooth(std::size_t(w), 0.0f);
+      for (int x = 0; x < w; ++x) {
+        const int a = std::max(0, x - reach), b = std::min(w, x + reach + 1);
+        band_smooth[std::size_t(x)] =
+            (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a);
+      }
+      for (int x = 0; x < w; ++x) {
+        const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
+        if (top < 0) continue;
+        // (Its reflection spans as many rows below the horizon as the band above it, and a
+        // line's width more for the horizon's error.)
+        const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
+        const float mirror = std::min(band_weight[std::size_t(x)], band_smooth[std::size_t(x)]);
+        for (int y = top; y < h; ++y) {
+          const std::size_t i = std::size_t(y) * w + x;
+          const int cls = pixel_class[i];
+          float bound = q_far, weight = mirror;
+          if (y > bottom && cls != kFar) {  // (the far billboard ends at the pixel's centre)
+            if (!(cls == int(photo::Coverage::ground) ||
+                  (cls == kContact && contact_forward[i] >= 0.99f * far_forward)))
+              continue;
+            const double down = -g.pose.ray_direction(camera, x, y).y;
+            const double below = std::asin(std::clamp(down, -1.0, 1.0));
+            const double conf = std::clamp(below / (2 * depression * kDeg), 0.0, 1.0);
+            bound = float(conf * conf * std::max(0.0, down) / height);
+            // The band's mirror weight over its reflection, fading over as many rows below
+            // it: the refinement's own step at the reflection's lower edge (the nearer
+            // water's distance stops at that faint line) is not kept at full strength there.
+            const float fade =
+                std::clamp(1.0f - float(y - reflection) / float(reflection - bottom), 0.0f, 1.0f);
+            weight = open[std::size_t(x)] * std::max(sky_mirrors.at<float>(y, x), mirror * fade);
+          }
+          if (q[i] > bound)
+            q[i] = bound > 0 ? q[i] * std::pow(bound / q[i], weight) : (1 - weight) * q[i];
+        }
+      }
     }
   }
   // Issue 11 item 4: a surface that meets the sky where the photo shows no edge (a calm sea
   // under a hazy sky, a hill fading into it) goes to the sky's distance there, so that the fog,
   // opaque in the sky, is continuous across the boundary (photo/geometry.h, sky_fold).
-  std::vector<float> fold;
-  if (options.refine_depth && options.sky_fold && mask.pixels > 0) {
-    fold = photo::sky_proximity(photo->view(), mask.sky);
-    for (std::size_t i = 0; i < n; ++i) {
-      const int cls = pixel_class[i];
-      fold[i] = cls == int(photo::Coverage::hint) || cls == int(photo::Coverage::plane)
-                    ? 1.0f
-                    : photo::sky_fold(fold[i]);
-      q[i] *= fold[i];
-    }
-  }
+  for (std::size_t i = 0; i < fold.size(); ++i) q[i] *= fold[i];
   // Farther than this a surface is as good as sky for any fog that is not almost clear air.
   constexpr float kMaxFiniteDistanceM = 1e5f;
   for (int y = 0; y < h; ++y)
