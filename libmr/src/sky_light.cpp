@@ -100,8 +100,8 @@ void add_sky_light(const SkyLight& sky_light, const Medium& medium, const Camera
        sky_light.scale.channels() != 1))
     throw Error(ErrorCode::size_mismatch,
                 "add_sky_light: the sky light's scale is " +
-                    size_text(sky_light.scale.width(), sky_light.scale.height()) +
-                    ", the camera " + size_text(camera.width, camera.height));
+                    size_text(sky_light.scale.width(), sky_light.scale.height()) + ", the camera " +
+                    size_text(camera.width, camera.height));
   tbb::parallel_for(0, camera.height, [&](int y) {
     for (int x = 0; x < camera.width; ++x) {
       const Rgb deviation = sky_light.deviation_at(pose.ray_direction(camera, x, y), x, y);
