@@ -871,16 +871,21 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         }
         band_foot[std::size_t(x)] = foot;
       }
-      // A box over 1/10 of the width, squared: the bound fades in across columns, no seam.
-      const int reach = std::max(1, w / 20);
-      std::vector<float> prefix(std::size_t(w) + 1, 0.0f);
-      for (int x = 0; x < w; ++x)
-        prefix[std::size_t(x) + 1] = prefix[std::size_t(x)] + open[std::size_t(x)];
-      for (int x = 0; x < w; ++x) {
-        const int a = std::max(0, x - reach), b = std::min(w, x + reach + 1);
-        const float m = (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a);
-        open[std::size_t(x)] = m * m;
-      }
+      // The mean of a per-column value over a box of 1/10 of the width: no seam across columns.
+      auto box_across_columns = [w](const std::vector<float>& v) {
+        const int reach = std::max(1, w / 20);
+        std::vector<float> prefix(std::size_t(w) + 1, 0.0f), mean(prefix.size() - 1);
+        for (int x = 0; x < w; ++x)
+          prefix[std::size_t(x) + 1] = prefix[std::size_t(x)] + v[std::size_t(x)];
+        for (int x = 0; x < w; ++x) {
+          const int a = std::max(0, x - reach), b = std::min(w, x + reach + 1);
+          mean[std::size_t(x)] = (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a);
+        }
+        return mean;
+      };
+      // Squared: the bound fades in across columns.
+      open = box_across_columns(open);
+      for (float& m : open) m *= m;
       constexpr float kMirrorLumaTolerance = 0.8f;  // |la - lb| / max(la, lb) at which it is 0
       cv::Mat mirrors(h, w, CV_32F, cv::Scalar(0)), sky_mirrors(h, w, CV_32F, cv::Scalar(0));
       for (int y = 0; y < h; ++y)
@@ -900,11 +905,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           const float lb = 0.2126f * b[0] + 0.7152f * b[1] + 0.0722f * b[2];
           const float dl = std::abs(la - lb) / std::max({la, lb, 1e-6f});
           mirrors.at<float>(y, x) = std::clamp(1.0f - dl / kMirrorLumaTolerance, 0.0f, 1.0f);
-          if (mask.sky[im]) sky_mirrors.at<float>(y, x) = mirrors.at<float>(y, x);
+          if (options.far_shore && mask.sky[im])
+            sky_mirrors.at<float>(y, x) = mirrors.at<float>(y, x);
         }
-      cv::blur(mirrors, mirrors, cv::Size(std::max(3, w / 40) | 1, std::max(3, h / 80) | 1));
-      cv::blur(sky_mirrors, sky_mirrors,
-               cv::Size(std::max(3, w / 40) | 1, std::max(3, h / 80) | 1));
+      const cv::Size mirror_box(std::max(3, w / 40) | 1, std::max(3, h / 80) | 1);
+      cv::blur(mirrors, mirrors, mirror_box);
+      if (options.far_shore) cv::blur(sky_mirrors, sky_mirrors, mirror_box);
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
           const std::size_t i = std::size_t(y) * w + x;
@@ -929,12 +935,14 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // across columns (a box over 1/10 of the width, as `open`), so that where a band ends
       // (a taller structure, a gap) its distance returns gradually, not in a vertical seam.
       std::vector<float> band_weight(std::size_t(w), 0.0f);
+      std::vector<int> band_reflection(std::size_t(w), -1);  // the reflection's last row
       for (int x = 0; x < w; ++x) {
         const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
         if (top < 0) continue;
         // (Its reflection spans as many rows below the horizon as the band above it, and a
         // line's width more for the horizon's error.)
         const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
+        band_reflection[std::size_t(x)] = reflection;
         float mirror = 0.0f, water = 0.0f;
         for (int y = bottom + 1; y <= std::min(h - 1, reflection); ++y)
           mirror = std::max(mirror, mirrors.at<float>(y, x));
@@ -944,20 +952,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           water = std::max(water, sky_mirrors.at<float>(y, x));
         band_weight[std::size_t(x)] = std::min(mirror, water);
       }
-      for (int x = 0; x < w; ++x)
-        prefix[std::size_t(x) + 1] = prefix[std::size_t(x)] + band_weight[std::size_t(x)];
-      std::vector<float> band_smooth(std::size_t(w), 0.0f);
-      for (int x = 0; x < w; ++x) {
-        const int a = std::max(0, x - reach), b = std::min(w, x + reach + 1);
-        band_smooth[std::size_t(x)] =
-            (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a);
-      }
+      const std::vector<float> band_smooth = box_across_columns(band_weight);
       for (int x = 0; x < w; ++x) {
         const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
         if (top < 0) continue;
-        // (Its reflection spans as many rows below the horizon as the band above it, and a
-        // line's width more for the horizon's error.)
-        const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
+        const int reflection = band_reflection[std::size_t(x)];
         const float mirror = std::min(band_weight[std::size_t(x)], band_smooth[std::size_t(x)]);
         for (int y = top; y < h; ++y) {
           const std::size_t i = std::size_t(y) * w + x;
