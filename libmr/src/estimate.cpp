@@ -1054,13 +1054,17 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i] ||
               band_top[std::size_t(x)] >= 0)
             continue;
-          // (Beside a far shore's columns the same water continues under an open horizon:
-          // the band columns' mirror weight, smoothed across columns, fades in there too, so
-          // that where a band ends its water's fog does not step.)
-          const float weight =
-              std::max(open[std::size_t(x)] * mirrors.at<float>(y, x), band_smooth[std::size_t(x)]);
-          const float bound = c[i] * q_plane[i];
+          const float weight = open[std::size_t(x)] * mirrors.at<float>(y, x);
+          // Beside a far shore's columns the same water continues under the horizon: the band
+          // columns' mirror weight, smoothed across columns (box), phases in their bound there
+          // (the confidence squared, blended in log inverse distance), so that where a band
+          // ends its water's fog does not step from one bound to the other (summer_1am: a
+          // column edge where the band ends under the mask's sky). 0 away from bands: as sea11.
+          const float beside = band_smooth[std::size_t(x)];
+          const float bound = c[i] * q_plane[i] * std::pow(c[i], beside);
           if (q[i] > bound) q[i] = (1 - weight) * q[i] + weight * bound;
+          if (beside > 0 && q[i] > bound)
+            q[i] = bound > 0 ? q[i] * std::pow(bound / q[i], beside) : (1 - beside) * q[i];
         }
       // The band itself: as far as the horizon where the water at its foot mirrors it (the
       // water's bound there is a few kilometres), no nearer than the sea's geometric horizon
