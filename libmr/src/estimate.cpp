@@ -202,6 +202,50 @@ constexpr double kMinSkyBelowGuessFraction = 0.75;
 // The geometry's steps: horizon, sky mask, depth, refine.
 constexpr std::size_t kGeometrySteps = 4;
 
+// Issue 11 (far shores, helper shore15): how plainly the photo below row `axis` is the mirror
+// image of the photo above it, in the columns x - half_width .. x + half_width and the `rows`
+// rows on either side (row axis - 1 - k against row axis + k): the normalized cross-correlation
+// of the three channels, each less its mean over its side, in [-1, 1]. Calm water is a mirror
+// at its own plane: a point of a far shore standing H above the water at distance d is seen H/d
+// above its waterline and its reflection H/d below it (the camera's own height shifts both by
+// the same h/d), so about the waterline the two are symmetric, row for row. The reflection is
+// darker (the Fresnel reflectance of water at grazing angles), tinted and blurred a little by
+// ripples; the correlation allows any gain and offset per side, and `photo` comes blurred
+// vertically. A dark field under a dark ridge matches it in brightness, but not the ridge's
+// outline mirrored: its correlation is low. 0 where a side is flat (nothing to compare).
+float mirror_correlation(const cv::Mat& photo, int x, int axis, int rows, int half_width) {
+  const int x0 = std::max(0, x - half_width), x1 = std::min(photo.cols - 1, x + half_width);
+  if (rows < 2 || axis - rows < 0 || axis + rows > photo.rows) return 0.0f;
+  const int n = (x1 - x0 + 1) * rows;
+  double sa[3] = {0, 0, 0}, sb[3] = {0, 0, 0};
+  for (int k = 0; k < rows; ++k) {
+    const cv::Vec3f* above = photo.ptr<cv::Vec3f>(axis - 1 - k);
+    const cv::Vec3f* below = photo.ptr<cv::Vec3f>(axis + k);
+    for (int xx = x0; xx <= x1; ++xx)
+      for (int c = 0; c < 3; ++c) sa[c] += above[xx][c], sb[c] += below[xx][c];
+  }
+  double ab = 0, aa = 0, bb = 0;
+  for (int k = 0; k < rows; ++k) {
+    const cv::Vec3f* above = photo.ptr<cv::Vec3f>(axis - 1 - k);
+    const cv::Vec3f* below = photo.ptr<cv::Vec3f>(axis + k);
+    for (int xx = x0; xx <= x1; ++xx)
+      for (int c = 0; c < 3; ++c) {
+        const double a = above[xx][c] - sa[c] / n, b = below[xx][c] - sb[c] / n;
+        ab += a * b, aa += a * a, bb += b * b;
+      }
+  }
+  // (A side flat to within 0.2 % in linear units carries no outline to mirror.)
+  const double floor = 3.0 * n * 0.002 * 0.002;
+  if (aa <= floor || bb <= floor) return 0.0f;
+  // Water reflects a fraction of what it mirrors (its Fresnel reflectance, below 1), so the
+  // reflection's contrast is at most the original's: a brighter, more contrasted "reflection"
+  // (a bright guard rail under a dark ridge: storm_pano) is none. Ripples' glints and the
+  // water's own colour are allowed 20 % over it; the score falls to 0 at 40 % over.
+  const double gain = std::sqrt(bb / aa);
+  const double plausible = std::clamp((1.4 - gain) / 0.2, 0.0, 1.0);
+  return float(plausible * ab / std::sqrt(aa * bb));
+}
+
 GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annotations& annotations,
                           const EstimateOptions& options, Steps& steps) {
   steps.start("horizon");
@@ -848,7 +892,14 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         for (int y = std::max(0, yh - line_px); y <= std::min(h - 1, yh); ++y)
           if (mask.sky[std::size_t(y) * w + x]) open[std::size_t(x)] = 1.0f;
         // (A band lower than a line's width leaves the column open, and is a band all the same.)
-        if (!options.far_shore || yh < 0 || yh >= h || sky_like(std::size_t(yh) * w + x)) continue;
+        if (!options.far_shore || yh < 0 || yh >= h) continue;
+        // (Helper shore15: a column whose horizon the sky fold, not the sky mask, takes to the
+        // sky (far hills faded into a glow: summer_1am's left third) is a band of no height
+        // here: the fold's sky is as far as the sky, and water mirroring it is open water.
+        // One the sky mask meets is sea11's open water, as before.)
+        if (mask.sky[std::size_t(yh) * w + x] ||
+            (sky_like(std::size_t(yh) * w + x) && open[std::size_t(x)] > 0))
+          continue;
         int y = yh;
         for (; y >= 0 && yh - y <= band_px; --y) {
           const std::size_t i = std::size_t(y) * w + x;
@@ -858,7 +909,6 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         }
         if (y < 0 || !sky_like(std::size_t(y) * w + x)) continue;  // not open sky above it
         band_top[std::size_t(x)] = y + 1, band_bottom[std::size_t(x)] = yh;
-        open[std::size_t(x)] = 1.0f;
         // Its foot below the horizon: the structure standing on the far billboard's contact
         // (a shore's dark foot, its reflection joined to it), and ground cut by it.
         int foot = yh;
@@ -870,6 +920,74 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           foot = yf;
         }
         band_foot[std::size_t(x)] = foot;
+      }
+      // Issue 11 (helper shore15): each band column's waterline and how plainly the water under
+      // it mirrors the band. The horizon found from the photo's lines can lie a few pixels off
+      // the waterline (summer_1am: 5-6 px above it), and a reflection starts at the waterline,
+      // not at the horizon: the waterline is the row within a line's width of the horizon about
+      // which the photo below is most like the photo above flipped (the band, with a line's
+      // width of the sky over it: the band's top outline must be mirrored too), correlated over
+      // a box of columns (mirror_correlation); per column the median of its neighbours' rows,
+      // since a shore's waterline is one level line. A dark field under a dark ridge matches
+      // the ridge in brightness (storm_pano) but not its outline: its correlation is low.
+      std::vector<int> waterline(std::size_t(w), -1);
+      std::vector<float> band_mirror(std::size_t(w), 0.0f);
+      if (options.far_shore) {
+        cv::Mat rgb(h, w, CV_32FC3);
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x) {
+            const float* p = photo->pixel(x, y);
+            const int c1 = std::min(1, photo->channels() - 1),
+                      c2 = std::min(2, photo->channels() - 1);
+            rgb.at<cv::Vec3f>(y, x) = cv::Vec3f(p[0], p[c1], p[c2]);
+          }
+        // Ripples blur a reflection vertically: both sides blurred alike over a line's width.
+        cv::blur(rgb, rgb, cv::Size(1, std::max(3, h / 100) | 1));
+        const int search = 2 * line_px, half_width = std::max(4, w / 80);
+        std::vector<std::vector<float>> score(static_cast<std::size_t>(w));
+        std::vector<int> best(std::size_t(w), -1);
+        for (int x = 0; x < w; ++x) {
+          const int top = band_top[std::size_t(x)];
+          if (top < 0) continue;
+          const int yh = band_bottom[std::size_t(x)] + 1;  // the horizon's first row below
+          auto& s = score[std::size_t(x)];
+          s.assign(std::size_t(2 * search + 1), 0.0f);
+          float best_score = -2.0f;
+          for (int k = 0; k <= 2 * search; ++k) {
+            const int axis = yh - search + k;
+            if (axis <= top) continue;
+            s[std::size_t(k)] = mirror_correlation(rgb, x, axis, axis - top + line_px, half_width);
+            if (s[std::size_t(k)] > best_score)
+              best_score = s[std::size_t(k)], best[std::size_t(x)] = k;
+          }
+        }
+        std::vector<int> near;
+        for (int x = 0; x < w; ++x) {
+          if (band_top[std::size_t(x)] < 0) continue;
+          near.clear();
+          for (int xx = std::max(0, x - half_width); xx <= std::min(w - 1, x + half_width); ++xx)
+            if (best[std::size_t(xx)] >= 0) near.push_back(best[std::size_t(xx)]);
+          std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
+          const int k = near[near.size() / 2];
+          waterline[std::size_t(x)] = band_bottom[std::size_t(x)] + 1 - search + k;
+          // Calm water repeats the band's outline almost exactly: mirrored from a
+          // correlation of 0.8, plainly from 0.87 (the tuning half: summer_1am's far shore
+          // 0.88-0.99, storm_pano's field under its ridge at most 0.77).
+          constexpr float kMinMirrorCorrelation = 0.8f, kMirrorCorrelation = 0.87f;
+          const float mirror =
+              std::clamp((score[std::size_t(x)][std::size_t(k)] - kMinMirrorCorrelation) /
+                             (kMirrorCorrelation - kMinMirrorCorrelation),
+                         0.0f, 1.0f);
+          band_mirror[std::size_t(x)] = mirror;
+          // A band the water mirrors is a far shore: the column's horizon is open water's
+          // (what stands on it is as far as the sky for the fog); one it does not mirror (a
+          // ridge over a field) leaves the column as it was.
+          open[std::size_t(x)] = std::max(open[std::size_t(x)], mirror);
+        }
+        // A band no water mirrors is no far shore: its column stays as without the rule.
+        for (int x = 0; x < w; ++x)
+          if (band_top[std::size_t(x)] >= 0 && !(band_mirror[std::size_t(x)] > 0))
+            band_top[std::size_t(x)] = band_bottom[std::size_t(x)] = -1;
       }
       // The mean of a per-column value over a box of 1/10 of the width: no seam across columns.
       auto box_across_columns = [w](const std::vector<float>& v) {
@@ -911,6 +1029,25 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       const cv::Size mirror_box(std::max(3, w / 40) | 1, std::max(3, h / 80) | 1);
       cv::blur(mirrors, mirrors, mirror_box);
       if (options.far_shore) cv::blur(sky_mirrors, sky_mirrors, mirror_box);
+      std::vector<float> band_weight(std::size_t(w), 0.0f);
+      std::vector<int> band_reflection(std::size_t(w), -1);  // the reflection's last row
+      for (int x = 0; x < w; ++x) {
+        const int top = band_top[std::size_t(x)];
+        if (top < 0) continue;
+        // The reflection: the band's top mirrored about the waterline (2 axis - 1 - top), and
+        // a line's width more for the blur of the water's ripples.
+        const int axis = waterline[std::size_t(x)];
+        const int reflection = std::max(band_foot[std::size_t(x)], 2 * axis - 1 - top + line_px);
+        band_reflection[std::size_t(x)] = reflection;
+        // The mirror test: the water under the waterline mirrors the band's outline (its
+        // colour and texture correlated, mirror_correlation).
+        const float mirror = band_mirror[std::size_t(x)];
+        // (The water in front is not tested against the sky's brightness as well: sea11's
+        // luma test passed a dark field under a dark storm sky, storm_pano, and held calm
+        // water mirroring a glow at half weight, summer_1am; the band's mirror is the test.)
+        band_weight[std::size_t(x)] = mirror;
+      }
+      const std::vector<float> band_smooth = box_across_columns(band_weight);
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
           const std::size_t i = std::size_t(y) * w + x;
@@ -918,8 +1055,16 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
               band_top[std::size_t(x)] >= 0)
             continue;
           const float weight = open[std::size_t(x)] * mirrors.at<float>(y, x);
-          const float bound = c[i] * q_plane[i];
+          // Beside a far shore's columns the same water continues under the horizon: the band
+          // columns' mirror weight, smoothed across columns (box), phases in their bound there
+          // (the confidence squared, blended in log inverse distance), so that where a band
+          // ends its water's fog does not step from one bound to the other (summer_1am: a
+          // column edge where the band ends under the mask's sky). 0 away from bands: as sea11.
+          const float beside = band_smooth[std::size_t(x)];
+          const float bound = c[i] * q_plane[i] * std::pow(c[i], beside);
           if (q[i] > bound) q[i] = (1 - weight) * q[i] + weight * bound;
+          if (beside > 0 && q[i] > bound)
+            q[i] = bound > 0 ? q[i] * std::pow(bound / q[i], beside) : (1 - beside) * q[i];
         }
       // The band itself: as far as the horizon where the water at its foot mirrors it (the
       // water's bound there is a few kilometres), no nearer than the sea's geometric horizon
@@ -934,28 +1079,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // Per column: how plainly the water in front mirrors the band and the sky; smoothed
       // across columns (a box over 1/10 of the width, as `open`), so that where a band ends
       // (a taller structure, a gap) its distance returns gradually, not in a vertical seam.
-      std::vector<float> band_weight(std::size_t(w), 0.0f);
-      std::vector<int> band_reflection(std::size_t(w), -1);  // the reflection's last row
       for (int x = 0; x < w; ++x) {
         const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
         if (top < 0) continue;
-        // (Its reflection spans as many rows below the horizon as the band above it, and a
-        // line's width more for the horizon's error.)
-        const int reflection = std::max(band_foot[std::size_t(x)], 2 * bottom - top + 2 + line_px);
-        band_reflection[std::size_t(x)] = reflection;
-        float mirror = 0.0f, water = 0.0f;
-        for (int y = bottom + 1; y <= std::min(h - 1, reflection); ++y)
-          mirror = std::max(mirror, mirrors.at<float>(y, x));
-        // Water: in front of the reflection, the pixels mirror the sky (a dark field in front
-        // of a dark ridge matches it in luma too, and mirrors nothing).
-        for (int y = reflection + 1; y <= std::min(h - 1, reflection + 2 * band_px); ++y)
-          water = std::max(water, sky_mirrors.at<float>(y, x));
-        band_weight[std::size_t(x)] = std::min(mirror, water);
-      }
-      const std::vector<float> band_smooth = box_across_columns(band_weight);
-      for (int x = 0; x < w; ++x) {
-        const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
-        if (top < 0) continue;
+        const int axis = waterline[std::size_t(x)], mirrored_top = 2 * axis - 1 - top;
         const int reflection = band_reflection[std::size_t(x)];
         const float mirror = std::min(band_weight[std::size_t(x)], band_smooth[std::size_t(x)]);
         for (int y = top; y < h; ++y) {
@@ -969,13 +1096,29 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
             const double down = -g.pose.ray_direction(camera, x, y).y;
             const double below = std::asin(std::clamp(down, -1.0, 1.0));
             const double conf = std::clamp(below / (2 * depression * kDeg), 0.0, 1.0);
-            bound = float(conf * conf * std::max(0.0, down) / height);
-            // The band's mirror weight over its reflection, fading over as many rows below
-            // it: the refinement's own step at the reflection's lower edge (the nearer
-            // water's distance stops at that faint line) is not kept at full strength there.
-            const float fade =
-                std::clamp(1.0f - float(y - reflection) / float(reflection - bottom), 0.0f, 1.0f);
-            weight = open[std::size_t(x)] * std::max(sky_mirrors.at<float>(y, x), mirror * fade);
+            const float water_bound = float(conf * conf * std::max(0.0, down) / height);
+            if (y < axis) {
+              // Above the waterline: the band itself (below a horizon found too high).
+            } else if (y <= mirrored_top) {
+              // The band's reflection: along the mirrored ray (camera to water to shore) it is
+              // as far as the band, and no nearer than the open water's bound.
+              bound = std::min(q_far, water_bound);
+            } else {
+              // Below it the water mirrors the sky and has the open water's bound (sea11: the
+              // plane's inverse distance times the ground's confidence), hundreds of metres a
+              // band's height below a tall band. The reflection's lower edge is blurred by the
+              // water's ripples and is a faint line in the photo: the distance returns from the
+              // band's to the water's bound over as many rows as the band is tall (blended in
+              // log inverse distance), with the band's mirror weight, not in a step.
+              const float fade = std::clamp(
+                  1.0f - float(y - reflection) / float(std::max(1, 2 * (reflection - bottom))),
+                  0.0f, 1.0f);
+              const float reflected = std::min(q_far, water_bound);
+              bound =
+                  water_bound > 0 ? water_bound * std::pow(reflected / water_bound, fade) : 0.0f;
+              weight = open[std::size_t(x)] *
+                       std::max(std::min(mirror, sky_mirrors.at<float>(y, x)), mirror * fade);
+            }
           }
           if (q[i] > bound)
             q[i] = bound > 0 ? q[i] * std::pow(bound / q[i], weight) : (1 - weight) * q[i];

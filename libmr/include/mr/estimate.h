@@ -75,13 +75,14 @@ struct MR_API EstimateOptions {
   /// as the horizon, no nearer than the sea's geometric horizon from the camera's height
   /// (sqrt(2 R h): 4.5 km from 1.6 m), and the water in front of it that mirrors it or the sky
   /// gets the sea_horizon bound like open water, so haze veils the band as it veils the sky
-  /// behind it, and the water's fog ramps up to it (issue 11, helper shore14). Off by default:
-  /// on the gallery's tuning half it made summer_1am's haze worse (the reflections under a
-  /// horizon found a few pixels too high stay clear under the veiled shore) and storm_pano's
-  /// (a dark field under a dark storm sky passes the luma mirror test), see
-  /// gallery/results/shore14_tune.md. false: the band keeps the refinement's distance (the far
-  /// billboard's, 46 m from 1.6 m) and bounds no water.
-  bool far_shore = false;
+  /// behind it, and the water's fog ramps up to it (issue 11, helpers shore14, shore15). Only
+  /// where the water below mirrors the band: the photo under the waterline correlates with the
+  /// band and the sky over it flipped (>= 0.8, colour and outline, no more contrast than the
+  /// original: a dark field under a ridge does not), the waterline snapped within two lines'
+  /// widths of the horizon to the row where the mirror is best, the reflection as far down as
+  /// the band's top mirrored about it (gallery/results/shore15_tune.md). false: the band keeps
+  /// the refinement's distance (the far billboard's, 46 m from 1.6 m) and bounds no water.
+  bool far_shore = true;
   /// The sky matte's spill onto a surface beyond a sharp edge trimmed: on the surface side of
   /// the matte (alpha < 0.5), where sky and surface differ plainly in brightness, alpha is at
   /// most the pixel's unmixed share of the sky's colour (issue 11, helper haze11b; photo/sky_matte.h,
