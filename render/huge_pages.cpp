@@ -14,6 +14,8 @@ namespace mr::render {
 namespace {
 
 constexpr std::size_t kHuge = std::size_t(2) << 20;
+// The least the pool maps at once (acquire_huge_block).
+constexpr std::size_t kChunk = std::size_t(128) << 20;
 
 std::size_t whole_pages(std::size_t bytes) {
   return (std::max<std::size_t>(bytes, 1) + kHuge - 1) / kHuge * kHuge;
@@ -96,7 +98,13 @@ void* acquire_huge_block(std::size_t bytes) {
       return block;
     }
   }
-  return map_block(bytes);
+  // A fresh mapping of at least kChunk: the rest goes to the pool, so that the next requests
+  // are carved from the same range and later releases join into large blocks again (pages
+  // never touched cost nothing).
+  const std::size_t mapped = std::max(bytes, kChunk);
+  char* block = static_cast<char*>(map_block(mapped));
+  if (mapped > bytes) release_huge_block(block + bytes, mapped - bytes);
+  return block;
 }
 
 void release_huge_block(void* block, std::size_t bytes) noexcept {

@@ -34,8 +34,11 @@ void advise_huge_pages(const void* data, std::size_t bytes);
 /// scratch one after another (the normals' and the mesh's samples, the mesh's planes and corner
 /// tables, the render's per-pixel AO, sun visibility, grid samples, gradients and the photo
 /// fallback's points): released blocks serve the next stage's requests instead of being
-/// unmapped and mapped afresh (a larger block is split at 2 MiB boundaries). The pool keeps at
-/// most kHugePagePoolBytes; what a release would put beyond that is unmapped.
+/// unmapped and mapped afresh (a larger block is split at 2 MiB boundaries, and released
+/// neighbours are joined). Fresh memory is mapped 128 MiB at least, the rest going to the pool,
+/// so that consecutive requests lie side by side and join into large blocks when released
+/// (pages never touched cost nothing). The pool keeps at most kHugePagePoolBytes; what a
+/// release would put beyond that is unmapped.
 void* acquire_huge_block(std::size_t bytes);
 /// Returns a block of acquire_huge_block (the same `bytes`) to the pool (or unmaps it).
 void release_huge_block(void* block, std::size_t bytes) noexcept;

@@ -1180,6 +1180,12 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   throw_if_stopped();
   exact_count += exact_more.combine(std::plus<>());
   out.interpolation_s = seconds_since(pass_start);
+  // Pass 3 reads only the per-pixel arrays: the grid's samples, their gradients and the AO
+  // table go back to the pool now (render/huge_pages.h), where the photo fallback's arrays
+  // below find them (already mapped) instead of fresh memory.
+  sparse.grid.reset();
+  sample_gradients = HugePageArray<Gradients>(0);
+  ao_table = HugePageArray<std::uint32_t>(0);
   pass_start = Clock::now();
 
   // Pass 3: per pixel, the transmittance map T = tau(camera, surface) * S(surface) and the AOVs.
