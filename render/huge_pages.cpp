@@ -25,8 +25,8 @@ std::size_t whole_pages(std::size_t bytes) {
 // Fresh, 2 MiB-aligned anonymous memory (mapped 2 MiB more, then trimmed to the alignment), so
 // that any 2 MiB-aligned piece of it can later be unmapped on its own.
 void* map_block(std::size_t bytes) {
-  void* raw = mmap(nullptr, bytes + kHuge, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS,
-                   -1, 0);
+  void* raw =
+      mmap(nullptr, bytes + kHuge, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
   if (raw == MAP_FAILED) throw std::bad_alloc();
   const auto start = reinterpret_cast<std::uintptr_t>(raw);
   const auto aligned = (start + kHuge - 1) & ~std::uintptr_t(kHuge - 1);
