@@ -1,6 +1,9 @@
 #include "render/huge_pages.h"
 
 #include <cstdint>
+#include <mutex>
+#include <new>
+#include <vector>
 
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -8,9 +11,58 @@
 
 namespace mr::render {
 
+namespace {
+
+constexpr std::size_t kHuge = std::size_t(2) << 20;
+// The least the pool maps at once (acquire_huge_block).
+constexpr std::size_t kChunk = std::size_t(128) << 20;
+
+std::size_t whole_pages(std::size_t bytes) {
+  return (std::max<std::size_t>(bytes, 1) + kHuge - 1) / kHuge * kHuge;
+}
+
+#if defined(__linux__)
+// Fresh, 2 MiB-aligned anonymous memory (mapped 2 MiB more, then trimmed to the alignment), so
+// that any 2 MiB-aligned piece of it can later be unmapped on its own.
+void* map_block(std::size_t bytes) {
+  void* raw =
+      mmap(nullptr, bytes + kHuge, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (raw == MAP_FAILED) throw std::bad_alloc();
+  const auto start = reinterpret_cast<std::uintptr_t>(raw);
+  const auto aligned = (start + kHuge - 1) & ~std::uintptr_t(kHuge - 1);
+  if (aligned > start) munmap(raw, aligned - start);
+  const std::uintptr_t end = aligned + bytes, raw_end = start + bytes + kHuge;
+  if (raw_end > end) munmap(reinterpret_cast<void*>(end), raw_end - end);
+  void* block = reinterpret_cast<void*>(aligned);
+  advise_huge_pages(block, bytes);
+  return block;
+}
+
+void unmap_block(void* block, std::size_t bytes) noexcept {
+  munmap(block, bytes);
+}
+
+// The released blocks (never destroyed: arrays may be released during static destruction).
+struct Pool {
+  std::mutex mutex;
+  struct Block {
+    char* data;
+    std::size_t bytes;
+  };
+  std::vector<Block> blocks;
+  std::size_t held = 0;
+};
+
+Pool& pool() {
+  static Pool* const p = new Pool;
+  return *p;
+}
+#endif
+
+}  // namespace
+
 void advise_huge_pages(const void* data, std::size_t bytes) {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
-  constexpr std::uintptr_t kHuge = std::uintptr_t(2) << 20;
   if (!data || bytes < 2 * kHuge) return;
   // The whole huge pages inside the range only: the ends may share a page with other
   // allocations, whose backing this must not change.
@@ -22,5 +74,116 @@ void advise_huge_pages(const void* data, std::size_t bytes) {
   (void)bytes;
 #endif
 }
+
+#if defined(__linux__)
+
+void* acquire_huge_block(std::size_t bytes) {
+  bytes = whole_pages(bytes);
+  {
+    Pool& p = pool();
+    const std::lock_guard lock(p.mutex);
+    // The smallest block that is large enough; the rest of it stays in the pool.
+    std::size_t best = p.blocks.size();
+    for (std::size_t i = 0; i < p.blocks.size(); ++i)
+      if (p.blocks[i].bytes >= bytes &&
+          (best == p.blocks.size() || p.blocks[i].bytes < p.blocks[best].bytes))
+        best = i;
+    if (best < p.blocks.size()) {
+      Pool::Block& b = p.blocks[best];
+      char* block = b.data;
+      b.data += bytes;
+      b.bytes -= bytes;
+      if (b.bytes == 0) p.blocks.erase(p.blocks.begin() + std::ptrdiff_t(best));
+      p.held -= bytes;
+      return block;
+    }
+  }
+  // A fresh mapping of at least kChunk: the rest goes to the pool, so that the next requests
+  // are carved from the same range and later releases join into large blocks again (pages
+  // never touched cost nothing).
+  const std::size_t mapped = std::max(bytes, kChunk);
+  char* block = static_cast<char*>(map_block(mapped));
+  if (mapped > bytes) release_huge_block(block + bytes, mapped - bytes);
+  return block;
+}
+
+void release_huge_block(void* block, std::size_t bytes) noexcept {
+  if (!block) return;
+  bytes = whole_pages(bytes);
+  Pool& p = pool();
+  {
+    const std::lock_guard lock(p.mutex);
+    bool noted = p.held + bytes <= kHugePagePoolBytes;
+    if (noted) {
+      try {
+        p.blocks.reserve(p.blocks.size() + 1);
+      } catch (...) {  // no room to note it: unmap it below
+        noted = false;
+      }
+    }
+    if (noted) {
+      // Joined with the pieces next to it (split from the same mapping earlier), so that
+      // repeated renders find their large blocks whole again.
+      char* data = static_cast<char*>(block);
+      std::size_t size = bytes;
+      for (std::size_t i = 0; i < p.blocks.size();) {
+        const Pool::Block b = p.blocks[i];
+        if (b.data + b.bytes == data || data + size == b.data) {
+          data = std::min(data, b.data);
+          size += b.bytes;
+          p.blocks[i] = p.blocks.back();
+          p.blocks.pop_back();
+        } else {
+          ++i;
+        }
+      }
+      p.blocks.push_back({data, size});
+      p.held += bytes;
+      return;
+    }
+  }
+  unmap_block(block, bytes);
+}
+
+std::size_t trim_huge_page_pool() noexcept {
+  Pool& p = pool();
+  std::vector<Pool::Block> blocks;
+  std::size_t held = 0;
+  {
+    const std::lock_guard lock(p.mutex);
+    blocks.swap(p.blocks);
+    held = std::exchange(p.held, 0);
+  }
+  for (const Pool::Block& b : blocks) unmap_block(b.data, b.bytes);
+  return held;
+}
+
+std::size_t huge_page_pool_bytes() noexcept {
+  Pool& p = pool();
+  const std::lock_guard lock(p.mutex);
+  return p.held;
+}
+
+#else  // no pool: aligned heap blocks
+
+void* acquire_huge_block(std::size_t bytes) {
+  void* p = std::aligned_alloc(kHuge, whole_pages(bytes));
+  if (!p) throw std::bad_alloc();
+  return p;
+}
+
+void release_huge_block(void* block, std::size_t) noexcept {
+  std::free(block);
+}
+
+std::size_t trim_huge_page_pool() noexcept {
+  return 0;
+}
+
+std::size_t huge_page_pool_bytes() noexcept {
+  return 0;
+}
+
+#endif
 
 }  // namespace mr::render

@@ -12,9 +12,8 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdlib>
-#include <memory>
-#include <new>
 #include <type_traits>
+#include <utility>
 
 namespace mr::render {
 
@@ -25,35 +24,69 @@ namespace mr::render {
 /// memory then stays on ordinary pages).
 void advise_huge_pages(const void* data, std::size_t bytes);
 
+/// A block of `bytes` (rounded up to whole 2 MiB pages), 2 MiB-aligned, advised for huge pages
+/// (advise_huge_pages), uninitialized: from the process's pool of released blocks when one is
+/// large enough, else freshly mapped. Throws std::bad_alloc. Thread-safe.
+///
+/// Why a pool (issue 12 item 4): on the development VM the first touch of fresh memory costs
+/// ~1-5 ms per MB even on huge pages (the kernel zeroes it, and the hypervisor maps it), ~30x a
+/// memset of memory already mapped. A 1080p render's geometry and passes allocate ~280 MB of
+/// scratch one after another (the normals' and the mesh's samples, the mesh's planes and corner
+/// tables, the render's per-pixel AO, sun visibility, grid samples, gradients and the photo
+/// fallback's points): released blocks serve the next stage's requests instead of being
+/// unmapped and mapped afresh (a larger block is split at 2 MiB boundaries, and released
+/// neighbours are joined). Fresh memory is mapped 128 MiB at least, the rest going to the pool,
+/// so that consecutive requests lie side by side and join into large blocks when released
+/// (pages never touched cost nothing). The pool keeps at most kHugePagePoolBytes; what a
+/// release would put beyond that is unmapped.
+void* acquire_huge_block(std::size_t bytes);
+/// Returns a block of acquire_huge_block (the same `bytes`) to the pool (or unmaps it).
+void release_huge_block(void* block, std::size_t bytes) noexcept;
+/// Unmaps every block the pool holds (e.g. when a long-running process goes idle); returns the
+/// bytes it held.
+std::size_t trim_huge_page_pool() noexcept;
+/// The bytes the pool holds now (for tests and reports).
+std::size_t huge_page_pool_bytes() noexcept;
+/// The most the pool keeps: a 4K render's scratch is about four times the 1080p figure above.
+inline constexpr std::size_t kHugePagePoolBytes = std::size_t(1) << 30;
+
 /// An uninitialized array of n trivially copyable T, 2 MiB-aligned and advised for huge pages
-/// (advise_huge_pages), for scratch buffers that a parallel loop fills entirely: no zeroing
+/// (acquire_huge_block), for scratch buffers that a parallel loop fills entirely: no zeroing
 /// pass (std::vector value-initializes its elements serially, touching every page from one
-/// thread first).
+/// thread first). Its memory comes from and goes back to the pool of acquire_huge_block, so
+/// its contents start as whatever the block last held: every element must be written before
+/// it is read.
 template <class T>
 class HugePageArray {
   static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>);
 
  public:
-  explicit HugePageArray(std::size_t n) : size_(n) {
-    constexpr std::size_t kAlign = std::size_t(2) << 20;
-    const std::size_t bytes =
-        (std::max<std::size_t>(n * sizeof(T), 1) + kAlign - 1) / kAlign * kAlign;
-    void* p = std::aligned_alloc(kAlign, bytes);
-    if (!p) throw std::bad_alloc();
-    data_.reset(static_cast<T*>(p));
-    advise_huge_pages(p, bytes);
+  explicit HugePageArray(std::size_t n)
+      : data_(static_cast<T*>(acquire_huge_block(std::max<std::size_t>(n * sizeof(T), 1)))),
+        size_(n) {}
+  ~HugePageArray() {
+    if (data_) release_huge_block(data_, std::max<std::size_t>(size_ * sizeof(T), 1));
   }
-  T* data() { return data_.get(); }
-  const T* data() const { return data_.get(); }
+  HugePageArray(HugePageArray&& other) noexcept
+      : data_(std::exchange(other.data_, nullptr)), size_(std::exchange(other.size_, 0)) {}
+  HugePageArray& operator=(HugePageArray&& other) noexcept {
+    if (this != &other) {
+      if (data_) release_huge_block(data_, std::max<std::size_t>(size_ * sizeof(T), 1));
+      data_ = std::exchange(other.data_, nullptr);
+      size_ = std::exchange(other.size_, 0);
+    }
+    return *this;
+  }
+  HugePageArray(const HugePageArray&) = delete;
+  HugePageArray& operator=(const HugePageArray&) = delete;
+  T* data() { return data_; }
+  const T* data() const { return data_; }
   std::size_t size() const { return size_; }
   T& operator[](std::size_t i) { return data_[i]; }
   const T& operator[](std::size_t i) const { return data_[i]; }
 
  private:
-  struct Free {
-    void operator()(T* p) const { std::free(p); }
-  };
-  std::unique_ptr<T[], Free> data_;
+  T* data_ = nullptr;  // null only when moved from
   std::size_t size_ = 0;
 };
 

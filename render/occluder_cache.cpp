@@ -182,8 +182,12 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
 }
 
 void clear_occluder_geometry_cache() {
-  const std::lock_guard lock(cache_mutex);
-  cache_entry.reset();
+  {
+    const std::lock_guard lock(cache_mutex);
+    cache_entry.reset();
+  }
+  // And the scratch blocks kept for the next render (render/huge_pages.h).
+  trim_huge_page_pool();
 }
 
 }  // namespace mr::render

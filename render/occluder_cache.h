@@ -54,7 +54,8 @@ struct OccluderGeometryTimings {
 std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometryRequest& request,
                                                           OccluderGeometryTimings* timings);
 
-/// Drops the cached entry (tests; memory).
+/// Drops the cached entry and unmaps the render scratch kept for reuse (trim_huge_page_pool;
+/// tests, memory, and "fresh geometry" benchmarks).
 void clear_occluder_geometry_cache();
 
 }  // namespace mr::render

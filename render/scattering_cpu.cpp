@@ -175,7 +175,6 @@ class Core {
     bounds.clear();
     bounds.reserve(std::size_t(steps + plan_.lamp_steps * scene_.lighting.lamps.size() + 2));
     bounds.push_back(0);
-    bounds.push_back(length);
     const double od_mean_total = sigma_mean_ * od_unit_total;
     const double one_minus_tau_end = -std::expm1(-od_mean_total);
     for (int i = 1; i < steps; ++i) {
@@ -183,6 +182,7 @@ class Core {
                                                  one_minus_tau_end, length);
       if (t > 0 && t < length) bounds.push_back(t);
     }
+    bounds.push_back(length);
     thread_local std::vector<physics::LampOnRay> lamp_rays;
     lamp_rays.clear();
     lamp_rays.reserve(scene_.lighting.lamps.size());
@@ -194,7 +194,9 @@ class Core {
         if (t > 0 && t < length) bounds.push_back(t);
       }
     }
-    std::sort(bounds.begin(), bounds.end());
+    // Without lamps the boundaries (0, the uniform ones, length) come in order: the sort (~33
+    // values per march) only where lamps add theirs; the same sorted array either way.
+    if (!std::is_sorted(bounds.begin(), bounds.end())) std::sort(bounds.begin(), bounds.end());
     bounds.erase(std::unique(bounds.begin(), bounds.end()), bounds.end());
 
     const double jitter = pixel_jitter(x, y, scene_.render.seed);
@@ -690,14 +692,18 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // the fine grid's interpolation of the same (render_scattering_cpu's surface samples).
   // The test is a box sum over a summed-area table of ao_matters_at.
   const int ao_reach = 3 * g * int(kCoarseFactor) + 1;
-  std::vector<std::uint32_t> ao_table;  // (w + 1) x (h + 1) summed-area table, or empty: all
+  // (w + 1) x (h + 1) summed-area table (unused where AO is wanted everywhere). Every entry
+  // is written below: row 0 and column 0 zero, the rest prefix sums (a zero-filled vector was a
+  // serial pass over 8 MB of fresh 4 KiB pages at 1080p).
   const bool ao_everywhere = !core.needs_ao() || !in.scene->lighting.lamps.empty();
+  HugePageArray<std::uint32_t> ao_table(ao_everywhere ? 0 : (std::size_t(w) + 1) * (h + 1));
   if (!ao_everywhere) {
     const std::size_t tw = std::size_t(w) + 1;
-    ao_table.assign(tw * (std::size_t(h) + 1), 0);
+    std::fill(ao_table.data(), ao_table.data() + tw, 0u);
     tbb::parallel_for(0, h, [&](int y) {  // row prefix sums
       std::uint32_t sum = 0;
       std::uint32_t* row = &ao_table[(std::size_t(y) + 1) * tw];
+      row[0] = 0;
       for (int x = 0; x < w; ++x) row[x + 1] = sum += core.ao_matters_at(x, y) ? 1u : 0u;
     });
     tbb::parallel_for(std::size_t(1), tw, [&](std::size_t x) {  // then down the columns
@@ -1174,6 +1180,12 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   throw_if_stopped();
   exact_count += exact_more.combine(std::plus<>());
   out.interpolation_s = seconds_since(pass_start);
+  // Pass 3 reads only the per-pixel arrays: the grid's samples, their gradients and the AO
+  // table go back to the pool now (render/huge_pages.h), where the photo fallback's arrays
+  // below find them (already mapped) instead of fresh memory.
+  sparse.grid.reset();
+  sample_gradients = HugePageArray<Gradients>(0);
+  ao_table = HugePageArray<std::uint32_t>(0);
   pass_start = Clock::now();
 
   // Pass 3: per pixel, the transmittance map T = tau(camera, surface) * S(surface) and the AOVs.

@@ -2,11 +2,13 @@
 // check of a mesh before its Embree build (render/embree_scene.cpp).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <numeric>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "mr/error.h"
@@ -29,6 +31,52 @@ TEST(HugePages, ArrayIsAlignedAndHoldsItsContents) {
   const HugePageArray<float> empty(0);
   EXPECT_EQ(empty.size(), 0u);
   EXPECT_NE(empty.data(), nullptr);
+}
+
+// Released arrays go to a pool that serves the next requests (render/huge_pages.h): a smaller
+// array takes part of a released block (its pages already mapped: no fresh zeroing), the pieces
+// join again when released, and trimming unmaps them all. (Blocks other tests released may be
+// in the pool too, so the checks are on addresses and differences.)
+TEST(HugePages, ReleasedBlocksServeLaterArrays) {
+  trim_huge_page_pool();
+  ASSERT_EQ(huge_page_pool_bytes(), 0u);
+  constexpr std::size_t kMiB = std::size_t(1) << 20;
+  const std::uint32_t* whole = nullptr;
+  {
+    HugePageArray<std::uint32_t> a(10 * kMiB / 4);  // 10 MiB: 5 huge pages
+    whole = a.data();
+    std::fill(a.data(), a.data() + a.size(), 0xabcdu);
+  }
+  // The pool maps at least a chunk at once: what it holds now is all of that mapping.
+  const std::size_t held = huge_page_pool_bytes();
+  EXPECT_GE(held, 10 * kMiB);
+  {
+    HugePageArray<float> first(3 * kMiB / 4);  // 3 MiB: two pages of the released block
+    HugePageArray<double> second(kMiB / 8);    // 1 MiB: the next one
+    EXPECT_EQ(static_cast<const void*>(first.data()), static_cast<const void*>(whole));
+    EXPECT_EQ(reinterpret_cast<const char*>(second.data()),
+              reinterpret_cast<const char*>(whole) + 4 * kMiB);
+    EXPECT_EQ(huge_page_pool_bytes(), held - 6 * kMiB);
+    first[0] = 1.5f;
+    second[second.size() - 1] = 2.5;
+    EXPECT_EQ(first[0], 1.5f);
+    EXPECT_EQ(second[second.size() - 1], 2.5);
+  }
+  EXPECT_EQ(huge_page_pool_bytes(), held);
+  {
+    HugePageArray<std::uint32_t> again(held / 4);  // whole again: the pieces were joined
+    EXPECT_EQ(again.data(), whole);
+    EXPECT_EQ(huge_page_pool_bytes(), 0u);
+  }
+  {
+    HugePageArray<std::uint32_t> moved_from(kMiB);
+    HugePageArray<std::uint32_t> moved(std::move(moved_from));
+    EXPECT_EQ(moved.size(), kMiB);
+    moved_from = std::move(moved);  // back: the moved-from array releases nothing
+    EXPECT_EQ(moved_from.size(), kMiB);
+  }
+  EXPECT_EQ(trim_huge_page_pool(), held);
+  EXPECT_EQ(huge_page_pool_bytes(), 0u);
 }
 
 // Advising memory that already holds data (the mesh's vectors after reserve, or any range)
