@@ -332,9 +332,28 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // The core of the sky: sky pixels whose whole median window is sky (the binary sky's outer
   // pixels are mixed with the surface along its edge, and a window reaching past it judges
   // structure against the surface) that are not structure.
+  const cv::Mat window =
+      cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px));
   cv::Mat core;
-  cv::erode(sky, core, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px)));
+  cv::erode(sky, core, window);
   core.setTo(0, structure);
+  // A lattice dense enough that its steel outweighs its openings in the median window (rocket's
+  // towers) passes the structure test (the median is steel, and the openings are what stands
+  // off it): its steel would feed the average and darken the fog into ghostly columns. Open
+  // sky is smooth at the window's scale, a lattice is not: a pixel whose window spans more
+  // than kTextureLuma of luma (its maximum less its minimum) does not feed the average. A dark
+  // cloud's body, smooth inside, still does (its rim does not, but the filter carries the
+  // body's luma out to it).
+  constexpr float kTextureLuma = 0.08f;
+  {
+    cv::Mat l(h, w, CV_32F), high, low;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) l.at<float>(y, x) = luma[std::size_t(y) * w + x];
+    cv::dilate(l, high, window);
+    cv::erode(l, low, window);
+    cv::Mat textured = (high - low) > kTextureLuma;
+    core.setTo(0, textured);
+  }
   // Normalized convolution: the filter of (core Y', core), their ratio.
   std::vector<float> data(2 * count);
   for (int y = 0; y < h; ++y)

@@ -54,7 +54,7 @@ struct MR_API SkyLight {
 /// inputs of another size or channel count.
 MR_API SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m,
                                      const Camera& camera, const FogScene& scene,
-                                     const Rgb& sky_radiance, bool brightness_from_photo = false);
+                                     const Rgb& sky_radiance, bool brightness_from_photo = true);
 
 /// Adds the sky light's correction albedo (L_in(w) - L_sky) (1 - exp(-optical_depth)) to
 /// `inscatter` (3 channels) at every pixel, w the pixel's view ray from `pose`, optical_depth
