@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <vector>
 
@@ -338,21 +339,28 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   cv::erode(sky, core, window);
   core.setTo(0, structure);
   // A lattice dense enough that its steel outweighs its openings in the median window (rocket's
-  // towers) passes the structure test (the median is steel, and the openings are what stands
-  // off it): its steel would feed the average and darken the fog into ghostly columns. Open
-  // sky is smooth at the window's scale, a lattice is not: a pixel whose window spans more
-  // than kTextureLuma of luma (its maximum less its minimum) does not feed the average. A dark
-  // cloud's body, smooth inside, still does (its rim does not, but the filter carries the
-  // body's luma out to it).
-  constexpr float kTextureLuma = 0.08f;
+  // launch towers) passes the structure test (the median is steel, and the openings are what
+  // stands off it), and against a dark dusk sky its steel is not much darker than the sky: it
+  // fed the average and darkened the fog into ghostly columns (haze14's v5/v6). Dark things
+  // narrower than kClosingFraction of the frame in some direction (struts, cables, a facade's
+  // windows) are not the sky's brightness: a grey closing of the sky's luma (the maximum over a
+  // square window, then the minimum; surfaces left out of both) fills them with the brightness
+  // of the sky around them, while a dark cloud wider than the window keeps its own.
+  constexpr double kClosingFraction = 0.03;
   {
-    cv::Mat l(h, w, CV_32F), high, low;
+    const int closing_px = std::max(3, int(std::lround(kClosingFraction * std::max(w, h))) | 1);
+    const cv::Mat square =
+        cv::getStructuringElement(cv::MORPH_RECT, cv::Size(closing_px, closing_px));
+    cv::Mat l(h, w, CV_32F), high, closed;
     for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) l.at<float>(y, x) = luma[std::size_t(y) * w + x];
-    cv::dilate(l, high, window);
-    cv::erode(l, low, window);
-    cv::Mat textured = (high - low) > kTextureLuma;
-    core.setTo(0, textured);
+      for (int x = 0; x < w; ++x)
+        l.at<float>(y, x) = sky.at<std::uint8_t>(y, x) ? luma[std::size_t(y) * w + x] : 0.0f;
+    cv::dilate(l, high, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    high.setTo(std::numeric_limits<float>::max(), sky == 0);
+    cv::erode(high, closed, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (sky.at<std::uint8_t>(y, x)) luma[std::size_t(y) * w + x] = closed.at<float>(y, x);
   }
   // Normalized convolution: the filter of (core Y', core), their ratio.
   std::vector<float> data(2 * count);
