@@ -344,9 +344,12 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // fed the average and darkened the fog into ghostly columns (haze14's v5/v6). Dark things
   // narrower than kClosingFraction of the frame in some direction (struts, cables, a facade's
   // windows) are not the sky's brightness: a grey closing of the sky's luma (the maximum over a
-  // square window, then the minimum; surfaces left out of both) fills them with the brightness
-  // of the sky around them, while a dark cloud wider than the window keeps its own.
+  // square window, then the minimum; surfaces left out of both) lifts them to the brightness
+  // of the sky around them, while a dark cloud wider than the window keeps its own. A pixel
+  // darker than kDarkShare below its closing does not feed the average (the closing itself is
+  // not the data: its flat-topped plateaus would show as blocks in a sky of wisps).
   constexpr double kClosingFraction = 0.03;
+  constexpr float kDarkShare = 0.1f;
   {
     const int closing_px = std::max(3, int(std::lround(kClosingFraction * std::max(w, h))) | 1);
     const cv::Mat square =
@@ -358,9 +361,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
     cv::dilate(l, high, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
     high.setTo(std::numeric_limits<float>::max(), sky == 0);
     cv::erode(high, closed, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x)
-        if (sky.at<std::uint8_t>(y, x)) luma[std::size_t(y) * w + x] = closed.at<float>(y, x);
+    core.setTo(0, l < (1 - kDarkShare) * closed);
   }
   // Normalized convolution: the filter of (core Y', core), their ratio.
   std::vector<float> data(2 * count);
