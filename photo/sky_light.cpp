@@ -362,6 +362,15 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
     high.setTo(std::numeric_limits<float>::max(), sky == 0);
     cv::erode(high, closed, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
     core.setTo(0, l < (1 - kDarkShare) * closed);
+    // The same for bright structures (a lit lattice against a dusk sky, a pale tower): a grey
+    // opening (the minimum, then the maximum; surfaces left out) brings them down to the sky
+    // around them, and a pixel brighter than kDarkShare above it does not feed the average.
+    cv::Mat low, opened;
+    l.setTo(std::numeric_limits<float>::max(), sky == 0);
+    cv::erode(l, low, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    low.setTo(0, sky == 0);
+    cv::dilate(low, opened, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    core.setTo(0, l > (1 + kDarkShare) * opened);
   }
   // Normalized convolution: the filter of (core Y', core), their ratio.
   std::vector<float> data(2 * count);
@@ -407,7 +416,11 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // average is sound (a far hill under the sky, at T ~ 0, shows the same fog as the sky just
   // above it, not a broad average that takes in a darker zenith), smoothed over kSpreadFraction
   // of the frame so the nearest pixels' cells leave no seams, and fading to 1 with the distance
-  // from the sky (kFadeFraction of the frame; near surfaces are nearly clear anyway).
+  // from the sky (kFadeFraction of the frame; near surfaces are nearly clear anyway). The fade
+  // counts from any sky pixel, sound or not: the steel of a lattice taken partly for surface
+  // lies between its sky-coloured openings, far from sound sky, and faded to the flat light it
+  // stood out as a lighter ghost of the tower where the fog hides it (rocket in dense fog); a
+  // surface seen right beside the sky is seen in the sky's direction, through the same fog.
   constexpr double kSpreadFraction = 0.01, kFadeFraction = 0.05;
   std::vector<std::uint8_t> sound(count, 0);
   bool any_sound = false;
@@ -427,6 +440,8 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   const double spread_px = std::max(1.0, kSpreadFraction * std::max(w, h));
   cv::GaussianBlur(spread, spread, cv::Size(0, 0), spread_px, spread_px, cv::BORDER_REPLICATE);
   const double fade_px = kFadeFraction * std::max(w, h);
+  cv::Mat from_sky;  // each pixel's distance to the nearest sky pixel (0 on the sky)
+  cv::distanceTransform(sky == 0, from_sky, cv::DIST_L2, cv::DIST_MASK_PRECISE);
   bool any = false;
   Image out(w, h, 1);
   for (int y = 0; y < h; ++y)
@@ -437,8 +452,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       if (sky.at<std::uint8_t>(y, x)) {
         s = f + b * (scale[i] - f);
       } else {
-        const std::int32_t k = nearest[i];
-        const double d = k >= 0 ? std::hypot(double(k % w - x), double(k / w - y)) : 1e30;
+        const double d = from_sky.at<float>(y, x);
         s = float(1.0 + std::exp(-d / fade_px) * (f - 1.0));
       }
       out.at(x, y, 0) = s;

@@ -1373,6 +1373,26 @@ TEST(SkyLight, HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze) {
 // mixed the two: the body near its edge brightened, the glow dimmed, each a new gradient). The
 // body, darker than the fog's light, keeps its own brightness; the glow, brighter, keeps the
 // fog's light as before (the scale only ever darkens).
+// The render asks for the brightness scale by default (helper haze15: mr::fog, and through
+// sky_light_from_photo's default the streamed `mr fog` too): the leaves of the test above, fogged
+// by mr::fog as `mr fog` does, keep their hue edge (before haze15 the render left the light
+// flat: 0.42 % created edges).
+TEST(SkyLight, TheRenderScalesTheSkyLightToThePhotosSkyByDefault) {
+  FogScene scene = haze_scene();
+  scene.pose.pitch_deg = 25;
+  const TreeScene t = leaves_against_a_deep_blue_sky(scene);
+  scene.lighting.sky_by_direction = true;
+  scene.lighting.sky_radiance = estimate_airlight(t.photo);
+  const SkyLight light =
+      sky_light_from_photo(t.photo, t.distance, kCamera, scene, *scene.lighting.sky_radiance);
+  EXPECT_FALSE(light.scale.empty());
+  const FogLayers fogged = fog(t.photo, t.distance, t.alpha, kCamera, scene);
+  const double e = test::gallery_created_edges(t.photo, fogged.composite);
+  std::printf("leaves against a deep blue sky, mr::fog's haze: created-edge pixels %.4f %%\n",
+              100 * e);
+  EXPECT_LE(e, 2e-4);  // the target
+}
+
 TEST(SkyLight, DarkCloudBesideItsGlowKeepsItsBrightnessInHaze) {
   FogScene scene = haze_scene();
   scene.pose.pitch_deg = 25;  // looking up: all sky
