@@ -333,8 +333,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // The core of the sky: sky pixels whose whole median window is sky (the binary sky's outer
   // pixels are mixed with the surface along its edge, and a window reaching past it judges
   // structure against the surface) that are not structure.
-  const cv::Mat window =
-      cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px));
+  const cv::Mat window = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px));
   cv::Mat core;
   cv::erode(sky, core, window);
   core.setTo(0, structure);

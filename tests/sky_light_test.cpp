@@ -1350,8 +1350,10 @@ TEST(SkyLight, HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze) {
   scene.lighting.sky_by_direction = true;
   scene.lighting.sky_radiance = estimate_airlight(t.photo);
   Image map_before, map_after;
-  const FogLayers fog_before = fog_with_sky_light(t.photo, t.distance, t.alpha, scene, false, kCamera);
-  const FogLayers fog_after = fog_with_sky_light(t.photo, t.distance, t.alpha, scene, true, kCamera);
+  const FogLayers fog_before =
+      fog_with_sky_light(t.photo, t.distance, t.alpha, scene, false, kCamera);
+  const FogLayers fog_after =
+      fog_with_sky_light(t.photo, t.distance, t.alpha, scene, true, kCamera);
   const double e_before = test::gallery_created_edges(t.photo, fog_before.composite, &map_before);
   const double e_after = test::gallery_created_edges(t.photo, fog_after.composite, &map_after);
   if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
