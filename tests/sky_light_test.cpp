@@ -34,6 +34,7 @@
 #include "photo/sky_matte.h"
 #include "render/physics/scattering.h"
 #include "tests/display_luma.h"
+#include "tests/flat_light_look.h"
 #include "tests/gallery_look.h"
 
 namespace mr {
@@ -308,27 +309,8 @@ TEST(SkyLight, SunsetGradientSurvivesHazeWithNoCreatedEdge) {
 using test::fog_auto_look;
 using test::gallery_created_edges;
 
-FogLayers fog_with_sky_light(const Image& photo, const Image& distance, const Image& alpha,
-                             const FogScene& scene, bool brightness_from_photo,
-                             const Camera& camera);
-
-// fog_auto_look with the sky light's brightness left flat (SkyLight::scale off: the render
-// before helper haze15 turned it on), to show a defect of the estimate that the scale would
-// also hide.
-FogLayers fog_auto_look_flat_light(const Image& photo, const Camera& camera,
-                                   const SceneEstimate& est, double visibility_m, double top_m,
-                                   double g) {
-  FogScene s = est.scene;
-  const float sigma = float(extinction_from_visibility(visibility_m));
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.g = g;
-  s.medium.layer_top_m = top_m;
-  s.render.backend = Backend::cpu;
-  s.lighting.sky_by_direction = true;
-  if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
-  return fog_with_sky_light(photo, est.geometry.distance_m, est.geometry.sky_alpha, s, false,
-                            camera);
-}
+using test::fog_auto_look_flat_light;
+using test::fog_with_sky_light;
 
 // The sun bank look (gallery/looks/sun_bank.json): 90 m visibility, height fog (scale 12 m)
 // under a 40 m top, g = 0.6, the sun at azimuth 20, elevation 8 degrees.
@@ -1280,25 +1262,6 @@ TEST(SkyLight, SceneDocumentField) {
 // clear (T ~ 0.98); the photo's edge, mostly hue, became a luma step. The geometry is exact
 // (the tree's coverage from 4 x 4 samples a pixel: its matte and, at half coverage, its
 // distance), so the case is the sky light alone.
-// mr::fog's steps (render, sky light by direction, matte, composite), with or without the sky
-// light's brightness scale (without: the render before haze14).
-FogLayers fog_with_sky_light(const Image& photo, const Image& distance, const Image& alpha,
-                             const FogScene& scene, bool brightness_from_photo,
-                             const Camera& camera) {
-  FogScene plain = scene;
-  plain.lighting.sky_by_direction = false;
-  ScatteringLayers layers = render_scattering(photo, distance, camera, plain);
-  const SkyLight light = sky_light_from_photo(photo, distance, camera, scene, layers.sky_radiance,
-                                              brightness_from_photo);
-  add_sky_light(light, scene.medium, camera, scene.pose, layers.optical_depth, layers.inscatter);
-  if (!alpha.empty())
-    photo::apply_sky_matte(alpha.view(), layers.transmittance.view(), layers.inscatter.view());
-  FogLayers out;
-  out.composite = Image(photo.width(), photo.height(), 3);
-  photo::composite(photo.view(), layers.transmittance.view(), layers.inscatter.view(),
-                   out.composite.view());
-  return out;
-}
 
 struct TreeScene {
   Image photo, distance, alpha;
