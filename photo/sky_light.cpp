@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <vector>
 
@@ -332,9 +333,47 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // The core of the sky: sky pixels whose whole median window is sky (the binary sky's outer
   // pixels are mixed with the surface along its edge, and a window reaching past it judges
   // structure against the surface) that are not structure.
+  const cv::Mat window = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px));
   cv::Mat core;
-  cv::erode(sky, core, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(median_px, median_px)));
+  cv::erode(sky, core, window);
   core.setTo(0, structure);
+  // A lattice dense enough that its steel outweighs its openings in the median window (rocket's
+  // launch towers) passes the structure test (the median is steel, and the openings are what
+  // stands off it), and against a dark dusk sky its steel is not much darker than the sky: it
+  // fed the average and darkened the fog into ghostly columns (haze14's v5/v6). Dark things
+  // narrower than kClosingFraction of the frame in some direction (struts, cables, a facade's
+  // windows) are not the sky's brightness: a grey closing of the sky's luma (the maximum over a
+  // square window, then the minimum; surfaces left out of both) lifts them to the brightness
+  // of the sky around them, while a dark cloud wider than the window keeps its own. A pixel
+  // darker than kDarkShare below its closing does not feed the average (the closing itself is
+  // not the data: its flat-topped plateaus would show as blocks in a sky of wisps). kDarkShare
+  // 0.2: at 0.1 the dark gaps between backlit clouds next to their glow were kept out too, and
+  // the fog there took the glow's brightness (SkyLight.BacklitCloudsUnderAWeakHorizonLowerIt:
+  // 0.0212 % created edges; 0.0085 % at 0.2, as without the closing).
+  constexpr double kClosingFraction = 0.03;
+  constexpr float kDarkShare = 0.2f, kBrightShare = 0.1f;
+  {
+    const int closing_px = std::max(3, int(std::lround(kClosingFraction * std::max(w, h))) | 1);
+    const cv::Mat square =
+        cv::getStructuringElement(cv::MORPH_RECT, cv::Size(closing_px, closing_px));
+    cv::Mat l(h, w, CV_32F), high, closed;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        l.at<float>(y, x) = sky.at<std::uint8_t>(y, x) ? luma[std::size_t(y) * w + x] : 0.0f;
+    cv::dilate(l, high, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    high.setTo(std::numeric_limits<float>::max(), sky == 0);
+    cv::erode(high, closed, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    core.setTo(0, l < (1 - kDarkShare) * closed);
+    // The same for bright structures (a lit lattice against a dusk sky, a pale tower): a grey
+    // opening (the minimum, then the maximum; surfaces left out) brings them down to the sky
+    // around them, and a pixel brighter than kBrightShare above it does not feed the average.
+    cv::Mat low, opened;
+    l.setTo(std::numeric_limits<float>::max(), sky == 0);
+    cv::erode(l, low, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    low.setTo(0, sky == 0);
+    cv::dilate(low, opened, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    core.setTo(0, l > (1 + kBrightShare) * opened);
+  }
   // Normalized convolution: the filter of (core Y', core), their ratio.
   std::vector<float> data(2 * count);
   for (int y = 0; y < h; ++y)
@@ -379,7 +418,11 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // average is sound (a far hill under the sky, at T ~ 0, shows the same fog as the sky just
   // above it, not a broad average that takes in a darker zenith), smoothed over kSpreadFraction
   // of the frame so the nearest pixels' cells leave no seams, and fading to 1 with the distance
-  // from the sky (kFadeFraction of the frame; near surfaces are nearly clear anyway).
+  // from the sky (kFadeFraction of the frame; near surfaces are nearly clear anyway). The fade
+  // counts from any sky pixel, sound or not: the steel of a lattice taken partly for surface
+  // lies between its sky-coloured openings, far from sound sky, and faded to the flat light it
+  // stood out as a lighter ghost of the tower where the fog hides it (rocket in dense fog); a
+  // surface seen right beside the sky is seen in the sky's direction, through the same fog.
   constexpr double kSpreadFraction = 0.01, kFadeFraction = 0.05;
   std::vector<std::uint8_t> sound(count, 0);
   bool any_sound = false;
@@ -399,6 +442,8 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   const double spread_px = std::max(1.0, kSpreadFraction * std::max(w, h));
   cv::GaussianBlur(spread, spread, cv::Size(0, 0), spread_px, spread_px, cv::BORDER_REPLICATE);
   const double fade_px = kFadeFraction * std::max(w, h);
+  cv::Mat from_sky;  // each pixel's distance to the nearest sky pixel (0 on the sky)
+  cv::distanceTransform(sky == 0, from_sky, cv::DIST_L2, cv::DIST_MASK_PRECISE);
   bool any = false;
   Image out(w, h, 1);
   for (int y = 0; y < h; ++y)
@@ -409,8 +454,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       if (sky.at<std::uint8_t>(y, x)) {
         s = f + b * (scale[i] - f);
       } else {
-        const std::int32_t k = nearest[i];
-        const double d = k >= 0 ? std::hypot(double(k % w - x), double(k / w - y)) : 1e30;
+        const double d = from_sky.at<float>(y, x);
         s = float(1.0 + std::exp(-d / fade_px) * (f - 1.0));
       }
       out.at(x, y, 0) = s;

@@ -80,8 +80,12 @@ bool all_zero(const Image& map);
 /// it, surface pixels and the mixed pixels along the sky's edge never do, and a photo edge,
 /// such as a dark cloud's rim against its bright glow, stops it). The scale only ever darkens
 /// (at most 1): a glow, white clouds or a pale structure taken for sky keep the flat light.
-/// Surface pixels take the scale of the nearest sky (the fog in front of a far hill is the
-/// same light as the sky's just above it), smoothed, fading to 1 away from the sky. The scale
+/// Dark or bright structures narrower than 3 % of the frame taken for sky (a launch tower's
+/// lattice, cables, a facade's windows: haze15) stand off a grey closing or opening of the sky's
+/// luma by more than 10 % and do not feed the average either.
+/// Surface pixels take the scale of the nearest sound sky (the fog in front of a far hill is the
+/// same light as the sky's just above it), smoothed, fading to 1 with their distance from any
+/// sky pixel (a lattice's steel between sky-coloured openings keeps the sky's scale). The scale
 /// is a scalar, so the fog's colour (its chroma) is the map's.
 /// `photo`: scene-linear, >= 3 channels; `distance_m`: 1 channel, the same size (is_sky:
 /// sky); `deviation`: the convolved (and bounded) map of L_in - sky_radiance. Returns a

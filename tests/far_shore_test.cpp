@@ -22,6 +22,7 @@
 #include "mr/fog.h"
 #include "mr/image.h"
 #include "mr/io.h"
+#include "tests/flat_light_look.h"
 #include "tests/gallery_look.h"
 
 namespace mr {
@@ -95,6 +96,14 @@ TEST(FarShore, ThinBandOnASeaHorizonIsFarAndHazeVeilsIt) {
   const test::GalleryLooks after = haze_and_dense_looks(photo, camera, est, "far_shore");
   const test::GalleryLooks base =
       haze_and_dense_looks(photo, camera, est_before, "far_shore_before");
+  // The defect and its mend in haze are measured under the flat sky light (the render before
+  // helper haze15): the sky light's brightness scale, on by default since, darkens the sky's
+  // fog toward this photo's glow and hides the band's step as well (default render: 0.0023 %
+  // before, 0.0090 % with the rule, both within the target, checked below).
+  const double flat_after = gallery_created_edges(
+      photo, test::fog_auto_look_flat_light(photo, camera, est, 2000, 1500, 0.6).composite);
+  const double flat_base = gallery_created_edges(
+      photo, test::fog_auto_look_flat_light(photo, camera, est_before, 2000, 1500, 0.6).composite);
   auto d = [](const SceneEstimate& e, int x, int y) { return e.geometry.distance_m.at(x, y, 0); };
   // The band's middle row at its tallest column, the water 4 px below the horizon
   // there, the post 30 px above the horizon and 40 px below it.
@@ -106,23 +115,25 @@ TEST(FarShore, ThinBandOnASeaHorizonIsFarAndHazeVeilsIt) {
       "far shore (column %d, %d px tall): band at %.0f m (before %.0f m), water 4 px below the "
       "horizon %.0f m (before %.0f m); post 30 px above / 40 px below the horizon %.1f / %.1f m "
       "(before %.1f / %.1f m); created-edge pixels haze %.4f %% (before %.4f %%), dense %.4f %% "
-      "(before %.4f %%)\n",
+      "(before %.4f %%); under the flat sky light haze %.4f %% (before %.4f %%)\n",
       xb, band_height(xb), d(est, xb, yb), d(est_before, xb, yb), d(est, xb, kHorizon + 4),
       d(est_before, xb, kHorizon + 4), d(est, kPostX, kHorizon - 30), d(est, kPostX, kHorizon + 40),
       d(est_before, kPostX, kHorizon - 30), d(est_before, kPostX, kHorizon + 40),
       100 * after.haze_edges, 100 * base.haze_edges, 100 * after.dense_edges,
-      100 * base.dense_edges);
+      100 * base.dense_edges, 100 * flat_after, 100 * flat_base);
   // The defect reproduced: without the rule the band steps out of the haze.
-  EXPECT_GT(base.haze_edges, 2e-4);
+  EXPECT_GT(flat_base, 2e-4);
   // The band is kilometres away, the water in front of it farther than before.
   EXPECT_GT(d(est, xb, yb), 1000.0f);
   EXPECT_GT(d(est, xb, kHorizon + 4), d(est_before, xb, kHorizon + 4));
-  // Fewer created edges in haze: the band and its reflection veiled (0.0070 % with shore15's
-  // mirror test and fade, within the 0.02 %; 0.0219 % with shore14's rule); dense fog
-  // within it.
-  EXPECT_LT(after.haze_edges, 0.75 * base.haze_edges);
-  EXPECT_LE(after.haze_edges, 2e-4);
+  // Fewer created edges in haze (flat light): the band and its reflection veiled (0.0070 % with
+  // shore15's mirror test and fade, within the 0.02 %; 0.0219 % with shore14's rule);
+  // dense fog within it.
+  EXPECT_LT(flat_after, 0.75 * flat_base);
+  EXPECT_LE(flat_after, 2e-4);
   EXPECT_LE(after.dense_edges, 2e-4);
+  // With the default render (the brightness scale on) haze is within the target too.
+  EXPECT_LE(after.haze_edges, 2e-4);
   // The near post standing in the water keeps its depth, above and below the horizon.
   for (const int y : {kHorizon - 30, kHorizon - 5, kHorizon + 40})
     EXPECT_NEAR(d(est, kPostX, y), d(est_before, kPostX, y), 0.01 * d(est_before, kPostX, y))

@@ -44,17 +44,16 @@ struct MR_API SkyLight {
 /// The sky light of `photo` (scene-linear RGB, the camera's size) with its distance map
 /// (1 channel, +inf = sky) seen by `camera` from `scene.pose`, convolved with scene.medium.g,
 /// relative to `sky_radiance` (the L_sky the render uses). A photo whose sky and ground are both
-/// exactly sky_radiance gives an empty map. `brightness_from_photo` (issue 11, helper haze14):
-/// also the scale that darkens the light along each pixel's ray to the display luma of the
-/// photo's own sky around the pixel (SkyLight::scale, photo/sky_light.h). Off by default, and
-/// the render (render_scattering, `mr fog`) does not ask for it yet: on the gallery's tuning
-/// half it lowered the haze misses (rocket 0.183 -> 0.077 %, summer_1am 0.087 -> 0.042 %,
-/// palace 0.076 -> 0.046 %) but put other photos or tests over the target
-/// (gallery/results/haze14_tune.md). Throws mr::Error(size_mismatch / invalid_argument) for
+/// exactly sky_radiance gives an empty map. `brightness_from_photo` (issue 11, helpers haze14
+/// and haze15): also the scale that darkens the light along each pixel's ray to the display luma
+/// of the photo's own sky around the pixel (SkyLight::scale, photo/sky_light.h). On by default
+/// since haze15 (render_scattering and the streamed `mr fog` use the default): on the gallery's
+/// tuning half it lowered the haze misses with dense fog still within the target everywhere
+/// (gallery/results/haze15_tune.md). Throws mr::Error(size_mismatch / invalid_argument) for
 /// inputs of another size or channel count.
 MR_API SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m,
                                      const Camera& camera, const FogScene& scene,
-                                     const Rgb& sky_radiance, bool brightness_from_photo = false);
+                                     const Rgb& sky_radiance, bool brightness_from_photo = true);
 
 /// Adds the sky light's correction albedo (L_in(w) - L_sky) (1 - exp(-optical_depth)) to
 /// `inscatter` (3 channels) at every pixel, w the pixel's view ray from `pose`, optical_depth
