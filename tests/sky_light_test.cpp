@@ -1433,5 +1433,60 @@ TEST(SkyLight, DarkCloudBesideItsGlowKeepsItsBrightnessInHaze) {
   EXPECT_LE(e_after, 2e-4);
 }
 
+// In fog (visibility under 1 km) the light has scattered from the whole dome: the photo's sky
+// brightness behind each pixel must not pattern it. With the scale at full weight, dense fog
+// under a deep blue sky with leaves turned into a dark "storm" of the sky's own luma
+// (gallery/tune/kite, summer_1am); in haze (2 km) the scale still applies.
+TEST(SkyLight, DenseFogTakesTheWholeDomesLightNotTheSkyBehindEachPixel) {
+  EXPECT_EQ(sky_brightness_scale_weight(Medium{}), 0.0);  // 150 m visibility
+  auto weight_at = [](double visibility_m) {
+    Medium m;
+    const float sigma = float(extinction_from_visibility(visibility_m));
+    m.sigma_t_per_m = {sigma, sigma, sigma};
+    return sky_brightness_scale_weight(m);
+  };
+  EXPECT_EQ(weight_at(60), 0.0);
+  EXPECT_NEAR(weight_at(500), 0.0, 1e-6);  // float sigma_t round trip
+  EXPECT_NEAR(weight_at(500 * std::sqrt(2.0)), 0.5, 1e-6);  // log-linear: no step on a slider
+  EXPECT_NEAR(weight_at(1000), 1.0, 1e-6);
+  EXPECT_EQ(weight_at(2000), 1.0);
+  Medium clear;
+  clear.sigma_t_per_m = {0, 0, 0};
+  EXPECT_EQ(sky_brightness_scale_weight(clear), 1.0);
+
+  FogScene haze = haze_scene();
+  haze.pose.pitch_deg = 25;
+  const TreeScene t = leaves_against_a_deep_blue_sky(haze);
+  haze.lighting.sky_by_direction = true;
+  haze.lighting.sky_radiance = estimate_airlight(t.photo);
+  FogScene dense = haze;  // the gallery's dense look: 60 m visibility, an 80 m layer, g = 0.3
+  const float sigma = float(extinction_from_visibility(60));
+  dense.medium.sigma_t_per_m = {sigma, sigma, sigma};
+  dense.medium.layer_top_m = 80;
+  dense.medium.g = 0.3;
+  EXPECT_FALSE(sky_light_from_photo(t.photo, t.distance, kCamera, haze, *haze.lighting.sky_radiance)
+                   .scale.empty());
+  EXPECT_TRUE(
+      sky_light_from_photo(t.photo, t.distance, kCamera, dense, *dense.lighting.sky_radiance)
+          .scale.empty());
+  // Dense fog with the photo's brightness asked for is the flat light's render, bit for bit.
+  const FogLayers flat = fog_with_sky_light(t.photo, t.distance, t.alpha, dense, false, kCamera);
+  const FogLayers scaled = fog_with_sky_light(t.photo, t.distance, t.alpha, dense, true, kCamera);
+  EXPECT_TRUE(same_bits(flat.composite, scaled.composite));
+  // In haze the scale still darkens the sky's fog toward the photo's deep blue.
+  const FogLayers haze_flat =
+      fog_with_sky_light(t.photo, t.distance, t.alpha, haze, false, kCamera);
+  const FogLayers haze_scaled =
+      fog_with_sky_light(t.photo, t.distance, t.alpha, haze, true, kCamera);
+  double darker = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x)
+      if (std::isinf(t.distance.at(x, y, 0)))
+        darker = std::max(
+            darker, double(haze_flat.composite.at(x, y, 1) - haze_scaled.composite.at(x, y, 1)));
+  std::printf("haze: the scale darkens the sky's fog by up to %.4f (linear green)\n", darker);
+  EXPECT_GT(darker, 0.01);
+}
+
 }  // namespace
 }  // namespace mr

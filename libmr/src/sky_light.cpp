@@ -78,10 +78,21 @@ SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m, const
       const std::array<float, 3> bounded = photo::neutral_fog_colour(light);
       for (int c = 0; c < 3; ++c) d[c] = bounded[c] - sky_radiance[c];
     }
-  if (brightness_from_photo)
+  const double weight = sky_brightness_scale_weight(scene.medium);
+  if (brightness_from_photo && weight > 0) {
     out.scale = photo::sky_brightness_scale(photo.view(), distance_m.view(), camera, scene.pose,
                                             out.deviation, sky_radiance);
+    if (weight < 1)
+      for (float& s : out.scale.pixels()) s = float(std::pow(double(s), weight));
+  }
   return out;
+}
+
+double sky_brightness_scale_weight(const Medium& medium) {
+  const double sigma_t_per_m =
+      (double(medium.sigma_t_per_m[0]) + medium.sigma_t_per_m[1] + medium.sigma_t_per_m[2]) / 3;
+  if (!(sigma_t_per_m > 0)) return 1;
+  return std::clamp(std::log2(visibility_from_extinction(sigma_t_per_m) / 500), 0.0, 1.0);
 }
 
 void add_sky_light(const SkyLight& sky_light, const Medium& medium, const Camera& camera,

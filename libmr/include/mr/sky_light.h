@@ -55,6 +55,14 @@ MR_API SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m
                                      const Camera& camera, const FogScene& scene,
                                      const Rgb& sky_radiance, bool brightness_from_photo = true);
 
+/// How much of the photo's sky brightness (SkyLight::scale) the light in `medium` takes: the
+/// scale used is scale^w. Fog (meteorological visibility under 1 km, WMO) is optically thick
+/// over the frame, so the light in it has scattered from the whole dome and carries no pattern
+/// of the sky behind one pixel: w = 0 at 500 m and below, 1 from 1 km (mist and haze, where the
+/// sky is seen through the layer), log-linear between so a visibility slider has no step.
+/// Visibility from the mean of sigma_t_per_m at density 1; w = 1 for a medium without extinction.
+MR_API double sky_brightness_scale_weight(const Medium& medium);
+
 /// Adds the sky light's correction albedo (L_in(w) - L_sky) (1 - exp(-optical_depth)) to
 /// `inscatter` (3 channels) at every pixel, w the pixel's view ray from `pose`, optical_depth
 /// per channel (3 channels, ScatteringLayers::optical_depth: +inf gives 1 - tau = 1). Nothing
