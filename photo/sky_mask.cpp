@@ -573,15 +573,30 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
               (d.t() * model.inverse * d)(0) <= o.gap_max_sigma * o.gap_max_sigma &&
               luma.at<float>(y, x) >= o.gap_min_luma * model.low_luma;
         }
+      // Below the horizon, the pixels of the sky's colour (the same test on any pixel).
+      cv::Mat sky_like_ground(h, w, CV_8U, cv::Scalar(0));
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          if (above(x, y)) continue;
+          const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
+          const cv::Vec3d d = cv::Vec3d(p[0], p[1], p[2]) - model.mean;
+          sky_like_ground.at<std::uint8_t>(y, x) =
+              (d.t() * model.inverse * d)(0) <= o.gap_max_sigma * o.gap_max_sigma &&
+              luma.at<float>(y, x) >= o.gap_min_luma * model.low_luma;
+        }
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
           structure.at<std::uint8_t>(y, x) =
               !sky.at<std::uint8_t>(y, x) && !open_cand.at<std::uint8_t>(y, x);
       cv::morphologyEx(structure, thick, cv::MORPH_OPEN,
                        cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(member, member)));
-      // Below the horizon is the ground, never a member; an opening that reaches it is not
-      // sky (the sky mask ends at the horizon: sky there would end in a line across the
-      // lattice).
+      // Below the horizon is the ground, never a member. The sky mask ends at the horizon, so
+      // an opening that reaches it is sky only where the photo's opening ends there too: where
+      // most of the ground around it has the sky's colour (the opening goes on below a horizon
+      // drawn a few pixels high, rocket's left tower), its sky would end in a line across the
+      // lattice; where the ground around it does not (the tower's foot on a dark cloud bank,
+      // rocket's middle tower), the whole of it as a surface left the lattice's blue inside a
+      // hard outline while the sky around it took the haze's grey (issue 11, helper haze16).
       cv::Mat ground(h, w, CV_8U, cv::Scalar(0));
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
@@ -619,11 +634,14 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       std::vector<double> ring_sky(std::size_t(m), 0.0), ring_thin(std::size_t(m), 0.0),
           ring_thick(std::size_t(m), 0.0), ring_all(std::size_t(m), 0.0);
       std::vector<std::uint8_t> reaches_ground(std::size_t(m), 0);
+      std::vector<double> ring_ground(std::size_t(m), 0.0), ring_ground_sky(std::size_t(m), 0.0);
       for (int round = 0; round < 16; ++round) {
         std::fill(ring_sky.begin(), ring_sky.end(), 0.0);
         std::fill(ring_thin.begin(), ring_thin.end(), 0.0);
         std::fill(ring_thick.begin(), ring_thick.end(), 0.0);
         std::fill(ring_all.begin(), ring_all.end(), 0.0);
+        std::fill(ring_ground.begin(), ring_ground.end(), 0.0);
+        std::fill(ring_ground_sky.begin(), ring_ground_sky.end(), 0.0);
         for (int y = 0; y < h; ++y)
           for (int x = 0; x < w; ++x) {
             const int l = ol.at<int>(y, x);
@@ -636,9 +654,11 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
               ring_all[l] += 1;
               if (sky.at<std::uint8_t>(yy, xx) || (k > 0 && made[k]))
                 ring_sky[l] += 1;
-              else if (ground.at<std::uint8_t>(yy, xx))
+              else if (ground.at<std::uint8_t>(yy, xx)) {
                 reaches_ground[l] = 1;
-              else if (thick.at<std::uint8_t>(yy, xx))
+                ring_ground[l] += 1;
+                ring_ground_sky[l] += sky_like_ground.at<std::uint8_t>(yy, xx);
+              } else if (thick.at<std::uint8_t>(yy, xx))
                 ring_thick[l] += 1;
               else if (structure.at<std::uint8_t>(yy, xx))
                 ring_thin[l] += 1;
@@ -646,7 +666,9 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
           }
         bool changed = false;
         for (int i = 1; i < m; ++i) {
-          if (made[i] || !sky_coloured[i] || reaches_ground[i] || !(ring_sky[i] > 0)) continue;
+          if (made[i] || !sky_coloured[i] || !(ring_sky[i] > 0)) continue;
+          if (reaches_ground[i] && ring_ground_sky[i] > o.thin_max_ground_sky * ring_ground[i])
+            continue;
           const double members = ring_thin[i] + ring_thick[i];
           if (members >= o.thin_min_bounded * ring_all[i] &&
               ring_thick[i] <= o.thin_max_thick * members)

@@ -81,11 +81,17 @@ struct SkyMaskOptions {
   /// the working image's diagonal (a morphological opening of that diameter removes it) is sky
   /// when that thin structure bounds at least `thin_min_bounded` of the pixels around it (within
   /// about a member's width) and structure that is not thin at most `thin_max_thick` of the
-  /// structure there, and it does not reach the horizon (the sky ends there: a lattice's sky
-  /// would end in a line across it). Only under a blue sky. 0: off.
+  /// structure there. One that reaches the horizon is sky only where the sky's colour does not
+  /// go on below it: at most `thin_max_ground_sky` of the pixels around it below the horizon
+  /// have the sky's colour (the mask ends at the horizon, so an opening that continues below
+  /// it would end in a line across the lattice; one whose tower stands on land or a cloud bank
+  /// there ends where the photo's opening ends; issue 11, helper haze16); negative: every
+  /// opening that reaches the horizon is refused (the rule before). Only under a blue sky.
+  /// thin_member_width 0: off.
   double thin_member_width = 0.008;
   double thin_min_bounded = 0.25;
   double thin_max_thick = 0.2;
+  double thin_max_ground_sky = 0.5;
   /// Along the mask's edges, unmix each pixel against the colours on both sides (the two-colour
   /// matting model) where the sides differ, so the matte sits on the photo's edge and is as wide
   /// as it (issue 11 item 4); false: the guided filter's output alone.
