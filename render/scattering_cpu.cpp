@@ -286,8 +286,8 @@ class Core {
     // each boundary (two segments meet there), computed where a lit segment first asks for it
     // (NaN: not yet). The same expressions as physics::sun_path_transmittance and
     // sun_inscatter evaluate per segment, so the same values.
-    const double sun_phase = scene_.lighting.sun ? physics::henyey_greenstein(m.g, dot(w, sun_dir_))
-                                                 : 0.0;
+    const double sun_phase =
+        scene_.lighting.sun ? physics::henyey_greenstein(m.g, dot(w, sun_dir_)) : 0.0;
     thread_local std::vector<double> sun_od_at_bound;
     if (scene_.lighting.sun && light_path) sun_od_at_bound.assign(segments + 1, kNaN);
     auto sun_od_at = [&](std::size_t j) {
@@ -318,12 +318,13 @@ class Core {
         sun_seen_fraction += physics::sun_seen_fraction(ta, tb, tl, tr, vis_prev, vis, vis_next);
         ++sun_samples;
         if (lit_weight.x + lit_weight.y + lit_weight.z > 0) {
-          const Vec3d tau_sun =
-              light_path ? physics::sun_path_transmittance_ends(
-                               shape_, rd.shared(), origin_, w, sun_dir_, ta, tb, xs, modulation,
-                               sigma3_, sun_od_at(i), sun_od_at(i + 1))
-                         : Vec3d{1, 1, 1};
-          inscatter += physics::sun_inscatter_phase(lit_weight, sun_phase, sun_irradiance_, tau_sun);
+          const Vec3d tau_sun = light_path
+                                    ? physics::sun_path_transmittance_ends(
+                                          shape_, rd.shared(), origin_, w, sun_dir_, ta, tb, xs,
+                                          modulation, sigma3_, sun_od_at(i), sun_od_at(i + 1))
+                                    : Vec3d{1, 1, 1};
+          inscatter +=
+              physics::sun_inscatter_phase(lit_weight, sun_phase, sun_irradiance_, tau_sun);
         }
       }
       for (std::size_t li = 0; li < scene_.lighting.lamps.size(); ++li) {
