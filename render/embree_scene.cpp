@@ -343,6 +343,22 @@ float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& 
   const int total = std::max(ray_count, partial_ray_count);
   const int stride = total / ray_count;
   const std::uint32_t stream = physics::ao_stream(seed);
+  // The set's local directions (a sincos each) are the same at every point: kept per thread for
+  // the last (stream, total, stride) asked, so a render computes them once per thread.
+  struct LocalSet {
+    std::uint32_t stream = 0;
+    int total = -1, stride = 0;
+    std::vector<physics::Float3> local;
+  };
+  thread_local LocalSet set;
+  if (set.stream != stream || set.total != total || set.stride != stride) {
+    set.local.resize(std::size_t(total));
+    for (int i = 0; i < total; ++i)
+      set.local[std::size_t(i)] = physics::ao_local_direction(stream, i, total, stride);
+    set.stream = stream;
+    set.total = total;
+    set.stride = stride;
+  }
   int open = 0;
   auto trace = [&](int first, int count, int step) {
     occluded_rays(
@@ -350,7 +366,7 @@ float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& 
         [&](std::size_t k) {
           const int index = first + int(k) * step;
           const physics::Float3 dir =
-              physics::ao_direction(stream, index, total, stride, n, t1, t2);
+              physics::ao_world_direction(set.local[std::size_t(index)], n, t1, t2);
           return ShadowRay{{origin[0], origin[1], origin[2]},
                            {float(dir.x), float(dir.y), float(dir.z)},
                            0.0f,

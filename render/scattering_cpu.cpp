@@ -282,6 +282,20 @@ class Core {
     int sun_samples = 0;
     double sun_seen_fraction = 0;
     const bool light_path = scene_.render.light_path_attenuation;
+    // Per view ray, not per segment: the sun's phase function, and the sun's optical depth at
+    // each boundary (two segments meet there), computed where a lit segment first asks for it
+    // (NaN: not yet). The same expressions as physics::sun_path_transmittance and
+    // sun_inscatter evaluate per segment, so the same values.
+    const double sun_phase =
+        scene_.lighting.sun ? physics::henyey_greenstein(m.g, dot(w, sun_dir_)) : 0.0;
+    thread_local std::vector<double> sun_od_at_bound;
+    if (scene_.lighting.sun && light_path) sun_od_at_bound.assign(segments + 1, kNaN);
+    auto sun_od_at = [&](std::size_t j) {
+      double& od_j = sun_od_at_bound[j];
+      if (std::isnan(od_j))
+        od_j = physics::sun_path_optical_depth(shape_, origin_ + w * bounds[j], sun_dir_);
+      return od_j;
+    };
     for (std::size_t i = 0; i < segments; ++i) {
       const double ta = bounds[i], tb = bounds[i + 1];
       const double ts = sample_t[i];
@@ -304,12 +318,13 @@ class Core {
         sun_seen_fraction += physics::sun_seen_fraction(ta, tb, tl, tr, vis_prev, vis, vis_next);
         ++sun_samples;
         if (lit_weight.x + lit_weight.y + lit_weight.z > 0) {
-          const Vec3d tau_sun = light_path ? physics::sun_path_transmittance(
-                                                 shape_, rd.shared(), origin_, w, sun_dir_, ta, tb,
-                                                 xs, modulation, sigma3_)
-                                           : Vec3d{1, 1, 1};
+          const Vec3d tau_sun = light_path
+                                    ? physics::sun_path_transmittance_ends(
+                                          shape_, rd.shared(), origin_, w, sun_dir_, ta, tb, xs,
+                                          modulation, sigma3_, sun_od_at(i), sun_od_at(i + 1))
+                                    : Vec3d{1, 1, 1};
           inscatter +=
-              physics::sun_inscatter(lit_weight, m.g, w, sun_dir_, sun_irradiance_, tau_sun);
+              physics::sun_inscatter_phase(lit_weight, sun_phase, sun_irradiance_, tau_sun);
         }
       }
       for (std::size_t li = 0; li < scene_.lighting.lamps.size(); ++li) {
@@ -1226,8 +1241,11 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
             sun_disk = 1;
         }
         core.surface_term(x, y, s.ao, sun_disk, S, &sun_visible, &view);
+        // One exp for grey fog (physics::exp3: equal channels share it, bit for bit).
+        const Vec3d camera_tau = physics::exp3(Vec3d{-od[0], -od[1], -od[2]});
+        const double camera_tau_c[3] = {camera_tau.x, camera_tau.y, camera_tau.z};
         for (int c = 0; c < 3; ++c) {
-          out.transmittance.at(x, y, c) = float(std::exp(-od[c]) * S[c]);  // R: pass 1 or 2
+          out.transmittance.at(x, y, c) = float(camera_tau_c[c] * S[c]);  // R: pass 1 or 2
           out.optical_depth.at(x, y, c) = float(od[c]);
         }
         out.sun_visibility.at(x, y, 0) = sun_visible;

@@ -10,6 +10,7 @@
 #include <limits>
 #include <random>
 #include <string>
+#include <thread>
 #include <unordered_map>
 #include <vector>
 
@@ -676,6 +677,31 @@ TEST(AmbientOcclusion, OpenGroundAndFootOfWall) {
   EXPECT_NEAR(foot, ambient_occlusion(scene, {-1.4f, 0.0f, 3.95f}, {0, 1, 0}, 256, 1.0f, 8), 0.125);
   EXPECT_THROW(ambient_occlusion(scene, {0, 0, 3}, {0, 1, 0}, 0, 1.0f, 7), Error);
   EXPECT_THROW(ambient_occlusion(scene, {0, 0, 3}, {0, 0, 0}, 16, 1.0f, 7), Error);
+}
+
+// ambient_occlusion keeps its ray set's local directions per thread for the last (seed, set
+// size, stride) asked (speed16): whatever a thread asked before, each query gives exactly the
+// value a fresh thread (nothing kept) gives. Seeds, set sizes and partial sets alternate.
+TEST(AmbientOcclusion, SameValueWhateverTheThreadAskedBefore) {
+  const OccluderScene& scene = box_occluders();
+  struct Query {
+    std::uint32_t seed;
+    int rays, partial;
+  };
+  const std::vector<Query> queries = {{7, 256, 0}, {8, 256, 0}, {9, 256, 0}, {7, 8, 32},
+                                      {8, 8, 32},  {7, 8, 0},   {8, 16, 64}, {7, 256, 0}};
+  // Points at the foot of the wall and by the box's corner: partly open, so every ray counts.
+  const std::vector<std::array<float, 3>> points = {
+      {-1.4f, 0.0f, 3.95f}, {-0.7f, 0.0f, 3.9f}, {-1.45f, 0.3f, 3.98f}};
+  auto ao = [&](const Query& q, const std::array<float, 3>& p) {
+    return ambient_occlusion(scene, p, {0, 1, 0}, q.rays, 1.0f, q.seed, {0, 0, -1}, q.partial);
+  };
+  for (const Query& q : queries)
+    for (const auto& p : points) {
+      float fresh = -1;
+      std::thread([&] { fresh = ao(q, p); }).join();
+      EXPECT_EQ(ao(q, p), fresh) << "seed " << q.seed << ", " << q.rays << " / " << q.partial;
+    }
 }
 
 // With thickness, a fronto-parallel square 5 m away (in front of a wall at 20 m) blocks a ray

@@ -52,17 +52,27 @@ MR_FN uint ao_stream(uint seed) {
 /// so that every stride-th ray (indices r, r + stride, ...) is itself a golden-angle spiral
 /// (Fibonacci set; the AO traces those first, the rest only where they disagree); stride 1:
 /// one spiral.
-MR_FN Float3 ao_direction(uint stream, int index, int ray_count, int stride, Float3 n, Float3 t1,
-                          Float3 t2) {
+/// The frame-independent part of ao_direction: the direction's components (lx, ly, cos_theta)
+/// along t1, t2 and n, the same at every point (the CPU keeps one render's set in a table).
+MR_FN Float3 ao_local_direction(uint stream, int index, int ray_count, int stride) {
   const Float u1 = (Float(index) + 0.5) / Float(ray_count);
   const Float turn = Float(index) * (0.6180339887498949 / Float(stride)) + unit_float(stream);
   const Float phi = 2.0 * kPi * fract(turn);
   const Float r = sqrt(u1);
   const Float cos_theta = sqrt(max(0.0, 1.0 - u1));
-  const Float lx = r * cos(phi);
-  const Float ly = r * sin(phi);
+  return Float3(r * cos(phi), r * sin(phi), cos_theta);
+}
+/// A local direction (ao_local_direction) in the frame t1, t2, n.
+MR_FN Float3 ao_world_direction(Float3 local, Float3 n, Float3 t1, Float3 t2) {
+  const Float lx = local.x;
+  const Float ly = local.y;
+  const Float cos_theta = local.z;
   return Float3(lx * t1.x + ly * t2.x + cos_theta * n.x, lx * t1.y + ly * t2.y + cos_theta * n.y,
                 lx * t1.z + ly * t2.z + cos_theta * n.z);
+}
+MR_FN Float3 ao_direction(uint stream, int index, int ray_count, int stride, Float3 n, Float3 t1,
+                          Float3 t2) {
+  return ao_world_direction(ao_local_direction(stream, index, ray_count, stride), n, t1, t2);
 }
 
 MR_PHYSICS_END

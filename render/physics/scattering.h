@@ -176,14 +176,21 @@ MR_FN Float sun_seen_fraction(Float ta, Float tb, Float tl, Float tr, bool vis_p
 
 /// The sun's in-scatter of a segment: its lit weight times the phase function, the irradiance
 /// above the fog and the transmittance of the sun's path to the sample point.
+/// Here with the phase function henyey_greenstein(g, dot(w, sun_dir)) given (the same for every
+/// segment of a view ray).
+MR_FN Float3 sun_inscatter_phase(Float3 lit_weight, Float phase, Float3 irradiance,
+                                 Float3 tau_sun) {
+  return lit_weight * phase * irradiance * tau_sun;
+}
 MR_FN Float3 sun_inscatter(Float3 lit_weight, Float g, Float3 w, Float3 sun_dir, Float3 irradiance,
                            Float3 tau_sun) {
-  return lit_weight * henyey_greenstein(g, dot(w, sun_dir)) * irradiance * tau_sun;
+  return sun_inscatter_phase(lit_weight, henyey_greenstein(g, dot(w, sun_dir)), irradiance,
+                             tau_sun);
 }
 
 /// Unit optical depth from x up the sun's path out of the medium (closed form; inf where it never
 /// leaves a medium that does not thin out).
-MR_FN Float sun_path_optical_depth(MediumShape shape, Float3 x, Float3 sun_dir) {
+MR_HOT_FN Float sun_path_optical_depth(MediumShape shape, Float3 x, Float3 sun_dir) {
   return optical_depth(ray_density(shape, x, sun_dir), 0.0, MR_INF);
 }
 
@@ -197,14 +204,16 @@ MR_FN Float sun_path_optical_depth(MediumShape shape, Float3 x, Float3 sun_dir) 
 /// by under 1 % there: the value at xs is as good and four times cheaper (homogeneous fog under a
 /// layer top, short segments). `modulation`: the segment's noise factor (scales the camera's
 /// optical depth within it, as in advance_segment).
-MR_FN Float3 sun_path_transmittance(MediumShape shape, RayDensity rd, Float3 o, Float3 w,
-                                    Float3 sun_dir, Float ta, Float tb, Float3 xs, Float modulation,
-                                    Float3 sigma) {
-  const Float od_xs = sun_path_optical_depth(shape, xs, sun_dir);
+/// Here with the sun's optical depths at the segment's ends given (sun_path_optical_depth at
+/// o + w ta and o + w tb: a march shares each boundary's between the two segments that meet
+/// there); the one at xs is computed only where it is used. sun_path_transmittance below
+/// computes the ends itself.
+MR_FN Float3 sun_path_transmittance_ends(MediumShape shape, RayDensity rd, Float3 o, Float3 w,
+                                         Float3 sun_dir, Float ta, Float tb, Float3 xs,
+                                         Float modulation, Float3 sigma, Float od_a, Float od_b) {
   const Float sigma_max = max(max(sigma.x, sigma.y), sigma.z);
-  const Float od_a = sun_path_optical_depth(shape, o + w * ta, sun_dir);
-  const Float od_b = sun_path_optical_depth(shape, o + w * tb, sun_dir);
-  if (!(sigma_max * abs(od_a - od_b) > 0.01)) return transmittance(sigma, od_xs);
+  if (!(sigma_max * abs(od_a - od_b) > 0.01))
+    return transmittance(sigma, sun_path_optical_depth(shape, xs, sun_dir));
   const Float mid = 0.5 * (ta + tb);
   const Float half_length = 0.5 * (tb - ta);
   Float3 num = Float3(0.0, 0.0, 0.0);
@@ -223,8 +232,17 @@ MR_FN Float3 sun_path_transmittance(MediumShape shape, RayDensity rd, Float3 o, 
     num += weight * sun_tau;
     den += weight;
   }
-  if (!(den.x > 0.0 && den.y > 0.0 && den.z > 0.0)) return transmittance(sigma, od_xs);
+  if (!(den.x > 0.0 && den.y > 0.0 && den.z > 0.0))
+    return transmittance(sigma, sun_path_optical_depth(shape, xs, sun_dir));
   return num / den;
+}
+
+MR_FN Float3 sun_path_transmittance(MediumShape shape, RayDensity rd, Float3 o, Float3 w,
+                                    Float3 sun_dir, Float ta, Float tb, Float3 xs, Float modulation,
+                                    Float3 sigma) {
+  return sun_path_transmittance_ends(shape, rd, o, w, sun_dir, ta, tb, xs, modulation, sigma,
+                                     sun_path_optical_depth(shape, o + w * ta, sun_dir),
+                                     sun_path_optical_depth(shape, o + w * tb, sun_dir));
 }
 
 /// From a point toward a lamp: the unit direction l, the distance r and its square r2 (l is
