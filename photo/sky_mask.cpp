@@ -564,26 +564,21 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
       // Each pixel of the sky's colour (a component's mean would mix the sky in a lattice's
       // openings with the pale haze along the horizon they run into), no darker than the
       // sky's darkest part (a tower's top stands against the deep blue zenith).
+      auto sky_coloured_at = [&](int x, int y) {
+        const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
+        const cv::Vec3d d = cv::Vec3d(p[0], p[1], p[2]) - model.mean;
+        return (d.t() * model.inverse * d)(0) <= o.gap_max_sigma * o.gap_max_sigma &&
+               luma.at<float>(y, x) >= o.gap_min_luma * model.low_luma;
+      };
       for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-          if (!open_cand.at<std::uint8_t>(y, x)) continue;
-          const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
-          const cv::Vec3d d = cv::Vec3d(p[0], p[1], p[2]) - model.mean;
-          open_cand.at<std::uint8_t>(y, x) =
-              (d.t() * model.inverse * d)(0) <= o.gap_max_sigma * o.gap_max_sigma &&
-              luma.at<float>(y, x) >= o.gap_min_luma * model.low_luma;
-        }
-      // Below the horizon, the pixels of the sky's colour (the same test on any pixel).
+        for (int x = 0; x < w; ++x)
+          if (open_cand.at<std::uint8_t>(y, x))
+            open_cand.at<std::uint8_t>(y, x) = sky_coloured_at(x, y);
+      // Below the horizon, the pixels of the sky's colour.
       cv::Mat sky_like_ground(h, w, CV_8U, cv::Scalar(0));
       for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-          if (above(x, y)) continue;
-          const cv::Vec3f& p = small.at<cv::Vec3f>(y, x);
-          const cv::Vec3d d = cv::Vec3d(p[0], p[1], p[2]) - model.mean;
-          sky_like_ground.at<std::uint8_t>(y, x) =
-              (d.t() * model.inverse * d)(0) <= o.gap_max_sigma * o.gap_max_sigma &&
-              luma.at<float>(y, x) >= o.gap_min_luma * model.low_luma;
-        }
+        for (int x = 0; x < w; ++x)
+          if (!above(x, y)) sky_like_ground.at<std::uint8_t>(y, x) = sky_coloured_at(x, y);
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
           structure.at<std::uint8_t>(y, x) =
