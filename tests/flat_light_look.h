@@ -11,6 +11,7 @@
 #include "mr/sky_light.h"
 #include "photo/composite.h"
 #include "photo/sky_matte.h"
+#include "tests/gallery_look.h"
 
 namespace mr::test {
 
@@ -38,16 +39,8 @@ inline FogLayers fog_with_sky_light(const Image& photo, const Image& distance, c
 inline FogLayers fog_auto_look_flat_light(const Image& photo, const Camera& camera,
                                           const SceneEstimate& est, double visibility_m,
                                           double top_m, double g) {
-  FogScene s = est.scene;
-  const float sigma = float(extinction_from_visibility(visibility_m));
-  s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-  s.medium.g = g;
-  s.medium.layer_top_m = top_m;
-  s.render.backend = Backend::cpu;
-  s.lighting.sky_by_direction = true;
-  if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
-  return fog_with_sky_light(photo, est.geometry.distance_m, est.geometry.sky_alpha, s, false,
-                            camera);
+  return fog_with_sky_light(photo, est.geometry.distance_m, est.geometry.sky_alpha,
+                            gallery_look_scene(photo, est, visibility_m, top_m, g), false, camera);
 }
 
 }  // namespace mr::test

@@ -81,10 +81,10 @@ inline Image depth_picture(const Image& distance_m) {
   return picture;
 }
 
-// As `mr fog --depth auto` with a gallery look (gallery/looks: sky light 'auto', i.e. by
-// direction with the estimate's sky radiance): the automatic estimate, its matte, the fog.
-inline FogLayers fog_auto_look(const Image& photo, const Camera& camera, const SceneEstimate& est,
-                               double visibility_m, double top_m, double g) {
+// The scene of a gallery look (gallery/looks: sky light 'auto', i.e. by direction with the
+// estimate's sky radiance) over an automatic estimate.
+inline FogScene gallery_look_scene(const Image& photo, const SceneEstimate& est,
+                                   double visibility_m, double top_m, double g) {
   FogScene s = est.scene;
   const float sigma = float(extinction_from_visibility(visibility_m));
   s.medium.sigma_t_per_m = {sigma, sigma, sigma};
@@ -93,7 +93,14 @@ inline FogLayers fog_auto_look(const Image& photo, const Camera& camera, const S
   s.render.backend = Backend::cpu;
   s.lighting.sky_by_direction = true;
   if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
-  return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
+  return s;
+}
+
+// As `mr fog --depth auto` with a gallery look: the automatic estimate, its matte, the fog.
+inline FogLayers fog_auto_look(const Image& photo, const Camera& camera, const SceneEstimate& est,
+                               double visibility_m, double top_m, double g) {
+  return fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera,
+             gallery_look_scene(photo, est, visibility_m, top_m, g));
 }
 
 // The gallery's haze and dense looks of one estimate and their created edges; with
