@@ -246,3 +246,47 @@ TEST(FarShore, DarkFieldUnderADarkRidgeIsNoWater) {
 
 }  // namespace
 }  // namespace mr
+
+namespace mr {
+namespace {
+
+// The far shore's reflection returns to the water's distance gradually below it (over twice
+// the band's height), and the water beyond 4 degrees below the horizon (the ground's full
+// confidence, kept exactly by the refinement) was written back as the ground plane over that
+// return: a step in distance (2x there, 3.2x here) along the row where the confidence is 1, a
+// straight seam across calm water the photo does not have (gallery/tune summer_1am's lake at
+// 4 degrees: 47 m over 23 m in one row, plain in the night look's 70 m fog). The distance down
+// a column of water changes from row to row only as the bounds' ramps do: from kilometres to
+// tens of metres over some 20-40 rows, at most 1.26x per row here (the ground plane itself
+// changes by ~3 % per row there), against the step's 3.2x before. The sky fold is off here: this
+// synthetic water meets the open sky right of the shore, so its fold stays just under 1 down to the
+// frame's bottom and every water pixel was written back anyway, hiding the step; summer_1am's
+// water, cut off from the sky by its shore, has a fold of exactly 1 (the default's case).
+TEST(FarShore, WaterReturnsToItsPlaneWithoutAStepWhereTheGroundIsKeptExactly) {
+  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
+  const Image photo = far_shore_photo();
+  Annotations horizon;
+  horizon.horizon = std::array<PixelPoint, 2>{PixelPoint{0, double(kHorizon)},
+                                              PixelPoint{kW - 1.0, double(kHorizon)}};
+  EstimateOptions options;
+  options.sky_fold = false;
+  const SceneEstimate est = estimate_scene(photo, camera, horizon, options);
+  double worst = 1;
+  int worst_x = -1, worst_y = -1;
+  for (int x = 0; x < 430; ++x) {
+    if (band_height(x) < 8) continue;
+    for (int y = kHorizon + 2 * band_height(x) + 8; y + 1 < kH; ++y) {
+      const double a = est.geometry.distance_m.at(x, y, 0),
+                   b = est.geometry.distance_m.at(x, y + 1, 0);
+      if (!(std::isfinite(a) && std::isfinite(b) && b > 0)) continue;
+      if (a / b > worst) worst = a / b, worst_x = x, worst_y = y;
+    }
+  }
+  std::printf(
+      "water below the far shore: largest row-to-row distance ratio %.3f (column %d, row %d)\n",
+      worst, worst_x, worst_y);
+  EXPECT_LT(worst, 1.5);
+}
+
+}  // namespace
+}  // namespace mr

@@ -777,6 +777,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   const photo::DepthRefineOptions refine;
   std::vector<float> q(n), c(n);
   std::vector<std::uint8_t> blended(n, 0);  // on the sky's blurred edge
+  // Moved farther by the sea horizon's or a far shore's bound below: written back even where
+  // the ground's confidence is 1 (the refinement keeps such pixels exactly), else the bound's
+  // gradual return to the plane below a tall shore's reflection was cut off along the row of
+  // 4 degrees, a straight step in the water (summer_1am: 47 m over 23 m in one row).
+  std::vector<std::uint8_t> sea_bounded(n, 0);
   // Issue 11 item 3 (helper bounded13): a bounded scene (no sky: an interior, a still life, a
   // close-up) has a guessed horizon and no pixel of known distance. Refined against the photo,
   // the guessed ground's near distances ran up through whatever the photo bounds by edges (a
@@ -1062,9 +1067,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           // column edge where the band ends under the mask's sky). 0 away from bands: as sea11.
           const float beside = band_smooth[std::size_t(x)];
           const float bound = c[i] * q_plane[i] * std::pow(c[i], beside);
+          const float q_before = q[i];
           if (q[i] > bound) q[i] = (1 - weight) * q[i] + weight * bound;
           if (beside > 0 && q[i] > bound)
             q[i] = bound > 0 ? q[i] * std::pow(bound / q[i], beside) : (1 - beside) * q[i];
+          if (q[i] != q_before) sea_bounded[i] = 1;
         }
       // The band itself: as far as the horizon where the water at its foot mirrors it (the
       // water's bound there is a few kilometres), no nearer than the sea's geometric horizon
@@ -1085,6 +1092,17 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         const int axis = waterline[std::size_t(x)], mirrored_top = 2 * axis - 1 - top;
         const int reflection = band_reflection[std::size_t(x)];
         const float mirror = std::min(band_weight[std::size_t(x)], band_smooth[std::size_t(x)]);
+        // The return below the reflection ends by the row where the ground's confidence reaches
+        // 1 (2x the billboard's depression), from which the plane is kept as it is: ending
+        // later, beside whatever stands in the water there and keeps its own distance (reeds,
+        // posts), it left the water between them far and them near, a speckle of pale blocks
+        // (summer_1am's reeds in the night look), and cut off along that row, a straight step.
+        int full_row = reflection + 1;
+        while (full_row < h && std::asin(std::clamp(-g.pose.ray_direction(camera, x, full_row).y,
+                                                    -1.0, 1.0)) < 2 * depression * kDeg)
+          ++full_row;
+        const int return_rows =
+            std::max(1, std::min(2 * (reflection - bottom), full_row - reflection));
         for (int y = top; y < h; ++y) {
           const std::size_t i = std::size_t(y) * w + x;
           const int cls = pixel_class[i];
@@ -1108,11 +1126,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
               // plane's inverse distance times the ground's confidence), hundreds of metres a
               // band's height below a tall band. The reflection's lower edge is blurred by the
               // water's ripples and is a faint line in the photo: the distance returns from the
-              // band's to the water's bound over as many rows as the band is tall (blended in
-              // log inverse distance), with the band's mirror weight, not in a step.
-              const float fade = std::clamp(
-                  1.0f - float(y - reflection) / float(std::max(1, 2 * (reflection - bottom))),
-                  0.0f, 1.0f);
+              // band's to the water's bound over twice as many rows as the band is tall (blended
+              // in log inverse distance; at most down to full_row), with the band's mirror
+              // weight, not in a step.
+              const float fade =
+                  std::clamp(1.0f - float(y - reflection) / float(return_rows), 0.0f, 1.0f);
               const float reflected = std::min(q_far, water_bound);
               bound =
                   water_bound > 0 ? water_bound * std::pow(reflected / water_bound, fade) : 0.0f;
@@ -1120,8 +1138,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
                        std::max(std::min(mirror, sky_mirrors.at<float>(y, x)), mirror * fade);
             }
           }
-          if (q[i] > bound)
+          if (q[i] > bound) {
+            const float q_before = q[i];
             q[i] = bound > 0 ? q[i] * std::pow(bound / q[i], weight) : (1 - weight) * q[i];
+            if (q[i] != q_before) sea_bounded[i] = 1;
+          }
         }
       }
     }
@@ -1140,7 +1161,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       if (!std::isfinite(d)) continue;  // sky stays sky
       const bool refined = options.refine_depth && photo::refine_keep_weight(c[i]) < 1.0f;
       const bool folded = !fold.empty() && fold[i] < 1.0f;
-      if (!refined && !blended[i] && !folded && !smooth_bounded) continue;  // kept exactly
+      if (!refined && !blended[i] && !folded && !smooth_bounded && !sea_bounded[i])
+        continue;  // kept exactly
       d = std::min(kMaxFiniteDistanceM, q[i] > 0 ? 1.0f / q[i] : kMaxFiniteDistanceM);
     }
   // Issue 11 (sun bank): the fragments of clouds the sky mask left out, held up by nothing and
