@@ -182,7 +182,7 @@ void BM_Stages(benchmark::State& state) {
   // Process CPU time (all threads) of the geometry (normals, mesh, blockers, BVH) and of the
   // render: comparable across runs on a machine other work shares, where wall times are not.
   double geometry_cpu_s = 0, render_cpu_s = 0;
-  std::size_t triangles = 0;
+  std::size_t triangles = 0, grid_pixels = 0;
   mr::render::CoreOutputs out;
   // Minor page faults and system CPU (the kernel zeroing fresh memory: render/huge_pages.h).
   auto usage = [] {
@@ -211,8 +211,14 @@ void BM_Stages(benchmark::State& state) {
     blockers_s = since(t);
     triangles = mesh.triangle_count();
     t = Clock::now();
-    const mr::render::OccluderScene occluders(std::move(mesh));
+    // MR_BENCH_GRIDS=1: the surface's regular stretches as Embree grids
+    // (OccluderSceneOptions::surface_grids, off by default), to compare with the same binary.
+    mr::render::OccluderSceneOptions scene_options;
+    if (const char* grids = std::getenv("MR_BENCH_GRIDS"))
+      scene_options.surface_grids = *grids != '0';
+    const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     bvh_s = since(t);
+    grid_pixels = occluders.grid_pixel_count();
     const double cpu1 = process_cpu_s();
     geometry_cpu_s = cpu1 - cpu0;
     mr::render::CoreInputs core_in;
@@ -258,6 +264,7 @@ void BM_Stages(benchmark::State& state) {
   state.counters["geometry_cpu_ms"] = geometry_cpu_s * 1e3;
   state.counters["render_cpu_ms"] = render_cpu_s * 1e3;
   state.counters["Mtriangles"] = double(triangles) / 1e6;
+  state.counters["Mgrid_px"] = double(grid_pixels) / 1e6;
   state.counters["kfaults"] = faults * 1e-3;
   state.counters["sys_ms"] = sys_s * 1e3;
   state.counters["Mrays"] = double(out.shadow_rays) / 1e6;
@@ -321,7 +328,10 @@ void BM_Geometry(benchmark::State& state) {
                                 s.blockers);
     lap();
     triangles = mesh.triangle_count();
-    const mr::render::OccluderScene occluders(std::move(mesh));
+    mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS as in BM_Stages
+    if (const char* grids = std::getenv("MR_BENCH_GRIDS"))
+      scene_options.surface_grids = *grids != '0';
+    const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     lap();
     benchmark::DoNotOptimize(occluders.triangle_count());
     // MR_BENCH_DUMP=<prefix>: the normals and the mesh (<prefix>.normals.f32, .positions.f32,
