@@ -155,6 +155,13 @@ double process_cpu_s() {
   return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
 }
 
+// MR_BENCH_GRIDS=1: BM_Stages and BM_Geometry give the surface's regular pixels to Embree as
+// grids (MeshOptions::pixel_layout + OccluderSceneOptions::surface_grids, both off by default).
+bool grids_wanted() {
+  const char* grids = std::getenv("MR_BENCH_GRIDS");
+  return grids && *grids == '1';
+}
+
 // The CPU core's stages as libmr/src/scattering.cpp runs them on a fresh photo (CPU backend,
 // full-resolution mesh, decimated when `merge` is 1 as the core does, the blockers' completion
 // on), each timed.
@@ -200,6 +207,7 @@ void BM_Stages(benchmark::State& state) {
     normals_s = since(t);
     t = Clock::now();
     mr::render::MeshOptions mesh_options;
+    mesh_options.pixel_layout = grids_wanted();
     if (state.range(3) != 0)
       mesh_options.planar_merge_tolerance = mr::render::kCpuPlanarMergeTolerance;
     mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
@@ -211,11 +219,8 @@ void BM_Stages(benchmark::State& state) {
     blockers_s = since(t);
     triangles = mesh.triangle_count();
     t = Clock::now();
-    // MR_BENCH_GRIDS=1: the surface's regular stretches as Embree grids
-    // (OccluderSceneOptions::surface_grids, off by default), to compare with the same binary.
-    mr::render::OccluderSceneOptions scene_options;
-    if (const char* grids = std::getenv("MR_BENCH_GRIDS"))
-      scene_options.surface_grids = *grids != '0';
+    mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS=1: grids
+    scene_options.surface_grids = grids_wanted();
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     bvh_s = since(t);
     grid_pixels = occluders.grid_pixel_count();
@@ -321,16 +326,17 @@ void BM_Geometry(benchmark::State& state) {
     };
     const mr::Image normals = mr::render::estimate_normals(in.depth.view(), in.camera, s.pose);
     lap();
+    mr::render::MeshOptions mesh_options;
+    mesh_options.pixel_layout = grids_wanted();
     mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
-        in.depth.view(), in.camera, s.pose, {}, normals.view());
+        in.depth.view(), in.camera, s.pose, mesh_options, normals.view());
     lap();
     mr::render::append_blockers(mesh, in.depth.view(), normals.view(), in.camera, s.pose,
                                 s.blockers);
     lap();
     triangles = mesh.triangle_count();
     mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS as in BM_Stages
-    if (const char* grids = std::getenv("MR_BENCH_GRIDS"))
-      scene_options.surface_grids = *grids != '0';
+    scene_options.surface_grids = grids_wanted();
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     lap();
     benchmark::DoNotOptimize(occluders.triangle_count());

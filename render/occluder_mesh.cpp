@@ -767,7 +767,8 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
           auto single = [&](int ci, int cj) {
             return kCornerTable[corner_key[std::size_t(cj) * corner_width + ci]].count == 1;
           };
-          if (single(x, y) && single(x + 1, y) && single(x, y + 1) && single(x + 1, y + 1))
+          if (options.pixel_layout && single(x, y) && single(x + 1, y) && single(x, y + 1) &&
+              single(x + 1, y + 1))
             flags[i] |= kGridEligible;
         }
         tri += 6;
@@ -778,7 +779,7 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
     merge_planar_pixels(mesh, flags, width, height, row_pixel_offset, row_fan_offset,
                         fan_triangle_base, options.planar_merge_tolerance, origin, vertex_of);
   }
-  const bool keep_layout = !(options.planar_merge_tolerance > 0);
+  const bool keep_layout = options.pixel_layout && !(options.planar_merge_tolerance > 0);
   if (extrude) {
     const double thickness_m = options.thickness_m;
     tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {

@@ -70,7 +70,7 @@ struct TriangleMesh {
   std::vector<std::uint32_t> indices;      ///< 3 vertex indices per triangle
   std::size_t surface_triangle_count = 0;  ///< the first triangles, 2N + 2F (see above)
   /// The surface's pixel structure (see SurfacePixelLayout), or null: set by
-  /// reconstruct_occluder_mesh unless MeshOptions::planar_merge_tolerance > 0. Whoever changes
+  /// reconstruct_occluder_mesh with MeshOptions::pixel_layout (and no planar merge). Whoever changes
   /// the surface triangles or the corner vertices of a mesh must reset it; appending triangles
   /// and vertices after the surface's (extrusions, blockers) keeps it valid.
   std::shared_ptr<const SurfacePixelLayout> layout;
@@ -110,6 +110,11 @@ struct MeshOptions {
   /// tolerance (relative to the distance). The surface triangles are then no longer two per
   /// pixel: the layout of TriangleMesh holds only with 0 (the default, off). Must be >= 0.
   double planar_merge_tolerance = 0;
+  /// Keep the surface's pixel structure in TriangleMesh::layout (flags and corner table, ~5
+  /// bytes a pixel, moved into the mesh rather than released), for an OccluderScene with
+  /// OccluderSceneOptions::surface_grids. Off by default, as are the grids; ignored with
+  /// planar_merge_tolerance > 0.
+  bool pixel_layout = false;
 };
 
 /// Estimates a unit surface normal per pixel of a distance map.

@@ -42,8 +42,13 @@ SmallMap make_small_map() {
 
 TEST(SurfaceGrid, CoverageOnASmallMap) {
   const SmallMap m = make_small_map();
-  const TriangleMesh mesh = reconstruct_occluder_mesh(m.distance_m.view(), m.camera, m.pose);
+  MeshOptions with_layout;
+  with_layout.pixel_layout = true;
+  const TriangleMesh mesh =
+      reconstruct_occluder_mesh(m.distance_m.view(), m.camera, m.pose, with_layout);
   ASSERT_TRUE(mesh.layout);
+  // Off by default: no layout, and so no grids.
+  EXPECT_FALSE(reconstruct_occluder_mesh(m.distance_m.view(), m.camera, m.pose).layout);
   const SurfacePixelLayout& layout = *mesh.layout;
   ASSERT_EQ(layout.width, 10);
   ASSERT_EQ(layout.height, 7);
@@ -75,7 +80,7 @@ TEST(SurfaceGrid, CoverageOnASmallMap) {
   EXPECT_EQ(scene.grid_pixel_count(), std::size_t(2 * (8 + 7 + 8)));
   EXPECT_EQ(scene.surface_quad_count(), std::size_t(69 - 46));
   // Merged meshes carry no layout (their surface is not two triangles per pixel).
-  MeshOptions merged;
+  MeshOptions merged = with_layout;
   merged.planar_merge_tolerance = 1e-3;
   EXPECT_FALSE(reconstruct_occluder_mesh(m.distance_m.view(), m.camera, m.pose, merged).layout);
 }
@@ -125,6 +130,7 @@ TEST(SurfaceGrid, SameAnswersAsTheQuads) {
   const Inputs in = make_inputs();
   MeshOptions options;
   options.thickness_m = 0.3;  // extrusions after the surface: the grids' scene has a second BVH
+  options.pixel_layout = true;
   const TriangleMesh mesh =
       reconstruct_occluder_mesh(in.distance_m.view(), in.camera, in.pose, options);
   OccluderSceneOptions with_grids, quads_only;
