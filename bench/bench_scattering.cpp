@@ -24,6 +24,8 @@
 // MR_BENCH_DUMP=<prefix> writes BM_Stages' last R, T and sun visibility (raw floats),
 // MR_BENCH_EXACT=1 renders without the gradient acceleration, MR_BENCH_STEPS=<n> with n march
 // steps (the reference for the acceleration's error: MR_BENCH_EXACT=1 MR_BENCH_STEPS=128).
+// MR_BENCH_GRIDS=1 (BM_Stages, BM_Geometry): the surface's regular pixels as Embree grids
+// (OccluderSceneOptions::surface_grids; the Mgrid_px counter says how many pixels).
 //
 // BM_Geometry runs the geometry stages alone (normals, mesh, blockers, BVH), with each one's
 // CPU time and minor page faults: `perf record` it to profile them.
