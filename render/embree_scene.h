@@ -60,9 +60,10 @@ struct OccluderSceneOptions {
   /// quads' primitives, reading their vertices from one shared corner buffer. Off by default:
   /// on gallery-like estimated depth (BM_Stages 1080p normal, leuven) 29 % of the surface
   /// pixels are fanned and more sit at split corners, so only 1.09 M of 1.59 M pixels became
-  /// grids; the BVH built ~15 % faster, but every shadow ray then traverses two BVHs (grids
-  /// and quads) and the grid leaves gather their vertices, and the render's CPU rose ~25 %
-  /// (1.88 -> 2.38 s, medians of four pairs; README, issue 12).
+  /// grids; the BVH built 13 % faster (326 -> 285 ms nearly idle), but every shadow ray then
+  /// traverses two BVHs (grids and quads) and the grid leaves gather their vertices: the
+  /// render's CPU rose 8 % idle (1645 -> 1785 ms), 27 % at load 4 (medians of four pairs; the
+  /// fresh wall even, a reused BVH's render slower; README, issue 12).
   bool surface_grids = false;
 };
 
