@@ -24,6 +24,8 @@
 // MR_BENCH_DUMP=<prefix> writes BM_Stages' last R, T and sun visibility (raw floats),
 // MR_BENCH_EXACT=1 renders without the gradient acceleration, MR_BENCH_STEPS=<n> with n march
 // steps (the reference for the acceleration's error: MR_BENCH_EXACT=1 MR_BENCH_STEPS=128).
+// MR_BENCH_GRIDS=1 (BM_Stages, BM_Geometry): the surface's regular pixels as Embree grids
+// (OccluderSceneOptions::surface_grids; the Mgrid_px counter says how many pixels).
 //
 // BM_Geometry runs the geometry stages alone (normals, mesh, blockers, BVH), with each one's
 // CPU time and minor page faults: `perf record` it to profile them.
@@ -155,6 +157,13 @@ double process_cpu_s() {
   return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
 }
 
+// MR_BENCH_GRIDS=1: BM_Stages and BM_Geometry give the surface's regular pixels to Embree as
+// grids (MeshOptions::pixel_layout + OccluderSceneOptions::surface_grids, both off by default).
+bool grids_wanted() {
+  const char* grids = std::getenv("MR_BENCH_GRIDS");
+  return grids && *grids == '1';
+}
+
 // The CPU core's stages as libmr/src/scattering.cpp runs them on a fresh photo (CPU backend,
 // full-resolution mesh, decimated when `merge` is 1 as the core does, the blockers' completion
 // on), each timed.
@@ -182,7 +191,7 @@ void BM_Stages(benchmark::State& state) {
   // Process CPU time (all threads) of the geometry (normals, mesh, blockers, BVH) and of the
   // render: comparable across runs on a machine other work shares, where wall times are not.
   double geometry_cpu_s = 0, render_cpu_s = 0;
-  std::size_t triangles = 0;
+  std::size_t triangles = 0, grid_pixels = 0;
   mr::render::CoreOutputs out;
   // Minor page faults and system CPU (the kernel zeroing fresh memory: render/huge_pages.h).
   auto usage = [] {
@@ -200,6 +209,7 @@ void BM_Stages(benchmark::State& state) {
     normals_s = since(t);
     t = Clock::now();
     mr::render::MeshOptions mesh_options;
+    mesh_options.pixel_layout = grids_wanted();
     if (state.range(3) != 0)
       mesh_options.planar_merge_tolerance = mr::render::kCpuPlanarMergeTolerance;
     mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
@@ -211,8 +221,11 @@ void BM_Stages(benchmark::State& state) {
     blockers_s = since(t);
     triangles = mesh.triangle_count();
     t = Clock::now();
-    const mr::render::OccluderScene occluders(std::move(mesh));
+    mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS=1: grids
+    scene_options.surface_grids = grids_wanted();
+    const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     bvh_s = since(t);
+    grid_pixels = occluders.grid_pixel_count();
     const double cpu1 = process_cpu_s();
     geometry_cpu_s = cpu1 - cpu0;
     mr::render::CoreInputs core_in;
@@ -258,6 +271,7 @@ void BM_Stages(benchmark::State& state) {
   state.counters["geometry_cpu_ms"] = geometry_cpu_s * 1e3;
   state.counters["render_cpu_ms"] = render_cpu_s * 1e3;
   state.counters["Mtriangles"] = double(triangles) / 1e6;
+  state.counters["Mgrid_px"] = double(grid_pixels) / 1e6;
   state.counters["kfaults"] = faults * 1e-3;
   state.counters["sys_ms"] = sys_s * 1e3;
   state.counters["Mrays"] = double(out.shadow_rays) / 1e6;
@@ -314,14 +328,18 @@ void BM_Geometry(benchmark::State& state) {
     };
     const mr::Image normals = mr::render::estimate_normals(in.depth.view(), in.camera, s.pose);
     lap();
+    mr::render::MeshOptions mesh_options;
+    mesh_options.pixel_layout = grids_wanted();
     mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
-        in.depth.view(), in.camera, s.pose, {}, normals.view());
+        in.depth.view(), in.camera, s.pose, mesh_options, normals.view());
     lap();
     mr::render::append_blockers(mesh, in.depth.view(), normals.view(), in.camera, s.pose,
                                 s.blockers);
     lap();
     triangles = mesh.triangle_count();
-    const mr::render::OccluderScene occluders(std::move(mesh));
+    mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS as in BM_Stages
+    scene_options.surface_grids = grids_wanted();
+    const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     lap();
     benchmark::DoNotOptimize(occluders.triangle_count());
     // MR_BENCH_DUMP=<prefix>: the normals and the mesh (<prefix>.normals.f32, .positions.f32,

@@ -1,9 +1,11 @@
 #include "render/embree_scene.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -13,6 +15,7 @@
 #include <vector>
 
 #include "mr/error.h"
+#include "render/huge_pages.h"
 #include "render/physics/occlusion.h"
 #include "render/triangle_pairs.h"
 
@@ -86,6 +89,51 @@ constexpr float kInfF = std::numeric_limits<float>::infinity();
 
 }  // namespace
 
+bool surface_grid_covers(const SurfacePixelLayout& layout, int x, int y) {
+  const int partner = y ^ 1;
+  if (partner >= layout.height) return false;
+  const std::size_t w = std::size_t(layout.width);
+  constexpr std::uint8_t kEligible = SurfacePixelLayout::kGridEligible;
+  return (layout.pixel[std::size_t(y) * w + x] & kEligible) &&
+         (layout.pixel[std::size_t(partner) * w + x] & kEligible);
+}
+
+namespace {
+
+/// Appends band b's runs of covered pixels to `runs`.
+void band_runs(const SurfacePixelLayout& layout, int band, std::vector<SurfaceGridRun>& runs) {
+  const int y = 2 * band;
+  if (y + 1 >= layout.height) return;
+  const std::uint8_t* top = layout.pixel.data() + std::size_t(y) * layout.width;
+  const std::uint8_t* bottom = top + layout.width;
+  constexpr std::uint8_t kEligible = SurfacePixelLayout::kGridEligible;
+  int x = 0;
+  while (x < layout.width) {
+    while (x < layout.width && !(top[x] & bottom[x] & kEligible)) ++x;
+    const int begin = x;
+    while (x < layout.width && (top[x] & bottom[x] & kEligible)) ++x;
+    if (x > begin) runs.push_back({band, begin, x});
+  }
+}
+
+}  // namespace
+
+std::vector<SurfaceGridRun> surface_grid_runs(const SurfacePixelLayout& layout) {
+  std::vector<SurfaceGridRun> runs;
+  for (int band = 0; 2 * band + 1 < layout.height; ++band) band_runs(layout, band, runs);
+  return runs;
+}
+
+/// The buffers Embree reads the surface's grids and remaining quads from.
+struct OccluderScene::SurfaceGrids {
+  /// (W + 1) x (H + 1) corners, each row mirrored in x (see attach_surface_grids), 3 floats
+  /// each plus one of padding; only corners of covered pixels are written.
+  HugePageArray<float> vertices;
+  /// The other surface pairs as quads, 4 indices each (render/triangle_pairs.h's order).
+  HugePageArray<std::uint32_t> quads;
+  std::size_t grid_pixels = 0;
+};
+
 OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& options)
     : mesh_(std::move(mesh)), errors_(std::make_unique<ErrorSink>()) {
   validate_mesh(mesh_);
@@ -157,7 +205,16 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
         rtcReleaseGeometry(geometry);  // the scene holds its own reference
         errors_->throw_if_failed();
       };
-      attach(scene_, 0, split);
+      // The grids' cells are the pixels' quads with the winding reversed (see
+      // attach_surface_grids): not with an Embree that culls back faces.
+      const bool grids =
+          options.surface_grids && surface_quads && split == surface && mesh_.layout &&
+          rtcGetDeviceProperty(device_, RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) == 0;
+      if (grids)
+        attach_surface_grids(surface, quality);
+      else
+        attach(scene_, 0, split);
+      surface_quads_ = grids ? surface_quads_ : surface_quads ? surface / 2 : 0;
       if (split < triangles) {
         extra_scene_ = rtcNewScene(device_);
         errors_->throw_if_failed();
@@ -171,10 +228,166 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
     }
     rtcCommitScene(scene_);
     errors_->throw_if_failed();
+    // Only the build needed the pixel layout (10 MB at 1080p): back to the scratch pool.
+    mesh_.layout.reset();
   } catch (...) {
     release();
     throw;
   }
+}
+
+void OccluderScene::attach_surface_grids(std::size_t surface, RTCBuildQuality quality) {
+  const SurfacePixelLayout& layout = *mesh_.layout;
+  const int width = layout.width, height = layout.height;
+  const std::size_t corner_width = std::size_t(width) + 1;
+  const std::uint32_t* corner = layout.corner_vertex.data();
+  const std::uint8_t* pixel = layout.pixel.data();
+  const int bands = (height + 1) / 2;  // the last band of an odd height has one row, no grid
+  // 1. Per band: its runs, and per row the surface pixels and those left to quads.
+  std::vector<std::vector<SurfaceGridRun>> band_grids(static_cast<std::size_t>(bands));
+  std::vector<std::size_t> row_pairs(std::size_t(height) + 1, 0),
+      row_left(std::size_t(height) + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, bands, 8), [&](const tbb::blocked_range<int>& r) {
+    for (int band = r.begin(); band < r.end(); ++band) {
+      band_runs(layout, band, band_grids[std::size_t(band)]);
+      for (int y = 2 * band; y < std::min(2 * band + 2, height); ++y) {
+        std::size_t pairs = 0, left = 0;
+        for (int x = 0; x < width; ++x) {
+          if (!(pixel[std::size_t(y) * width + x] & SurfacePixelLayout::kSurface)) continue;
+          ++pairs;
+          left += surface_grid_covers(layout, x, y) ? 0 : 1;
+        }
+        row_pairs[std::size_t(y) + 1] = pairs;
+        row_left[std::size_t(y) + 1] = left;
+      }
+    }
+  });
+  for (int y = 0; y < height; ++y) {
+    row_pairs[std::size_t(y) + 1] += row_pairs[std::size_t(y)];
+    row_left[std::size_t(y) + 1] += row_left[std::size_t(y)];
+  }
+  const std::size_t pixels = row_pairs[std::size_t(height)];
+  if (2 * pixels > surface || (surface - 2 * pixels) % 2 != 0)
+    throw Error(ErrorCode::internal, "occluder mesh layout has " + std::to_string(pixels) +
+                                         " surface pixels for " + std::to_string(surface) +
+                                         " surface triangles");
+  const std::size_t fan_pairs = (surface - 2 * pixels) / 2;
+  const std::size_t left = row_left[std::size_t(height)];
+  auto grids = std::make_unique<SurfaceGrids>(
+      SurfaceGrids{HugePageArray<float>(3 * corner_width * (std::size_t(height) + 1) + 1),
+                   HugePageArray<std::uint32_t>(std::max<std::size_t>(4 * (left + fan_pairs), 1)),
+                   pixels - left});
+
+  // 2. The pairs of the pixels not covered, then the fanned pixels' second pairs, as quads;
+  // the covered pixels' pairs checked against the layout (its corners must be their vertices).
+  const std::uint32_t* indices = mesh_.indices.data();
+  std::uint32_t* quads = grids->quads.data();
+  auto put_quad = [&](std::size_t quad, std::size_t pair) {
+    const std::uint32_t* t = indices + 6 * pair;  // (A, B, C), (A, D, B) -> (C, A, D, B)
+    std::uint32_t* q = quads + 4 * quad;
+    q[0] = t[2], q[1] = t[0], q[2] = t[4], q[3] = t[1];
+  };
+  std::atomic<bool> mismatch{false};
+  tbb::parallel_for(tbb::blocked_range<int>(0, height, 8), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y) {
+      std::size_t pair = row_pairs[std::size_t(y)], quad = row_left[std::size_t(y)];
+      for (int x = 0; x < width; ++x) {
+        if (!(pixel[std::size_t(y) * width + x] & SurfacePixelLayout::kSurface)) continue;
+        if (surface_grid_covers(layout, x, y)) {
+          const std::uint32_t* t = indices + 6 * pair;
+          const std::size_t c = std::size_t(y) * corner_width + x;
+          if (t[0] != corner[c] || t[1] != corner[c + corner_width + 1] ||
+              t[2] != corner[c + corner_width] || t[3] != t[0] || t[4] != corner[c + 1] ||
+              t[5] != t[1])
+            mismatch = true;
+        } else {
+          put_quad(quad++, pair);
+        }
+        ++pair;
+      }
+    }
+  });
+  if (mismatch)
+    throw Error(ErrorCode::internal, "occluder mesh layout does not match its surface triangles");
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fan_pairs, 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t f = r.begin(); f < r.end(); ++f)
+                        put_quad(left + f, pixels + f);
+                    });
+
+  // 3. The corner buffer. Embree splits a grid cell (v00, v01, v11, v10) on the diagonal
+  // v01-v10 (from the cell's top-right vertex to its bottom-left one), the mesh each pixel on
+  // c00-c11: with each row laid out mirrored in x (grid column W - i holds corner column i)
+  // the cell of pixel (x, y) is (c10, c00, c01, c11), its diagonal c00-c11, and its two
+  // triangles (c10, c00, c11) and (c01, c11, c00) are the pixel's own (winding reversed, which
+  // Embree, built without back-face culling, does not see). A corner is written when a covered
+  // pixel uses it (its only vertex, then); the others are never read.
+  float* out = grids->vertices.data();
+  const float* positions = mesh_.positions.data();
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, height + 1, 8), [&](const tbb::blocked_range<int>& r) {
+        for (int j = r.begin(); j < r.end(); ++j) {
+          for (int i = 0; i <= width; ++i) {
+            const bool used = (j > 0 && i > 0 && surface_grid_covers(layout, i - 1, j - 1)) ||
+                              (j > 0 && i < width && surface_grid_covers(layout, i, j - 1)) ||
+                              (j < height && i > 0 && surface_grid_covers(layout, i - 1, j)) ||
+                              (j < height && i < width && surface_grid_covers(layout, i, j));
+            if (!used) continue;
+            const float* v = positions + 3 * std::size_t(corner[std::size_t(j) * corner_width + i]);
+            float* o = out + 3 * (std::size_t(j) * corner_width + std::size_t(width - i));
+            o[0] = v[0], o[1] = v[1], o[2] = v[2];
+          }
+        }
+      });
+  out[3 * corner_width * (std::size_t(height) + 1)] = 0.0f;  // Embree's 16-byte loads
+
+  std::size_t runs = 0;
+  for (const auto& b : band_grids) runs += b.size();
+  if (runs > 0) {
+    RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_GRID);
+    rtcSetGeometryBuildQuality(geometry, quality);
+    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, out, 0,
+                               3 * sizeof(float), corner_width * (std::size_t(height) + 1));
+    auto* grid = static_cast<RTCGrid*>(rtcSetNewGeometryBuffer(
+        geometry, RTC_BUFFER_TYPE_GRID, 0, RTC_FORMAT_GRID, sizeof(RTCGrid), runs));
+    errors_->throw_if_failed();
+    for (const auto& b : band_grids)
+      for (const SurfaceGridRun& run : b) {
+        // Grid column 0 is the run's right end corner (x_end), mirrored: column W - x_end.
+        grid->startVertexID = std::uint32_t(std::size_t(2 * run.band) * corner_width +
+                                            std::size_t(width - run.x_end));
+        grid->stride = std::uint32_t(corner_width);
+        grid->width = std::uint16_t(run.x_end - run.x_begin + 1);
+        grid->height = 3;
+        ++grid;
+      }
+    rtcCommitGeometry(geometry);
+    rtcAttachGeometry(scene_, geometry);
+    rtcReleaseGeometry(geometry);
+    errors_->throw_if_failed();
+  }
+  surface_quads_ = left + fan_pairs;
+  if (surface_quads_ > 0) {
+    RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_QUAD);
+    rtcSetGeometryBuildQuality(geometry, quality);
+    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                               mesh_.positions.data(), 0, 3 * sizeof(float), mesh_.vertex_count());
+    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, quads, 0,
+                               4 * sizeof(std::uint32_t), surface_quads_);
+    rtcCommitGeometry(geometry);
+    rtcAttachGeometry(scene_, geometry);
+    rtcReleaseGeometry(geometry);
+    errors_->throw_if_failed();
+  }
+  grids_ = std::move(grids);
+}
+
+std::size_t OccluderScene::grid_pixel_count() const {
+  return grids_ ? grids_->grid_pixels : 0;
+}
+
+std::size_t OccluderScene::surface_quad_count() const {
+  return surface_quads_;
 }
 
 OccluderScene::~OccluderScene() {
@@ -197,7 +410,9 @@ OccluderScene::OccluderScene(OccluderScene&& other) noexcept
       scene_(std::exchange(other.scene_, nullptr)),
       extra_scene_(std::exchange(other.extra_scene_, nullptr)),
       native_ray8_(other.native_ray8_),
-      shadow_query_(std::move(other.shadow_query_)) {}
+      shadow_query_(std::move(other.shadow_query_)),
+      grids_(std::move(other.grids_)),
+      surface_quads_(other.surface_quads_) {}
 
 OccluderScene& OccluderScene::operator=(OccluderScene&& other) noexcept {
   if (this != &other) {
@@ -209,6 +424,8 @@ OccluderScene& OccluderScene::operator=(OccluderScene&& other) noexcept {
     extra_scene_ = std::exchange(other.extra_scene_, nullptr);
     native_ray8_ = other.native_ray8_;
     shadow_query_ = std::move(other.shadow_query_);
+    grids_ = std::move(other.grids_);
+    surface_quads_ = other.surface_quads_;
   }
   return *this;
 }

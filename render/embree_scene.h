@@ -10,6 +10,7 @@
 #include <limits>
 #include <memory>
 #include <utility>
+#include <vector>
 
 #include "render/occluder_mesh.h"
 #include "render/shadow_query.h"
@@ -52,7 +53,35 @@ struct OccluderSceneOptions {
   /// ray crosses ~70 quad boxes before its hit (leuven's: ~14), and the sun bank render took
   /// 49 s CPU compact against 34 s without (same rays, same answers; README, issue 12).
   bool compact = false;
+  /// Issue 12 item 4: the surface's regular stretches as Embree grids (RTC_GEOMETRY_TYPE_GRID,
+  /// see surface_grid_runs) and only the rest as quads, when the mesh carries its pixel layout
+  /// (TriangleMesh::layout). The same triangles (same vertices, same diagonal: R, T and S came
+  /// out bit-identical); Embree builds its BVH over 2 x 2-pixel subgrids, a quarter of the
+  /// quads' primitives, reading their vertices from one shared corner buffer. Off by default:
+  /// on gallery-like estimated depth (BM_Stages 1080p normal, leuven) 29 % of the surface
+  /// pixels are fanned and more sit at split corners, so only 1.09 M of 1.59 M pixels became
+  /// grids; the BVH built 13 % faster (326 -> 285 ms nearly idle), but every shadow ray then
+  /// traverses two BVHs (grids and quads) and the grid leaves gather their vertices: the
+  /// render's CPU rose 8 % idle (1645 -> 1785 ms), 27 % at load 4 (medians of four pairs; the
+  /// fresh wall even, a reused BVH's render slower; README, issue 12).
+  bool surface_grids = false;
 };
+
+/// Issue 12 item 4: one RTCGrid of the surface: pixels x_begin .. x_end - 1 of rows 2 * band
+/// and 2 * band + 1, every one of them grid-eligible (SurfacePixelLayout), maximal along x.
+struct SurfaceGridRun {
+  int band = 0, x_begin = 0, x_end = 0;
+  bool operator==(const SurfaceGridRun& o) const {
+    return band == o.band && x_begin == o.x_begin && x_end == o.x_end;
+  }
+};
+/// Whether OccluderScene gives pixel (x, y) to Embree as part of a grid: it and the other pixel
+/// of its band's column (row y ^ 1) are both grid-eligible.
+bool surface_grid_covers(const SurfacePixelLayout& layout, int x, int y);
+/// The grids OccluderScene makes of a layout: the runs of covered pixels, band by band, left to
+/// right. (Bands of two rows: an Embree subgrid is 2 x 2 cells, so a two-row grid fills its
+/// subgrids; taller rectangles would cover fewer pixels around holes for no fewer subgrids.)
+std::vector<SurfaceGridRun> surface_grid_runs(const SurfacePixelLayout& layout);
 
 /// The occluder mesh in an Embree device + scene, ready for ray queries (RAII: released on
 /// destruction; movable, not copyable). All query methods are const and safe to call from many
@@ -90,6 +119,10 @@ class OccluderScene {
   std::size_t triangle_count() const { return mesh_.triangle_count(); }
   /// The mesh the scene traces (positions carry one float of padding at the end for Embree).
   const TriangleMesh& mesh() const { return mesh_; }
+  /// How many surface pixels Embree holds as grids (OccluderSceneOptions::surface_grids), and
+  /// how many surface quads it holds as quads (the other pixels' and the fanned pixels' pairs).
+  std::size_t grid_pixel_count() const;
+  std::size_t surface_quad_count() const;
   /// Whether occluded8 uses Embree's native 8-wide packet kernel.
   bool native_packets() const { return native_ray8_; }
   /// Issue 17: another traversal of the same mesh (render/shadow_query.h) that occluded_rays
@@ -99,7 +132,10 @@ class OccluderScene {
 
  private:
   struct ErrorSink;
+  struct SurfaceGrids;
   void release() noexcept;
+  /// Attaches the surface (the first `surface` triangles, in pairs) to scene_ as grids and quads.
+  void attach_surface_grids(std::size_t surface, RTCBuildQuality quality);
 
   TriangleMesh mesh_;
   std::unique_ptr<ErrorSink> errors_;  // heap-allocated: Embree keeps a pointer to it
@@ -108,6 +144,8 @@ class OccluderScene {
   RTCScene extra_scene_ = nullptr;  // the triangles after them, if any (extrusions, blockers)
   bool native_ray8_ = false;
   std::shared_ptr<const ShadowQuery> shadow_query_;
+  std::unique_ptr<SurfaceGrids> grids_;  // buffers Embree reads the grids and other quads from
+  std::size_t surface_quads_ = 0;
 };
 
 /// One shadow ray for occluded_rays: from `origin` along `direction` (need not be unit length),

@@ -253,6 +253,9 @@ inline bool continuous(const Sample& p, const Plane& pp, const Sample& q, const 
 
 // Per-pixel flags.
 constexpr std::uint8_t kValid = 1, kRightContinuous = 2, kDownContinuous = 4, kFan = 8;
+constexpr std::uint8_t kGridEligible = SurfacePixelLayout::kGridEligible;
+static_assert(kValid == SurfacePixelLayout::kSurface);
+static_assert((kGridEligible & (kValid | kRightContinuous | kDownContinuous | kFan)) == 0);
 
 /// How the up-to-four pixels around a corner share it. Slots: 0 = top-left, 1 = top-right,
 /// 2 = bottom-left, 3 = bottom-right pixel. Key bits 0-3: slot has a surface; bits 4-7: the
@@ -760,6 +763,13 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
         } else {
           tri[0] = c00, tri[1] = c11, tri[2] = c01;
           tri[3] = c00, tri[4] = c10, tri[5] = c11;
+          // Grid-eligible (SurfacePixelLayout): each corner has one vertex, corner_base's.
+          auto single = [&](int ci, int cj) {
+            return kCornerTable[corner_key[std::size_t(cj) * corner_width + ci]].count == 1;
+          };
+          if (options.pixel_layout && single(x, y) && single(x + 1, y) && single(x, y + 1) &&
+              single(x + 1, y + 1))
+            flags[i] |= kGridEligible;
         }
         tri += 6;
       }
@@ -769,6 +779,7 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
     merge_planar_pixels(mesh, flags, width, height, row_pixel_offset, row_fan_offset,
                         fan_triangle_base, options.planar_merge_tolerance, origin, vertex_of);
   }
+  const bool keep_layout = options.pixel_layout && !(options.planar_merge_tolerance > 0);
   if (extrude) {
     const double thickness_m = options.thickness_m;
     tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
@@ -812,6 +823,11 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
         }
       }
     });
+  }
+  if (keep_layout) {
+    // The flags and corner table are done with: handed over, not copied.
+    mesh.layout = std::make_shared<const SurfacePixelLayout>(width, height, std::move(flags),
+                                                             std::move(corner_base));
   }
   return mesh;
 }

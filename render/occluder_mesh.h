@@ -15,13 +15,39 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <utility>
 #include <vector>
 
 #include "mr/camera.h"
 #include "mr/image.h"
 #include "mr/scene.h"
+#include "render/huge_pages.h"
 
 namespace mr::render {
+
+/// The pixel structure behind a mesh made by reconstruct_occluder_mesh without planar merging
+/// (issue 12 item 4), for OccluderScene to hand regular stretches of the surface to Embree as
+/// grids (RTC_GEOMETRY_TYPE_GRID): one vertex per corner, no per-pair index to build over.
+struct SurfacePixelLayout {
+  /// pixel[] bits: the pixel has a surface (its two triangles are the surface's next pair, see
+  /// TriangleMesh), and it is grid-eligible: it has a surface, is not fanned, and each of its
+  /// four corners has exactly one vertex (no discontinuity splits it), so its triangles are
+  /// (c00, c11, c01), (c00, c10, c11) over corner_vertex[] of its corners. Other bits: private.
+  static constexpr std::uint8_t kSurface = 1, kGridEligible = 16;
+  SurfacePixelLayout(int width_px, int height_px, HugePageArray<std::uint8_t> pixels,
+                     HugePageArray<std::uint32_t> corners)
+      : width(width_px),
+        height(height_px),
+        pixel(std::move(pixels)),
+        corner_vertex(std::move(corners)) {}
+  int width = 0, height = 0;  ///< pixels of the depth map the mesh was made from
+  /// width x height, row by row (top row first).
+  HugePageArray<std::uint8_t> pixel;
+  /// (width + 1) x (height + 1) corners, row by row: the index of the corner's first vertex;
+  /// the corner's only vertex for every corner of a grid-eligible pixel.
+  HugePageArray<std::uint32_t> corner_vertex;
+};
 
 /// An indexed triangle mesh in the world frame (metres, +Y up; see mr/scene.h).
 ///
@@ -43,6 +69,11 @@ struct TriangleMesh {
   std::vector<float> positions;            ///< x, y, z per vertex, world metres
   std::vector<std::uint32_t> indices;      ///< 3 vertex indices per triangle
   std::size_t surface_triangle_count = 0;  ///< the first triangles, 2N + 2F (see above)
+  /// The surface's pixel structure (see SurfacePixelLayout), or null: set by
+  /// reconstruct_occluder_mesh with MeshOptions::pixel_layout (and no planar merge). Whoever changes
+  /// the surface triangles or the corner vertices of a mesh must reset it; appending triangles
+  /// and vertices after the surface's (extrusions, blockers) keeps it valid.
+  std::shared_ptr<const SurfacePixelLayout> layout;
 
   std::size_t vertex_count() const { return positions.size() / 3; }
   std::size_t triangle_count() const { return indices.size() / 3; }
@@ -79,6 +110,11 @@ struct MeshOptions {
   /// tolerance (relative to the distance). The surface triangles are then no longer two per
   /// pixel: the layout of TriangleMesh holds only with 0 (the default, off). Must be >= 0.
   double planar_merge_tolerance = 0;
+  /// Keep the surface's pixel structure in TriangleMesh::layout (flags and corner table, ~5
+  /// bytes a pixel, moved into the mesh rather than released), for an OccluderScene with
+  /// OccluderSceneOptions::surface_grids. Off by default, as are the grids; ignored with
+  /// planar_merge_tolerance > 0.
+  bool pixel_layout = false;
 };
 
 /// Estimates a unit surface normal per pixel of a distance map.
