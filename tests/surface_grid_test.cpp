@@ -15,6 +15,7 @@
 #include "mr/scene.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
+#include "tests/wall_and_mound_scene.h"
 
 namespace mr::render {
 namespace {
@@ -85,49 +86,13 @@ TEST(SurfaceGrid, CoverageOnASmallMap) {
   EXPECT_FALSE(reconstruct_occluder_mesh(m.distance_m.view(), m.camera, m.pose, merged).layout);
 }
 
-// 240x160 ground with a wall and a mound (as tests/quad_scene_test.cpp): discontinuities (the
-// wall's outline), fanned pixels (the mound's creases), sky.
-struct Inputs {
-  Camera camera = Camera::from_horizontal_fov(240, 160, 70);
-  CameraPose pose;
-  Image distance_m{240, 160, 1};
-};
-
-Inputs make_inputs() {
-  Inputs in;
-  in.pose.position_m = {0, 1.6, 0};
-  in.pose.pitch_deg = -8;
-  for (int y = 0; y < in.camera.height; ++y)
-    for (int x = 0; x < in.camera.width; ++x) {
-      const Vec3 w = in.pose.ray_direction(in.camera, x, y);
-      double t = std::numeric_limits<double>::infinity();
-      if (w.y < 0) {
-        double lo = 0, hi = 1.6 / -w.y;
-        auto above = [&](double s) {
-          const double px = s * w.x, pz = s * w.z, py = 1.6 + s * w.y;
-          const double r2 = (px - 4) * (px - 4) + (pz - 8) * (pz - 8);
-          return py > 0.8 * std::exp(-r2 / 8);
-        };
-        for (double s = 0.05; s < hi; s += 0.05)
-          if (!above(s)) {
-            hi = s;
-            break;
-          }
-        lo = std::max(0.0, hi - 0.05);
-        for (int k = 0; k < 40; ++k) (above(0.5 * (lo + hi)) ? lo : hi) = 0.5 * (lo + hi);
-        t = 0.5 * (lo + hi);
-      }
-      if (w.z > 0) {
-        const double tw = 12 / w.z, px = tw * w.x, py = 1.6 + tw * w.y;
-        if (px >= -3 && px <= 2 && py >= 0 && py <= 4 && tw < t) t = tw;
-      }
-      in.distance_m.at(x, y, 0) = float(t);
-    }
-  return in;
-}
+// The wall-and-mound scene (tests/wall_and_mound_scene.h): discontinuities (the wall's outline),
+// fanned pixels (the mound's creases), sky.
+using test::wall_and_mound;
+using test::WallAndMound;
 
 TEST(SurfaceGrid, SameAnswersAsTheQuads) {
-  const Inputs in = make_inputs();
+  const WallAndMound in = wall_and_mound();
   MeshOptions options;
   options.thickness_m = 0.3;  // extrusions after the surface: the grids' scene has a second BVH
   options.pixel_layout = true;
