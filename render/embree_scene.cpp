@@ -183,27 +183,15 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
             : triangles;
     if (triangles > 0) {
       // Embree reads vertices with 16-byte loads: the last one needs a float of padding.
-      const std::size_t vertices = mesh_.vertex_count();
       mesh_.positions.push_back(0.0f);
       auto attach = [&](RTCScene target, std::size_t first, std::size_t count) {
-        const bool quads = surface_quads && first == 0 && count == surface;
-        RTCGeometry geometry =
-            rtcNewGeometry(device_, quads ? RTC_GEOMETRY_TYPE_QUAD : RTC_GEOMETRY_TYPE_TRIANGLE);
-        rtcSetGeometryBuildQuality(geometry, quality);
-        rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                   mesh_.positions.data(), 0, 3 * sizeof(float), vertices);
-        if (quads)
-          rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
-                                     mesh_.indices.data(), quad_index_offset_bytes(first),
-                                     kQuadIndexStrideBytes, count / 2);
+        if (surface_quads && first == 0 && count == surface)
+          attach_indexed(target, RTC_GEOMETRY_TYPE_QUAD, mesh_.indices.data(),
+                         quad_index_offset_bytes(first), kQuadIndexStrideBytes, count / 2, quality);
         else
-          rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                     mesh_.indices.data(), 3 * sizeof(std::uint32_t) * first,
-                                     3 * sizeof(std::uint32_t), count);
-        rtcCommitGeometry(geometry);
-        rtcAttachGeometry(target, geometry);
-        rtcReleaseGeometry(geometry);  // the scene holds its own reference
-        errors_->throw_if_failed();
+          attach_indexed(target, RTC_GEOMETRY_TYPE_TRIANGLE, mesh_.indices.data(),
+                         3 * sizeof(std::uint32_t) * first, 3 * sizeof(std::uint32_t), count,
+                         quality);
       };
       // The grids' cells are the pixels' quads with the winding reversed (see
       // attach_surface_grids): not with an Embree that culls back faces.
@@ -367,19 +355,28 @@ void OccluderScene::attach_surface_grids(std::size_t surface, RTCBuildQuality qu
     errors_->throw_if_failed();
   }
   surface_quads_ = left + fan_pairs;
-  if (surface_quads_ > 0) {
-    RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_QUAD);
-    rtcSetGeometryBuildQuality(geometry, quality);
-    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                               mesh_.positions.data(), 0, 3 * sizeof(float), mesh_.vertex_count());
-    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, quads, 0,
-                               4 * sizeof(std::uint32_t), surface_quads_);
-    rtcCommitGeometry(geometry);
-    rtcAttachGeometry(scene_, geometry);
-    rtcReleaseGeometry(geometry);
-    errors_->throw_if_failed();
-  }
+  if (surface_quads_ > 0)
+    attach_indexed(scene_, RTC_GEOMETRY_TYPE_QUAD, quads, 0, 4 * sizeof(std::uint32_t),
+                   surface_quads_, quality);
   grids_ = std::move(grids);
+}
+
+void OccluderScene::attach_indexed(RTCScene target, RTCGeometryType type,
+                                   const std::uint32_t* indices, std::size_t offset_bytes,
+                                   std::size_t stride_bytes, std::size_t count,
+                                   RTCBuildQuality quality) {
+  RTCGeometry geometry = rtcNewGeometry(device_, type);
+  rtcSetGeometryBuildQuality(geometry, quality);
+  // (positions carry one float of padding: vertex_count() is unchanged by it.)
+  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                             mesh_.positions.data(), 0, 3 * sizeof(float), mesh_.vertex_count());
+  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
+                             type == RTC_GEOMETRY_TYPE_QUAD ? RTC_FORMAT_UINT4 : RTC_FORMAT_UINT3,
+                             indices, offset_bytes, stride_bytes, count);
+  rtcCommitGeometry(geometry);
+  rtcAttachGeometry(target, geometry);
+  rtcReleaseGeometry(geometry);  // the scene holds its own reference
+  errors_->throw_if_failed();
 }
 
 std::size_t OccluderScene::grid_pixel_count() const {

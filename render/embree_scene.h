@@ -136,6 +136,11 @@ class OccluderScene {
   void release() noexcept;
   /// Attaches the surface (the first `surface` triangles, in pairs) to scene_ as grids and quads.
   void attach_surface_grids(std::size_t surface, RTCBuildQuality quality);
+  /// Attaches `count` triangles or quads (`type`) over the mesh's vertices to `target`, their
+  /// indices read from `indices` at `offset_bytes` with `stride_bytes` (shared, not copied).
+  void attach_indexed(RTCScene target, RTCGeometryType type, const std::uint32_t* indices,
+                      std::size_t offset_bytes, std::size_t stride_bytes, std::size_t count,
+                      RTCBuildQuality quality);
 
   TriangleMesh mesh_;
   std::unique_ptr<ErrorSink> errors_;  // heap-allocated: Embree keeps a pointer to it
