@@ -268,6 +268,17 @@ Image environment_deviation(ConstImageView photo, ConstImageView distance_m, con
   return out;
 }
 
+// min(ratio, 1) with its corner rounded below 1 by the cubic that leaves the line with slope 1
+// at 1 - knee and arrives at 1 with slope 0 (C1): exactly 1 from 1 on (a sky as bright as the
+// light or brighter keeps it), the ratio itself below 1 - knee, and never above 1; on the
+// knee it is up to 4/27 knee above the ratio.
+double soft_limit_to_one(double ratio, double knee) {
+  if (ratio >= 1) return 1;
+  if (ratio <= 1 - knee) return ratio;
+  const double t = (ratio - (1 - knee)) / knee;
+  return 1 - knee + knee * (t + t * t - t * t * t);
+}
+
 bool all_zero(const Image& map) {
   for (float v : map.pixels())
     if (v != 0) return false;
@@ -396,7 +407,10 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // a pale tower taken for sky) the haze keeps its flat light, as before; brightening it
   // brought back structures the sky mask took in and made the matte's spill at a bright
   // horizon stand out (a mixed pixel given the sky's fog).
-  constexpr double kMinScale = 0.1, kMaxScale = 1;
+  // The limit is reached over a knee of kKnee in the luma ratio: a hard one cut
+  // the fogged sky's gradient along the contour where the photo's sky meets the light, a Mach
+  // band drawn as a bright arc through a sunset's haze (sunset_aitzol).
+  constexpr double kMinScale = 0.1, kMaxScale = 1, kKnee = 0.3;
   std::vector<float> scale(count, 1.0f);
   cv::Mat sky_weight(h, w, CV_32F, cv::Scalar(0));
   tbb::parallel_for(0, h, [&](int y) {
@@ -408,8 +422,8 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       const double light =
           display_luma(sky_radiance[0] + d[0], sky_radiance[1] + d[1], sky_radiance[2] + d[2]);
       if (!(light > 0) || !(local >= 0)) continue;
-      const float s =
-          float(std::clamp(std::pow(local / light, kDisplayGamma), kMinScale, kMaxScale));
+      const float s = float(std::clamp(
+          std::pow(soft_limit_to_one(local / light, kKnee), kDisplayGamma), kMinScale, kMaxScale));
       scale[i] = s;
       sky_weight.at<float>(y, x) = std::min(1.0f, data[2 * i + 1] / kFullWeight);
     }

@@ -1433,6 +1433,75 @@ TEST(SkyLight, DarkCloudBesideItsGlowKeepsItsBrightnessInHaze) {
   EXPECT_LE(e_after, 2e-4);
 }
 
+// A glow around a hidden sun fades into a darker sky, all sky: where the photo's sky is darker
+// than the fog's light the scale darkens the light to it, where brighter it keeps the light.
+// A hard limit at "only ever darker" cut the fogged sky's gradient along the contour where the
+// two are equal: the slope of its luma fell to nothing from one row to the next, a Mach band
+// that drew a bright arc through the haze of gallery/tune's sunset_aitzol (and held-out
+// canyon_dusk). Measured down the glow's centre column: the largest change of the fogged
+// luma's slope (over 6 rows) from one window to the next, against its largest slope: the photo
+// 0.16 (its Gaussian glow's curvature), the hard limit 0.81 (the slope falls to a seventh
+// within 6 rows), the knee (photo/sky_light.cpp, soft_limit_to_one) 0.35. A wider knee
+// brightens more of a deep blue sky toward the light and brings back the leaves' edges of
+// HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze (knee 0.4: 0.0195 %, 0.5: 0.039 %).
+TEST(SkyLight, GlowBrighterThanTheLightFadesIntoTheScaledSkyWithoutAKink) {
+  FogScene scene = haze_scene();
+  scene.pose.pitch_deg = 25;  // looking up: all sky
+  const Image distance = ground_plane_distance(scene);
+  Image photo(kW, kH, 3);
+  constexpr double kGlowX = 160, kGlowY = 200, kGlowRadius = 90;  // pixels
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      const double glow =
+          0.5 * std::exp(-std::pow(std::hypot(x - kGlowX, y - kGlowY) / kGlowRadius, 2));
+      const std::array<float, 3> c{float(0.35 + 1.1 * glow), float(0.45 + glow),
+                                   float(0.62 + 0.8 * glow)};
+      for (int i = 0; i < 3; ++i) photo.at(x, y, i) = linear(std::clamp(c[i], 0.0f, 1.0f));
+    }
+  scene.lighting.sky_by_direction = true;
+  scene.lighting.sky_radiance = estimate_airlight(photo);
+  const FogLayers fogged = fog_with_sky_light(photo, distance, Image(), scene, true, kCamera);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
+    const std::string f(folder);
+    write_image(f + "/glow_photo.png", photo);
+    write_image(f + "/glow_haze.png", fogged.composite);
+  }
+  auto lum = [](const Image& img, int x, int y) {  // display luma
+    auto e = [&](int c) { return std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f); };
+    return 0.2126 * e(0) + 0.7152 * e(1) + 0.0722 * e(2);
+  };
+  // Slopes over kRows rows (the render's march jitter changes single rows' slopes by ~40 %).
+  auto kink = [&](const Image& img) {
+    constexpr int kRows = 6;
+    const int x = int(kGlowX);
+    double slope = 0, change = 0;
+    for (int y = kRows; y + kRows < kH; ++y) {
+      const double up = (lum(img, x, y) - lum(img, x, y - kRows)) / kRows;
+      const double down = (lum(img, x, y + kRows) - lum(img, x, y)) / kRows;
+      slope = std::max(slope, std::abs(down));
+      change = std::max(change, std::abs(down - up));
+    }
+    return change / slope;
+  };
+  // The scale must act in the frame (the sky darker than the light at the top) and leave it
+  // (the glow brighter): otherwise there is no contour to test.
+  const SkyLight light =
+      sky_light_from_photo(photo, distance, kCamera, scene, *scene.lighting.sky_radiance);
+  ASSERT_FALSE(light.scale.empty());
+  float lowest = 1, highest = 0;
+  for (int y = 0; y < kH; ++y) {
+    lowest = std::min(lowest, light.scale.at(int(kGlowX), y, 0));
+    highest = std::max(highest, light.scale.at(int(kGlowX), y, 0));
+  }
+  const double k_photo = kink(photo), k_fog = kink(fogged.composite);
+  std::printf(
+      "glow into a darker sky, haze: scale %.3f .. %.3f down the column; largest "
+      "change of slope / largest slope: photo %.3f, fogged %.3f\n",
+      lowest, highest, k_photo, k_fog);
+  EXPECT_LT(lowest, 0.8f);
+  EXPECT_GT(highest, 0.999f);
+  EXPECT_LT(k_fog, 0.4);  // 0.81 with the hard limit, 0.35 with the knee
+}
 // In fog (visibility under 1 km) the light has scattered from the whole dome: the photo's sky
 // brightness behind each pixel must not pattern it. With the scale at full weight, dense fog
 // under a deep blue sky with leaves turned into a dark "storm" of the sky's own luma
