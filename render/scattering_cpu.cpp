@@ -65,12 +65,46 @@ Vec3d rgb(const std::array<float, 3>& c) {
   return {c[0], c[1], c[2]};
 }
 
+// Thin shadows (issue 11): a shadow that a view ray crosses in less than a march step or two
+// is caught only where the pixel's jitter puts a sample in it. A march reports what it caught
+// (ThinShadows) so that its neighbours can look for the same shadow where their own view ray
+// passes it (render_scattering_cpu's hints): one ray each, instead of more steps everywhere.
+constexpr int kMaxThinShadows = 4;
+// A shadowed run of at most this many march samples, lit on both sides, is thin.
+constexpr int kThinRunSamples = 2;
+struct ThinShadows {
+  // Midpoints (distance along the view ray, m) of the thin shadows the march caught and
+  // bisected.
+  float mid_m[kMaxThinShadows] = {};
+  // Every shadowed run's extent, from the lit sample before it to the lit sample after it (the
+  // march's ends where there is none): a hint there is known already.
+  float run_lo_m[kMaxThinShadows] = {}, run_hi_m[kMaxThinShadows] = {};
+  unsigned char mids = 0, runs = 0;  // (runs beyond kMaxThinShadows are not kept)
+  bool knows(double t_m) const {
+    for (int r = 0; r < runs; ++r)
+      if (t_m >= run_lo_m[r] && t_m <= run_hi_m[r]) return true;
+    return false;
+  }
+};
+
 struct PixelSample {
   double inscatter[3] = {0, 0, 0};
   double camera_od[3] = {0, 0, 0};  // optical depth camera -> surface (or end of the sky march)
   double shaft = 1;                 // fraction of march samples that saw the sun (1: no sun)
   double ao = 1;                    // ambient occlusion at the surface
   double sun_disk = -1;             // sun_disk_visibility at the surface, -1: not known
+  ThinShadows thin;                 // (grid samples) what the march caught, for hints
+};
+
+// Distances along a pixel's view ray (m) where a neighbour's thin shadows may lie (hints).
+struct Hints {
+  static constexpr int kMax = 16;
+  double t_m[kMax];
+  int n = 0;
+  void add(double t) {  // (a shadow hinted by two corners once)
+    if (n == kMax || !std::isfinite(t) || std::find(t_m, t_m + n, t) != t_m + n) return;
+    t_m[n++] = t;
+  }
 };
 
 class Core {
@@ -150,8 +184,40 @@ class Core {
     return physics::march_length(rd.shared(), distance, scene_.render.max_distance_m, sigma_min_);
   }
 
+  // Where pixel (x, y)'s view ray passes a thin shadow that pixel (xn, yn)'s march caught at
+  // distance tn_m along its own ray: the point of (x, y)'s ray nearest to the line through
+  // that shadow along the sun's direction (a shadow volume is swept along it). NaN where the
+  // view ray runs (nearly) along the sun or the point lies behind the camera.
+  double hint_on_ray(int x, int y, int xn, int yn, double tn_m) const {
+    if (!scene_.lighting.sun) return kNaN;
+    const Vec3d w = ray(x, y);
+    // Lines o + t w and p + s u with p = o + tn wn: r = o - p = -tn wn.
+    const Vec3d r = ray(xn, yn) * -tn_m;
+    const double b = dot(w, sun_dir_), d = dot(w, r), e = dot(sun_dir_, r);
+    const double denom = 1 - b * b;
+    if (denom < 1e-6) return kNaN;
+    const double t = (b * e - d) / denom;
+    return t > 0 ? t : kNaN;
+  }
+
+  // Whether the sun (its centre) is hidden at distance t_m along pixel (x, y)'s view ray, where
+  // the march would sample it: one shadow ray testing a hint before a march is redone for it.
+  bool hint_shadowed(int x, int y, double t_m) const {
+    if (!scene_.lighting.sun || !in_.occluders) return false;
+    const Vec3d w = ray(x, y);
+    const RayDensity rd(scene_.medium, origin_, w);
+    if (!(t_m < march_length(rd, in_.distance_m.at(x, y, 0)))) return false;
+    rays_.local() += 1;
+    return in_.occluders->occluded(f3(add(origin_, w, t_m)), f3(sun_dir_),
+                                   float(1e-3 + 1e-4 * t_m), float(kInf));
+  }
+
   // `steps`: view-ray segments (the preset's, or more where a pixel straddles a shaft edge).
-  PixelSample march(int x, int y, int steps) const {
+  // `hints`: distances along the view ray where a neighbour's thin shadow may lie: each one
+  // whose segment's sample and both neighbours' saw the sun is tested (one shadow ray, in the
+  // segment's sun direction), and where the sun is hidden there the segment's sample moves
+  // there, so that the shadow is bisected as if the jitter had put the sample in it.
+  PixelSample march(int x, int y, int steps, const Hints* hints = nullptr) const {
     PixelSample s;
     const double distance = in_.distance_m.at(x, y, 0);
     const Vec3d w = ray(x, y);
@@ -228,6 +294,23 @@ class Core {
           },
           [&](std::size_t i, bool blocked) { sun_visible[i] = !blocked; });
       rays += segments;
+      if (hints)
+        for (int h = 0; h < hints->n; ++h) {
+          const double th = hints->t_m[h];
+          if (!(th > bounds[0] && th < bounds[segments])) continue;
+          const std::size_t k =
+              std::size_t(std::upper_bound(bounds.begin(), bounds.end(), th) - bounds.begin()) - 1;
+          if (k >= segments || !sun_visible[k] || (k > 0 && !sun_visible[k - 1]) ||
+              (k + 1 < segments && !sun_visible[k + 1]))
+            continue;
+          const Vec3d dir = sun_sample_direction(k, jitter, double(segments + 1), pixel_rotation);
+          ++rays;
+          if (in_.occluders->occluded(f3(add(origin_, w, th)), f3(dir), float(1e-3 + 1e-4 * th),
+                                      float(kInf))) {
+            sample_t[k] = th;
+            sun_visible[k] = 0;
+          }
+        }
       // Shaft edges: where the visibility changes between two samples, bisect for the crossing
       // (to 1/64 of the gap), so each segment gets its exact lit part instead of all or nothing:
       // one sample per segment alone leaves a jitter-dithered edge of 1/steps steps. The
@@ -276,6 +359,24 @@ class Core {
       rays += std::size_t(bisections) * edges.size();
       for (std::size_t e = 0; e < edges.size(); ++e)
         crossing[edges[e]] = 0.5 * (edge_lo[e] + edge_hi[e]);
+      // The shadowed runs and the thin shadows among them, for the neighbours' hints.
+      ThinShadows& thin = s.thin;
+      for (std::size_t i = 0; i < segments;) {
+        if (sun_visible[i]) {
+          ++i;
+          continue;
+        }
+        const std::size_t a = i;
+        while (i < segments && !sun_visible[i]) ++i;
+        if (thin.runs < kMaxThinShadows) {
+          thin.run_lo_m[thin.runs] = float(a > 0 ? sample_t[a - 1] : 0.0);
+          thin.run_hi_m[thin.runs] = float(i < segments ? sample_t[i] : length);
+          ++thin.runs;
+        }
+        if (a > 0 && i < segments && i - a <= std::size_t(kThinRunSamples) &&
+            thin.mids < kMaxThinShadows)
+          thin.mid_m[thin.mids++] = float(0.5 * (crossing[a - 1] + crossing[i - 1]));
+      }
     }
 
     Vec3d od{0, 0, 0}, tau{1, 1, 1}, inscatter{0, 0, 0};
@@ -737,8 +838,10 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
            ao_table[y0 * tw + x1] + ao_table[y1 * tw + x0];
   };
   // known_sun_disk: the pixel's sun_disk_visibility when already traced (a probe below).
-  auto exact = [&](int x, int y, int steps, double known_sun_disk = kNaN) {
-    PixelSample s = core.march(x, y, steps);
+  // hints: where neighbours' thin shadows may cross the pixel's view ray (Core::march).
+  auto exact = [&](int x, int y, int steps, double known_sun_disk = kNaN,
+                   const Hints* hints = nullptr) {
+    PixelSample s = core.march(x, y, steps, hints);
     if (ao_wanted(x, y)) s.ao = core.ambient_occlusion_at(x, y);
     s.sun_disk = std::isnan(known_sun_disk) ? core.sun_disk_visibility(x, y) : known_sun_disk;
     sparse.set(x, y, s);
@@ -782,6 +885,104 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                     });
   throw_if_stopped();
   exact_count += cx.size() * cy.size();
+
+  // Thin shadows (issue 11): a coarse sample whose march caught one hints it to its eight
+  // neighbours, which test the point of their own view ray where it should be (one shadow ray
+  // each, Core::hint_on_ray); where the sun is hidden there, the neighbour's march is redone
+  // with the hint and catches the shadow too, and hints its own neighbours in the next wave:
+  // a flood along the shaft, so that one sample's catch per shaft suffices. Every wave reads
+  // the samples as the previous wave left them (deterministic). Without it the samples along
+  // a thin shaft caught it where their jitter put a sample in it, and the grid interpolated
+  // the dither into blobs (the kite's shaft a fan of dots).
+  const bool thin_hints = g > 1 && in.scene->lighting.sun && in.occluders;
+  auto sample_hints = [&](int x, int y, const PixelSample& own, int xn, int yn,
+                          const PixelSample& neighbour, Hints& hints) {
+    for (int m = 0; m < neighbour.thin.mids; ++m) {
+      const double t = core.hint_on_ray(x, y, xn, yn, neighbour.thin.mid_m[m]);
+      if (std::isfinite(t) && !own.thin.knows(t)) hints.add(t);
+    }
+  };
+  if (thin_hints) {
+    const std::size_t ncx_s = cx.size(), ncy_s = cy.size();
+    std::vector<unsigned char> frontier(ncx_s * ncy_s, 0);
+    std::vector<std::size_t> wave;
+    for (std::size_t b = 0; b < ncy_s; ++b)
+      for (std::size_t a = 0; a < ncx_s; ++a)
+        if (sparse.grid_at(cx[a], cy[b]).thin.mids > 0) {
+          frontier[b * ncx_s + a] = 1;
+          wave.push_back(b * ncx_s + a);
+        }
+    std::vector<std::size_t> candidates;
+    std::vector<PixelSample> redone;
+    std::vector<unsigned char> changed;
+    while (!wave.empty() && !stop()) {
+      candidates.clear();
+      for (const std::size_t c : wave) {
+        const std::size_t a = c % ncx_s, b = c / ncx_s;
+        for (std::size_t bb = b > 0 ? b - 1 : 0; bb <= std::min(ncy_s - 1, b + 1); ++bb)
+          for (std::size_t aa = a > 0 ? a - 1 : 0; aa <= std::min(ncx_s - 1, a + 1); ++aa)
+            if (bb != b || aa != a) candidates.push_back(bb * ncx_s + aa);
+      }
+      std::sort(candidates.begin(), candidates.end());
+      candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+      redone.assign(candidates.size(), PixelSample{});
+      changed.assign(candidates.size(), 0);
+      tbb::parallel_for(std::size_t(0), candidates.size(), [&](std::size_t n) {
+        const std::size_t c = candidates[n];
+        const std::size_t a = c % ncx_s, b = c / ncx_s;
+        const int x = gx[cx[a]], y = gy[cy[b]];
+        const PixelSample& own = sparse.grid_at(cx[a], cy[b]);
+        Hints hints;
+        for (std::size_t bb = b > 0 ? b - 1 : 0; bb <= std::min(ncy_s - 1, b + 1); ++bb)
+          for (std::size_t aa = a > 0 ? a - 1 : 0; aa <= std::min(ncx_s - 1, a + 1); ++aa)
+            if (frontier[bb * ncx_s + aa])
+              sample_hints(x, y, own, gx[cx[aa]], gy[cy[bb]], sparse.grid_at(cx[aa], cy[bb]),
+                           hints);
+        Hints shadowed;
+        for (int h = 0; h < hints.n; ++h)
+          if (core.hint_shadowed(x, y, hints.t_m[h])) shadowed.add(hints.t_m[h]);
+        if (shadowed.n == 0) return;
+        // The march again with the hints: R, the lit fraction and what it caught change; the
+        // camera's optical depth, AO and the surface's sun visibility do not.
+        const PixelSample fresh = core.march(x, y, plan.steps, &shadowed);
+        if (fresh.thin.mids <= own.thin.mids) return;
+        PixelSample s = own;
+        for (int k = 0; k < 3; ++k) s.inscatter[k] = fresh.inscatter[k];
+        s.shaft = fresh.shaft;
+        s.thin = fresh.thin;
+        redone[n] = s;
+        changed[n] = 1;
+      });
+      std::fill(frontier.begin(), frontier.end(), 0);
+      wave.clear();
+      for (std::size_t n = 0; n < candidates.size(); ++n) {
+        if (!changed[n]) continue;
+        const std::size_t c = candidates[n];
+        const std::size_t a = c % ncx_s, b = c / ncx_s;
+        sparse.put(cx[a], cy[b], redone[n]);
+        sparse.set(gx[cx[a]], gy[cy[b]], redone[n]);
+        frontier[c] = 1;
+        wave.push_back(c);
+      }
+    }
+    throw_if_stopped();
+  }
+  // Whether a cell's corners disagree on having caught a thin shadow: its image-space edge.
+  auto thin_edge = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners) {
+    if (!thin_hints) return false;
+    const bool first = sparse.grid_at(corners[0].first, corners[0].second).thin.mids > 0;
+    for (int k = 1; k < 4; ++k)
+      if ((sparse.grid_at(corners[k].first, corners[k].second).thin.mids > 0) != first)
+        return true;
+    return false;
+  };
+  // The hints of a cell's corners for pixel (x, y) inside it.
+  auto corner_hints = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners,
+                          int x, int y, Hints& hints) {
+    const PixelSample none;
+    for (const auto& [ci, cj] : corners)
+      sample_hints(x, y, none, gx[ci], gy[cj], sparse.grid_at(ci, cj), hints);
+  };
 
   constexpr int kValues = physics::kResolveValues;    // R (3), camera optical depth (3), AO
   using Gradients = std::array<double, 2 * kValues>;  // d/dx of each value, then d/dy
@@ -871,7 +1072,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         lum_min = std::min(lum_min, lum);
         lum_max = std::max(lum_max, lum);
       }
-      if (physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max)) return kRefineFull;
+      if (physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max) || thin_edge(corners))
+        return kRefineFull;
       double ao_min = 1, ao_max = 0;
       for (int k = 0; k < 4; ++k) {
         ao_min = std::min(ao_min, value[k][6]);
@@ -1045,7 +1247,15 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         });
         work += kSampleWork;
         if (full) {
-          sparse.put(i, j, exact(gx[i], gy[j], plan.steps, probe[j * nx + i]));
+          // The thin shadows of the refined cells' corners as hints.
+          Hints hints;
+          for_cells(i, j, [&](std::size_t a, std::size_t b) {
+            if (refine[b * ncx + a] == kRefineFull)
+              corner_hints({{{cx[a], cy[b]}, {cx[a + 1], cy[b]}, {cx[a], cy[b + 1]},
+                             {cx[a + 1], cy[b + 1]}}},
+                           gx[i], gy[j], hints);
+          });
+          sparse.put(i, j, exact(gx[i], gy[j], plan.steps, probe[j * nx + i], &hints));
           ++fine.local();
         } else if (surface) {
           sparse.put(i, j, surface_sample(surface_a, surface_b, gx[i], gy[j], probe[j * nx + i]));
@@ -1110,6 +1320,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         lum_max = std::max(lum_max, lum);
       }
       const bool shadow_edge = physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max);
+      // A thin shadow's image-space edge crosses the cell: its pixels marched, with the
+      // corners' thin shadows as hints.
+      const bool thin_cell = !shadow_edge && thin_edge(corners);
       const double disk0 = sparse.grid_at(i0, j0).sun_disk;
       const bool sun_disk_agrees = disk0 >= 0 && sparse.grid_at(i1, j0).sun_disk == disk0 &&
                                    sparse.grid_at(i0, j1).sun_disk == disk0 &&
@@ -1123,7 +1336,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         for (int k = 0; k < 4; ++k) dy[k] = y - corner_y[k];
         for (int x = x0; x <= x_last; ++x) {
           if (sparse.has(x, y)) continue;
-          bool ok = !shadow_edge;
+          bool ok = !shadow_edge && !thin_cell;
           if (ok) {
             const double dp = d(x, y);
             for (int k = 0; k < 4 && ok; ++k) ok = depth_continuous(dp, corner_d[k]);
@@ -1131,7 +1344,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           if (!ok) {
             // A shaft's edge crosses the cell: its pixels get finer steps, or thin slivers
             // of shadow that one step misses or catches would show as grain.
-            exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
+            if (thin_cell) {
+              Hints hints;
+              corner_hints(corners, x, y, hints);
+              exact(x, y, plan.steps, kNaN, &hints);
+            } else {
+              exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
+            }
             ++exact_n;
             continue;
           }
