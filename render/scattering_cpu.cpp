@@ -80,6 +80,13 @@ struct ThinShadows {
   // march's ends where there is none): a hint there is known already.
   float run_lo_m[kMaxThinShadows] = {}, run_hi_m[kMaxThinShadows] = {};
   unsigned char mids = 0, runs = 0;  // (runs beyond kMaxThinShadows are not kept)
+  // The hints that moved a sample (Core::march), for a march redone with more hints.
+  float hinted_m[kMaxThinShadows] = {};
+  unsigned char hinted = 0;
+  // The march samples' own sun visibility (bit i: sample i, before any hint), when there are
+  // at most 64: a march redone with hints reads it instead of tracing its rays again.
+  std::uint64_t visible_bits = 0;
+  unsigned char visible_samples = 0;  // 0: not kept
   bool knows(double t_m) const {
     for (int r = 0; r < runs; ++r)
       if (t_m >= run_lo_m[r] && t_m <= run_hi_m[r]) return true;
@@ -217,7 +224,10 @@ class Core {
   // whose segment's sample and both neighbours' saw the sun is tested (one shadow ray, in the
   // segment's sun direction), and where the sun is hidden there the segment's sample moves
   // there, so that the shadow is bisected as if the jitter had put the sample in it.
-  PixelSample march(int x, int y, int steps, const Hints* hints = nullptr) const {
+  // `known`: this pixel's earlier march with the same steps, whose samples' sun visibility
+  // (ThinShadows::visible_bits) is reused.
+  PixelSample march(int x, int y, int steps, const Hints* hints = nullptr,
+                    const ThinShadows* known = nullptr) const {
     PixelSample s;
     const double distance = in_.distance_m.at(x, y, 0);
     const Vec3d w = ray(x, y);
@@ -281,7 +291,10 @@ class Core {
     for (std::size_t i = 0; i < segments; ++i)
       sample_t[i] = physics::segment_sample_t(bounds[i], bounds[i + 1], jitter, int(i));
     std::size_t rays = 0;
-    if (scene_.lighting.sun && in_.occluders) {
+    if (scene_.lighting.sun && in_.occluders && known && known->visible_samples == segments) {
+      for (std::size_t i = 0; i < segments; ++i)
+        sun_visible[i] = (known->visible_bits >> i) & 1u;
+    } else if (scene_.lighting.sun && in_.occluders) {
       occluded_rays(
           *in_.occluders, segments,
           [&](std::size_t i) {
@@ -294,6 +307,13 @@ class Core {
           },
           [&](std::size_t i, bool blocked) { sun_visible[i] = !blocked; });
       rays += segments;
+    }
+    if (scene_.lighting.sun && in_.occluders) {
+      if (segments <= 64) {
+        for (std::size_t i = 0; i < segments; ++i)
+          s.thin.visible_bits |= std::uint64_t(sun_visible[i]) << i;
+        s.thin.visible_samples = (unsigned char)segments;
+      }
       if (hints)
         for (int h = 0; h < hints->n; ++h) {
           const double th = hints->t_m[h];
@@ -309,6 +329,7 @@ class Core {
                                       float(kInf))) {
             sample_t[k] = th;
             sun_visible[k] = 0;
+            if (s.thin.hinted < kMaxThinShadows) s.thin.hinted_m[s.thin.hinted++] = float(th);
           }
         }
       // Shaft edges: where the visibility changes between two samples, bisect for the crossing
@@ -939,12 +960,15 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
               sample_hints(x, y, own, gx[cx[aa]], gy[cy[bb]], sparse.grid_at(cx[aa], cy[bb]),
                            hints);
         Hints shadowed;
+        for (int m = 0; m < own.thin.hinted; ++m) shadowed.add(own.thin.hinted_m[m]);
+        const int earlier = shadowed.n;
         for (int h = 0; h < hints.n; ++h)
           if (core.hint_shadowed(x, y, hints.t_m[h])) shadowed.add(hints.t_m[h]);
-        if (shadowed.n == 0) return;
-        // The march again with the hints: R, the lit fraction and what it caught change; the
-        // camera's optical depth, AO and the surface's sun visibility do not.
-        const PixelSample fresh = core.march(x, y, plan.steps, &shadowed);
+        if (shadowed.n == earlier) return;
+        // The march again with the hints (and those of an earlier wave), its samples' own sun
+        // visibility read back: R, the lit fraction and what it caught change; the camera's
+        // optical depth, AO and the surface's sun visibility do not.
+        const PixelSample fresh = core.march(x, y, plan.steps, &shadowed, &own.thin);
         if (fresh.thin.mids <= own.thin.mids) return;
         PixelSample s = own;
         for (int k = 0; k < 3; ++k) s.inscatter[k] = fresh.inscatter[k];
