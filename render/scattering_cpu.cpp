@@ -100,7 +100,6 @@ struct PixelSample {
   double shaft = 1;                 // fraction of march samples that saw the sun (1: no sun)
   double ao = 1;                    // ambient occlusion at the surface
   double sun_disk = -1;             // sun_disk_visibility at the surface, -1: not known
-  ThinShadows thin;                 // (grid samples) what the march caught, for hints
 };
 
 // Distances along a pixel's view ray (m) where a neighbour's thin shadows may lie (hints).
@@ -225,9 +224,9 @@ class Core {
   // segment's sun direction), and where the sun is hidden there the segment's sample moves
   // there, so that the shadow is bisected as if the jitter had put the sample in it.
   // `known`: this pixel's earlier march with the same steps, whose samples' sun visibility
-  // (ThinShadows::visible_bits) is reused.
+  // (ThinShadows::visible_bits) is reused. `thin`: where to say what the march caught.
   PixelSample march(int x, int y, int steps, const Hints* hints = nullptr,
-                    const ThinShadows* known = nullptr) const {
+                    const ThinShadows* known = nullptr, ThinShadows* thin = nullptr) const {
     PixelSample s;
     const double distance = in_.distance_m.at(x, y, 0);
     const Vec3d w = ray(x, y);
@@ -309,10 +308,13 @@ class Core {
       rays += segments;
     }
     if (scene_.lighting.sun && in_.occluders) {
-      if (segments <= 64) {
-        for (std::size_t i = 0; i < segments; ++i)
-          s.thin.visible_bits |= std::uint64_t(sun_visible[i]) << i;
-        s.thin.visible_samples = (unsigned char)segments;
+      if (thin) {
+        *thin = ThinShadows{};
+        if (segments <= 64) {
+          for (std::size_t i = 0; i < segments; ++i)
+            thin->visible_bits |= std::uint64_t(sun_visible[i]) << i;
+          thin->visible_samples = (unsigned char)segments;
+        }
       }
       if (hints)
         for (int h = 0; h < hints->n; ++h) {
@@ -329,7 +331,7 @@ class Core {
                                       float(kInf))) {
             sample_t[k] = th;
             sun_visible[k] = 0;
-            if (s.thin.hinted < kMaxThinShadows) s.thin.hinted_m[s.thin.hinted++] = float(th);
+            if (thin && thin->hinted < kMaxThinShadows) thin->hinted_m[thin->hinted++] = float(th);
           }
         }
       // Shaft edges: where the visibility changes between two samples, bisect for the crossing
@@ -381,22 +383,21 @@ class Core {
       for (std::size_t e = 0; e < edges.size(); ++e)
         crossing[edges[e]] = 0.5 * (edge_lo[e] + edge_hi[e]);
       // The shadowed runs and the thin shadows among them, for the neighbours' hints.
-      ThinShadows& thin = s.thin;
-      for (std::size_t i = 0; i < segments;) {
+      for (std::size_t i = 0; thin && i < segments;) {
         if (sun_visible[i]) {
           ++i;
           continue;
         }
         const std::size_t a = i;
         while (i < segments && !sun_visible[i]) ++i;
-        if (thin.runs < kMaxThinShadows) {
-          thin.run_lo_m[thin.runs] = float(a > 0 ? sample_t[a - 1] : 0.0);
-          thin.run_hi_m[thin.runs] = float(i < segments ? sample_t[i] : length);
-          ++thin.runs;
+        if (thin->runs < kMaxThinShadows) {
+          thin->run_lo_m[thin->runs] = float(a > 0 ? sample_t[a - 1] : 0.0);
+          thin->run_hi_m[thin->runs] = float(i < segments ? sample_t[i] : length);
+          ++thin->runs;
         }
         if (a > 0 && i < segments && i - a <= std::size_t(kThinRunSamples) &&
-            thin.mids < kMaxThinShadows)
-          thin.mid_m[thin.mids++] = float(0.5 * (crossing[a - 1] + crossing[i - 1]));
+            thin->mids < kMaxThinShadows)
+          thin->mid_m[thin->mids++] = float(0.5 * (crossing[a - 1] + crossing[i - 1]));
       }
     }
 
@@ -860,9 +861,10 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   };
   // known_sun_disk: the pixel's sun_disk_visibility when already traced (a probe below).
   // hints: where neighbours' thin shadows may cross the pixel's view ray (Core::march).
+  // thin: where to keep what the march caught (coarse samples).
   auto exact = [&](int x, int y, int steps, double known_sun_disk = kNaN,
-                   const Hints* hints = nullptr) {
-    PixelSample s = core.march(x, y, steps, hints);
+                   const Hints* hints = nullptr, ThinShadows* thin = nullptr) {
+    PixelSample s = core.march(x, y, steps, hints, nullptr, thin);
     if (ao_wanted(x, y)) s.ao = core.ambient_occlusion_at(x, y);
     s.sun_disk = std::isnan(known_sun_disk) ? core.sun_disk_visibility(x, y) : known_sun_disk;
     sparse.set(x, y, s);
@@ -893,12 +895,25 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   const std::vector<std::size_t> cx = coarse_indices(nx, k_coarse),
                                  cy = coarse_indices(ny, k_coarse);
   auto d = [&](int x, int y) { return double(in.distance_m.at(x, y, 0)); };
+  // What the coarse samples' marches caught (thin shadows, below), row-major over cx x cy.
+  const bool thin_hints = g > 1 && in.scene->lighting.sun && in.occluders;
+  const std::size_t ncx_s = cx.size(), ncy_s = cy.size();
+  std::vector<ThinShadows> coarse_thin(thin_hints ? ncx_s * ncy_s : 0);
+  std::vector<int> coarse_x(thin_hints ? nx : 0, -1), coarse_y(thin_hints ? ny : 0, -1);
+  for (std::size_t a = 0; thin_hints && a < ncx_s; ++a) coarse_x[cx[a]] = int(a);
+  for (std::size_t b = 0; thin_hints && b < ncy_s; ++b) coarse_y[cy[b]] = int(b);
+  // Those of coarse grid point (fine indices) (i, j).
+  auto thin_at = [&](std::size_t i, std::size_t j) -> const ThinShadows& {
+    return coarse_thin[std::size_t(coarse_y[j]) * ncx_s + std::size_t(coarse_x[i])];
+  };
   tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, cy.size(), 0, cx.size()),
                     [&](const tbb::blocked_range2d<std::size_t>& r) {
                       for (std::size_t b = r.rows().begin(); b < r.rows().end(); ++b) {
                         if (stop()) return;
                         for (std::size_t a = r.cols().begin(); a < r.cols().end(); ++a) {
-                          const PixelSample s = exact(gx[cx[a]], gy[cy[b]], plan.steps);
+                          const PixelSample s =
+                              exact(gx[cx[a]], gy[cy[b]], plan.steps, kNaN, nullptr,
+                                    thin_hints ? &coarse_thin[b * ncx_s + a] : nullptr);
                           if (g > 1) sparse.put(cx[a], cy[b], s);
                         }
                         progress.add(r.cols().size() * kSampleWork);
@@ -915,27 +930,31 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // the samples as the previous wave left them (deterministic). Without it the samples along
   // a thin shaft caught it where their jitter put a sample in it, and the grid interpolated
   // the dither into blobs (the kite's shaft a fan of dots).
-  const bool thin_hints = g > 1 && in.scene->lighting.sun && in.occluders;
-  auto sample_hints = [&](int x, int y, const PixelSample& own, int xn, int yn,
-                          const PixelSample& neighbour, Hints& hints) {
-    for (int m = 0; m < neighbour.thin.mids; ++m) {
-      const double t = core.hint_on_ray(x, y, xn, yn, neighbour.thin.mid_m[m]);
-      if (std::isfinite(t) && !own.thin.knows(t)) hints.add(t);
+  auto sample_hints = [&](int x, int y, const ThinShadows& own, int xn, int yn,
+                          const ThinShadows& neighbour, Hints& hints) {
+    for (int m = 0; m < neighbour.mids; ++m) {
+      const double t = core.hint_on_ray(x, y, xn, yn, neighbour.mid_m[m]);
+      if (std::isfinite(t) && !own.knows(t)) hints.add(t);
     }
   };
   if (thin_hints) {
-    const std::size_t ncx_s = cx.size(), ncy_s = cy.size();
     std::vector<unsigned char> frontier(ncx_s * ncy_s, 0);
     std::vector<std::size_t> wave;
     for (std::size_t b = 0; b < ncy_s; ++b)
       for (std::size_t a = 0; a < ncx_s; ++a)
-        if (sparse.grid_at(cx[a], cy[b]).thin.mids > 0) {
+        if (coarse_thin[b * ncx_s + a].mids > 0) {
           frontier[b * ncx_s + a] = 1;
           wave.push_back(b * ncx_s + a);
         }
     std::vector<std::size_t> candidates;
-    std::vector<PixelSample> redone;
-    std::vector<unsigned char> changed;
+    // The samples a wave changed (candidate index, sample, what it caught): only those kept.
+    struct Redone {
+      std::size_t n;
+      PixelSample sample;
+      ThinShadows thin;
+    };
+    tbb::combinable<std::vector<Redone>> redone_local;
+    std::vector<Redone> redone;
     while (!wave.empty() && !stop()) {
       candidates.clear();
       for (const std::size_t c : wave) {
@@ -946,21 +965,20 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       }
       std::sort(candidates.begin(), candidates.end());
       candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
-      redone.assign(candidates.size(), PixelSample{});
-      changed.assign(candidates.size(), 0);
       tbb::parallel_for(std::size_t(0), candidates.size(), [&](std::size_t n) {
         const std::size_t c = candidates[n];
         const std::size_t a = c % ncx_s, b = c / ncx_s;
         const int x = gx[cx[a]], y = gy[cy[b]];
         const PixelSample& own = sparse.grid_at(cx[a], cy[b]);
+        const ThinShadows& own_thin = coarse_thin[c];
         Hints hints;
         for (std::size_t bb = b > 0 ? b - 1 : 0; bb <= std::min(ncy_s - 1, b + 1); ++bb)
           for (std::size_t aa = a > 0 ? a - 1 : 0; aa <= std::min(ncx_s - 1, a + 1); ++aa)
             if (frontier[bb * ncx_s + aa])
-              sample_hints(x, y, own, gx[cx[aa]], gy[cy[bb]], sparse.grid_at(cx[aa], cy[bb]),
-                           hints);
+              sample_hints(x, y, own_thin, gx[cx[aa]], gy[cy[bb]],
+                           coarse_thin[bb * ncx_s + aa], hints);
         Hints shadowed;
-        for (int m = 0; m < own.thin.hinted; ++m) shadowed.add(own.thin.hinted_m[m]);
+        for (int m = 0; m < own_thin.hinted; ++m) shadowed.add(own_thin.hinted_m[m]);
         const int earlier = shadowed.n;
         for (int h = 0; h < hints.n; ++h)
           if (core.hint_shadowed(x, y, hints.t_m[h])) shadowed.add(hints.t_m[h]);
@@ -968,23 +986,30 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         // The march again with the hints (and those of an earlier wave), its samples' own sun
         // visibility read back: R, the lit fraction and what it caught change; the camera's
         // optical depth, AO and the surface's sun visibility do not.
-        const PixelSample fresh = core.march(x, y, plan.steps, &shadowed, &own.thin);
-        if (fresh.thin.mids <= own.thin.mids) return;
+        ThinShadows fresh_thin;
+        const PixelSample fresh =
+            core.march(x, y, plan.steps, &shadowed, &own_thin, &fresh_thin);
+        if (fresh_thin.mids <= own_thin.mids) return;
         PixelSample s = own;
         for (int k = 0; k < 3; ++k) s.inscatter[k] = fresh.inscatter[k];
         s.shaft = fresh.shaft;
-        s.thin = fresh.thin;
-        redone[n] = s;
-        changed[n] = 1;
+        redone_local.local().push_back({n, s, fresh_thin});
       });
-      std::fill(frontier.begin(), frontier.end(), 0);
+      for (const std::size_t c : wave) frontier[c] = 0;
       wave.clear();
-      for (std::size_t n = 0; n < candidates.size(); ++n) {
-        if (!changed[n]) continue;
-        const std::size_t c = candidates[n];
+      redone.clear();
+      redone_local.combine_each([&](std::vector<Redone>& v) {
+        redone.insert(redone.end(), v.begin(), v.end());
+        v.clear();
+      });
+      std::sort(redone.begin(), redone.end(),
+                [](const Redone& l, const Redone& r) { return l.n < r.n; });
+      for (const Redone& r : redone) {
+        const std::size_t c = candidates[r.n];
         const std::size_t a = c % ncx_s, b = c / ncx_s;
-        sparse.put(cx[a], cy[b], redone[n]);
-        sparse.set(gx[cx[a]], gy[cy[b]], redone[n]);
+        sparse.put(cx[a], cy[b], r.sample);
+        sparse.set(gx[cx[a]], gy[cy[b]], r.sample);
+        coarse_thin[c] = r.thin;
         frontier[c] = 1;
         wave.push_back(c);
       }
@@ -1004,7 +1029,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     bool any = false, all = true;
     for (const auto& [ci, cj] : corners) {
       if (std::isfinite(d(gx[ci], gy[cj]))) return false;
-      const bool caught = sparse.grid_at(ci, cj).thin.mids > 0;
+      const bool caught = thin_at(ci, cj).mids > 0;
       any |= caught;
       all &= caught;
     }
@@ -1013,9 +1038,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // The hints of a cell's corners for fine sample (x, y) inside it.
   auto corner_hints = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners,
                           int x, int y, Hints& hints) {
-    const PixelSample none;
-    for (const auto& [ci, cj] : corners)
-      sample_hints(x, y, none, gx[ci], gy[cj], sparse.grid_at(ci, cj), hints);
+    if (!thin_hints) return;
+    const ThinShadows none;
+    for (const auto& [ci, cj] : corners) sample_hints(x, y, none, gx[ci], gy[cj], thin_at(ci, cj), hints);
   };
 
   constexpr int kValues = physics::kResolveValues;    // R (3), camera optical depth (3), AO
