@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -898,7 +900,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // What the coarse samples' marches caught (thin shadows, below), row-major over cx x cy.
   const bool thin_hints = g > 1 && in.scene->lighting.sun && in.occluders;
   const std::size_t ncx_s = cx.size(), ncy_s = cy.size();
-  std::vector<ThinShadows> coarse_thin(thin_hints ? ncx_s * ncy_s : 0);
+  // (Written for every coarse sample below before it is read.)
+  HugePageArray<ThinShadows> coarse_thin(thin_hints ? ncx_s * ncy_s : 0);
   std::vector<int> coarse_x(thin_hints ? nx : 0, -1), coarse_y(thin_hints ? ny : 0, -1);
   for (std::size_t a = 0; thin_hints && a < ncx_s; ++a) coarse_x[cx[a]] = int(a);
   for (std::size_t b = 0; thin_hints && b < ncy_s; ++b) coarse_y[cy[b]] = int(b);
@@ -911,9 +914,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                       for (std::size_t b = r.rows().begin(); b < r.rows().end(); ++b) {
                         if (stop()) return;
                         for (std::size_t a = r.cols().begin(); a < r.cols().end(); ++a) {
+                          ThinShadows* thin = nullptr;
+                          if (thin_hints) {
+                            thin = &coarse_thin[b * ncx_s + a];
+                            *thin = ThinShadows{};  // (a march without the sun's rays)
+                          }
                           const PixelSample s =
-                              exact(gx[cx[a]], gy[cy[b]], plan.steps, kNaN, nullptr,
-                                    thin_hints ? &coarse_thin[b * ncx_s + a] : nullptr);
+                              exact(gx[cx[a]], gy[cy[b]], plan.steps, kNaN, nullptr, thin);
                           if (g > 1) sparse.put(cx[a], cy[b], s);
                         }
                         progress.add(r.cols().size() * kSampleWork);
@@ -937,7 +944,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       if (std::isfinite(t) && !own.knows(t)) hints.add(t);
     }
   };
-  if (thin_hints) {
+  static const int dbg_mode = getenv("MR_THIN_MODE") ? atoi(getenv("MR_THIN_MODE")) : 7;
+  auto dbg_t0 = Clock::now();
+  if (thin_hints && (dbg_mode & 1)) {
     std::vector<unsigned char> frontier(ncx_s * ncy_s, 0);
     std::vector<std::size_t> wave;
     for (std::size_t b = 0; b < ncy_s; ++b)
@@ -1016,6 +1025,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     }
     throw_if_stopped();
   }
+  if (getenv("MR_THIN_DEBUG")) fprintf(stderr, "flood %.1f ms\n", 1e3 * seconds_since(dbg_t0));
   // Whether a coarse cell of sky pixels has corners that disagree on having caught a thin
   // shadow: the shaft's edge in the image, which the fine grid (its samples marched with the
   // corners' hints) puts within a grid step instead of a coarse cell's interpolation (the test
@@ -1025,20 +1035,24 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // shadow rays. The sky's view rays are the longest (the march ends where the fog does), so
   // there shadows are thinnest against a step and in-scatter is all there is to see.
   auto thin_edge = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners) {
-    if (!thin_hints) return false;
+    if (!thin_hints || !(dbg_mode & 2)) return false;
     bool any = false, all = true;
+    double lum_min = kInf, lum_max = 0;
     for (const auto& [ci, cj] : corners) {
       if (std::isfinite(d(gx[ci], gy[cj]))) return false;
       const bool caught = thin_at(ci, cj).mids > 0;
       any |= caught;
       all &= caught;
+      const double* r = sparse.grid_at(ci, cj).inscatter;
+      lum_min = std::min(lum_min, r[0] + r[1] + r[2]);
+      lum_max = std::max(lum_max, r[0] + r[1] + r[2]);
     }
-    return any && !all;
+    return any && !all && lum_max - lum_min > kRefineTolerance * lum_max;
   };
   // The hints of a cell's corners for fine sample (x, y) inside it.
   auto corner_hints = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners,
                           int x, int y, Hints& hints) {
-    if (!thin_hints) return;
+    if (!thin_hints || !(dbg_mode & 4)) return;
     const ThinShadows none;
     for (const auto& [ci, cj] : corners) sample_hints(x, y, none, gx[ci], gy[cj], thin_at(ci, cj), hints);
   };
