@@ -6,9 +6,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdio>
-#include <cstdlib>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <numbers>
 #include <optional>
@@ -222,9 +221,9 @@ class Core {
 
   // `steps`: view-ray segments (the preset's, or more where a pixel straddles a shaft edge).
   // `hints`: distances along the view ray where a neighbour's thin shadow may lie: each one
-  // whose segment's sample and both neighbours' saw the sun is tested (one shadow ray, in the
-  // segment's sun direction), and where the sun is hidden there the segment's sample moves
-  // there, so that the shadow is bisected as if the jitter had put the sample in it.
+  // whose segment's sample and both neighbours' saw the sun is tested (one shadow ray toward
+  // the sun's centre, see `centred`), and where the sun is hidden there the segment's sample
+  // moves there, so that the shadow is bisected as if the jitter had put the sample in it.
   // `known`: this pixel's earlier march with the same steps, whose samples' sun visibility
   // (ThinShadows::visible_bits) is reused. `thin`: where to say what the march caught.
   PixelSample march(int x, int y, int steps, const Hints* hints = nullptr,
@@ -286,6 +285,12 @@ class Core {
     thread_local std::vector<double> sample_t;
     thread_local std::vector<unsigned char> sun_visible;
     thread_local std::vector<double> crossing;  // visibility changes between samples i, i + 1
+    // Samples moved to a hint (below): they, and the bisection of their edges, look at the
+    // sun's centre, as hint_shadowed does, instead of the segment's point of its disk: where
+    // a small occluder's shadow is a penumbra (a kite's, ~100 m behind it), a disk sample
+    // would catch it or not at random, and the flood along the shaft would stop there. The
+    // centre's shadow is as deep in sum (the penumbra is it blurred by the disk).
+    thread_local std::vector<unsigned char> centred;
     sample_t.resize(segments);
     crossing.resize(segments);
     sun_visible.assign(segments, 1);
@@ -318,6 +323,7 @@ class Core {
           thin->visible_samples = (unsigned char)segments;
         }
       }
+      centred.assign(segments, 0);
       if (hints)
         for (int h = 0; h < hints->n; ++h) {
           const double th = hints->t_m[h];
@@ -327,13 +333,14 @@ class Core {
           if (k >= segments || !sun_visible[k] || (k > 0 && !sun_visible[k - 1]) ||
               (k + 1 < segments && !sun_visible[k + 1]))
             continue;
-          const Vec3d dir = sun_sample_direction(k, jitter, double(segments + 1), pixel_rotation);
           ++rays;
-          if (in_.occluders->occluded(f3(add(origin_, w, th)), f3(dir), float(1e-3 + 1e-4 * th),
-                                      float(kInf))) {
+          if (in_.occluders->occluded(f3(add(origin_, w, th)), f3(sun_dir_),
+                                      float(1e-3 + 1e-4 * th), float(kInf))) {
             sample_t[k] = th;
             sun_visible[k] = 0;
-            if (thin && thin->hinted < kMaxThinShadows) thin->hinted_m[thin->hinted++] = float(th);
+            centred[k] = 1;
+            if (thin && thin->hinted < kMaxThinShadows)
+              thin->hinted_m[thin->hinted++] = float(th);
           }
         }
       // Shaft edges: where the visibility changes between two samples, bisect for the crossing
@@ -354,7 +361,9 @@ class Core {
         const std::size_t i = edges[e];
         edge_lo[e] = sample_t[i];
         edge_hi[e] = sample_t[i + 1];
-        edge_dir[e] = sun_sample_direction(i, jitter, double(segments + 1), pixel_rotation);
+        edge_dir[e] = centred[i] || centred[i + 1]
+                          ? sun_dir_
+                          : sun_sample_direction(i, jitter, double(segments + 1), pixel_rotation);
       }
       // A refined march (pass 2's shaft-edge cells) has closer samples: fewer bisections.
       const int bisections = steps > plan_.steps ? kShaftRefinementBisections : kEdgeBisections;
@@ -897,17 +906,18 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   const std::vector<std::size_t> cx = coarse_indices(nx, k_coarse),
                                  cy = coarse_indices(ny, k_coarse);
   auto d = [&](int x, int y) { return double(in.distance_m.at(x, y, 0)); };
-  // What the coarse samples' marches caught (thin shadows, below), row-major over cx x cy.
+  // What the grid samples' marches caught (thin shadows, below), row-major over gx x gy.
   const bool thin_hints = g > 1 && in.scene->lighting.sun && in.occluders;
   const std::size_t ncx_s = cx.size(), ncy_s = cy.size();
-  // (Written for every coarse sample below before it is read.)
-  HugePageArray<ThinShadows> coarse_thin(thin_hints ? ncx_s * ncy_s : 0);
-  std::vector<int> coarse_x(thin_hints ? nx : 0, -1), coarse_y(thin_hints ? ny : 0, -1);
-  for (std::size_t a = 0; thin_hints && a < ncx_s; ++a) coarse_x[cx[a]] = int(a);
-  for (std::size_t b = 0; thin_hints && b < ncy_s; ++b) coarse_y[cy[b]] = int(b);
-  // Those of coarse grid point (fine indices) (i, j).
-  auto thin_at = [&](std::size_t i, std::size_t j) -> const ThinShadows& {
-    return coarse_thin[std::size_t(coarse_y[j]) * ncx_s + std::size_t(coarse_x[i])];
+  // (Written for every grid sample, as it is traced or interpolated, before it is read.)
+  HugePageArray<ThinShadows> grid_thin(thin_hints ? nx * ny : 0);
+  // Those of coarse sample c (row-major over cx x cy).
+  auto coarse_thin = [&](std::size_t c) -> ThinShadows& {
+    return grid_thin[cy[c / ncx_s] * nx + cx[c % ncx_s]];
+  };
+  // Those of grid sample (i, j).
+  auto thin_at = [&](std::size_t i, std::size_t j) -> ThinShadows& {
+    return grid_thin[j * nx + i];
   };
   tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, cy.size(), 0, cx.size()),
                     [&](const tbb::blocked_range2d<std::size_t>& r) {
@@ -916,7 +926,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                         for (std::size_t a = r.cols().begin(); a < r.cols().end(); ++a) {
                           ThinShadows* thin = nullptr;
                           if (thin_hints) {
-                            thin = &coarse_thin[b * ncx_s + a];
+                            thin = &coarse_thin(b * ncx_s + a);
                             *thin = ThinShadows{};  // (a march without the sun's rays)
                           }
                           const PixelSample s =
@@ -944,14 +954,12 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       if (std::isfinite(t) && !own.knows(t)) hints.add(t);
     }
   };
-  static const int dbg_mode = getenv("MR_THIN_MODE") ? atoi(getenv("MR_THIN_MODE")) : 7;
-  auto dbg_t0 = Clock::now();
-  if (thin_hints && (dbg_mode & 1)) {
+  if (thin_hints) {
     std::vector<unsigned char> frontier(ncx_s * ncy_s, 0);
     std::vector<std::size_t> wave;
     for (std::size_t b = 0; b < ncy_s; ++b)
       for (std::size_t a = 0; a < ncx_s; ++a)
-        if (coarse_thin[b * ncx_s + a].mids > 0) {
+        if (coarse_thin(b * ncx_s + a).mids > 0) {
           frontier[b * ncx_s + a] = 1;
           wave.push_back(b * ncx_s + a);
         }
@@ -979,13 +987,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         const std::size_t a = c % ncx_s, b = c / ncx_s;
         const int x = gx[cx[a]], y = gy[cy[b]];
         const PixelSample& own = sparse.grid_at(cx[a], cy[b]);
-        const ThinShadows& own_thin = coarse_thin[c];
+        const ThinShadows& own_thin = coarse_thin(c);
         Hints hints;
         for (std::size_t bb = b > 0 ? b - 1 : 0; bb <= std::min(ncy_s - 1, b + 1); ++bb)
           for (std::size_t aa = a > 0 ? a - 1 : 0; aa <= std::min(ncx_s - 1, a + 1); ++aa)
             if (frontier[bb * ncx_s + aa])
               sample_hints(x, y, own_thin, gx[cx[aa]], gy[cy[bb]],
-                           coarse_thin[bb * ncx_s + aa], hints);
+                           coarse_thin(bb * ncx_s + aa), hints);
         Hints shadowed;
         for (int m = 0; m < own_thin.hinted; ++m) shadowed.add(own_thin.hinted_m[m]);
         const int earlier = shadowed.n;
@@ -1018,14 +1026,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         const std::size_t a = c % ncx_s, b = c / ncx_s;
         sparse.put(cx[a], cy[b], r.sample);
         sparse.set(gx[cx[a]], gy[cy[b]], r.sample);
-        coarse_thin[c] = r.thin;
+        coarse_thin(c) = r.thin;
         frontier[c] = 1;
         wave.push_back(c);
       }
     }
     throw_if_stopped();
   }
-  if (getenv("MR_THIN_DEBUG")) fprintf(stderr, "flood %.1f ms\n", 1e3 * seconds_since(dbg_t0));
   // Whether a coarse cell of sky pixels has corners that disagree on having caught a thin
   // shadow: the shaft's edge in the image, which the fine grid (its samples marched with the
   // corners' hints) puts within a grid step instead of a coarse cell's interpolation (the test
@@ -1035,7 +1042,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // shadow rays. The sky's view rays are the longest (the march ends where the fog does), so
   // there shadows are thinnest against a step and in-scatter is all there is to see.
   auto thin_edge = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners) {
-    if (!thin_hints || !(dbg_mode & 2)) return false;
+    if (!thin_hints) return false;
     bool any = false, all = true;
     double lum_min = kInf, lum_max = 0;
     for (const auto& [ci, cj] : corners) {
@@ -1052,9 +1059,10 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // The hints of a cell's corners for fine sample (x, y) inside it.
   auto corner_hints = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners,
                           int x, int y, Hints& hints) {
-    if (!thin_hints || !(dbg_mode & 4)) return;
+    if (!thin_hints) return;
     const ThinShadows none;
-    for (const auto& [ci, cj] : corners) sample_hints(x, y, none, gx[ci], gy[cj], thin_at(ci, cj), hints);
+    for (const auto& [ci, cj] : corners)
+      sample_hints(x, y, none, gx[ci], gy[cj], thin_at(ci, cj), hints);
   };
 
   constexpr int kValues = physics::kResolveValues;    // R (3), camera optical depth (3), AO
@@ -1328,10 +1336,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                              {cx[a + 1], cy[b + 1]}}},
                            gx[i], gy[j], hints);
           });
-          sparse.put(i, j, exact(gx[i], gy[j], plan.steps, probe[j * nx + i], &hints));
+          sparse.put(i, j,
+                     exact(gx[i], gy[j], plan.steps, probe[j * nx + i], &hints,
+                           thin_hints ? &thin_at(i, j) : nullptr));
           ++fine.local();
         } else if (surface) {
           sparse.put(i, j, surface_sample(surface_a, surface_b, gx[i], gy[j], probe[j * nx + i]));
+          if (thin_hints) thin_at(i, j) = ThinShadows{};  // (interpolated: caught nothing)
         }
       }
       progress.add(work);
@@ -1393,6 +1404,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         lum_max = std::max(lum_max, lum);
       }
       const bool shadow_edge = physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max);
+      // A thin shadow's edge in the sky (thin_edge): its pixels marched with the corners' thin
+      // shadows as hints.
+      const bool thin_cell = !shadow_edge && thin_edge(corners);
       const double disk0 = sparse.grid_at(i0, j0).sun_disk;
       const bool sun_disk_agrees = disk0 >= 0 && sparse.grid_at(i1, j0).sun_disk == disk0 &&
                                    sparse.grid_at(i0, j1).sun_disk == disk0 &&
@@ -1406,7 +1420,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         for (int k = 0; k < 4; ++k) dy[k] = y - corner_y[k];
         for (int x = x0; x <= x_last; ++x) {
           if (sparse.has(x, y)) continue;
-          bool ok = !shadow_edge;
+          bool ok = !shadow_edge && !thin_cell;
           if (ok) {
             const double dp = d(x, y);
             for (int k = 0; k < 4 && ok; ++k) ok = depth_continuous(dp, corner_d[k]);
@@ -1414,7 +1428,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           if (!ok) {
             // A shaft's edge crosses the cell: its pixels get finer steps, or thin slivers
             // of shadow that one step misses or catches would show as grain.
-            exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
+            if (thin_cell) {
+              Hints hints;
+              corner_hints(corners, x, y, hints);
+              exact(x, y, plan.steps, kNaN, &hints);
+            } else {
+              exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
+            }
             ++exact_n;
             continue;
           }
