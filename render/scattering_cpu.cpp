@@ -1405,7 +1405,10 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
       }
       const bool shadow_edge = physics::cell_has_edge(shaft_min, shaft_max, lum_min, lum_max);
       // A thin shadow's edge in the sky (thin_edge): its pixels marched with the corners' thin
-      // shadows as hints.
+      // shadows as hints, and with the shaft edges' finer steps, for the thin shadows no corner
+      // caught (the kite's shaft is many streaks a few pixels wide: against 256 steps without
+      // acceleration, crop x 640-800, y 60-200, mean |R error| 2.18 % before, 2.00 % with the
+      // preset's steps here, 1.50 % with kShaftRefinement's).
       const bool thin_cell = !shadow_edge && thin_edge(corners);
       const double disk0 = sparse.grid_at(i0, j0).sun_disk;
       const bool sun_disk_agrees = disk0 >= 0 && sparse.grid_at(i1, j0).sun_disk == disk0 &&
@@ -1431,7 +1434,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
             if (thin_cell) {
               Hints hints;
               corner_hints(corners, x, y, hints);
-              exact(x, y, plan.steps, kNaN, &hints);
+              exact(x, y, plan.steps * kShaftRefinement, kNaN, &hints);
             } else {
               exact(x, y, shadow_edge ? plan.steps * kShaftRefinement : plan.steps);
             }
