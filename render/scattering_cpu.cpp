@@ -1501,10 +1501,11 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   throw_if_stopped();
   exact_count += exact_more.combine(std::plus<>());
   out.interpolation_s = seconds_since(pass_start);
-  // Pass 3 reads only the per-pixel arrays: the grid's samples, their gradients and the AO
-  // table go back to the pool now (render/huge_pages.h), where the photo fallback's arrays
-  // below find them (already mapped) instead of fresh memory.
+  // Pass 3 reads only the per-pixel arrays: the grid's samples (and the thin shadows they
+  // caught), their gradients and the AO table go back to the pool now (render/huge_pages.h),
+  // where the photo fallback's arrays below find them (already mapped) instead of fresh memory.
   sparse.grid.reset();
+  grid_thin = HugePageArray<ThinShadows>(0);
   sample_gradients = HugePageArray<Gradients>(0);
   ao_table = HugePageArray<std::uint32_t>(0);
   pass_start = Clock::now();
