@@ -959,7 +959,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     std::vector<std::size_t> wave;
     for (std::size_t b = 0; b < ncy_s; ++b)
       for (std::size_t a = 0; a < ncx_s; ++a)
-        if (coarse_thin(b * ncx_s + a).mids > 0) {
+        if (coarse_thin(b * ncx_s + a).mids > 0 && !std::isfinite(d(gx[cx[a]], gy[cy[b]]))) {
           frontier[b * ncx_s + a] = 1;
           wave.push_back(b * ncx_s + a);
         }
@@ -986,6 +986,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         const std::size_t c = candidates[n];
         const std::size_t a = c % ncx_s, b = c / ncx_s;
         const int x = gx[cx[a]], y = gy[cy[b]];
+        if (std::isfinite(d(x, y))) return;  // sky only (thin_edge)
         const PixelSample& own = sparse.grid_at(cx[a], cy[b]);
         const ThinShadows& own_thin = coarse_thin(c);
         Hints hints;
