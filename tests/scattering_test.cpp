@@ -614,7 +614,7 @@ TEST_F(Scattering, ForestShaftsMatchAManyStepReference) {
 }
 #endif
 
-#ifndef MR_SCATTERING_TEST_VULKAN  // the CPU core's thin-shadow re-march (issue 11)
+#ifndef MR_SCATTERING_TEST_VULKAN  // the CPU core's thin-shadow hints (issue 11)
 // Issue 11's kite: a small sheet floating 15 m up-left in the sun bank look casts a shaft
 // through the fog that a view ray crosses in less than one of normal's 32 steps. Whether a
 // march sample lands in it depended on the pixel's jitter, and the accelerated grid's cells
@@ -622,11 +622,12 @@ TEST_F(Scattering, ForestShaftsMatchAManyStepReference) {
 // a fan of dots. Against every pixel marched with 256 steps, the shaft's pixels' mean
 // |error| relative to the shadow's depth (R unshadowed - R), and the error's pixel-to-pixel
 // variation (mean |difference of horizontal neighbours' errors|), likewise relative. Before
-// the re-march of thin-shadow samples (kThinShadowRefinement) and the refinement of cells
-// whose corners disagree on any shadow (cell_has_thin_shadow): |error| 28.3 %, variation
-// 11.7 %; with them 11.0 % and 11.6 % (the reference's own per-pixel jitter at 256 steps is
-// most of the variation; the blobs were the error). The |error| bar, 20 %, fails on the old
-// code; re-marching the samples alone gives 27.7 %.
+// the neighbour hints (render/scattering_cpu.cpp: a coarse sample's caught thin shadow flooded
+// to its neighbours, sky cells at a thin shadow's edge refined, their pixels marched with the
+// corners' hints): |error| 28.3 %, variation 11.7 %; with them 14.0 % and 7.8 % (the
+// reference's own per-pixel jitter at 256 steps is much of the variation). The |error| bar,
+// 20 %, fails on the old code; the flood alone gives 21.1 % (helper shafts18). Written by
+// helper shafts17, whose fix (8x steps for marches that saw little shadow) gave 11.0 %.
 TEST_F(Scattering, ThinShaftInSunlitFogIsSmooth) {
   const Camera cam = Camera::from_horizontal_fov(160, 100, 60);
   FogScene s = test::low_sun_height_fog_scene();
