@@ -323,7 +323,7 @@ class Core {
           thin->visible_samples = (unsigned char)segments;
         }
       }
-      centred.assign(segments, 0);
+      if (hints) centred.assign(segments, 0);  // (read only with hints)
       if (hints)
         for (int h = 0; h < hints->n; ++h) {
           const double th = hints->t_m[h];
@@ -361,7 +361,7 @@ class Core {
         const std::size_t i = edges[e];
         edge_lo[e] = sample_t[i];
         edge_hi[e] = sample_t[i + 1];
-        edge_dir[e] = centred[i] || centred[i + 1]
+        edge_dir[e] = hints && (centred[i] || centred[i + 1])
                           ? sun_dir_
                           : sun_sample_direction(i, jitter, double(segments + 1), pixel_rotation);
       }
@@ -924,10 +924,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                       for (std::size_t b = r.rows().begin(); b < r.rows().end(); ++b) {
                         if (stop()) return;
                         for (std::size_t a = r.cols().begin(); a < r.cols().end(); ++a) {
+                          // What a sky sample's march caught (the flood and thin_edge
+                          // look at the sky only); nothing for the rest.
                           ThinShadows* thin = nullptr;
                           if (thin_hints) {
                             thin = &coarse_thin(b * ncx_s + a);
                             *thin = ThinShadows{};  // (a march without the sun's rays)
+                            if (std::isfinite(d(gx[cx[a]], gy[cy[b]]))) thin = nullptr;
                           }
                           const PixelSample s =
                               exact(gx[cx[a]], gy[cy[b]], plan.steps, kNaN, nullptr, thin);
@@ -1343,9 +1346,13 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                              {cx[a + 1], cy[b + 1]}}},
                            gx[i], gy[j], hints);
           });
-          sparse.put(i, j,
-                     exact(gx[i], gy[j], plan.steps, probe[j * nx + i], &hints,
-                           thin_hints ? &thin_at(i, j) : nullptr));
+          ThinShadows* thin = nullptr;
+          if (thin_hints) {
+            thin = &thin_at(i, j);
+            *thin = ThinShadows{};
+            if (std::isfinite(d(gx[i], gy[j]))) thin = nullptr;  // (sky only, as above)
+          }
+          sparse.put(i, j, exact(gx[i], gy[j], plan.steps, probe[j * nx + i], &hints, thin));
           ++fine.local();
         } else if (surface) {
           sparse.put(i, j, surface_sample(surface_a, surface_b, gx[i], gy[j], probe[j * nx + i]));
