@@ -215,8 +215,8 @@ class Core {
     const RayDensity rd(scene_.medium, origin_, w);
     if (!(t_m < march_length(rd, in_.distance_m.at(x, y, 0)))) return false;
     rays_.local() += 1;
-    return in_.occluders->occluded(f3(add(origin_, w, t_m)), f3(sun_dir_),
-                                   float(1e-3 + 1e-4 * t_m), float(kInf));
+    return in_.occluders->occluded(f3(add(origin_, w, t_m)), f3(sun_dir_), float(1e-3 + 1e-4 * t_m),
+                                   float(kInf));
   }
 
   // `steps`: view-ray segments (the preset's, or more where a pixel straddles a shaft edge).
@@ -298,8 +298,7 @@ class Core {
       sample_t[i] = physics::segment_sample_t(bounds[i], bounds[i + 1], jitter, int(i));
     std::size_t rays = 0;
     if (scene_.lighting.sun && in_.occluders && known && known->visible_samples == segments) {
-      for (std::size_t i = 0; i < segments; ++i)
-        sun_visible[i] = (known->visible_bits >> i) & 1u;
+      for (std::size_t i = 0; i < segments; ++i) sun_visible[i] = (known->visible_bits >> i) & 1u;
     } else if (scene_.lighting.sun && in_.occluders) {
       occluded_rays(
           *in_.occluders, segments,
@@ -339,8 +338,7 @@ class Core {
             sample_t[k] = th;
             sun_visible[k] = 0;
             centred[k] = 1;
-            if (thin && thin->hinted < kMaxThinShadows)
-              thin->hinted_m[thin->hinted++] = float(th);
+            if (thin && thin->hinted < kMaxThinShadows) thin->hinted_m[thin->hinted++] = float(th);
           }
         }
       // Shaft edges: where the visibility changes between two samples, bisect for the crossing
@@ -999,8 +997,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         for (std::size_t bb = b > 0 ? b - 1 : 0; bb <= std::min(ncy_s - 1, b + 1); ++bb)
           for (std::size_t aa = a > 0 ? a - 1 : 0; aa <= std::min(ncx_s - 1, a + 1); ++aa)
             if (frontier[bb * ncx_s + aa])
-              sample_hints(x, y, own_thin, gx[cx[aa]], gy[cy[bb]],
-                           coarse_thin(bb * ncx_s + aa), hints);
+              sample_hints(x, y, own_thin, gx[cx[aa]], gy[cy[bb]], coarse_thin(bb * ncx_s + aa),
+                           hints);
         Hints shadowed;
         for (int m = 0; m < own_thin.hinted; ++m) shadowed.add(own_thin.hinted_m[m]);
         const int earlier = shadowed.n;
@@ -1011,8 +1009,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
         // visibility read back: R, the lit fraction and what it caught change; the camera's
         // optical depth, AO and the surface's sun visibility do not.
         ThinShadows fresh_thin;
-        const PixelSample fresh =
-            core.march(x, y, plan.steps, &shadowed, &own_thin, &fresh_thin);
+        const PixelSample fresh = core.march(x, y, plan.steps, &shadowed, &own_thin, &fresh_thin);
         if (fresh_thin.mids <= own_thin.mids) return;
         PixelSample s = own;
         for (int k = 0; k < 3; ++k) s.inscatter[k] = fresh.inscatter[k];
@@ -1067,8 +1064,8 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
     return any && !all && lum_max - lum_min > kRefineTolerance * lum_max;
   };
   // The hints of a cell's corners for fine sample (x, y) inside it.
-  auto corner_hints = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners,
-                          int x, int y, Hints& hints) {
+  auto corner_hints = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners, int x,
+                          int y, Hints& hints) {
     if (!thin_hints) return;
     const ThinShadows none;
     for (const auto& [ci, cj] : corners)
@@ -1342,7 +1339,9 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
           Hints hints;
           for_cells(i, j, [&](std::size_t a, std::size_t b) {
             if (refine[b * ncx + a] == kRefineFull)
-              corner_hints({{{cx[a], cy[b]}, {cx[a + 1], cy[b]}, {cx[a], cy[b + 1]},
+              corner_hints({{{cx[a], cy[b]},
+                             {cx[a + 1], cy[b]},
+                             {cx[a], cy[b + 1]},
                              {cx[a + 1], cy[b + 1]}}},
                            gx[i], gy[j], hints);
           });
