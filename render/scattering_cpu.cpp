@@ -215,6 +215,12 @@ class Core {
     const RayDensity rd(scene_.medium, origin_, w);
     if (!(t_m < march_length(rd, in_.distance_m.at(x, y, 0)))) return false;
     rays_.local() += 1;
+    return sun_centre_hidden(w, t_m);
+  }
+
+  // One shadow ray toward the sun's centre from distance t_m along view direction w (a hint's
+  // test, in hint_shadowed and in march).
+  bool sun_centre_hidden(const Vec3d& w, double t_m) const {
     return in_.occluders->occluded(f3(add(origin_, w, t_m)), f3(sun_dir_), float(1e-3 + 1e-4 * t_m),
                                    float(kInf));
   }
@@ -323,24 +329,22 @@ class Core {
         }
       }
       if (hints) centred.assign(segments, 0);  // (read only with hints)
-      if (hints)
-        for (int h = 0; h < hints->n; ++h) {
-          const double th = hints->t_m[h];
-          if (!(th > bounds[0] && th < bounds[segments])) continue;
-          const std::size_t k =
-              std::size_t(std::upper_bound(bounds.begin(), bounds.end(), th) - bounds.begin()) - 1;
-          if (k >= segments || !sun_visible[k] || (k > 0 && !sun_visible[k - 1]) ||
-              (k + 1 < segments && !sun_visible[k + 1]))
-            continue;
-          ++rays;
-          if (in_.occluders->occluded(f3(add(origin_, w, th)), f3(sun_dir_),
-                                      float(1e-3 + 1e-4 * th), float(kInf))) {
-            sample_t[k] = th;
-            sun_visible[k] = 0;
-            centred[k] = 1;
-            if (thin && thin->hinted < kMaxThinShadows) thin->hinted_m[thin->hinted++] = float(th);
-          }
+      for (int h = 0; hints && h < hints->n; ++h) {
+        const double th = hints->t_m[h];
+        if (!(th > bounds[0] && th < bounds[segments])) continue;
+        const std::size_t k =
+            std::size_t(std::upper_bound(bounds.begin(), bounds.end(), th) - bounds.begin()) - 1;
+        if (k >= segments || !sun_visible[k] || (k > 0 && !sun_visible[k - 1]) ||
+            (k + 1 < segments && !sun_visible[k + 1]))
+          continue;
+        ++rays;
+        if (sun_centre_hidden(w, th)) {
+          sample_t[k] = th;
+          sun_visible[k] = 0;
+          centred[k] = 1;
+          if (thin && thin->hinted < kMaxThinShadows) thin->hinted_m[thin->hinted++] = float(th);
         }
+      }
       // Shaft edges: where the visibility changes between two samples, bisect for the crossing
       // (to 1/64 of the gap), so each segment gets its exact lit part instead of all or nothing:
       // one sample per segment alone leaves a jitter-dithered edge of 1/steps steps. The
@@ -917,19 +921,20 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   auto thin_at = [&](std::size_t i, std::size_t j) -> ThinShadows& {
     return grid_thin[j * nx + i];
   };
+  // Where a grid sample's march says what it caught (with thin_hints): reset, and handed to
+  // the march only for a sky sample (the flood and thin_edge look at the sky only).
+  auto sky_thin = [&](ThinShadows& slot, int x, int y) -> ThinShadows* {
+    slot = ThinShadows{};  // (a march without the sun's rays, or a surface sample)
+    return std::isfinite(d(x, y)) ? nullptr : &slot;
+  };
   tbb::parallel_for(tbb::blocked_range2d<std::size_t>(0, cy.size(), 0, cx.size()),
                     [&](const tbb::blocked_range2d<std::size_t>& r) {
                       for (std::size_t b = r.rows().begin(); b < r.rows().end(); ++b) {
                         if (stop()) return;
                         for (std::size_t a = r.cols().begin(); a < r.cols().end(); ++a) {
-                          // What a sky sample's march caught (the flood and thin_edge
-                          // look at the sky only); nothing for the rest.
-                          ThinShadows* thin = nullptr;
-                          if (thin_hints) {
-                            thin = &coarse_thin(b * ncx_s + a);
-                            *thin = ThinShadows{};  // (a march without the sun's rays)
-                            if (std::isfinite(d(gx[cx[a]], gy[cy[b]]))) thin = nullptr;
-                          }
+                          ThinShadows* thin = thin_hints ? sky_thin(coarse_thin(b * ncx_s + a),
+                                                                    gx[cx[a]], gy[cy[b]])
+                                                         : nullptr;
                           const PixelSample s =
                               exact(gx[cx[a]], gy[cy[b]], plan.steps, kNaN, nullptr, thin);
                           if (g > 1) sparse.put(cx[a], cy[b], s);
@@ -1345,12 +1350,7 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
                              {cx[a + 1], cy[b + 1]}}},
                            gx[i], gy[j], hints);
           });
-          ThinShadows* thin = nullptr;
-          if (thin_hints) {
-            thin = &thin_at(i, j);
-            *thin = ThinShadows{};
-            if (std::isfinite(d(gx[i], gy[j]))) thin = nullptr;  // (sky only, as above)
-          }
+          ThinShadows* thin = thin_hints ? sky_thin(thin_at(i, j), gx[i], gy[j]) : nullptr;
           sparse.put(i, j, exact(gx[i], gy[j], plan.steps, probe[j * nx + i], &hints, thin));
           ++fine.local();
         } else if (surface) {
