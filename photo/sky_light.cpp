@@ -1,5 +1,7 @@
 #include "photo/sky_light.h"
 
+#include "photo/airlight.h"
+
 #include <tbb/parallel_for.h>
 
 #include <opencv2/core.hpp>
@@ -29,9 +31,11 @@ double texel_elevation(int height, double row) {
 // Display luma (Rec.709 weights on the gamma-2.2 encoded values, as the gallery's measure and
 // SkyMask take it) of scene-linear RGB. Scaling the colour by s scales it by s^(1 / 2.2).
 constexpr double kDisplayGamma = 2.2;
+double display_encode(double v) {
+  return std::pow(std::max(0.0, v), 1 / kDisplayGamma);
+}
 double display_luma(double r, double g, double b) {
-  auto encode = [](double v) { return std::pow(std::max(0.0, v), 1 / kDisplayGamma); };
-  return 0.2126 * encode(r) + 0.7152 * encode(g) + 0.0722 * encode(b);
+  return 0.2126 * display_encode(r) + 0.7152 * display_encode(g) + 0.0722 * display_encode(b);
 }
 
 // The domain transform's recursive filter (Gastal and Oliveira 2011, "Domain transform for
@@ -287,12 +291,15 @@ bool all_zero(const Image& map) {
 
 Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, const Camera& camera,
                            const CameraPose& pose, const Image& deviation,
-                           const std::array<float, 3>& sky_radiance) {
+                           const std::array<float, 3>& sky_radiance, Image* tint) {
+  if (tint) *tint = Image{};
   const int w = photo.width, h = photo.height;
   if (w < 1 || h < 1 || photo.channels < 3 || deviation.empty()) return {};
   const std::size_t count = std::size_t(w) * h;
   // The sky mask and the display-referred guide.
   std::vector<float> guide(3 * count), luma(count);
+  // The display-encoded colour (as display_luma encodes it), for the sky's local hue (tint).
+  std::vector<float> colour(tint ? 3 * count : 0);
   cv::Mat sky(h, w, CV_8U, cv::Scalar(0));
   bool any_sky = false;
   for (int y = 0; y < h; ++y)
@@ -303,6 +310,8 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       for (int c = 0; c < 3; ++c)
         guide[3 * i + c] = finite ? std::pow(std::clamp(p[c], 0.0f, 1.0f), 1 / 2.2f) : 0.0f;
       luma[i] = finite ? float(display_luma(p[0], p[1], p[2])) : 0.0f;
+      for (int c = 0; tint && c < 3; ++c)
+        colour[3 * i + c] = finite ? float(display_encode(p[c])) : 0.0f;
       if (finite && render::physics::is_sky(distance_m.at(x, y, 0))) {
         sky.at<std::uint8_t>(y, x) = 1;
         any_sky = true;
@@ -385,19 +394,22 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
     cv::dilate(low, opened, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
     core.setTo(0, l > (1 + kBrightShare) * opened);
   }
-  // Normalized convolution: the filter of (core Y', core), their ratio.
-  std::vector<float> data(2 * count);
+  // Normalized convolution: the filter of (core Y', core) and, for the tint, of the core's
+  // display colour; their ratios.
+  const int n = tint ? 5 : 2;
+  std::vector<float> data(std::size_t(n) * count);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
       const float m = core.at<std::uint8_t>(y, x) ? 1.0f : 0.0f;
-      data[2 * i] = m * luma[i];
-      data[2 * i + 1] = m;
+      data[n * i] = m * luma[i];
+      data[n * i + 1] = m;
+      for (int c = 0; c < n - 2; ++c) data[n * i + 2 + c] = m * colour[3 * i + c];
     }
   // Smoothing over about 3 % of the frame (the haze hides the sky's fine texture), stopped by
   // steps of the guide's channels summing to about kEdgeSigma.
   constexpr double kSmoothingFraction = 0.03, kEdgeSigma = 0.2;
-  domain_transform_filter(data, 2, guide, w, h, kSmoothingFraction * std::max(w, h), kEdgeSigma);
+  domain_transform_filter(data, n, guide, w, h, kSmoothingFraction * std::max(w, h), kEdgeSigma);
   // The scale on the sky: the local luma against the sky light's along the pixel's ray.
   // The average's own weight (the share of core sky that reached the pixel) says how much it
   // holds: below kFullWeight the scale fades into the plain average below (a sky pocket
@@ -411,23 +423,88 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // the fogged sky's gradient along the contour where the photo's sky meets the light, a Mach
   // band drawn as a bright arc through a sunset's haze (sunset_aitzol).
   constexpr double kMinScale = 0.1, kMaxScale = 1, kKnee = 0.3;
+  // The tint: the light's colour moved kSkyHueShare of the way toward the hue of the photo's
+  // own sky around the pixel (its display colour normalised to unit luma), at the scaled
+  // light's display luma, which the blend leaves unchanged (luma is linear in display values),
+  // so the created-edge balance of the scale above holds. The neutral prior alone turned a
+  // deep blue sky seen through haze into slate grey at the blue's luma (palace, kite):
+  // haze lit by a blue sky and no sun takes some of that sky's colour, and the chroma bound
+  // of the fog colour (the gallery's C*) still holds the blend to a muted blue.
+  constexpr double kSkyHueShare = 0.5;
+  // The blend's colour is bounded as every automatic fog colour is (photo/airlight.h), but with
+  // the cool end of the daylight locus moved out to a clear sky's light (blue skylight without
+  // the sun reaches 15000-25000 K and beyond, against the prior's 10000 K for daylight); the
+  // chroma bound (33.6, under the gallery's 36.1) binds first on a deep blue sky.
+  NeutralPrior skylight_prior;
+  skylight_prior.cool_limit = 0.06;
+  skylight_prior.knee_fraction = 1;
   std::vector<float> scale(count, 1.0f);
+  std::vector<float> hue(tint ? 3 * count : 0, 1.0f);  // the tint's factor on the scaled light
   cv::Mat sky_weight(h, w, CV_32F, cv::Scalar(0));
   tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
-      if (!sky.at<std::uint8_t>(y, x) || !(data[2 * i + 1] > kMinWeight)) continue;
-      const double local = double(data[2 * i]) / double(data[2 * i + 1]);
+      const float* a = &data[std::size_t(n) * i];
+      if (!sky.at<std::uint8_t>(y, x) || !(a[1] > kMinWeight)) continue;
+      const double local = double(a[0]) / double(a[1]);
       const auto d = sample_latlong(deviation, pose.ray_direction(camera, x, y));
-      const double light =
-          display_luma(sky_radiance[0] + d[0], sky_radiance[1] + d[1], sky_radiance[2] + d[2]);
+      const double lin[3] = {sky_radiance[0] + d[0], sky_radiance[1] + d[1],
+                             sky_radiance[2] + d[2]};
+      const double light = display_luma(lin[0], lin[1], lin[2]);
       if (!(light > 0) || !(local >= 0)) continue;
       const float s = float(std::clamp(
           std::pow(soft_limit_to_one(local / light, kKnee), kDisplayGamma), kMinScale, kMaxScale));
       scale[i] = s;
-      sky_weight.at<float>(y, x) = std::min(1.0f, data[2 * i + 1] / kFullWeight);
+      sky_weight.at<float>(y, x) = std::min(1.0f, a[1] / kFullWeight);
+      if (!tint || !(local > 0)) continue;
+      // Unit-luma display colours of the light (scaling leaves them as they are) and of the
+      // local sky; their blend, at the scaled light's luma, back to scene-linear.
+      const double light_scaled = light * std::pow(double(s), 1 / kDisplayGamma);
+      std::array<float, 3> target;
+      for (int c = 0; c < 3; ++c) {
+        const double own = display_encode(lin[c]) / light;
+        const double sky_hue = double(a[2 + c]) / double(a[1]) / local;
+        target[c] = float(std::pow(
+            std::max(0.0, light_scaled * ((1 - kSkyHueShare) * own + kSkyHueShare * sky_hue)),
+            kDisplayGamma));
+      }
+      // (The bound keeps the luminance; the display luma is the scale's, so it is put back.)
+      std::array<float, 3> bounded = neutral_fog_colour(target, skylight_prior);
+      const double luma_target = display_luma(target[0], target[1], target[2]),
+                   luma_bounded = display_luma(bounded[0], bounded[1], bounded[2]);
+      if (luma_bounded > 0)
+        for (float& v : bounded)
+          v = float(v * std::pow(luma_target / luma_bounded, kDisplayGamma));
+      for (int c = 0; c < 3; ++c) {
+        const double scaled = double(s) * std::max(0.0, lin[c]);
+        hue[3 * i + c] = scaled > 0 ? float(std::clamp(bounded[c] / scaled, 0.0, 4.0)) : 1.0f;
+      }
     }
   });
+  // The hue is blurred over kHueBlurFraction of the frame (not edge-aware): the edge-aware
+  // average stops at a cloud's rim, and a white cloud kept at the light's luma turned into a
+  // grey cut-out with a sharp hue edge inside the blue (kite). Luma is the scale's alone.
+  constexpr double kHueBlurFraction = 0.015;
+  if (tint) {
+    cv::Mat weighted(h, w, CV_32FC3), weight(h, w, CV_32F);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        const float m = sky.at<std::uint8_t>(y, x) ? sky_weight.at<float>(y, x) : 0.0f;
+        weight.at<float>(y, x) = m;
+        for (int c = 0; c < 3; ++c) weighted.at<cv::Vec3f>(y, x)[c] = m * hue[3 * i + c];
+      }
+    const double blur_px = std::max(1.0, kHueBlurFraction * std::max(w, h));
+    cv::GaussianBlur(weighted, weighted, cv::Size(0, 0), blur_px, blur_px, cv::BORDER_REPLICATE);
+    cv::GaussianBlur(weight, weight, cv::Size(0, 0), blur_px, blur_px, cv::BORDER_REPLICATE);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const float m = weight.at<float>(y, x);
+        if (!sky.at<std::uint8_t>(y, x) || !(m > 1e-4f)) continue;
+        const std::size_t i = std::size_t(y) * w + x;
+        for (int c = 0; c < 3; ++c) hue[3 * i + c] = weighted.at<cv::Vec3f>(y, x)[c] / m;
+      }
+  }
   // Elsewhere, and where the average holds little: the scale of the nearest sky pixel whose
   // average is sound (a far hill under the sky, at T ~ 0, shows the same fog as the sky just
   // above it, not a broad average that takes in a darker zenith), smoothed over kSpreadFraction
@@ -437,6 +514,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // lies between its sky-coloured openings, far from sound sky, and faded to the flat light it
   // stood out as a lighter ghost of the tower where the fog hides it (rocket in dense fog); a
   // surface seen right beside the sky is seen in the sky's direction, through the same fog.
+  // The tint spreads and fades as the scale does.
   constexpr double kSpreadFraction = 0.01, kFadeFraction = 0.05;
   std::vector<std::uint8_t> sound(count, 0);
   bool any_sound = false;
@@ -447,33 +525,43 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
     }
   if (!any_sound) return {};
   const std::vector<std::int32_t> nearest = nearest_source(w, h, sound);
-  cv::Mat spread(h, w, CV_32F);
+  const int k_channels = tint ? 4 : 1;  // the scale, then the tint's three factors
+  cv::Mat spread(h, w, CV_32FC(k_channels));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::int32_t k = nearest[std::size_t(y) * w + x];
-      spread.at<float>(y, x) = k >= 0 ? scale[std::size_t(k)] : 1.0f;
+      float* f = spread.ptr<float>(y) + std::size_t(k_channels) * x;
+      f[0] = k >= 0 ? scale[std::size_t(k)] : 1.0f;
+      for (int c = 1; c < k_channels; ++c) f[c] = k >= 0 ? hue[3 * std::size_t(k) + c - 1] : 1.0f;
     }
   const double spread_px = std::max(1.0, kSpreadFraction * std::max(w, h));
   cv::GaussianBlur(spread, spread, cv::Size(0, 0), spread_px, spread_px, cv::BORDER_REPLICATE);
   const double fade_px = kFadeFraction * std::max(w, h);
   cv::Mat from_sky;  // each pixel's distance to the nearest sky pixel (0 on the sky)
   cv::distanceTransform(sky == 0, from_sky, cv::DIST_L2, cv::DIST_MASK_PRECISE);
-  bool any = false;
+  bool any = false, any_tint = false;
   Image out(w, h, 1);
+  Image tinted(tint ? w : 0, tint ? h : 0, 3);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
-      const float b = sky_weight.at<float>(y, x), f = spread.at<float>(y, x);
-      float s;
-      if (sky.at<std::uint8_t>(y, x)) {
-        s = f + b * (scale[i] - f);
-      } else {
-        const double d = from_sky.at<float>(y, x);
-        s = float(1.0 + std::exp(-d / fade_px) * (f - 1.0));
+      const float b = sky_weight.at<float>(y, x);
+      const float* f = spread.ptr<float>(y) + std::size_t(k_channels) * x;
+      const bool on_sky = sky.at<std::uint8_t>(y, x);
+      const float fade = on_sky ? 0.0f : float(std::exp(-from_sky.at<float>(y, x) / fade_px));
+      for (int c = 0; c < k_channels; ++c) {
+        const float own = c == 0 ? scale[i] : hue[3 * i + c - 1];
+        const float v = on_sky ? f[c] + b * (own - f[c]) : 1.0f + fade * (f[c] - 1.0f);
+        if (c == 0) {
+          out.at(x, y, 0) = v;
+          any |= v != 1.0f;
+        } else {
+          tinted.at(x, y, c - 1) = v;
+          any_tint |= v != 1.0f;
+        }
       }
-      out.at(x, y, 0) = s;
-      any |= s != 1.0f;
     }
+  if (tint && any_tint) *tint = std::move(tinted);
   if (!any) return {};
   return out;
 }

@@ -90,8 +90,12 @@ bool all_zero(const Image& map);
 /// `photo`: scene-linear, >= 3 channels; `distance_m`: 1 channel, the same size (is_sky:
 /// sky); `deviation`: the convolved (and bounded) map of L_in - sky_radiance. Returns a
 /// 1-channel map of the photo's size, or an empty image when every scale is exactly 1.
+/// `tint` (optional): set to the 3-channel factor on the scaled light that moves its colour half
+/// way toward the hue of the photo's own sky around the pixel (the same edge-aware average of
+/// the sky's display colour, normalised to unit luma) at the same display luma, spread and faded
+/// over surfaces as the scale is; empty when every factor is exactly 1.
 Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, const Camera& camera,
                            const CameraPose& pose, const Image& deviation,
-                           const std::array<float, 3>& sky_radiance);
+                           const std::array<float, 3>& sky_radiance, Image* tint = nullptr);
 
 }  // namespace mr::photo

@@ -27,6 +27,7 @@
 #include "mr/scattering.h"
 #include "mr/scene_json.h"
 #include "mr/sky_light.h"
+#include "photo/airlight.h"
 #include "photo/clouds.h"
 #include "photo/composite.h"
 #include "photo/sky_light.h"
@@ -1331,6 +1332,89 @@ TEST(SkyLight, HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze) {
               100 * e_before, 100 * e_after);
   EXPECT_GT(e_before, 2e-4);  // the class reproduced
   EXPECT_LE(e_after, 2e-4);   // the issue's target
+}
+
+// Issue 11: a deep blue sky seen through haze turned slate grey (the light's colour went
+// through the neutral prior, whose cool end is 10000 K daylight, C* 21, while the scale brought
+// it to the blue's luma: gallery/tune palace and kite). Haze lit by a clear sky and no sun takes
+// part of that sky's colour: the light's hue moves half way toward the photo's own sky around
+// the pixel at the same display luma, bounded to the chroma of every automatic fog colour
+// (33.6, under the gallery's 36.1). Where the sky is seen through the whole layer (T < 0.01
+// here, 25-45 degrees up) the fogged sky keeps a muted blue of the photo's luma.
+TEST(SkyLight, DeepBlueSkyThroughHazeKeepsSomeOfItsBlueAtItsLuma) {
+  FogScene scene = haze_scene();
+  scene.pose.pitch_deg = 25;
+  const TreeScene t = leaves_against_a_deep_blue_sky(scene);
+  scene.lighting.sky_by_direction = true;
+  scene.lighting.sky_radiance = estimate_airlight(t.photo);
+  const FogLayers fog = fog_with_sky_light(t.photo, t.distance, t.alpha, scene, true, kCamera);
+  const SkyLight light =
+      sky_light_from_photo(t.photo, t.distance, kCamera, scene, *scene.lighting.sky_radiance);
+  ASSERT_FALSE(light.tint.empty());
+  EXPECT_EQ(light.tint.channels(), 3);
+  // The same render with the scale alone (the tint cleared), as fog_with_sky_light composes it.
+  SkyLight scale_only = light;
+  scale_only.tint = Image();
+  Image scale_only_composite(kW, kH, 3);
+  {
+    FogScene plain = scene;
+    plain.lighting.sky_by_direction = false;
+    ScatteringLayers layers = render_scattering(t.photo, t.distance, kCamera, plain);
+    add_sky_light(scale_only, scene.medium, kCamera, scene.pose, layers.optical_depth,
+                  layers.inscatter);
+    photo::apply_sky_matte(t.alpha.view(), layers.transmittance.view(), layers.inscatter.view());
+    photo::composite(t.photo.view(), layers.transmittance.view(), layers.inscatter.view(),
+                     scale_only_composite.view());
+  }
+  const cv::Mat scale_only_luma = test::display_luma(scale_only_composite);
+  // The open sky left of the tree (leaves from x = 90 on), away from the frame's top rows.
+  const cv::Mat photo_display_luma = test::display_luma(t.photo);
+  const cv::Mat fog_display_luma = test::display_luma(fog.composite);
+  std::array<double, 3> photo_sum{}, fog_sum{};
+  double photo_luma = 0, fog_luma = 0, fog_luma_scale_only = 0;
+  int n = 0;
+  for (int y = 10; y < 40; ++y)
+    for (int x = 10; x < 70; ++x) {
+      ASSERT_TRUE(std::isinf(t.distance.at(x, y, 0)));
+      for (int c = 0; c < 3; ++c) {
+        photo_sum[c] += t.photo.at(x, y, c);
+        fog_sum[c] += fog.composite.at(x, y, c);
+      }
+      photo_luma += photo_display_luma.at<float>(y, x);
+      fog_luma += fog_display_luma.at<float>(y, x);
+      fog_luma_scale_only += scale_only_luma.at<float>(y, x);
+      ++n;
+    }
+  auto mean = [&](const std::array<double, 3>& s) {
+    return std::array<float, 3>{float(s[0] / n), float(s[1] / n), float(s[2] / n)};
+  };
+  const double photo_chroma = photo::chroma_ab(mean(photo_sum));
+  // The fog's colour is the light's (the composite adds the photo's sky times T ~ 0.005).
+  std::array<double, 3> light_sum{}, scale_only_sum{};
+  for (int y = 10; y < 40; ++y)
+    for (int x = 10; x < 70; ++x) {
+      const Vec3 w = scene.pose.ray_direction(kCamera, x, y);
+      const Rgb d = light.deviation_at(w, x, y), d_scale_only = scale_only.deviation_at(w, x, y);
+      for (int c = 0; c < 3; ++c) {
+        light_sum[c] += light.sky_radiance[c] + d[c];
+        scale_only_sum[c] += light.sky_radiance[c] + d_scale_only[c];
+      }
+    }
+  const double fog_chroma = photo::chroma_ab(mean(light_sum));
+  const double scale_only_chroma = photo::chroma_ab(mean(scale_only_sum));
+  const std::array<float, 3> f = mean(fog_sum);
+  std::printf(
+      "deep blue sky through haze: C* photo %.1f -> fog %.1f (%.1f without the tint; "
+      "%.3f %.3f %.3f); display luma %.3f -> %.3f (%.3f without the tint)\n",
+      photo_chroma, fog_chroma, scale_only_chroma, f[0], f[1], f[2], photo_luma / n, fog_luma / n,
+      fog_luma_scale_only / n);
+  EXPECT_GT(photo_chroma, 40);                   // a deep blue
+  EXPECT_GT(fog_chroma, scale_only_chroma + 5);  // bluer than through the neutral prior alone
+  EXPECT_LE(fog_chroma, 33.6 + 0.1);             // within every automatic fog colour's bound
+  EXPECT_GT(f[2], 1.5 * f[0]);                   // blue, not another hue
+  // The tint leaves the display luma the scale gives (the photo's, up to the scale's knee).
+  EXPECT_NEAR(fog_luma / n, fog_luma_scale_only / n, 0.005);
+  EXPECT_NEAR(fog_luma / n, photo_luma / n, 0.05 * photo_luma / n);
 }
 
 // A dark cloud's flat body beside the bright glow around a hidden sun, all sky: the sky's

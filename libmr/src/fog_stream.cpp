@@ -214,6 +214,10 @@ StreamFogResult FogStreamer::fog_file(const StreamFogRequest& req, const CancelT
   if (by_direction && !req.sky_light->scale.empty() &&
       (req.sky_light->scale.width() != w || req.sky_light->scale.height() != h))
     return decline("the sky light's scale is not the photo's size");
+  if (by_direction && !req.sky_light->tint.empty() &&
+      (req.sky_light->tint.width() != w || req.sky_light->tint.height() != h ||
+       req.sky_light->tint.channels() != 3))
+    return decline("the sky light's tint is not the photo's size with 3 channels");
   result.camera = camera;
   result.width = w;
   result.height = h;

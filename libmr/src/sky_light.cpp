@@ -31,11 +31,12 @@ Rgb SkyLight::deviation_at(const Vec3& direction) const {
 
 Rgb SkyLight::deviation_at(const Vec3& direction, int x, int y) const {
   const Rgb d = deviation_at(direction);
-  if (scale.empty()) return d;
-  const float s = scale.at(x, y, 0);
-  if (s == 1.0f) return d;
+  const float s = scale.empty() ? 1.0f : scale.at(x, y, 0);
+  const float* t = tint.empty() ? nullptr : tint.pixel(x, y);
+  if (s == 1.0f && (!t || (t[0] == 1.0f && t[1] == 1.0f && t[2] == 1.0f))) return d;
   Rgb out;
-  for (int c = 0; c < 3; ++c) out[c] = s * (sky_radiance[c] + d[c]) - sky_radiance[c];
+  for (int c = 0; c < 3; ++c)
+    out[c] = s * (t ? t[c] : 1.0f) * (sky_radiance[c] + d[c]) - sky_radiance[c];
   return out;
 }
 
@@ -81,9 +82,11 @@ SkyLight sky_light_from_photo(const Image& photo, const Image& distance_m, const
   const double weight = sky_brightness_scale_weight(scene.medium);
   if (brightness_from_photo && weight > 0) {
     out.scale = photo::sky_brightness_scale(photo.view(), distance_m.view(), camera, scene.pose,
-                                            out.deviation, sky_radiance);
-    if (weight < 1)
+                                            out.deviation, sky_radiance, &out.tint);
+    if (weight < 1) {
       for (float& s : out.scale.pixels()) s = float(std::pow(double(s), weight));
+      for (float& t : out.tint.pixels()) t = float(std::pow(double(t), weight));
+    }
   }
   return out;
 }
@@ -113,6 +116,14 @@ void add_sky_light(const SkyLight& sky_light, const Medium& medium, const Camera
                 "add_sky_light: the sky light's scale is " +
                     size_text(sky_light.scale.width(), sky_light.scale.height()) + ", the camera " +
                     size_text(camera.width, camera.height));
+  if (!sky_light.tint.empty() &&
+      (sky_light.tint.width() != camera.width || sky_light.tint.height() != camera.height ||
+       sky_light.tint.channels() != 3))
+    throw Error(ErrorCode::size_mismatch,
+                "add_sky_light: the sky light's tint is " +
+                    size_text(sky_light.tint.width(), sky_light.tint.height()) + " with " +
+                    std::to_string(sky_light.tint.channels()) + " channels, the camera " +
+                    size_text(camera.width, camera.height) + " with 3");
   tbb::parallel_for(0, camera.height, [&](int y) {
     for (int x = 0; x < camera.width; ++x) {
       const Rgb deviation = sky_light.deviation_at(pose.ray_direction(camera, x, y), x, y);

@@ -36,8 +36,13 @@ struct MR_API SkyLight {
   /// the luminance of the photo's own sky around the pixel (photo/sky_light.h,
   /// sky_brightness_scale), 1 channel at the camera's size; empty: 1 everywhere.
   Image scale;
-  /// The light's deviation for pixel (x, y) seen along `direction`: s (L_sky + deviation) -
-  /// L_sky with s = scale(x, y), exactly deviation_at(direction) where the scale is 1 or empty.
+  /// The factor per channel on the scaled light that gives it part of the hue of the photo's
+  /// own sky around the pixel at the same display luma (photo/sky_light.h), 3 channels at the
+  /// camera's size; empty: 1 everywhere.
+  Image tint;
+  /// The light's deviation for pixel (x, y) seen along `direction`: s t_c (L_sky + deviation) -
+  /// L_sky with s = scale(x, y) and t = tint(x, y), exactly deviation_at(direction) where both
+  /// are 1 or empty.
   Rgb deviation_at(const Vec3& direction, int x, int y) const;
 };
 
