@@ -456,34 +456,18 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
           std::pow(soft_limit_to_one(local / light, kKnee), kDisplayGamma), kMinScale, kMaxScale));
       scale[i] = s;
       sky_weight.at<float>(y, x) = std::min(1.0f, a[1] / kFullWeight);
-      if (!tint || !(local > 0)) continue;
-      // Unit-luma display colours of the light (scaling leaves them as they are) and of the
-      // local sky; their blend, at the scaled light's luma, back to scene-linear.
-      const double light_scaled = light * std::pow(double(s), 1 / kDisplayGamma);
-      std::array<float, 3> target;
-      for (int c = 0; c < 3; ++c) {
-        const double own = display_encode(lin[c]) / light;
-        const double sky_hue = double(a[2 + c]) / double(a[1]) / local;
-        target[c] = float(std::pow(
-            std::max(0.0, light_scaled * ((1 - kSkyHueShare) * own + kSkyHueShare * sky_hue)),
-            kDisplayGamma));
-      }
-      // (The bound keeps the luminance; the display luma is the scale's, so it is put back.)
-      std::array<float, 3> bounded = neutral_fog_colour(target, skylight_prior);
-      const double luma_target = display_luma(target[0], target[1], target[2]),
-                   luma_bounded = display_luma(bounded[0], bounded[1], bounded[2]);
-      if (luma_bounded > 0)
-        for (float& v : bounded)
-          v = float(v * std::pow(luma_target / luma_bounded, kDisplayGamma));
-      for (int c = 0; c < 3; ++c) {
-        const double scaled = double(s) * std::max(0.0, lin[c]);
-        hue[3 * i + c] = scaled > 0 ? float(std::clamp(bounded[c] / scaled, 0.0, 4.0)) : 1.0f;
-      }
+      // The local sky's display colour at unit luma (its hue), for the tint below.
+      for (int c = 0; tint && local > 0 && c < 3; ++c)
+        hue[3 * i + c] = float(double(a[2 + c]) / double(a[1]) / local);
     }
   });
-  // The hue is blurred over kHueBlurFraction of the frame (not edge-aware): the edge-aware
-  // average stops at a cloud's rim, and a white cloud kept at the light's luma turned into a
-  // grey cut-out with a sharp hue edge inside the blue (kite). Luma is the scale's alone.
+  // The tint. The sky's hue is blurred over kHueBlurFraction of the frame first (not
+  // edge-aware): the edge-aware average stops at a cloud's rim, and a white cloud kept at the
+  // light's luma turned into a grey cut-out with a sharp hue edge inside the blue (kite). Then,
+  // per pixel: the unit-luma display colours of the light (scaling leaves them as they are) and
+  // of the sky, blended, at the scaled light's luma, back to scene-linear, bounded; the factor
+  // on the scaled light. (Blurring the bounded factors instead mixed lights of different rows
+  // and made a sunset's warmth step back and forth down the sky.)
   constexpr double kHueBlurFraction = 0.015;
   if (tint) {
     cv::Mat weighted(h, w, CV_32FC3), weight(h, w, CV_32F);
@@ -497,13 +481,42 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
     const double blur_px = std::max(1.0, kHueBlurFraction * std::max(w, h));
     cv::GaussianBlur(weighted, weighted, cv::Size(0, 0), blur_px, blur_px, cv::BORDER_REPLICATE);
     cv::GaussianBlur(weight, weight, cv::Size(0, 0), blur_px, blur_px, cv::BORDER_REPLICATE);
-    for (int y = 0; y < h; ++y)
+    tbb::parallel_for(0, h, [&](int y) {
       for (int x = 0; x < w; ++x) {
-        const float m = weight.at<float>(y, x);
-        if (!sky.at<std::uint8_t>(y, x) || !(m > 1e-4f)) continue;
         const std::size_t i = std::size_t(y) * w + x;
-        for (int c = 0; c < 3; ++c) hue[3 * i + c] = weighted.at<cv::Vec3f>(y, x)[c] / m;
+        const float m = weight.at<float>(y, x);
+        const float s = scale[i];
+        float* factor = &hue[3 * i];
+        if (!sky.at<std::uint8_t>(y, x) || !(m > 1e-4f) || !(sky_weight.at<float>(y, x) > 0)) {
+          factor[0] = factor[1] = factor[2] = 1.0f;
+          continue;
+        }
+        const auto d = sample_latlong(deviation, pose.ray_direction(camera, x, y));
+        const double lin[3] = {sky_radiance[0] + d[0], sky_radiance[1] + d[1],
+                               sky_radiance[2] + d[2]};
+        const double light = display_luma(lin[0], lin[1], lin[2]);
+        const double light_scaled = light * std::pow(double(s), 1 / kDisplayGamma);
+        std::array<float, 3> target;
+        for (int c = 0; c < 3; ++c) {
+          const double own = display_encode(lin[c]) / light;
+          const double sky_hue = double(weighted.at<cv::Vec3f>(y, x)[c]) / m;
+          target[c] = float(std::pow(
+              std::max(0.0, light_scaled * ((1 - kSkyHueShare) * own + kSkyHueShare * sky_hue)),
+              kDisplayGamma));
+        }
+        // (The bound keeps the luminance; the display luma is the scale's, so it is put back.)
+        std::array<float, 3> bounded = neutral_fog_colour(target, skylight_prior);
+        const double luma_target = display_luma(target[0], target[1], target[2]),
+                     luma_bounded = display_luma(bounded[0], bounded[1], bounded[2]);
+        if (luma_bounded > 0)
+          for (float& v : bounded)
+            v = float(v * std::pow(luma_target / luma_bounded, kDisplayGamma));
+        for (int c = 0; c < 3; ++c) {
+          const double scaled = double(s) * std::max(0.0, lin[c]);
+          factor[c] = scaled > 0 ? float(std::clamp(bounded[c] / scaled, 0.0, 4.0)) : 1.0f;
+        }
       }
+    });
   }
   // Elsewhere, and where the average holds little: the scale of the nearest sky pixel whose
   // average is sound (a far hill under the sky, at T ~ 0, shows the same fog as the sky just
