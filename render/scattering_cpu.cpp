@@ -1143,9 +1143,11 @@ void render_scattering_cpu(const CoreInputs& in, CoreOutputs& out) {
   // Where pixel (x, y) of a thin cell gets finer steps: the stretch of its view ray where the
   // cell's corners saw shadow (ThinShadows::shadow_lo_m..shadow_hi_m, carried along the sun
   // onto its ray as hints are), split in kShaftRefinement. Elsewhere along the ray the corners
-  // saw none, so thin shadows there are few: on the kite's sun bank (1280 px) this stretch is
-  // about half of its thin cells' marches, at the 128-step march's error (crop x 640-800,
-  // y 60-200: 1.478 % against 1.474 %). The whole ray where a corner's end cannot be carried.
+  // saw none, so thin shadows there are few. On the kite's sun bank (1280 px, with
+  // kThinShallow) its thin cells' marches traced 2.61 -> about 1.2 M shadow rays at the error of
+  // 128 steps along the whole ray (against 256 steps without acceleration, crop x 640-800,
+  // y 60-200: 1.480 % against 1.474 %; x 500-1000, y 0-300: 0.567 % against 0.566 %). The
+  // whole ray where a corner's end cannot be carried onto this one.
   auto thin_zone = [&](const std::array<std::pair<std::size_t, std::size_t>, 4>& corners, int x,
                        int y) {
     StepZone zone;
