@@ -1307,6 +1307,21 @@ TreeScene leaves_against_a_deep_blue_sky(const FogScene& scene) {  // all sky be
   return t;
 }
 
+// The haze look over the leaves, looking up (no ground in the frame), lit as the looks are
+// ('auto': the dark channel's airlight) with the sky light by direction.
+struct LeavesInHaze {
+  FogScene scene;
+  TreeScene t;
+};
+LeavesInHaze leaves_in_haze() {
+  LeavesInHaze l{haze_scene(), {}};
+  l.scene.pose.pitch_deg = 25;
+  l.t = leaves_against_a_deep_blue_sky(l.scene);
+  l.scene.lighting.sky_by_direction = true;
+  l.scene.lighting.sky_radiance = estimate_airlight(l.t.photo);
+  return l;
+}
+
 TEST(SkyLight, HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze) {
   FogScene scene = haze_scene();
   scene.pose.pitch_deg = 25;  // looking up: no ground in the frame (its horizon is another case)
@@ -1342,11 +1357,7 @@ TEST(SkyLight, HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze) {
 // (33.6, under the gallery's 36.1). Where the sky is seen through the whole layer (T < 0.01
 // here, 25-45 degrees up) the fogged sky keeps a muted blue of the photo's luma.
 TEST(SkyLight, DeepBlueSkyThroughHazeKeepsSomeOfItsBlueAtItsLuma) {
-  FogScene scene = haze_scene();
-  scene.pose.pitch_deg = 25;
-  const TreeScene t = leaves_against_a_deep_blue_sky(scene);
-  scene.lighting.sky_by_direction = true;
-  scene.lighting.sky_radiance = estimate_airlight(t.photo);
+  const auto [scene, t] = leaves_in_haze();
   const FogLayers fog = fog_with_sky_light(t.photo, t.distance, t.alpha, scene, true, kCamera);
   const SkyLight light =
       sky_light_from_photo(t.photo, t.distance, kCamera, scene, *scene.lighting.sky_radiance);
@@ -1427,11 +1438,7 @@ TEST(SkyLight, DeepBlueSkyThroughHazeKeepsSomeOfItsBlueAtItsLuma) {
 // by mr::fog as `mr fog` does, keep their hue edge (before haze15 the render left the light
 // flat: 0.42 % created edges).
 TEST(SkyLight, TheRenderScalesTheSkyLightToThePhotosSkyByDefault) {
-  FogScene scene = haze_scene();
-  scene.pose.pitch_deg = 25;
-  const TreeScene t = leaves_against_a_deep_blue_sky(scene);
-  scene.lighting.sky_by_direction = true;
-  scene.lighting.sky_radiance = estimate_airlight(t.photo);
+  const auto [scene, t] = leaves_in_haze();
   const SkyLight light =
       sky_light_from_photo(t.photo, t.distance, kCamera, scene, *scene.lighting.sky_radiance);
   EXPECT_FALSE(light.scale.empty());

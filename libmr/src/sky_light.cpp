@@ -109,21 +109,18 @@ void add_sky_light(const SkyLight& sky_light, const Medium& medium, const Camera
                     size_text(inscatter.width(), inscatter.height()) +
                     " must be 3-channel and the camera's " + size_text(camera.width, camera.height));
   if (sky_light.deviation.empty()) return;
-  if (!sky_light.scale.empty() &&
-      (sky_light.scale.width() != camera.width || sky_light.scale.height() != camera.height ||
-       sky_light.scale.channels() != 1))
-    throw Error(ErrorCode::size_mismatch,
-                "add_sky_light: the sky light's scale is " +
-                    size_text(sky_light.scale.width(), sky_light.scale.height()) + ", the camera " +
-                    size_text(camera.width, camera.height));
-  if (!sky_light.tint.empty() &&
-      (sky_light.tint.width() != camera.width || sky_light.tint.height() != camera.height ||
-       sky_light.tint.channels() != 3))
-    throw Error(ErrorCode::size_mismatch,
-                "add_sky_light: the sky light's tint is " +
-                    size_text(sky_light.tint.width(), sky_light.tint.height()) + " with " +
-                    std::to_string(sky_light.tint.channels()) + " channels, the camera " +
-                    size_text(camera.width, camera.height) + " with 3");
+  // The per-pixel maps (scale: 1 channel, tint: 3), when present, are the camera's size.
+  auto check_map = [&](const Image& map, int channels, const char* name) {
+    if (!map.empty() && (map.width() != camera.width || map.height() != camera.height ||
+                         map.channels() != channels))
+      throw Error(ErrorCode::size_mismatch,
+                  std::string("add_sky_light: the sky light's ") + name + " is " +
+                      size_text(map.width(), map.height()) + " with " +
+                      std::to_string(map.channels()) + " channels, the camera " +
+                      size_text(camera.width, camera.height) + " with " + std::to_string(channels));
+  };
+  check_map(sky_light.scale, 1, "scale");
+  check_map(sky_light.tint, 3, "tint");
   tbb::parallel_for(0, camera.height, [&](int y) {
     for (int x = 0; x < camera.width; ++x) {
       const Rgb deviation = sky_light.deviation_at(pose.ray_direction(camera, x, y), x, y);
