@@ -51,7 +51,9 @@ struct MR_API SkyLight {
 /// relative to `sky_radiance` (the L_sky the render uses). A photo whose sky and ground are both
 /// exactly sky_radiance gives an empty map. `brightness_from_photo` (issue 11, helpers haze14
 /// and haze15): also the scale that darkens the light along each pixel's ray to the display luma
-/// of the photo's own sky around the pixel (SkyLight::scale, photo/sky_light.h). On by default
+/// of the photo's own sky around the pixel (SkyLight::scale, photo/sky_light.h), and the tint
+/// that gives the light half of that sky's hue at the same luma (SkyLight::tint; the colour
+/// bounded as every automatic fog colour, C*ab <= 33.6). On by default
 /// since haze15 (render_scattering and the streamed `mr fog` use the default): on the gallery's
 /// tuning half it lowered the haze misses with dense fog still within the target everywhere
 /// (gallery/results/haze15_tune.md). Throws mr::Error(size_mismatch / invalid_argument) for
