@@ -309,9 +309,10 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       const bool finite = std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
       for (int c = 0; c < 3; ++c)
         guide[3 * i + c] = finite ? std::pow(std::clamp(p[c], 0.0f, 1.0f), 1 / 2.2f) : 0.0f;
-      luma[i] = finite ? float(display_luma(p[0], p[1], p[2])) : 0.0f;
-      for (int c = 0; tint && c < 3; ++c)
-        colour[3 * i + c] = finite ? float(display_encode(p[c])) : 0.0f;
+      // display_luma's sum, from the encoded channels the tint keeps.
+      const double e[3] = {display_encode(p[0]), display_encode(p[1]), display_encode(p[2])};
+      luma[i] = finite ? float(0.2126 * e[0] + 0.7152 * e[1] + 0.0722 * e[2]) : 0.0f;
+      for (int c = 0; tint && c < 3; ++c) colour[3 * i + c] = finite ? float(e[c]) : 0.0f;
       if (finite && render::physics::is_sky(distance_m.at(x, y, 0))) {
         sky.at<std::uint8_t>(y, x) = 1;
         any_sky = true;
@@ -438,6 +439,12 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   NeutralPrior skylight_prior;
   skylight_prior.cool_limit = 0.06;
   skylight_prior.knee_fraction = 1;
+  // The sky light along pixel (x, y)'s ray (scene-linear), for the scale and again for the tint.
+  auto light_at = [&](int x, int y) {
+    const auto d = sample_latlong(deviation, pose.ray_direction(camera, x, y));
+    return std::array<double, 3>{sky_radiance[0] + d[0], sky_radiance[1] + d[1],
+                                 sky_radiance[2] + d[2]};
+  };
   std::vector<float> scale(count, 1.0f);
   std::vector<float> hue(tint ? 3 * count : 0, 1.0f);  // the tint's factor on the scaled light
   cv::Mat sky_weight(h, w, CV_32F, cv::Scalar(0));
@@ -447,9 +454,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       const float* a = &data[std::size_t(n) * i];
       if (!sky.at<std::uint8_t>(y, x) || !(a[1] > kMinWeight)) continue;
       const double local = double(a[0]) / double(a[1]);
-      const auto d = sample_latlong(deviation, pose.ray_direction(camera, x, y));
-      const double lin[3] = {sky_radiance[0] + d[0], sky_radiance[1] + d[1],
-                             sky_radiance[2] + d[2]};
+      const std::array<double, 3> lin = light_at(x, y);
       const double light = display_luma(lin[0], lin[1], lin[2]);
       if (!(light > 0) || !(local >= 0)) continue;
       const float s = float(std::clamp(
@@ -491,9 +496,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
           factor[0] = factor[1] = factor[2] = 1.0f;
           continue;
         }
-        const auto d = sample_latlong(deviation, pose.ray_direction(camera, x, y));
-        const double lin[3] = {sky_radiance[0] + d[0], sky_radiance[1] + d[1],
-                               sky_radiance[2] + d[2]};
+        const std::array<double, 3> lin = light_at(x, y);
         const double light = display_luma(lin[0], lin[1], lin[2]);
         const double light_scaled = light * std::pow(double(s), 1 / kDisplayGamma);
         std::array<float, 3> target;
