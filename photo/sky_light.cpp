@@ -283,6 +283,16 @@ double soft_limit_to_one(double ratio, double knee) {
   return 1 - knee + knee * (t + t * t - t * t * t);
 }
 
+// The rise above 1 of the light's ratio to a brighter sky, 0 at 1 and C1 there (slope 0, as
+// soft_limit_to_one arrives at 1 from below: no kink in the fogged sky where the photo's sky
+// crosses the light's luma), then the ratio's own slope, reaching at most max_rise over a knee.
+double soft_rise_above_one(double ratio, double knee, double max_rise) {
+  const double t = ratio - 1;
+  if (!(t > 0)) return 0;
+  const double rise = t < knee ? t * t / (2 * knee) : t - knee / 2;
+  return max_rise * soft_limit_to_one(rise / max_rise, knee);
+}
+
 bool all_zero(const Image& map) {
   for (float v : map.pixels())
     if (v != 0) return false;
@@ -423,7 +433,18 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   // The limit is reached over a knee of kKnee in the luma ratio: a hard one cut
   // the fogged sky's gradient along the contour where the photo's sky meets the light, a Mach
   // band drawn as a bright arc through a sunset's haze (sunset_aitzol).
-  constexpr double kMinScale = 0.1, kMaxScale = 1, kKnee = 0.3;
+  constexpr double kMinScale = 0.1, kKnee = 0.3;
+  // Deep in the sky, away from every surface, the light follows the sky's own luma (photo/
+  // sky_light.h): darker as it is, brighter by kRiseShare of its excess over the flat light,
+  // up to kMaxRise above it. In full from kDeepFarFraction of the frame away from the nearest
+  // surface pixel, not at all within kDeepNearFraction (a smoothstep between).
+  constexpr double kDeepNearFraction = 0.05, kDeepFarFraction = 0.25, kMaxRise = 1.5,
+                   kRiseShare = 0.7;
+  const double kMaxScale = std::pow(1 + kMaxRise, kDisplayGamma);
+  cv::Mat from_surface;  // each sky pixel's distance to the nearest surface pixel
+  cv::distanceTransform(sky, from_surface, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  const double deep_near_px = kDeepNearFraction * std::max(w, h),
+               deep_far_px = kDeepFarFraction * std::max(w, h);
   // The tint: the light's colour moved kSkyHueShare of the way toward the hue of the photo's
   // own sky around the pixel (its display colour normalised to unit luma), at the scaled
   // light's display luma, which the blend leaves unchanged (luma is linear in display values),
@@ -446,20 +467,38 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
                                  sky_radiance[2] + d[2]};
   };
   std::vector<float> scale(count, 1.0f);
+  // The scale without the sky's own luma, for the surfaces (a surface under the sky takes the
+  // sky's average, not the single pixel's luma nearest to it).
+  std::vector<float> near_scale(count, 1.0f);
   std::vector<float> hue(tint ? 3 * count : 0, 1.0f);  // the tint's factor on the scaled light
   cv::Mat sky_weight(h, w, CV_32F, cv::Scalar(0));
+  cv::Mat deep_weight(h, w, CV_32F, cv::Scalar(0));
   tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
       const float* a = &data[std::size_t(n) * i];
-      if (!sky.at<std::uint8_t>(y, x) || !(a[1] > kMinWeight)) continue;
-      const double local = double(a[0]) / double(a[1]);
+      if (!sky.at<std::uint8_t>(y, x)) continue;
+      const double t0 = std::clamp(
+          (from_surface.at<float>(y, x) - deep_near_px) / (deep_far_px - deep_near_px), 0.0, 1.0);
+      const double t = t0 * t0 * (3 - 2 * t0);
+      const bool averaged = a[1] > kMinWeight;
+      if (!averaged && !(t > 0)) continue;
+      const double local = averaged ? double(a[0]) / double(a[1]) : 0.0;
       const std::array<double, 3> lin = light_at(x, y);
       const double light = display_luma(lin[0], lin[1], lin[2]);
       if (!(light > 0) || !(local >= 0)) continue;
-      const float s = float(std::clamp(
-          std::pow(soft_limit_to_one(local / light, kKnee), kDisplayGamma), kMinScale, kMaxScale));
+      // Near a surface: the edge-aware average, only ever darker. Deep in the sky: the sky's
+      // own luma, darker as it is and brighter by kRiseShare of its excess.
+      const double own_ratio = luma[i] / light;
+      const double deep = soft_limit_to_one(own_ratio, kKnee) +
+                          kRiseShare * soft_rise_above_one(own_ratio, kKnee, kMaxRise);
+      const double near = averaged ? soft_limit_to_one(local / light, kKnee) : deep;
+      const float s = float(
+          std::clamp(std::pow(near + t * (deep - near), kDisplayGamma), kMinScale, kMaxScale));
       scale[i] = s;
+      near_scale[i] = float(std::clamp(std::pow(near, kDisplayGamma), kMinScale, 1.0));
+      deep_weight.at<float>(y, x) = float(t);
+      if (!averaged) continue;
       sky_weight.at<float>(y, x) = std::min(1.0f, a[1] / kFullWeight);
       // The local sky's display colour at unit luma (its hue), for the tint below.
       for (int c = 0; tint && local > 0 && c < 3; ++c)
@@ -547,7 +586,7 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
     for (int x = 0; x < w; ++x) {
       const std::int32_t k = nearest[std::size_t(y) * w + x];
       float* f = spread.ptr<float>(y) + std::size_t(k_channels) * x;
-      f[0] = k >= 0 ? scale[std::size_t(k)] : 1.0f;
+      f[0] = k >= 0 ? near_scale[std::size_t(k)] : 1.0f;
       for (int c = 1; c < k_channels; ++c) f[c] = k >= 0 ? hue[3 * std::size_t(k) + c - 1] : 1.0f;
     }
   const double spread_px = std::max(1.0, kSpreadFraction * std::max(w, h));
@@ -561,12 +600,16 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * w + x;
-      const float b = sky_weight.at<float>(y, x);
+      // The sky's own luma deep in the sky holds whatever the average's weight (the scale's;
+      // the tint comes from the average alone).
+      const float b_tint = sky_weight.at<float>(y, x);
+      const float b_scale = b_tint + deep_weight.at<float>(y, x) * (1 - b_tint);
       const float* f = spread.ptr<float>(y) + std::size_t(k_channels) * x;
       const bool on_sky = sky.at<std::uint8_t>(y, x);
       const float fade = on_sky ? 0.0f : float(std::exp(-from_sky.at<float>(y, x) / fade_px));
       for (int c = 0; c < k_channels; ++c) {
         const float own = c == 0 ? scale[i] : hue[3 * i + c - 1];
+        const float b = c == 0 ? b_scale : b_tint;
         const float v = on_sky ? f[c] + b * (own - f[c]) : 1.0f + fade * (f[c] - 1.0f);
         if (c == 0) {
           out.at(x, y, 0) = v;

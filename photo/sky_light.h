@@ -78,8 +78,14 @@ bool all_zero(const Image& map);
 /// transform's recursive filter, Gastal and Oliveira 2011, guided by the display-referred
 /// photo after a median that removes thin structures taken for sky: the core of the sky feeds
 /// it, surface pixels and the mixed pixels along the sky's edge never do, and a photo edge,
-/// such as a dark cloud's rim against its bright glow, stops it). The scale only ever darkens
-/// (at most 1): a glow, white clouds or a pale structure taken for sky keep the flat light.
+/// such as a dark cloud's rim against its bright glow, stops it). Near a surface the scale only
+/// ever darkens (at most 1): a glow, white clouds or a pale structure taken for sky there keep
+/// the flat light. Deep in the sky (from 10 % of the frame away from the nearest surface pixel,
+/// not within 3 %, a smoothstep between) the light follows the sky's own display luma pixel by
+/// pixel instead: darker as it is, and brighter by 0.7 of its excess over the flat light (up to
+/// 1.5 above the flat light's luma), so white clouds, glows and sunlit rays stay visible,
+/// attenuated, with rims no sharper than the photo's (issue 11: kite's white clouds had become
+/// grey patches at the mean sky's luma).
 /// Dark or bright structures narrower than 3 % of the frame taken for sky (a launch tower's
 /// lattice, cables, a facade's windows: haze15) stand off a grey closing or opening of the sky's
 /// luma by more than 10 % and do not feed the average either.

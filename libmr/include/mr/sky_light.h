@@ -50,8 +50,9 @@ struct MR_API SkyLight {
 /// (1 channel, +inf = sky) seen by `camera` from `scene.pose`, convolved with scene.medium.g,
 /// relative to `sky_radiance` (the L_sky the render uses). A photo whose sky and ground are both
 /// exactly sky_radiance gives an empty map. `brightness_from_photo` (issue 11, helpers haze14
-/// and haze15): also the scale that darkens the light along each pixel's ray to the display luma
-/// of the photo's own sky around the pixel (SkyLight::scale, photo/sky_light.h), and the tint
+/// and haze15): also the scale that brings the light along each pixel's ray to the display luma
+/// of the photo's own sky around the pixel (SkyLight::scale, photo/sky_light.h: only darker near
+/// a surface; deep in the sky it follows the sky's own luma, clouds included), and the tint
 /// that gives the light half of that sky's hue at the same luma (SkyLight::tint; the colour
 /// bounded as every automatic fog colour, C*ab <= 33.6). On by default
 /// since haze15 (render_scattering and the streamed `mr fog` use the default): on the gallery's
