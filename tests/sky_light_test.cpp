@@ -1429,11 +1429,6 @@ TEST(SkyLight, DeepBlueSkyThroughHazeKeepsSomeOfItsBlueAtItsLuma) {
   EXPECT_NEAR(fog_luma / n, photo_luma / n, 0.05 * photo_luma / n);
 }
 
-// A dark cloud's flat body beside the bright glow around a hidden sun, all sky: the sky's
-// brightness is averaged within each side of the cloud's edge, never across it (a plain blur
-// mixed the two: the body near its edge brightened, the glow dimmed, each a new gradient). The
-// body, darker than the fog's light, keeps its own brightness; the glow, brighter, keeps the
-// fog's light as before (the scale only ever darkens).
 // The render asks for the brightness scale by default (helper haze15: mr::fog, and through
 // sky_light_from_photo's default the streamed `mr fog` too): the leaves of the test above, fogged
 // by mr::fog as `mr fog` does, keep their hue edge (before haze15 the render left the light
@@ -1450,6 +1445,11 @@ TEST(SkyLight, TheRenderScalesTheSkyLightToThePhotosSkyByDefault) {
   EXPECT_LE(e, 2e-4);  // the target
 }
 
+// A dark cloud's flat body beside the bright glow around a hidden sun, all sky: the sky's
+// brightness is never mixed across the cloud's edge (a plain blur mixed the two: the body near
+// its edge brightened, the glow dimmed, each a new gradient). The body, darker than the fog's
+// light, keeps its own brightness; the glow, brighter, is not dimmed (all sky, it rises toward
+// the photo's own glow: photo/sky_light.h).
 TEST(SkyLight, DarkCloudBesideItsGlowKeepsItsBrightnessInHaze) {
   FogScene scene = haze_scene();
   scene.pose.pitch_deg = 25;  // looking up: all sky
