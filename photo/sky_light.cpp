@@ -102,30 +102,6 @@ void domain_transform_filter(std::vector<float>& data, int n, const std::vector<
   }
 }
 
-// A Gaussian blur of standard deviation sigma_px (edges replicated) for the wide blurs below
-// (1-1.5 % of the frame: 60 px at 12 MP, where cv::GaussianBlur's 6 sigma taps per pixel and
-// pass took 11.7 of the scale's 22 s): above a few pixels, three box filters (O(1) per pixel)
-// whose widths give the same variance (Kovesi, "Fast almost-Gaussian filtering", 2010).
-void wide_gaussian_blur(cv::Mat& image, double sigma_px) {
-  constexpr double kDirectBelowPx = 4;
-  if (sigma_px < kDirectBelowPx) {
-    cv::GaussianBlur(image, image, cv::Size(0, 0), sigma_px, sigma_px, cv::BORDER_REPLICATE);
-    return;
-  }
-  constexpr int kPasses = 3;
-  const double ideal = std::sqrt(12 * sigma_px * sigma_px / kPasses + 1);
-  int lower = int(std::floor(ideal));
-  if (lower % 2 == 0) --lower;
-  const int upper = lower + 2;
-  const int lower_passes = int(std::lround(
-      (12 * sigma_px * sigma_px - kPasses * lower * lower - 4 * kPasses * lower - 3 * kPasses) /
-      (-4.0 * lower - 4)));
-  for (int pass = 0; pass < kPasses; ++pass) {
-    const int width = pass < lower_passes ? lower : upper;
-    cv::blur(image, image, cv::Size(width, width), cv::Point(-1, -1), cv::BORDER_REPLICATE);
-  }
-}
-
 }  // namespace
 
 Vec3 latlong_direction(int width, int height, double col, double row) {
@@ -321,6 +297,33 @@ bool all_zero(const Image& map) {
   for (float v : map.pixels())
     if (v != 0) return false;
   return true;
+}
+
+void wide_gaussian_blur(cv::Mat& image, double sigma_px) {
+  constexpr double kDirectBelowPx = 4;
+  if (sigma_px < kDirectBelowPx) {
+    cv::GaussianBlur(image, image, cv::Size(0, 0), sigma_px, sigma_px, cv::BORDER_REPLICATE);
+    return;
+  }
+  constexpr int kPasses = 3;
+  const double variance = sigma_px * sigma_px;
+  int lower = int(std::floor(std::sqrt(12 * variance / kPasses + 1)));
+  if (lower % 2 == 0) --lower;  // odd widths, centred
+  const int upper = lower + 2;
+  // The fewest passes at the lower width whose variance (a box of width b: (b^2 - 1) / 12) does
+  // not exceed the Gaussian's; an exact Gaussian of the small remainder makes it up.
+  auto box_variance = [&](int lower_passes) {
+    return (lower_passes * (lower * lower - 1) + (kPasses - lower_passes) * (upper * upper - 1)) /
+           12.0;
+  };
+  int lower_passes = 0;
+  while (box_variance(lower_passes) > variance) ++lower_passes;
+  for (int pass = 0; pass < kPasses; ++pass) {
+    const int width = pass < lower_passes ? lower : upper;
+    cv::blur(image, image, cv::Size(width, width), cv::Point(-1, -1), cv::BORDER_REPLICATE);
+  }
+  if (const double rest = std::sqrt(variance - box_variance(lower_passes)); rest > 0.05)
+    cv::GaussianBlur(image, image, cv::Size(0, 0), rest, rest, cv::BORDER_REPLICATE);
 }
 
 Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, const Camera& camera,
