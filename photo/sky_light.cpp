@@ -520,9 +520,9 @@ Image sky_brightness_scale(ConstImageView photo, ConstImageView distance_m, cons
       const float s = float(
           std::clamp(std::pow(near + t * (deep - near), kDisplayGamma), kMinScale, kMaxScale));
       scale[i] = s;
-      near_scale[i] = float(std::clamp(std::pow(near, kDisplayGamma), kMinScale, 1.0));
       deep_weight.at<float>(y, x) = float(t);
-      if (!averaged) continue;
+      if (!averaged) continue;  // never a sound source for the surfaces: no near_scale
+      near_scale[i] = float(std::clamp(std::pow(near, kDisplayGamma), kMinScale, 1.0));
       sky_weight.at<float>(y, x) = std::min(1.0f, a[1] / kFullWeight);
       // The local sky's display colour at unit luma (its hue), for the tint below.
       for (int c = 0; tint && local > 0 && c < 3; ++c)
