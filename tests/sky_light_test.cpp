@@ -212,6 +212,12 @@ FogScene haze_scene() {  // the gallery's haze look: 2 km visibility in a 1.5 km
   return s;
 }
 
+FogScene all_sky_haze_scene() {  // looking up (pitch 25 degrees): every pixel is sky
+  FogScene s = haze_scene();
+  s.pose.pitch_deg = 25;
+  return s;
+}
+
 bool same_bits(const Image& a, const Image& b) {
   return a.pixels().size() == b.pixels().size() &&
          std::memcmp(a.pixels().data(), b.pixels().data(), a.pixels().size() * sizeof(float)) == 0;
@@ -1491,10 +1497,9 @@ TEST(SkyLight, TheRenderScalesTheSkyLightToThePhotosSkyByDefault) {
 // light, keeps its own brightness; the glow, brighter, is not dimmed (all sky, it rises toward
 // the photo's own glow: photo/sky_light.h).
 TEST(SkyLight, DarkCloudBesideItsGlowKeepsItsBrightnessInHaze) {
-  FogScene scene = haze_scene();
-  scene.pose.pitch_deg = 25;  // looking up: all sky
-  Image photo(kW, kH, 3);
+  FogScene scene = all_sky_haze_scene();
   const Image distance = ground_plane_distance(scene);
+  Image photo(kW, kH, 3);
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> grain(-0.01f, 0.01f);
   auto cloud_cover = [](double x, double y) {  // a soft-edged ellipse (about 3 px ramp)
@@ -1575,8 +1580,7 @@ TEST(SkyLight, DarkCloudBesideItsGlowKeepsItsBrightnessInHaze) {
 // cloud keeps most of its brightness and its rim is the photo's own, no sharper. The old code:
 // the cloud's centre at display luma 0.578 of the photo's 0.939 (now 0.770).
 TEST(SkyLight, WhiteCloudsDeepInABlueSkyKeepTheirBrightnessInHaze) {
-  FogScene scene = haze_scene();
-  scene.pose.pitch_deg = 25;  // looking up: all sky
+  FogScene scene = all_sky_haze_scene();
   const Image distance = ground_plane_distance(scene);
   Image photo(kW, kH, 3);
   constexpr double kCloudX = 90, kCloudY = 110, kCloudRadius = 70;  // pixels
@@ -1638,8 +1642,7 @@ TEST(SkyLight, WhiteCloudsDeepInABlueSkyKeepTheirBrightnessInHaze) {
 // brightens more of a deep blue sky toward the light and brings back the leaves' edges of
 // HueEdgeAgainstADeepBlueSkyStaysAHueEdgeInHaze (knee 0.4: 0.0195 %, 0.5: 0.039 %).
 TEST(SkyLight, GlowBrighterThanTheLightFadesIntoTheScaledSkyWithoutAKink) {
-  FogScene scene = haze_scene();
-  scene.pose.pitch_deg = 25;  // looking up: all sky
+  FogScene scene = all_sky_haze_scene();
   const Image distance = ground_plane_distance(scene);
   Image photo(kW, kH, 3);
   constexpr double kGlowX = 160, kGlowY = 200, kGlowRadius = 90;  // pixels
