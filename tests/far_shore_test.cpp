@@ -33,6 +33,7 @@ using test::haze_and_dense_looks;
 using test::linear;
 
 constexpr int kW = 640, kH = 400, kHorizon = 220;
+constexpr int kPointEndX = 330;
 constexpr int kPostX = 560, kPostHalfWidth = 3, kPostTop = kHorizon - 60, kPostFoot = kHorizon + 90;
 
 // The band's height above the horizon at column x (px): a low far shore of wooded hills over
@@ -47,7 +48,7 @@ int band_height(int x) {
 // with faint ripples, the far shore a dark, slightly textured band on the horizon with its
 // reflection, and a near dark post standing in the water (its foot 90 px below the horizon:
 // about 10 m from 1.6 m).
-Image far_shore_photo() {
+Image far_shore_photo(int (*band_height_at)(int) = band_height) {
   Image photo(kW, kH, 3);
   auto sky = [&](double above) {  // display values, above = rows above the horizon
     const double t = std::clamp(above / kHorizon, 0.0, 1.0);
@@ -61,7 +62,7 @@ Image far_shore_photo() {
     for (int x = 0; x < kW; ++x) {
       const double dy = y - kHorizon + 0.5;
       std::array<double, 3> c = dy < 0 ? sky(-dy) : sky(dy);
-      const int band = band_height(x);
+      const int band = band_height_at(x);
       // The band above the horizon, and its reflection (as tall, darker) below it.
       const bool land = dy < 0 && -dy <= band;
       const bool reflection = dy >= 0 && dy < band;
@@ -284,6 +285,45 @@ TEST(FarShore, WaterReturnsToItsPlaneWithoutAStepWhereTheGroundIsKeptExactly) {
   }
   std::printf(
       "water below the far shore: largest row-to-row distance ratio %.3f (column %d, row %d)\n",
+      worst, worst_x, worst_y);
+  EXPECT_LT(worst, 1.5);
+}
+
+// Where the far shore ends, its water goes on beside it under the open sky (a wooded point
+// ending at a column). The band's columns bound their water's distance by the band's rule, the
+// columns beside it by the open water's only, and the two met in one column: the water in front
+// stepped from kilometres to tens of metres there (gallery/tune summer_1am: a vertical seam
+// through the reflection in dense fog, a pale block in the night look). Across the band's end
+// the water's distance changes gradually from column to column.
+int point_height(int x) {
+  return x < kPointEndX ? 10 : 0;
+}
+
+TEST(FarShore, WaterBesideTheBandsEndHasNoSeamAcrossColumns) {
+  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
+  const Image photo = far_shore_photo(point_height);
+  Annotations horizon;
+  horizon.horizon = std::array<PixelPoint, 2>{PixelPoint{0, double(kHorizon)},
+                                              PixelPoint{kW - 1.0, double(kHorizon)}};
+  const SceneEstimate est = estimate_scene(photo, camera, horizon, EstimateOptions{});
+  // Beyond the haze look's visibility both sides are as good as opaque, in every look.
+  constexpr double kVisibleM = 2000;
+  double worst = 1;
+  int worst_x = -1, worst_y = -1;
+  // The water's first rows (the reflection and as much again), from well inside the band to
+  // well past its end, short of the post.
+  for (int y = kHorizon + 1; y < kHorizon + 40; ++y)
+    for (int x = kPointEndX - 150; x + 1 < kPostX - 20; ++x) {
+      const double a = est.geometry.distance_m.at(x, y, 0),
+                   b = est.geometry.distance_m.at(x + 1, y, 0);
+      if (!(std::isfinite(a) && std::isfinite(b) && a > 0 && b > 0) || std::min(a, b) > kVisibleM)
+        continue;
+      const double ratio = std::max(a / b, b / a);
+      if (ratio > worst) worst = ratio, worst_x = x, worst_y = y;
+    }
+  std::printf(
+      "water beside the band's end: largest column-to-column distance ratio %.3f (column %d, "
+      "row %d)\n",
       worst, worst_x, worst_y);
   EXPECT_LT(worst, 1.5);
 }

@@ -1052,20 +1052,59 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         // water mirroring a glow at half weight, summer_1am; the band's mirror is the test.)
         band_weight[std::size_t(x)] = mirror;
       }
-      const std::vector<float> band_smooth = box_across_columns(band_weight);
+      // Each column's band weight: the band's own mirror weight on its columns, and beside
+      // them the nearest band column's, fading over the same reach as box_across_columns (a
+      // smoothstep). Where a band ends (a point, a gap), the photo has the band's edge: both
+      // sides of it take the band's rule at full weight (a weight of 1 bounds the reflection's
+      // distance by the band's whatever the refinement made of it), and the return to the open
+      // water's rule happens beside it, across water the photo shows as one surface. (A box
+      // smoothed across the end gave both sides half weight, where the refined distances
+      // differ by the reflection's edge: the water stepped from kilometres to tens of metres
+      // at the band's last column, summer_1am's vertical seam in dense fog and pale block in
+      // the night look.)
+      std::vector<int> nearest_band(std::size_t(w), -1);
+      for (int x = 0, last = -1; x < w; ++x) {
+        if (band_top[std::size_t(x)] >= 0) last = x;
+        nearest_band[std::size_t(x)] = last;
+      }
+      for (int x = w - 1, next = -1; x >= 0; --x) {
+        if (band_top[std::size_t(x)] >= 0) next = x;
+        const int prev = nearest_band[std::size_t(x)];
+        if (next >= 0 && (prev < 0 || next - x < x - prev)) nearest_band[std::size_t(x)] = next;
+      }
+      std::vector<float> band_near(std::size_t(w), 0.0f);
+      {
+        // How much of a band there is at a band column: the mean mirror weight over the reach
+        // on its better side (a band's last column has the band on one side only; a column or
+        // two taken for a band on their own, rocket's, weigh little).
+        const int reach = std::max(1, w / 20);
+        std::vector<float> prefix(std::size_t(w) + 1, 0.0f);
+        for (int x = 0; x < w; ++x)
+          prefix[std::size_t(x) + 1] = prefix[std::size_t(x)] + band_weight[std::size_t(x)];
+        auto mean = [&](int a, int b) {  // over [a, b), clipped to the frame
+          a = std::max(0, a), b = std::min(w, b);
+          return b > a ? (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a) : 0.0f;
+        };
+        for (int x = 0; x < w; ++x) {
+          const int xb = nearest_band[std::size_t(x)];
+          if (xb < 0) continue;
+          const float extent = std::max(mean(xb - reach, xb + 1), mean(xb, xb + reach + 1));
+          const double t = std::clamp(1 - std::abs(x - xb) / (2.0 * reach), 0.0, 1.0);
+          band_near[std::size_t(x)] = extent * float(t * t * (3 - 2 * t));
+        }
+      }
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
           const std::size_t i = std::size_t(y) * w + x;
-          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i] ||
-              band_top[std::size_t(x)] >= 0)
+          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i])
             continue;
           const float weight = open[std::size_t(x)] * mirrors.at<float>(y, x);
-          // Beside a far shore's columns the same water continues under the horizon: the band
-          // columns' mirror weight, smoothed across columns (box), phases in their bound there
-          // (the confidence squared, blended in log inverse distance), so that where a band
-          // ends its water's fog does not step from one bound to the other (summer_1am: a
-          // column edge where the band ends under the mask's sky). 0 away from bands: as sea11.
-          const float beside = band_smooth[std::size_t(x)];
+          // Near a far shore's columns (on them and beside them) the same water continues under
+          // the horizon: the band weight (band_near) phases in their bound there (the
+          // confidence squared, blended in log inverse distance), so that where a band ends
+          // its water's fog does not step from one bound to the other. 0 away from bands: as
+          // sea11.
+          const float beside = band_near[std::size_t(x)];
           const float bound = c[i] * q_plane[i] * std::pow(c[i], beside);
           const float q_before = q[i];
           if (q[i] > bound) q[i] = (1 - weight) * q[i] + weight * bound;
@@ -1083,15 +1122,19 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // linear blend at 90 % weight would leave it within a tenth of that, clear in haze.
       constexpr double kEarthRadiusM = 6.371e6;
       const float q_far = float(1.0 / std::sqrt(2 * kEarthRadiusM * height));
-      // Per column: how plainly the water in front mirrors the band and the sky; smoothed
-      // across columns (a box over 1/10 of the width, as `open`), so that where a band ends
-      // (a taller structure, a gap) its distance returns gradually, not in a vertical seam.
+      // Per column: how plainly the water in front mirrors the band and the sky (band_near:
+      // the band's own columns and, fading, those beside it, which take the nearest band
+      // column's rows), so that where a band ends (a taller structure, a gap) its distance
+      // returns gradually, not in a vertical seam.
       for (int x = 0; x < w; ++x) {
-        const int top = band_top[std::size_t(x)], bottom = band_bottom[std::size_t(x)];
-        if (top < 0) continue;
-        const int axis = waterline[std::size_t(x)], mirrored_top = 2 * axis - 1 - top;
-        const int reflection = band_reflection[std::size_t(x)];
-        const float mirror = std::min(band_weight[std::size_t(x)], band_smooth[std::size_t(x)]);
+        const bool own_band = band_top[std::size_t(x)] >= 0;
+        const int xb = nearest_band[std::size_t(x)];
+        if (xb < 0) continue;
+        const int top = band_top[std::size_t(xb)], bottom = band_bottom[std::size_t(xb)];
+        const int axis = waterline[std::size_t(xb)], mirrored_top = 2 * axis - 1 - top;
+        const int reflection = band_reflection[std::size_t(xb)];
+        const float mirror = band_near[std::size_t(x)];
+        if (!(mirror > 0)) continue;
         // The return below the reflection ends by the row where the ground's confidence reaches
         // 1 (2x the billboard's depression), from which the plane is kept as it is: ending
         // later, beside whatever stands in the water there and keeps its own distance (reeds,
@@ -1106,6 +1149,13 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         for (int y = top; y < h; ++y) {
           const std::size_t i = std::size_t(y) * w + x;
           const int cls = pixel_class[i];
+          // Beside the band only its water (the ground below the horizon, a contact at the far
+          // billboard's distance): what stands there (a tower's steel and the far billboard
+          // seen through it) is no band and keeps its distance.
+          if (!own_band &&
+              (y <= bottom || !(cls == int(photo::Coverage::ground) ||
+                                (cls == kContact && contact_forward[i] >= 0.99f * far_forward))))
+            continue;
           float bound = q_far, weight = mirror;
           if (y > bottom && cls != kFar) {  // (the far billboard ends at the pixel's centre)
             if (!(cls == int(photo::Coverage::ground) ||
