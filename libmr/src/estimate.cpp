@@ -1052,16 +1052,23 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         // water mirroring a glow at half weight, summer_1am; the band's mirror is the test.)
         band_weight[std::size_t(x)] = mirror;
       }
-      // Each column's band weight: the band's own mirror weight on its columns, and beside
-      // them the nearest band column's, fading over the same reach as box_across_columns (a
-      // smoothstep). Where a band ends (a point, a gap), the photo has the band's edge: both
-      // sides of it take the band's rule at full weight (a weight of 1 bounds the reflection's
-      // distance by the band's whatever the refinement made of it), and the return to the open
-      // water's rule happens beside it, across water the photo shows as one surface. (A box
-      // smoothed across the end gave both sides half weight, where the refined distances
-      // differ by the reflection's edge: the water stepped from kilometres to tens of metres
-      // at the band's last column, summer_1am's vertical seam in dense fog and pale block in
-      // the night look.)
+      // Each column's band weight (band_near) and how much of the water's sea bound it phases
+      // in (band_beside). Under a plainly mirrored band (the mean mirror weight over the reach
+      // on the band's better side near 1: a band's last column has the band on one side only),
+      // where the band ends (a point, a gap) the photo has the band's edge: both sides of it
+      // take the band's rule at full weight (a weight of 1 bounds the reflection's distance by
+      // the band's, whatever the refinement made of it), columns beside it take the nearest band
+      // column's rows fading over twice the box's reach (a smoothstep), and the band's own
+      // columns get the open water's bound first as the columns beside them do, so that the
+      // return to the open water's rule happens beside the band, across water the photo shows
+      // as one surface. (A box smoothed across the end gave both sides half weight, where the
+      // refined distances differ by the reflection's edge: the water stepped from kilometres
+      // to tens of metres at the band's last column, summer_1am's vertical seam in dense fog
+      // and pale block in the night look.) A weak band (a jetty's end the mirror test half
+      // passes, a column or two of rocket's horizon) keeps the box-smoothed weight on its own
+      // columns and nothing beside them: its weight fluctuates from column to column, and at
+      // full weight each fluctuation became a streak of far water in the jetty.
+      const std::vector<float> band_smooth = box_across_columns(band_weight);
       std::vector<int> nearest_band(std::size_t(w), -1);
       for (int x = 0, last = -1; x < w; ++x) {
         if (band_top[std::size_t(x)] >= 0) last = x;
@@ -1072,11 +1079,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         const int prev = nearest_band[std::size_t(x)];
         if (next >= 0 && (prev < 0 || next - x < x - prev)) nearest_band[std::size_t(x)] = next;
       }
-      std::vector<float> band_near(std::size_t(w), 0.0f);
+      constexpr float kPlainBandLow = 0.5f, kPlainBand = 0.9f;  // the mean mirror weight
+      std::vector<float> band_near(std::size_t(w), 0.0f), band_beside = band_smooth,
+                                                          band_plain(std::size_t(w), 0.0f);
       {
-        // How much of a band there is at a band column: the mean mirror weight over the reach
-        // on its better side (a band's last column has the band on one side only; a column or
-        // two taken for a band on their own, rocket's, weigh little).
         const int reach = std::max(1, w / 20);
         std::vector<float> prefix(std::size_t(w) + 1, 0.0f);
         for (int x = 0; x < w; ++x)
@@ -1085,26 +1091,39 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           a = std::max(0, a), b = std::min(w, b);
           return b > a ? (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a) : 0.0f;
         };
+        auto smoothstep = [](double t) {
+          t = std::clamp(t, 0.0, 1.0);
+          return float(t * t * (3 - 2 * t));
+        };
         for (int x = 0; x < w; ++x) {
           const int xb = nearest_band[std::size_t(x)];
           if (xb < 0) continue;
           const float extent = std::max(mean(xb - reach, xb + 1), mean(xb, xb + reach + 1));
-          const double t = std::clamp(1 - std::abs(x - xb) / (2.0 * reach), 0.0, 1.0);
-          band_near[std::size_t(x)] = extent * float(t * t * (3 - 2 * t));
+          const float plain = smoothstep((extent - kPlainBandLow) / (kPlainBand - kPlainBandLow));
+          band_plain[std::size_t(x)] = plain;
+          const float smoothed =
+              x == xb ? std::min(band_weight[std::size_t(x)], band_smooth[std::size_t(x)]) : 0.0f;
+          const float full = x == xb ? std::min(band_weight[std::size_t(x)], extent)
+                                     : extent * smoothstep(1 - std::abs(x - xb) / (2.0 * reach));
+          band_near[std::size_t(x)] = smoothed + plain * (full - smoothed);
+          band_beside[std::size_t(x)] +=
+              plain * (band_near[std::size_t(x)] - band_smooth[std::size_t(x)]);
         }
       }
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
           const std::size_t i = std::size_t(y) * w + x;
-          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i])
+          // (A band's own columns only under a plain band: see band_near.)
+          const float on_band = band_top[std::size_t(x)] >= 0 ? band_plain[std::size_t(x)] : 1.0f;
+          if (pixel_class[i] != int(photo::Coverage::ground) || ground_ratio[i] > 0 || blended[i] ||
+              !(on_band > 0))
             continue;
-          const float weight = open[std::size_t(x)] * mirrors.at<float>(y, x);
-          // Near a far shore's columns (on them and beside them) the same water continues under
-          // the horizon: the band weight (band_near) phases in their bound there (the
-          // confidence squared, blended in log inverse distance), so that where a band ends
-          // its water's fog does not step from one bound to the other. 0 away from bands: as
-          // sea11.
-          const float beside = band_near[std::size_t(x)];
+          const float weight = on_band * open[std::size_t(x)] * mirrors.at<float>(y, x);
+          // Near a far shore's columns the same water continues under the horizon: the band
+          // weight phases in their bound there (the confidence squared, blended in log inverse
+          // distance), so that where a band ends its water's fog does not step from one bound
+          // to the other. 0 away from bands: as sea11.
+          const float beside = on_band * band_beside[std::size_t(x)];
           const float bound = c[i] * q_plane[i] * std::pow(c[i], beside);
           const float q_before = q[i];
           if (q[i] > bound) q[i] = (1 - weight) * q[i] + weight * bound;
