@@ -1015,11 +1015,13 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         for (int x = 0; x < w; ++x) {
           const int ym = int(std::lround(2 * horizon_y(x) - y));
           if (!(y > horizon_y(x)) || ym < 0 || ym >= h) continue;
-          // In a far band's column: the sky, what the fold makes sky, or the band (its
-          // reflection); elsewhere the sky.
+          // The sky, what the fold makes sky, or in a far band's column the band (its
+          // reflection). (What the fold makes sky counted in band columns only before
+          // 2026-12-04: the water under summer_1am's left sixth, where far hills faded into the
+          // glow are fold sky down to the horizon, mirrored nothing, kept its plane's 25 m
+          // between veiled water, and showed as a pale patch in the night look.)
           const std::size_t im = std::size_t(ym) * w + x;
-          const bool in_band_column = band_top[std::size_t(x)] >= 0;
-          const bool sky_m = mask.sky[im] || (in_band_column && sky_like(im));
+          const bool sky_m = sky_like(im);
           const bool band = ym >= band_top[std::size_t(x)] && ym <= band_bottom[std::size_t(x)];
           if (!sky_m && !band) continue;
           const float* a = photo->pixel(x, y);
