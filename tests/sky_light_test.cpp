@@ -359,6 +359,22 @@ using test::gallery_created_edges;
 using test::fog_auto_look_flat_light;
 using test::fog_with_sky_light;
 
+// `photo` fogged in `scene` (all_sky_haze_scene's, at `distance`), lit as the looks light it: by
+// the photo's own sky ('auto', by direction, set on `scene`), with the brightness scale. Photo
+// and result are written as <name>_photo.png and <name>_haze.png under MR_TEST_IMAGES.
+FogLayers all_sky_haze_of(const Image& photo, const Image& distance, FogScene& scene,
+                          const std::string& name) {
+  scene.lighting.sky_by_direction = true;
+  scene.lighting.sky_radiance = estimate_airlight(photo);
+  FogLayers fogged = fog_with_sky_light(photo, distance, Image(), scene, true, kCamera);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
+    const std::string f(folder);
+    write_image(f + "/" + name + "_photo.png", photo);
+    write_image(f + "/" + name + "_haze.png", fogged.composite);
+  }
+  return fogged;
+}
+
 // The sun bank look (gallery/looks/sun_bank.json): 90 m visibility, height fog (scale 12 m)
 // under a 40 m top, g = 0.6, the sun at azimuth 20, elevation 8 degrees.
 FogLayers fog_sun_bank_look(const Image& photo, const Camera& camera, const SceneEstimate& est) {
@@ -1593,14 +1609,7 @@ TEST(SkyLight, WhiteCloudsDeepInABlueSkyKeepTheirBrightnessInHaze) {
       for (int i = 0; i < 3; ++i)
         photo.at(x, y, i) = linear(float(blue[i] + (white[i] - blue[i]) * k));
     }
-  scene.lighting.sky_by_direction = true;
-  scene.lighting.sky_radiance = estimate_airlight(photo);
-  const FogLayers fogged = fog_with_sky_light(photo, distance, Image(), scene, true, kCamera);
-  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
-    const std::string f(folder);
-    write_image(f + "/white_cloud_photo.png", photo);
-    write_image(f + "/white_cloud_haze.png", fogged.composite);
-  }
+  const FogLayers fogged = all_sky_haze_of(photo, distance, scene, "white_cloud");
   const cv::Mat photo_luma = test::display_luma(photo);
   const cv::Mat fog_luma = test::display_luma(fogged.composite);
   double photo_centre = 0, fog_centre = 0, photo_blue = 0, fog_blue = 0;
@@ -1654,14 +1663,7 @@ TEST(SkyLight, GlowBrighterThanTheLightFadesIntoTheScaledSkyWithoutAKink) {
                                    float(0.62 + 0.8 * glow)};
       for (int i = 0; i < 3; ++i) photo.at(x, y, i) = linear(std::clamp(c[i], 0.0f, 1.0f));
     }
-  scene.lighting.sky_by_direction = true;
-  scene.lighting.sky_radiance = estimate_airlight(photo);
-  const FogLayers fogged = fog_with_sky_light(photo, distance, Image(), scene, true, kCamera);
-  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
-    const std::string f(folder);
-    write_image(f + "/glow_photo.png", photo);
-    write_image(f + "/glow_haze.png", fogged.composite);
-  }
+  const FogLayers fogged = all_sky_haze_of(photo, distance, scene, "glow");
   auto lum = [](const Image& img, int x, int y) {  // display luma
     auto e = [&](int c) { return std::pow(std::clamp(img.at(x, y, c), 0.0f, 1.0f), 1 / 2.2f); };
     return 0.2126 * e(0) + 0.7152 * e(1) + 0.0722 * e(2);

@@ -994,16 +994,25 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           if (band_top[std::size_t(x)] >= 0 && !(band_mirror[std::size_t(x)] > 0))
             band_top[std::size_t(x)] = band_bottom[std::size_t(x)] = -1;
       }
-      // The mean of a per-column value over a box of 1/10 of the width: no seam across columns.
-      auto box_across_columns = [w](const std::vector<float>& v) {
-        const int reach = std::max(1, w / 20);
-        std::vector<float> prefix(std::size_t(w) + 1, 0.0f), mean(prefix.size() - 1);
+      // Means of a per-column value over columns [a, b) (clipped to the frame; 0 when empty),
+      // from its prefix sums.
+      const int reach = std::max(1, w / 20);
+      auto column_prefix = [w](const std::vector<float>& v) {
+        std::vector<float> prefix(std::size_t(w) + 1, 0.0f);
         for (int x = 0; x < w; ++x)
           prefix[std::size_t(x) + 1] = prefix[std::size_t(x)] + v[std::size_t(x)];
-        for (int x = 0; x < w; ++x) {
-          const int a = std::max(0, x - reach), b = std::min(w, x + reach + 1);
-          mean[std::size_t(x)] = (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a);
-        }
+        return prefix;
+      };
+      auto column_mean = [w](const std::vector<float>& prefix, int a, int b) {
+        a = std::max(0, a), b = std::min(w, b);
+        return b > a ? (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a) : 0.0f;
+      };
+      // The mean of a per-column value over a box of 1/10 of the width: no seam across columns.
+      auto box_across_columns = [&](const std::vector<float>& v) {
+        const std::vector<float> prefix = column_prefix(v);
+        std::vector<float> mean(static_cast<std::size_t>(w));
+        for (int x = 0; x < w; ++x)
+          mean[std::size_t(x)] = column_mean(prefix, x - reach, x + reach + 1);
         return mean;
       };
       // Squared: the bound fades in across columns.
@@ -1085,14 +1094,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       std::vector<float> band_near(std::size_t(w), 0.0f), band_beside = band_smooth,
                                                           band_plain(std::size_t(w), 0.0f);
       {
-        const int reach = std::max(1, w / 20);
-        std::vector<float> prefix(std::size_t(w) + 1, 0.0f);
-        for (int x = 0; x < w; ++x)
-          prefix[std::size_t(x) + 1] = prefix[std::size_t(x)] + band_weight[std::size_t(x)];
-        auto mean = [&](int a, int b) {  // over [a, b), clipped to the frame
-          a = std::max(0, a), b = std::min(w, b);
-          return b > a ? (prefix[std::size_t(b)] - prefix[std::size_t(a)]) / float(b - a) : 0.0f;
-        };
+        const std::vector<float> prefix = column_prefix(band_weight);
         auto smoothstep = [](double t) {
           t = std::clamp(t, 0.0, 1.0);
           return float(t * t * (3 - 2 * t));
@@ -1100,7 +1102,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         for (int x = 0; x < w; ++x) {
           const int xb = nearest_band[std::size_t(x)];
           if (xb < 0) continue;
-          const float extent = std::max(mean(xb - reach, xb + 1), mean(xb, xb + reach + 1));
+          const float extent = std::max(column_mean(prefix, xb - reach, xb + 1),
+                                        column_mean(prefix, xb, xb + reach + 1));
           const float plain = smoothstep((extent - kPlainBandLow) / (kPlainBand - kPlainBandLow));
           band_plain[std::size_t(x)] = plain;
           const float smoothed =
