@@ -530,6 +530,98 @@ TEST(SkyLight, BacklitCloudsUnderAWeakHorizonLowerIt) {
   EXPECT_LE(e_dense, 2e-4);
 }
 
+// A storm's cloud deck over mountains under the level fall-back horizon (gallery/tune valendas,
+// rebuilt from its description): a dark grey deck hangs from the top of the frame's left half
+// and reaches below its middle row, where the fall-back puts the horizon; under it a pale sky
+// runs down to a far, low ridge on the left; on the right a textured mountain rises above the
+// middle to a peak. The mask clipped at the guess took the deck (held up by the guess) and the pale
+// sky under it (cut off from the top border by the deck) for structures a few metres away: dense
+// fog showed the guess as a step across the pale sky, the night look the deck as a dark block.
+constexpr int kDeckW = 640, kDeckH = 426;
+cv::Mat storm_deck_display() {
+  constexpr int w = kDeckW, h = kDeckH;
+  cv::Mat m(h, w, CV_32FC3);
+  cv::Mat deck(h, w, CV_32F, cv::Scalar(0));
+  cv::ellipse(deck, cv::Point(230, 60), cv::Size(200, 190), 0, 0, 360, cv::Scalar(1), cv::FILLED);
+  cv::GaussianBlur(deck, deck, cv::Size(0, 0), 7);  // a cloud's soft edge
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      // A pale overcast sky, brightest at the low left, and the deck's smooth dark grey.
+      const float t = float(y) / h;
+      const cv::Vec3f sky = cv::Vec3f(0.70f, 0.69f, 0.64f) + cv::Vec3f(0.10f, 0.10f, 0.08f) * t;
+      const float k = deck.at<float>(y, x);
+      const cv::Vec3f cloud = cv::Vec3f(0.30f, 0.30f, 0.28f) +
+                              cv::Vec3f(0.03f, 0.03f, 0.03f) * float(std::sin(x / 40.0 + y / 25.0));
+      cv::Vec3f c = sky * (1 - k) + cloud * k;
+      // The land: a far low ridge at the left (~70 % down), rising to a peak above the middle
+      // at the right; a rough rock face, darker where nearer.
+      const double ridge =
+          x < 360 ? 0.70 * h + 6 * std::sin(x / 23.0)
+                  : 0.70 * h - (x - 360) * (0.70 * h - 0.38 * h) / 200.0 + 5 * std::sin(x / 9.0);
+      const double top = std::max(ridge, 0.38 * h + 0.9 * std::max(0, x - 560));
+      if (y >= top) {
+        const float v = 0.16f + 0.10f * float(y - top) / h + grain(rng);
+        c = cv::Vec3f(v + 0.01f, v + 0.02f, v + 0.03f);
+      }
+      m.at<cv::Vec3f>(y, x) = c;
+    }
+  cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);  // a lens
+  return m;
+}
+
+TEST(SkyLight, StormDeckUnderTheFallBackHorizonIsSky) {
+  const Camera camera = Camera::from_horizontal_fov(kDeckW, kDeckH, 60);
+  const Image photo = linear_photo(storm_deck_display());
+  EstimateOptions before;
+  before.sky_cut_by_a_guess = false;
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
+  const SceneEstimate est_before = estimate_scene(photo, camera, Annotations{}, before);
+  // The deck's body (well inside its soft edge) and the pale sky under it at the left.
+  auto sky_share = [&](const SceneEstimate& e, int x0, int x1, int y0, int y1) {
+    std::size_t n = 0, sky = 0;
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x) ++n, sky += std::isinf(e.geometry.distance_m.at(x, y, 0));
+    return double(sky) / double(n);
+  };
+  const double deck = sky_share(est, 20, 200, 20, 150),
+               deck_before = sky_share(est_before, 20, 200, 20, 150);
+  const double pale = sky_share(est, 20, 300, 272, 285),
+               pale_before = sky_share(est_before, 20, 300, 272, 285);
+  const FogLayers dense = fog_auto_look(photo, camera, est, 60, 80, 0.3);
+  const FogLayers dense_before = fog_auto_look(photo, camera, est_before, 60, 80, 0.3);
+  const FogLayers haze = fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
+  Image dense_map;
+  const double e_dense = gallery_created_edges(photo, dense.composite, &dense_map);
+  const double e_dense_before = gallery_created_edges(photo, dense_before.composite);
+  const double e_haze = gallery_created_edges(photo, haze.composite);
+  const FogLayers haze_before = fog_auto_look(photo, camera, est_before, 2000, 1500, 0.6);
+  const double e_haze_before = gallery_created_edges(photo, haze_before.composite);
+  if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {  // to look at
+    const std::string f(folder);
+    write_image(f + "/storm_deck_photo.png", photo);
+    write_image(f + "/storm_deck_haze_before.png", haze_before.composite);
+    write_image(f + "/storm_deck_dense.png", dense.composite);
+    write_image(f + "/storm_deck_dense_before.png", dense_before.composite);
+    write_image(f + "/storm_deck_haze.png", haze.composite);
+    write_image(f + "/storm_deck_dense_edges.png", dense_map);
+  }
+  std::printf(
+      "storm deck, fall-back horizon lowered %.0f px (before %.0f px); sky share: deck %.3f "
+      "(before %.3f), pale sky under it %.3f (before %.3f); created-edge pixels dense %.4f %% "
+      "(before %.4f %%), haze %.4f %% (before %.4f %%)\n",
+      est.geometry.horizon_lowered_px, est_before.geometry.horizon_lowered_px, deck, deck_before,
+      pale, pale_before, 100 * e_dense, 100 * e_dense_before, 100 * e_haze, 100 * e_haze_before);
+  EXPECT_GE(deck, 0.99);
+  EXPECT_GE(pale, 0.99);
+  EXPECT_GT(est.geometry.horizon_lowered_px, 0.0);
+  EXPECT_LE(e_dense, 2e-4);
+  EXPECT_LE(e_haze, 2e-4);
+  // What the join mends: the deck was a surface before.
+  EXPECT_LT(deck_before, 0.5);
+}
+
 // A calm sea meeting the sky at a far, faint shore line (gallery/tune summer_1am; the held-out
 // sea photos' class, rebuilt here without looking at them): a dusk sky from a pink glow at the
 // horizon to blue above, the water its mirror image a little darker, with a thin dark line of

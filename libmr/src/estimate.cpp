@@ -198,6 +198,9 @@ constexpr double kWeakHorizonConfidence = 0.2;
 constexpr double kMinSkyAtGuessFraction = 0.25;
 constexpr double kMinHorizonDropFraction = 0.02;
 constexpr double kMinSkyBelowGuessFraction = 0.75;
+// The probe's sky joined to the mask's, reaching the guess where the mask's does not, in at
+// least this fraction of the columns, is sky above the guess (join_sky_cut_by_a_guess).
+constexpr double kMinSkyCutByTheGuessFraction = 0.05;
 
 // The geometry's steps: horizon, sky mask, depth, refine.
 constexpr std::size_t kGeometrySteps = 4;
@@ -244,6 +247,58 @@ float mirror_correlation(const cv::Mat& photo, int x, int axis, int rows, int ha
   const double gain = std::sqrt(bb / aa);
   const double plausible = std::clamp((1.4 - gain) / 0.2, 0.0, 1.0);
   return float(plausible * ab / std::sqrt(aa * bb));
+}
+
+// Issue 11 (valendas: a storm's cloud deck over mountains under the level fall-back horizon):
+// the mask clips the sky at a guessed horizon, so a dark cloud deck reaching the guess "stands"
+// on it (the mask's floating-cloud rule: held up by the horizon), and a pale sky under the deck
+// is cut off from the top border by it: both stayed surfaces, a few metres away, and the fog
+// showed the guess as a step (dense fog), the deck as a block (the night). The probe (the mask
+// with its horizon below the frame) judges them without the guess. Where, in at least
+// `min_columns` columns, the probe's sky joined to the mask's (one 8-connected component of the
+// probe) reaches the guess (within `near` rows) and the mask's own sky does not, that joined
+// sky above the horizon is sky (its matte the probe's); returns those columns (0: unchanged).
+// A tower, a ridge or a tree reaching the guess goes on below it down to the land and stands
+// on it in the probe too, so it is in no sky component of the probe.
+int join_sky_cut_by_a_guess(photo::SkyMask& mask, const photo::SkyMask& probe,
+                            const std::array<PixelPoint, 2>& horizon, int near, int min_columns) {
+  const int w = mask.width, h = mask.height;
+  if (probe.sky.size() != mask.sky.size() || w < 1 || h < 1) return 0;
+  const double slope =
+      (horizon[1][1] - horizon[0][1]) / std::max(1.0, horizon[1][0] - horizon[0][0]);
+  auto horizon_y = [&](int x) { return horizon[0][1] + (x - horizon[0][0]) * slope; };
+  cv::Mat labels;
+  const int n = cv::connectedComponents(
+      cv::Mat(h, w, CV_8U, const_cast<std::uint8_t*>(probe.sky.data())), labels, 8, CV_32S);
+  std::vector<std::uint8_t> joined(std::size_t(n), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (mask.sky[std::size_t(y) * w + x]) joined[std::size_t(labels.at<int>(y, x))] = 1;
+  joined[0] = 0;
+  int columns = 0;
+  for (int x = 0; x < w; ++x) {
+    const int row = int(std::floor(horizon_y(x)));
+    if (row < near || row >= h) continue;
+    bool mask_reaches = false, joined_reaches = false;
+    for (int r = row; r >= row - near; --r) {
+      mask_reaches |= mask.sky[std::size_t(r) * w + x] != 0;
+      joined_reaches |= joined[std::size_t(labels.at<int>(r, x))] != 0;
+    }
+    columns += joined_reaches && !mask_reaches;
+  }
+  if (columns < std::max(1, min_columns)) return 0;
+  std::size_t pixels = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      if (double(y) < horizon_y(x) && joined[std::size_t(labels.at<int>(y, x))]) {
+        mask.sky[i] = 1;
+        mask.alpha[i] = std::max(mask.alpha[i], probe.alpha[i]);
+      }
+      pixels += mask.sky[i];
+    }
+  mask.pixels = pixels;
+  return columns;
 }
 
 GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annotations& annotations,
@@ -370,10 +425,15 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       return -1;
     };
     for (int x = 0; x < w; ++x) at_guess += reaches(x) >= 0;
+    // Columns where the probe's sky, not the mask's, reaches the guess (join_sky_cut_by_a_guess).
+    int cut_columns = 0;
+    const int min_cut_columns = int(std::ceil(kMinSkyCutByTheGuessFraction * w));
     if (at_guess >= kMinSkyAtGuessFraction * w) {
       const double below = h + 1.0;  // the probe: every pixel is above its horizon
       probe = photo::estimate_sky_mask(photo->view(),
                                        {PixelPoint{0, below}, PixelPoint{w - 1.0, below}});
+      if (options.sky_cut_by_a_guess)
+        cut_columns = join_sky_cut_by_a_guess(mask, probe, g.horizon, kNear, min_cut_columns);
       for (int x = 0; x < w; ++x) {
         int row = reaches(x);
         if (row < 0 || !probe.sky[std::size_t(row) * w + x]) continue;
@@ -407,15 +467,21 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // CLI tests' gradient pattern: 46 % of the band), or a sea reflecting the sky between
       // a pier's poles (61 %), continues below the guess in part of the columns only; an
       // all-sky frame (99 %) or the glow under clouds down to the land (89 %) fills it.
+      // Where the joined sky reached the guess, the band is judged in the columns the sky
+      // reaches the guess in: land standing above the guess elsewhere (valendas' peaks) stands
+      // on whatever horizon lies below it.
       std::size_t band = 0, band_sky = 0;
       for (int x = 0; x < w; ++x) {
+        if (cut_columns > 0 && reaches(x) < 0) continue;
         const int y0 = int(std::floor(guess_y(x)));
         for (int y = std::max(0, y0 + 1); y <= std::min(h - 1, y0 + int(drop)); ++y)
           ++band, band_sky += probe.sky[std::size_t(y) * w + x];
       }
       if (drop >= kMinHorizonDropFraction * h &&
-          double(band_sky) >= kMinSkyBelowGuessFraction * double(band))
+          double(band_sky) >= kMinSkyBelowGuessFraction * double(band)) {
         lower(drop);
+        if (cut_columns > 0) join_sky_cut_by_a_guess(mask, probe, g.horizon, kNear, 1);
+      }
     }
     // Issue 11: a cloud bank on the guessed line (god_rays' backlit bank under the level
     // fall-back), not open sky: above the guess it was a structure, below it the ground plane,
