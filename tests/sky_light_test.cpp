@@ -622,6 +622,49 @@ TEST(SkyLight, StormDeckUnderTheFallBackHorizonIsSky) {
   EXPECT_LT(deck_before, 0.5);
 }
 
+// The join's other side: a smooth grey tower of the deck's colour rising from the land through
+// the guess stands on the land in the probe too (it runs down to the frame's bottom), so it is
+// in no sky component of the probe and nothing is joined: the estimate is the one without the
+// join, the tower a surface.
+TEST(SkyLight, AGreyTowerThroughTheFallBackHorizonIsNotJoinedToTheSky) {
+  constexpr int w = kDeckW, h = kDeckH;
+  cv::Mat m(h, w, CV_32FC3);
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float t = float(y) / h;
+      cv::Vec3f c = cv::Vec3f(0.70f, 0.69f, 0.64f) + cv::Vec3f(0.10f, 0.10f, 0.08f) * t;
+      if (x >= 280 && x < 340 && y >= 90) c = cv::Vec3f(0.30f, 0.30f, 0.28f);  // the tower
+      if (y >= 0.70 * h + 6 * std::sin(x / 23.0)) {
+        const float v = 0.16f + grain(rng);
+        c = cv::Vec3f(v + 0.01f, v + 0.02f, v + 0.03f);
+      }
+      m.at<cv::Vec3f>(y, x) = c;
+    }
+  cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);
+  const Camera camera = Camera::from_horizontal_fov(w, h, 60);
+  const Image photo = linear_photo(m);
+  EstimateOptions without;
+  without.sky_cut_by_a_guess = false;
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
+  const SceneEstimate est_without = estimate_scene(photo, camera, Annotations{}, without);
+  std::size_t tower = 0, tower_finite = 0, differ = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float a = est.geometry.distance_m.at(x, y, 0),
+                  b = est_without.geometry.distance_m.at(x, y, 0);
+      differ += !(a == b || (std::isnan(a) && std::isnan(b)));
+      if (x >= 290 && x < 330 && y >= 100 && y < 290) ++tower, tower_finite += std::isfinite(a);
+    }
+  std::printf(
+      "grey tower through the guess: %zu of %zu tower pixels finite, %zu distances differ "
+      "from the estimate without the join\n",
+      tower_finite, tower, differ);
+  EXPECT_EQ(tower_finite, tower);
+  EXPECT_EQ(differ, 0u);
+}
+
 // A calm sea meeting the sky at a far, faint shore line (gallery/tune summer_1am; the held-out
 // sea photos' class, rebuilt here without looking at them): a dusk sky from a pink glow at the
 // horizon to blue above, the water its mirror image a little darker, with a thin dark line of
