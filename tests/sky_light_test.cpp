@@ -538,12 +538,17 @@ TEST(SkyLight, BacklitCloudsUnderAWeakHorizonLowerIt) {
 // sky under it (cut off from the top border by the deck) for structures a few metres away: dense
 // fog showed the guess as a step across the pale sky, the night look the deck as a dark block.
 constexpr int kDeckW = 640, kDeckH = 426;
-cv::Mat storm_deck_display() {
+// With `tower`: no deck, but a smooth tower of its colour standing on the land through the guess.
+cv::Mat storm_deck_display(bool tower = false) {
   constexpr int w = kDeckW, h = kDeckH;
   cv::Mat m(h, w, CV_32FC3);
   cv::Mat deck(h, w, CV_32F, cv::Scalar(0));
-  cv::ellipse(deck, cv::Point(230, 60), cv::Size(200, 190), 0, 0, 360, cv::Scalar(1), cv::FILLED);
-  cv::GaussianBlur(deck, deck, cv::Size(0, 0), 7);  // a cloud's soft edge
+  if (tower) {
+    cv::rectangle(deck, cv::Point(280, 90), cv::Point(339, h - 1), cv::Scalar(1), cv::FILLED);
+  } else {
+    cv::ellipse(deck, cv::Point(230, 60), cv::Size(200, 190), 0, 0, 360, cv::Scalar(1), cv::FILLED);
+    cv::GaussianBlur(deck, deck, cv::Size(0, 0), 7);  // a cloud's soft edge
+  }
   std::mt19937 rng(17);
   std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
   for (int y = 0; y < h; ++y)
@@ -628,23 +633,8 @@ TEST(SkyLight, StormDeckUnderTheFallBackHorizonIsSky) {
 // join, the tower a surface.
 TEST(SkyLight, AGreyTowerThroughTheFallBackHorizonIsNotJoinedToTheSky) {
   constexpr int w = kDeckW, h = kDeckH;
-  cv::Mat m(h, w, CV_32FC3);
-  std::mt19937 rng(23);
-  std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const float t = float(y) / h;
-      cv::Vec3f c = cv::Vec3f(0.70f, 0.69f, 0.64f) + cv::Vec3f(0.10f, 0.10f, 0.08f) * t;
-      if (x >= 280 && x < 340 && y >= 90) c = cv::Vec3f(0.30f, 0.30f, 0.28f);  // the tower
-      if (y >= 0.70 * h + 6 * std::sin(x / 23.0)) {
-        const float v = 0.16f + grain(rng);
-        c = cv::Vec3f(v + 0.01f, v + 0.02f, v + 0.03f);
-      }
-      m.at<cv::Vec3f>(y, x) = c;
-    }
-  cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);
   const Camera camera = Camera::from_horizontal_fov(w, h, 60);
-  const Image photo = linear_photo(m);
+  const Image photo = linear_photo(storm_deck_display(/*tower=*/true));
   EstimateOptions without;
   without.sky_cut_by_a_guess = false;
   const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
