@@ -199,8 +199,13 @@ constexpr double kMinSkyAtGuessFraction = 0.25;
 constexpr double kMinHorizonDropFraction = 0.02;
 constexpr double kMinSkyBelowGuessFraction = 0.75;
 // The probe's sky joined to the mask's, reaching the guess where the mask's does not, in at
-// least this fraction of the columns, is sky above the guess (join_sky_cut_by_a_guess).
-constexpr double kMinSkyCutByTheGuessFraction = 0.05;
+// least this fraction of the columns, is sky above the guess (join_sky_cut_by_a_guess): as
+// much evidence as the lowering asks of the mask's own sky (kMinSkyAtGuessFraction). A cloud
+// deck the guess cut spans a good part of the frame (valendas: 35 % of its columns); at 5 %, a
+// pale sliver along a canyon's far rim under a weak line cue (grand_canyon: 61 of 800 columns)
+// was joined, and the band judged in those columns let the horizon drop 16 px under the rim:
+// haze created edges 0.0006 -> 0.24 % (gallery/results/deck23_tune.md).
+constexpr double kMinSkyCutByTheGuessFraction = kMinSkyAtGuessFraction;
 
 // The geometry's steps: horizon, sky mask, depth, refine.
 constexpr std::size_t kGeometrySteps = 4;

@@ -65,7 +65,7 @@ struct MR_API EstimateOptions {
   /// Under a guessed horizon (the level fall-back, or a line cue of confidence below 0.2): sky
   /// the guess cut off (a dark cloud deck reaching the guess "stands" on it; a pale sky under
   /// the deck is cut off from the top border) is sky when the sky mask run without the horizon
-  /// finds it joined to the open sky, in at least 5 % of the columns reaching the guess where
+  /// finds it joined to the open sky, in at least 25 % of the columns reaching the guess where
   /// the mask's sky does not; the horizon's lowering then judges the sky below the guess in the
   /// columns that sky reaches the guess in (issue 11, valendas; libmr/src/estimate.cpp,
   /// join_sky_cut_by_a_guess). false: the mask clipped at the guess as it is.
