@@ -11,6 +11,14 @@ namespace {
 
 // The display-referred saturation ((max - min) / max on scene-linear ^ (1 / 2.2)) of a pixel and
 // whether it is bluish (B > R, B >= G).
+float display_luma(const float* p) {
+  float luma = 0;
+  constexpr float kWeights[3] = {0.2126f, 0.7152f, 0.0722f};
+  for (int k = 0; k < 3; ++k)
+    luma += kWeights[k] * std::pow(std::clamp(p[k], 0.0f, 1.0f), 1 / 2.2f);
+  return luma;
+}
+
 void display_tint(const float* p, float* saturation, bool* bluish) {
   float c[3];
   for (int k = 0; k < 3; ++k) c[k] = std::pow(std::clamp(p[k], 0.0f, 1.0f), 1 / 2.2f);
@@ -99,9 +107,18 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
   std::vector<int> ring_sky(std::size_t(m), 0), ring_other(std::size_t(m), 0);
   std::vector<int> bluish(std::size_t(m), 0), leafy(std::size_t(m), 0);
   std::vector<double> saturation(std::size_t(m), 0.0), radius(std::size_t(m), 0.0);
+  std::vector<double> gradient(std::size_t(m), 0.0), luma(std::size_t(m), 0.0);
   std::vector<std::vector<float>> ratios;
   ratios.resize(std::size_t(m));
   std::vector<std::size_t> component(std::size_t(m), 0);
+  // Per-pixel gradient magnitude of the display-referred luma (Sobel / 8: a difference per pixel,
+  // as SkyMaskOptions::max_texture measures it).
+  cv::Mat display(h, w, CV_32F), gx, gy, magnitude;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) display.at<float>(y, x) = display_luma(photo.pixel(x, y));
+  cv::Sobel(display, gx, CV_32F, 1, 0, 3, 1.0 / 8, 0, cv::BORDER_REPLICATE);
+  cv::Sobel(display, gy, CV_32F, 0, 1, 3, 1.0 / 8, 0, cv::BORDER_REPLICATE);
+  cv::magnitude(gx, gy, magnitude);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const int l = parts.at<int>(y, x);
@@ -114,6 +131,8 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
       saturation[k] += sat;
       bluish[k] += blue;
       leafy[k] += !foliage.empty() && foliage[i] != 0;
+      gradient[k] += magnitude.at<float>(y, x);
+      luma[k] += display.at<float>(y, x);
       ratios[k].push_back(distance_ratio[i]);
       radius[k] = std::max(radius[k], double(inside.at<float>(y, x)));
       // The outline: next to the sky, or to the frame's top, left or right border, or to the
@@ -139,7 +158,12 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
     std::vector<float>& r = ratios[k];
     std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());
     const bool joined = r[r.size() / 2] >= options.min_distance_ratio;
-    const bool sky_like = 2 * bluish[k] > area || joined;
+    // Of the sky's colours alone is not a cloud's evidence where the whole scene is a bluish grey
+    // (snow and a terminal's jet bridges under an overcast sky: airport_snow): such a part is
+    // also as smooth as a cloud, or bright white (a cumulus' sunlit detail).
+    const bool cloud_textured = gradient[k] <= options.overhang_max_texture * area ||
+                                luma[k] >= options.overhang_min_white_luma * area;
+    const bool sky_like = (2 * bluish[k] > area && cloud_textured) || joined;
     // Grey: a structure in its own shade under a blue sky is bluish but saturated (rocket's
     // launch towers at dusk, palace's tower in shade: 0.32-0.37 against a cumulus' 0.18).
     if (!sky_like || !(saturation[k] <= options.max_saturation * area)) continue;

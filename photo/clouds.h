@@ -122,11 +122,18 @@ struct FloatingCloudOptions {
   /// `min_overhang_radius_px` and `min_overhang_radius_fraction` of the frame's smaller side
   /// from its outline at its thickest (a cornice, a crane's jib, a cable or a branch is thin),
   /// not foliage, grey (a mean saturation of at most `max_saturation`) and of a sky's colours
-  /// or joined to the sky (as `min_distance_ratio`), with at least `min_sky_ring` of its
-  /// outline next to the sky (the seam with what holds it up counts as not), solid (the sky it
-  /// encloses at most `max_overhang_holes` of its area: not a lattice), and what holds it up
-  /// (the component's pixels that rest on the horizon) cloud-coloured and not foliage (as a
-  /// floating component). 0: off.
+  /// (and smooth, below) or joined to the sky (as `min_distance_ratio`), with at least
+  /// `min_sky_ring` of its outline next to the sky (the seam with what holds it up counts as not),
+  /// solid (the sky it encloses at most `max_overhang_holes` of its area: not a lattice), and what
+  /// holds it up (the component's pixels that rest on the horizon) cloud-coloured and not foliage
+  /// (as a floating component). 0: off.
+  /// ... and when of the sky's colours but not joined to the sky, as smooth as a cloud: a mean
+  /// per-pixel gradient of the display-referred luma (Sobel / 8) of at most
+  /// `overhang_max_texture` (SkyMaskOptions::max_texture), or bright white (a mean display luma
+  /// of at least `overhang_min_white_luma`: a cumulus' sunlit detail), not a structure in a
+  /// bluish-grey scene (snow, concrete and steel under an overcast sky).
+  double overhang_max_texture = 0.012;
+  double overhang_min_white_luma = 0.6;
   double min_overhang_fraction = 5e-4;
   double min_overhang_radius_px = 3;
   double min_overhang_radius_fraction = 0.01;

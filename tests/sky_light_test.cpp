@@ -1122,6 +1122,28 @@ TEST(SkyLight, FloatingCloudRuleForJoinedClouds) {
       0);
 }
 
+// The joined-cloud rule in a scene that is all bluish grey (airport_snow: snow, a terminal and
+// its jet bridges under an overcast sky, where the rule took a 72 x 105 px block of jet bridges
+// hanging beside the terminal's columns for a cloud): of the sky's colours is not enough, the
+// part must be as smooth as a cloud (or bright white, a cumulus' sunlit detail).
+TEST(SkyLight, JoinedCloudRuleRefusesTexturedBluishGreyStructures) {
+  constexpr int w = CloudRuleMap::w, horizon = CloudRuleMap::horizon;
+  const Rgb snow{0.55f, 0.6f, 0.7f}, steel{0.25f, 0.28f, 0.35f}, dark{0.05f, 0.06f, 0.08f};
+  auto scene = [&](bool textured) {
+    CloudRuleMap m;
+    m.put(0, w, horizon, CloudRuleMap::h, 1.0f, snow);  // the snowy apron
+    m.put(60, 115, 32, horizon, 1.0f, snow);            // a terminal on the horizon
+    m.put(60, 64, 20, 32, 1.0f, steel);                 // a column rising from it
+    m.put(64, 100, 8, 20, 1.0f, steel);                 // what hangs beside the column
+    if (textured)  // jet bridges: dark bands 2 px wide every 4 px (every pixel bluish grey)
+      for (int x = 64; x < 100; x += 4) m.put(x, x + 2, 8, 20, 1.0f, dark);
+    return photo::floating_clouds(m.photo.view(), m.ratio, m.above, {}, {});
+  };
+  EXPECT_EQ(scene(false)[std::size_t(14) * w + 90], 1);  // smooth: a cloud, as before
+  EXPECT_EQ(scene(true)[std::size_t(14) * w + 90], 0);   // textured: a structure
+  EXPECT_EQ(scene(true)[std::size_t(14) * w + 91], 0);
+}
+
 // A cumulus cut off by the frame's bottom under a guessed horizon (issue 11, the sun bank look;
 // kite's lower right cloud in the tuning half): an all-sky frame looking up, no horizon cue, so
 // the level fall-back guess is lowered below the sky it cut, to the frame's bottom; a white
