@@ -9,8 +9,7 @@ namespace mr::photo {
 
 namespace {
 
-// The display-referred saturation ((max - min) / max on scene-linear ^ (1 / 2.2)) of a pixel and
-// whether it is bluish (B > R, B >= G).
+// The display-referred luma (Rec. 709 weights on scene-linear ^ (1 / 2.2)) of a pixel.
 float display_luma(const float* p) {
   float luma = 0;
   constexpr float kWeights[3] = {0.2126f, 0.7152f, 0.0722f};
@@ -19,6 +18,8 @@ float display_luma(const float* p) {
   return luma;
 }
 
+// The display-referred saturation ((max - min) / max on scene-linear ^ (1 / 2.2)) of a pixel and
+// whether it is bluish (B > R, B >= G).
 void display_tint(const float* p, float* saturation, bool* bluish) {
   float c[3];
   for (int k = 0; k < 3; ++k) c[k] = std::pow(std::clamp(p[k], 0.0f, 1.0f), 1 / 2.2f);

@@ -127,17 +127,17 @@ struct FloatingCloudOptions {
   /// solid (the sky it encloses at most `max_overhang_holes` of its area: not a lattice), and what
   /// holds it up (the component's pixels that rest on the horizon) cloud-coloured and not foliage
   /// (as a floating component). 0: off.
-  /// ... and when of the sky's colours but not joined to the sky, as smooth as a cloud: a mean
-  /// per-pixel gradient of the display-referred luma (Sobel / 8) of at most
-  /// `overhang_max_texture` (SkyMaskOptions::max_texture), or bright white (a mean display luma
-  /// of at least `overhang_min_white_luma`: a cumulus' sunlit detail), not a structure in a
-  /// bluish-grey scene (snow, concrete and steel under an overcast sky).
-  double overhang_max_texture = 0.012;
-  double overhang_min_white_luma = 0.6;
   double min_overhang_fraction = 5e-4;
   double min_overhang_radius_px = 3;
   double min_overhang_radius_fraction = 0.01;
   double max_overhang_holes = 0.1;
+  /// A part of the sky's colours but not joined to the sky is a cloud only when also as smooth
+  /// as one: a mean per-pixel gradient of the display-referred luma (Sobel / 8) of at most
+  /// `overhang_max_texture` (SkyMaskOptions::max_texture), or bright white (a mean display luma
+  /// of at least `overhang_min_white_luma`: a cumulus' sunlit detail); not a structure in a
+  /// bluish-grey scene (snow, concrete and steel under an overcast sky: airport_snow).
+  double overhang_max_texture = 0.012;
+  double overhang_min_white_luma = 0.6;
   /// A cloud bank low over land on a known horizon (not `guessed_horizon`; issue 11, the sun
   /// bank's dark column under it): the pixels of a held-up component that rest on the horizon
   /// (as above) are sky when, together, they are at least `min_overhang_fraction` of the frame,
