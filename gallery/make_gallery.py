@@ -5,7 +5,8 @@ The photos come from Debian 12 packages unpacked with `apt-get download PKG; dpk
     gallery/make_gallery.py ROOT [--only NAME,NAME]
 With --only, just the named photos are converted (ROOT needs only their packages); the others keep
 their files, whose sizes go into LICENSES.
-Each photo is cropped (optional `crop` = x0 y0 x1 y1 as fractions of width/height, used for the
+Each photo is first turned upright (optional `turn` = 90, 180 or 270 degrees clockwise, for an
+original stored on its side or upside down without an EXIF Orientation saying so), then cropped (optional `crop` = x0 y0 x1 y1 as fractions of width/height, used for the
 panorama strips), reduced so the longest side is at most 1280 px (never enlarged) and written as
 8-bit sRGB JPEG, quality 90, with 3 channels (grey photos are replicated into R=G=B).
 An Enlightenment background (`.edj`, an Eet archive) holds the same photo as several plain JPEG
@@ -57,20 +58,27 @@ def largest_embedded_jpeg(src, tmp_dir):
     return path, w, h
 
 
-def convert(src, dst, crop):
+def convert(src, dst, crop, turn=""):
     with tempfile.TemporaryDirectory(prefix="make_gallery_") as tmp_dir:
         if src.endswith(".edj"):
             src = largest_embedded_jpeg(src, tmp_dir)[0]
-        return convert_file(src, dst, crop)
+        return convert_file(src, dst, crop, turn)
 
 
-def convert_file(src, dst, crop):
+def convert_file(src, dst, crop, turn=""):
     buf = oiio.ImageBuf(src)
     if buf.has_error:
         raise SystemExit(f"make_gallery: cannot read {src}: {buf.geterror()}")
     spec = buf.spec()
     chans = (0, 1, 2) if spec.nchannels >= 3 else (0, 0, 0)
     buf = oiio.ImageBufAlgo.channels(buf, chans)
+    turns = {"": None, "90": oiio.ImageBufAlgo.rotate90, "180": oiio.ImageBufAlgo.rotate180,
+             "270": oiio.ImageBufAlgo.rotate270}
+    if turn not in turns:
+        raise SystemExit(f"make_gallery: {dst}: turn must be 90, 180 or 270, not {turn!r}")
+    if turns[turn]:
+        buf = turns[turn](buf)
+    spec = buf.spec()
     if crop:
         x0, y0, x1, y1 = (float(v) for v in crop.split())
         roi = oiio.ROI(round(x0 * spec.width), round(x1 * spec.width),
@@ -113,7 +121,8 @@ def main():
         os.makedirs(out_dir, exist_ok=True)
         dst = os.path.join(out_dir, r["name"] + ".jpg")
         if only is None or r["name"] in only:
-            w, h = convert(os.path.join(root, r["package"]) + r["original_path"], dst, r["crop"])
+            w, h = convert(os.path.join(root, r["package"]) + r["original_path"], dst, r["crop"],
+                           r.get("turn") or "")
             print(f"{r['half']}/{r['name']}.jpg {w}x{h}")
         else:
             spec = oiio.ImageInput.open(dst).spec()
@@ -135,7 +144,8 @@ def main():
         for r, w, h in lines:
             f.write(f"{r['half']}/{r['name']}.jpg  ({w}x{h}; {r['category']})\n")
             f.write(f"  package:  {r['package']} {r['version']} (Debian 12)\n")
-            f.write(f"  original: {r['original_path']}" + (f"  (crop x0 y0 x1 y1 = {r['crop']})" if r['crop'] else "") + "\n")
+            f.write(f"  original: {r['original_path']}" + (f"  (turned {r['turn']} degrees clockwise)" if r.get('turn') else "")
+                    + (f"  (crop x0 y0 x1 y1 = {r['crop']})" if r['crop'] else "") + "\n")
             f.write(f"  licence:  {r['licence']}\n")
             f.write(f"  author:   {r['author']}\n\n")
 
