@@ -938,6 +938,11 @@ GroundMask estimate_ground_mask(ConstImageView photo, const std::array<PixelPoin
       }
     }
   }
+  out.coloured.assign(std::size_t(w) * h, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      out.coloured[std::size_t(y) * w + x] =
+          !(have_sky && sky[std::size_t(y) * w + x]) && ground_coloured(x, y);
   cv::Mat not_ground(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {

@@ -25,6 +25,7 @@
 #include "photo/lamps.h"
 #include "photo/sky_mask.h"
 #include "photo/sky_matte.h"
+#include "photo/subject.h"
 #include "photo/vegetation.h"
 
 namespace mr {
@@ -619,6 +620,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // Per pixel: the forward distance of the structure it is on where it meets the ground (0:
   // none found).
   std::vector<float> contact_forward(n, 0.0f);
+  // A subject standing in the bottom band (below): 1 on its pixels, empty where none was found.
+  std::vector<std::uint8_t> subject;
   // Without any sky the horizon is a guess (no ground is seen running to it) and everything
   // above it is "structure": a snow field seen from above, the back wall of a bar. Its
   // contacts would be wherever a dark trunk or a table leg happens to reach below the guessed
@@ -629,6 +632,30 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     const photo::GroundMask ground =
         photo::estimate_ground_mask(photo->view(), g.horizon, mask.sky);
     if (ground.valid) {
+      // Issue 11 (a person sitting on a beach, her feet out of the frame): a subject standing
+      // in the bottom band (photo/subject.h) hides the ground under it, so it stands no farther
+      // than the bottom row's ground (as any structure running off the bottom, below). It is
+      // taken apart from the rest of the structure: through a head or a shoulder it touches
+      // the far land behind it (dunes, people on a beach), and as one component with them it
+      // gave the far land its distance, or (too little of the joined component rising above
+      // the horizon) left the subject on the far billboard above the horizon and on the ground
+      // plane below it: a line across the person at the horizon's row in dense fog. (Only with
+      // a measured horizon, as the bottom row's contact below.)
+      std::vector<double> subject_forward;
+      if (ground.standing_subject && g.horizon_source != EstimateSource::fallback) {
+        subject = photo::find_standing_subject(photo->view(), g.horizon, mask.sky, ground).pixels;
+        const Vec3 o = g.pose.position_m;
+        subject_forward.assign(std::size_t(w), 0.0);
+        for (int x = 0; x < w && !subject.empty(); ++x) {
+          const auto gp = photo::ground_point(camera, g.pose, {double(x), h - 0.5});
+          const double fd = gp ? (gp->x - o.x) * fwd.x + (gp->z - o.z) * fwd.z : 0.0;
+          if (fd > 0 && std::isfinite(fd))
+            subject_forward[std::size_t(x)] = std::min(fd, far_forward);
+        }
+        for (int y = 0; y < h && !subject.empty(); ++y)
+          for (int x = 0; x < w; ++x)
+            if (!(subject_forward[std::size_t(x)] > 0)) subject[std::size_t(y) * w + x] = 0;
+      }
       // Structure: not sky, not annotated; below the horizon where not ground-coloured.
       cv::Mat structure(h, w, CV_8U, cv::Scalar(0));
       for (int y = 0; y < h; ++y)
@@ -784,6 +811,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
             contact_forward[std::size_t(y) * w + x] =
                 float(smooth[offset[l] + std::size_t(x - stats.at<int>(l, cv::CC_STAT_LEFT))]);
         }
+      if (!subject.empty())
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x)
+            if (subject[std::size_t(y) * w + x])
+              contact_forward[std::size_t(y) * w + x] = float(subject_forward[std::size_t(x)]);
     }
   }
 
@@ -930,7 +962,19 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   };
   if (options.refine_depth && !smooth_bounded) {
     const std::vector<float> q_plane = q;  // before the refinement: the ground plane's
-    q = photo::refine_inverse_distance(photo->view(), q, c, refine);
+    if (subject.empty()) {
+      q = photo::refine_inverse_distance(photo->view(), q, c, refine);
+    } else {
+      // The subject keeps its distance, and lends none to what is around it: where its outline
+      // is faint (blonde hair against sand) its inverse distance, tens of times the far land's,
+      // spread into the far land beside its head, a clear window in dense fog.
+      std::vector<float> weight = c;
+      for (std::size_t i = 0; i < n; ++i)
+        if (subject[i]) weight[i] = 0;
+      q = photo::refine_inverse_distance(photo->view(), q, weight, refine);
+      for (std::size_t i = 0; i < n; ++i)
+        if (subject[i]) q[i] = q_plane[i];
+    }
     // Only under a horizon that says where the water meets the sky (annotated, or found with
     // some confidence): under a guessed one (the level fall-back, a weak cue, one lowered
     // under the sky it cut) the ground's plane is a guess too (a dark ridge under a glow).
