@@ -475,7 +475,9 @@ TEST(GeometryNoHarm, PortraitFillingTheBottomBandStaysNear) {
 // on the far billboard above the horizon and on the ground plane below it, her head veiled in
 // dense fog and a line across her shirt at the horizon's row. The subject standing in the band
 // (photo/subject.h) stands at the bottom row's ground, and the dunes beside her head stay far.
-TEST(GeometryNoHarm, SeatedPersonJoinedToTheFarLandStaysWholeAndNear) {
+// `head_y` and `head_half_height`: the head's (and hair's) centre row and half height in pixels.
+void expect_person_on_a_beach_whole_and_near(const std::string& name, int head_y,
+                                             int head_half_height) {
   cv::Mat m(kH, kW, CV_32FC3);
   std::mt19937 rng(29);
   std::uniform_real_distribution<float> grain(-0.05f, 0.05f);
@@ -498,10 +500,10 @@ TEST(GeometryNoHarm, SeatedPersonJoinedToTheFarLandStaysWholeAndNear) {
   const std::vector<cv::Point> shirt = {{100, 479}, {120, 232}, {200, 205},
                                         {440, 205}, {520, 232}, {540, 479}};
   cv::fillPoly(person, std::vector<std::vector<cv::Point>>{shirt}, cv::Scalar(255));
-  cv::ellipse(person, cv::Point(320, 195), cv::Size(62, 42), 0, 0, 360, cv::Scalar(100),
-              cv::FILLED);  // hair
-  cv::ellipse(person, cv::Point(320, 200), cv::Size(38, 40), 0, 0, 360, cv::Scalar(170),
-              cv::FILLED);  // face
+  cv::ellipse(person, cv::Point(320, head_y - 5), cv::Size(62, head_half_height + 2), 0, 0, 360,
+              cv::Scalar(100), cv::FILLED);  // hair
+  cv::ellipse(person, cv::Point(320, head_y), cv::Size(38, head_half_height), 0, 0, 360,
+              cv::Scalar(170), cv::FILLED);  // face
   for (int y = 0; y < kH; ++y)
     for (int x = 0; x < kW; ++x) {
       const std::uint8_t p = person.at<std::uint8_t>(y, x);
@@ -512,12 +514,12 @@ TEST(GeometryNoHarm, SeatedPersonJoinedToTheFarLandStaysWholeAndNear) {
     }
   cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);  // a lens
   const Image photo = to_photo(m);
-  dump("seated_photo", photo);
+  dump(name + "_photo", photo);
   Annotations guess;  // the horizon guessed too low, through her chin
   guess.horizon =
       std::array<PixelPoint, 2>{PixelPoint{0, kGuess - 0.5}, PixelPoint{kW - 1.0, kGuess - 0.5}};
   const SceneEstimate est = estimate_scene(photo, kCamera, guess);
-  const PortraitInFog r = portrait_in_dense_fog(photo, person, est, "seated");
+  const PortraitInFog r = portrait_in_dense_fog(photo, person, est, name);
   const std::vector<float>&d = r.distance_m, &t = r.transmittance;
   const double bottom_m = r.bottom_row_ground_m;
   // The dunes beside her head, and her shirt just above and just below the guessed horizon.
@@ -538,12 +540,12 @@ TEST(GeometryNoHarm, SeatedPersonJoinedToTheFarLandStaysWholeAndNear) {
   }
   above /= 240, below /= 240;
   std::printf(
-      "seated person: distance median %.2f m, 90th percentile %.2f m (bottom row's ground "
+      "%s: distance median %.2f m, 90th percentile %.2f m (bottom row's ground "
       "%.2f m); dense fog transmittance median %.3f, 10th percentile %.3f; shirt 4 rows above / "
       "below the guessed horizon %.2f / %.2f m; dunes beside the head: 10th percentile %.1f m; "
       "far beach beside the head: 10th percentile %.1f m\n",
-      d[d.size() / 2], d[d.size() * 9 / 10], bottom_m, t[t.size() / 2], t[t.size() / 10], above,
-      below, dunes[dunes.size() / 10], far_sand[far_sand.size() / 10]);
+      name.c_str(), d[d.size() / 2], d[d.size() * 9 / 10], bottom_m, t[t.size() / 2],
+      t[t.size() / 10], above, below, dunes[dunes.size() / 10], far_sand[far_sand.size() / 10]);
   EXPECT_LT(d[d.size() * 9 / 10], 1.3 * bottom_m);  // all of her, the head included
   EXPECT_GT(t[t.size() / 10], 0.6f);                // visible in dense fog, the head included
   EXPECT_LT(std::abs(above - below), 0.1 * below);  // no line across her at the horizon
@@ -551,6 +553,18 @@ TEST(GeometryNoHarm, SeatedPersonJoinedToTheFarLandStaysWholeAndNear) {
   // ... and the far beach beside her head, whose colour is close to her hair's: her nearness
   // does not spread into it in the refinement (before: 5.1 m).
   EXPECT_GT(far_sand[far_sand.size() / 10], 20.0f);
+}
+
+TEST(GeometryNoHarm, SeatedPersonJoinedToTheFarLandStaysWholeAndNear) {
+  expect_person_on_a_beach_whole_and_near("seated", 200, 40);
+}
+
+// The same with her head rising high above the horizon (a person standing in front of the beach,
+// photographed from below eye level): the structure joined through her head rose enough for the
+// foot at the frame's bottom to count, and that foot, hers, was lent to the dunes and the far
+// beach: all of them a few metres away, unfogged (before: 3.8 m). Her foot is her own now.
+TEST(GeometryNoHarm, HighHeadLendsTheFarLandItTouchesNoFoot) {
+  expect_person_on_a_beach_whole_and_near("high_head", 150, 60);
 }
 
 }  // namespace

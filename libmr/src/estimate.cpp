@@ -634,13 +634,17 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     if (ground.valid) {
       // Issue 11 (a person sitting on a beach, her feet out of the frame): a subject standing
       // in the bottom band (photo/subject.h) hides the ground under it, so it stands no farther
-      // than the bottom row's ground (as any structure running off the bottom, below). It is
-      // taken apart from the rest of the structure: through a head or a shoulder it touches
-      // the far land behind it (dunes, people on a beach), and as one component with them it
-      // gave the far land its distance, or (too little of the joined component rising above
-      // the horizon) left the subject on the far billboard above the horizon and on the ground
-      // plane below it: a line across the person at the horizon's row in dense fog. (Only with
-      // a measured horizon, as the bottom row's contact below.)
+      // than the bottom row's ground (as any structure running off the bottom, below). Through
+      // a head or a shoulder it touches the far land behind it (dunes, people on a beach) and
+      // is one structure with it. Its foot is its own: the joined structure's contacts leave
+      // out the columns whose foot is the subject's (else the far land stood at the subject's
+      // distance), and the subject's pixels take the bottom row's ground after (else, the
+      // joined structure rising too little above the horizon for a foot at the frame's bottom
+      // to count, the subject stood on the far billboard above the horizon and on the ground
+      // plane below it: a line across the person at the horizon's row in dense fog). It stays
+      // in the structure: a facade beside a shop front has its contacts through it, and cut
+      // off from them went to the far billboard. (Only with a measured horizon, as the bottom
+      // row's contact below.)
       std::vector<double> subject_forward;
       if (ground.standing_subject && g.horizon_source != EstimateSource::fallback) {
         subject = photo::find_standing_subject(photo->view(), g.horizon, mask.sky, ground).pixels;
@@ -696,6 +700,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       std::size_t total = 0;
       for (int l = 1; l < count; ++l)
         if (rises[l]) offset[l] = total, total += std::size_t(stats.at<int>(l, cv::CC_STAT_WIDTH));
+      std::vector<int> subject_foot(std::size_t(count), 0);  // columns whose foot is the subject's
       // The lowest and the highest row of each rising component in each of its columns.
       std::vector<int> lowest(total, -1), highest(total, -1);
       for (int y = 0; y < h; ++y)
@@ -733,6 +738,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           } else if (!ground.ground[std::size_t(yc + 1) * w + x]) {
             continue;
           }
+          // A standing subject's foot is its own (above), not that of what it touches; the
+          // share of contacts asked below is of the columns whose foot is not the subject's.
+          if (!subject.empty() && subject[std::size_t(yc) * w + x]) {
+            ++subject_foot[std::size_t(l)];
+            continue;
+          }
           // Issue 11 item 3: something standing on the ground rises above the horizon by a fair
           // part of what it spans below it; the sea up to a boat, a person or a low wall do not,
           // and made into a billboard they become a wall of columns with seams between them.
@@ -765,7 +776,9 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         double* sm = smooth.data() + offset[l];
         int valid = 0;
         for (int k = 0; k < width; ++k) valid += fw[k] > 0;
-        if (valid == 0 || (!tree[std::size_t(l)] && valid < kMinContactColumns * width)) continue;
+        if (valid == 0 || (!tree[std::size_t(l)] &&
+                           valid < kMinContactColumns * (width - subject_foot[std::size_t(l)])))
+          continue;
         if (tree[std::size_t(l)]) {
           // A tree (or a stand of them joined by their canopy) stands at one distance: the
           // median of its trunks' contacts. Per-column contacts would give its canopy columns
