@@ -11,8 +11,9 @@
 
 #include "core/cv_bridge.h"
 #include "core/vec3.h"
-#include "photo/opencv_contrib.h"
 #include "mr/error.h"
+#include "photo/display.h"
+#include "photo/opencv_contrib.h"
 
 namespace mr::photo {
 
@@ -357,17 +358,8 @@ DistanceMap distance_map(const Camera& camera, const CameraPose& pose,
   return out;
 }
 
-namespace {
-
-// `map` (the photo's size, float channels) smoothed edge-aware against the photo: the fast
-// global smoother guided by the photo in display-referred 8-bit (its guide must be 8-bit), both
-// area-averaged down to at most o.working_pixels and the result brought back up linearly.
-template <typename Options>  // DepthRefineOptions, SkyProximityOptions
-cv::Mat smooth_against_photo(ConstImageView photo, const cv::Mat& map, const Options& o,
-                             double texture_px = 0) {
+cv::Mat display_rgb8(ConstImageView photo) {
   const int w = photo.width, h = photo.height;
-  const double s = std::min(1.0, std::sqrt(o.working_pixels / (double(w) * h)));
-  const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
   const cv::Mat src = detail::as_mat(photo);
   cv::Mat display(h, w, CV_8UC3);
   const int ch = photo.channels;
@@ -384,6 +376,21 @@ cv::Mat smooth_against_photo(ConstImageView photo, const cv::Mat& map, const Opt
       }
     }
   }
+  return display;
+}
+
+namespace {
+
+// `map` (the photo's size, float channels) smoothed edge-aware against the photo: the fast
+// global smoother guided by the photo in display-referred 8-bit (its guide must be 8-bit), both
+// area-averaged down to at most o.working_pixels and the result brought back up linearly.
+template <typename Options>  // DepthRefineOptions, SkyProximityOptions
+cv::Mat smooth_against_photo(ConstImageView photo, const cv::Mat& map, const Options& o,
+                             double texture_px = 0) {
+  const int w = photo.width, h = photo.height;
+  const double s = std::min(1.0, std::sqrt(o.working_pixels / (double(w) * h)));
+  const int ww = std::max(4, int(std::lround(w * s))), wh = std::max(4, int(std::lround(h * s)));
+  const cv::Mat display = display_rgb8(photo);
   cv::Mat guide = display, small = map;
   if (s < 1) {
     cv::resize(display, guide, cv::Size(ww, wh), 0, 0, cv::INTER_AREA);

@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/cv_bridge.h"
+#include "photo/display.h"
 #include "photo/sky_mask.h"
 
 namespace mr::photo {
@@ -90,22 +90,7 @@ StandingSubject find_standing_subject(ConstImageView photo,
     const double scale = std::min(1.0, std::sqrt(o.grabcut_pixels / double(n)));
     const cv::Size small(std::max(8, int(std::lround(w * scale))),
                          std::max(8, int(std::lround(h * scale))));
-    const cv::Mat src = detail::as_mat(photo);
-    cv::Mat display(h, w, CV_8UC3);
-    const int ch = photo.channels;
-    for (int y = 0; y < h; ++y) {
-      const float* row = src.ptr<float>(y);
-      cv::Vec3b* d = display.ptr<cv::Vec3b>(y);
-      for (int x = 0; x < w; ++x) {
-        const float* p = row + std::ptrdiff_t(x) * ch;
-        for (int c = 0; c < 3; ++c) {
-          float v = p[ch >= 3 ? c : 0];
-          if (!std::isfinite(v)) v = 0;
-          d[x][c] = cv::saturate_cast<std::uint8_t>(
-              255.0f * std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f) + 0.5f);
-        }
-      }
-    }
+    const cv::Mat display = display_rgb8(photo);
     // The colours of the far land beside the head (neither the candidate, sky nor ground-
     // coloured), in 16 levels a channel: above the band a run may go on from the hair into far
     // land the hair touches, and a run pixel of a colour common there is left to GrabCut.
