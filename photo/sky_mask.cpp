@@ -831,8 +831,8 @@ CloseUpSky keep_evident_sky(ConstImageView photo, SkyMask& mask, const CloseUpSk
       mask.alpha[i] = 0.0f;
     }
   if (mask.pixels > 0)
-    mask.gap_pixels = std::size_t(std::lround(double(mask.gap_pixels) * double(kept) /
-                                              double(mask.pixels)));
+    mask.gap_pixels =
+        std::size_t(std::lround(double(mask.gap_pixels) * double(kept) / double(mask.pixels)));
   mask.pixels = kept;
   out.kept_pixels = kept;
   out.dropped_pixels = dropped;
@@ -938,18 +938,18 @@ GroundMask estimate_ground_mask(ConstImageView photo, const std::array<PixelPoin
       }
     }
   }
-  out.coloured.assign(std::size_t(w) * h, 0);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x)
-      out.coloured[std::size_t(y) * w + x] =
-          !(have_sky && sky[std::size_t(y) * w + x]) && ground_coloured(x, y);
+  // The model is read below the horizon; for a standing subject above it too (its search,
+  // photo/subject.h, follows the subject up past the horizon).
+  if (out.standing_subject) out.coloured.assign(std::size_t(w) * h, 0);
   cv::Mat not_ground(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      if (!(y > horizon_y(x))) continue;
-      const cv::Vec3f& p = rgb.at<cv::Vec3f>(y, x);
-      const cv::Vec3d d = cv::Vec3d(p[0], p[1], p[2]) - mean;
-      if (!((d.t() * inverse * d)(0) < limit)) not_ground.at<std::uint8_t>(y, x) = 1;
+      const bool below = y > horizon_y(x);
+      if (!below && !out.standing_subject) continue;
+      const bool within = ground_coloured(x, y);
+      if (below && !within) not_ground.at<std::uint8_t>(y, x) = 1;
+      if (out.standing_subject)
+        out.coloured[std::size_t(y) * w + x] = within && !(have_sky && sky[std::size_t(y) * w + x]);
     }
   cv::morphologyEx(not_ground, not_ground, cv::MORPH_OPEN,
                    cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));

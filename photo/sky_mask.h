@@ -172,8 +172,9 @@ struct GroundMask {
   bool valid = false;  ///< false: too few ground samples (ground then unknown: all 0)
   int width = 0, height = 0;
   std::vector<std::uint8_t> ground;  ///< row-major, 1 = ground-coloured, below the horizon
-  /// Row-major, 1 = in the ground's colour model (the refit one for a standing subject) and
-  /// not sky, above the horizon as well as below it, without the opening `ground` gets.
+  /// Only with standing_subject (else empty): row-major, 1 = in the ground's colour model (the
+  /// refit one) and not sky, above the horizon as well as below it, without the opening
+  /// `ground` gets.
   std::vector<std::uint8_t> coloured;
   /// The band's colour rose above the horizon in most of its columns: a subject standing in
   /// front of the camera filled it, and the model was refit from the ground beside it.
