@@ -124,15 +124,26 @@ StandingSubject find_standing_subject(ConstImageView photo,
     cv::Mat small_display, small_labels;
     cv::resize(display, small_display, small, 0, 0, cv::INTER_AREA);
     cv::resize(labels, small_labels, small, 0, 0, cv::INTER_NEAREST);
-    // GrabCut needs both classes' colour models; without a background (a frame all subject and
-    // sky is still fine: sky is background) it cannot run.
-    const bool has_fg = cv::countNonZero(small_labels == cv::GC_FGD) > 0;
-    const bool has_bg =
-        cv::countNonZero((small_labels == cv::GC_BGD) | (small_labels == cv::GC_PR_BGD)) > 0;
-    if (has_fg && has_bg) {
+    // GrabCut fits a colour model of 5 Gaussians to each side (k-means first): with fewer
+    // pixels than a few per Gaussian on either side (a frame all subject) the candidate stays.
+    constexpr int kMinSidePixels = 25;
+    const int certain_fg = cv::countNonZero(small_labels == cv::GC_FGD);
+    const int fg_side =
+        cv::countNonZero((small_labels == cv::GC_FGD) | (small_labels == cv::GC_PR_FGD));
+    const int bg_side = small_labels.rows * small_labels.cols - fg_side;
+    bool cut = false;
+    if (certain_fg > 0 && fg_side >= kMinSidePixels && bg_side >= kMinSidePixels) {
       cv::Mat bgd, fgd;
-      cv::grabCut(small_display, small_labels, cv::Rect(), bgd, fgd,
-                  std::max(1, o.grabcut_iterations), cv::GC_INIT_WITH_MASK);
+      try {
+        cv::grabCut(small_display, small_labels, cv::Rect(), bgd, fgd,
+                    std::max(1, o.grabcut_iterations), cv::GC_INIT_WITH_MASK);
+        cut = true;
+      } catch (const cv::Exception&) {
+        // (Degenerate colours, e.g. a side of one colour: its covariance is singular; OpenCV
+        // regularises it, but any refusal leaves the candidate as it is.)
+      }
+    }
+    if (cut) {
       cv::Mat fg = (small_labels == cv::GC_FGD) | (small_labels == cv::GC_PR_FGD), fg_full;
       cv::resize(fg, fg_full, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);  // no blocks
       fg_full = fg_full >= 128;

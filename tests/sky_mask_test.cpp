@@ -18,6 +18,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,7 @@
 #include "mr/io.h"
 #include "mr/scattering.h"
 #include "photo/sky_mask.h"
+#include "photo/subject.h"
 #include "tests/display_luma.h"
 
 namespace mr {
@@ -442,7 +444,8 @@ cv::Mat lavender_closeup_display(cv::Mat* subject_region) {
       const float ts = t * t * (3 - 2 * t), us = u * u * (3 - 2 * u);
       cv::Vec3f p = lavender * (1 - ts) + sage * ts;
       p = p * (1 - us) + foliage * us;
-      p += cv::Vec3f(1, 1, 1) * (0.03f * blobs.at<float>(y, x) + 0.10f * us * leaves.at<float>(y, x));
+      p += cv::Vec3f(1, 1, 1) *
+           (0.03f * blobs.at<float>(y, x) + 0.10f * us * leaves.at<float>(y, x));
       img.at<cv::Vec3f>(y, x) = p;
     }
   // The subject: a sharp flower head with fine texture on a stem reaching the bottom.
@@ -484,8 +487,7 @@ TEST(SkyThroughHaze, BlurredLavenderBackgroundOfACloseUpIsNotSky) {
   s.medium.sigma_t_per_m = {sigma, sigma, sigma};
   s.medium.layer_top_m = 80;
   s.render.backend = Backend::cpu;
-  const FogLayers dense =
-      fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
+  const FogLayers dense = fog(photo, est.geometry.distance_m, est.geometry.sky_alpha, camera, s);
   dump("lavender_closeup_photo", photo);
   dump("lavender_closeup_haze", hazed.composite);
   dump("lavender_closeup_dense", dense.composite);
@@ -505,12 +507,12 @@ TEST(SkyThroughHaze, BlurredLavenderBackgroundOfACloseUpIsNotSky) {
   };
   const double t_lavender = mean_t(dense, 10, 60), t_sage = mean_t(dense, 330, 380);
   std::printf(
-      "lavender close-up (%s; %.2f of the frame blurred, %.2f sharp): mask alone takes %.3f of the lavender as sky; estimate: %zu "
+      "lavender close-up (%s; %.2f of the frame blurred, %.2f sharp): mask alone takes %.3f of the "
+      "lavender as sky; estimate: %zu "
       "pixels of sky matte; dense fog transmittance lavender %.3f, sage %.3f; created-edge "
       "pixels haze %.4f %%, dense %.4f %%\n",
-      est.geometry.scale_cue.c_str(), est.geometry.defocused_fraction,
-      est.geometry.sharp_fraction, raw_sky, sky, t_lavender, t_sage, 100 * haze_edges,
-      100 * dense_edges);
+      est.geometry.scale_cue.c_str(), est.geometry.defocused_fraction, est.geometry.sharp_fraction,
+      raw_sky, sky, t_lavender, t_sage, 100 * haze_edges, 100 * dense_edges);
   EXPECT_GT(raw_sky, 0.9);  // the failure class is present
   EXPECT_EQ(sky, 0u);
   EXPECT_GT(t_lavender, 0.6);
@@ -529,7 +531,8 @@ TEST(SkyThroughHaze, ClearBlueSkyBehindACloseUpStaysSky) {
     for (int x = 0; x < kW; ++x) {
       if (subject.at<std::uint8_t>(y, x)) continue;
       const float t = float(y) / 230.0f, u = std::clamp(float(y - 170) / 60.0f, 0.0f, 1.0f);
-      const cv::Vec3f sky = cv::Vec3f(0.25f, 0.50f, 0.88f) * (1 - t) + cv::Vec3f(0.55f, 0.70f, 0.92f) * t;
+      const cv::Vec3f sky =
+          cv::Vec3f(0.25f, 0.50f, 0.88f) * (1 - t) + cv::Vec3f(0.55f, 0.70f, 0.92f) * t;
       cv::Vec3f& p = display.at<cv::Vec3f>(y, x);
       p = sky * (1 - u) + p * u + cv::Vec3f(1, 1, 1) * (0.01f * blobs.at<float>(y, x));
     }
@@ -548,6 +551,57 @@ TEST(SkyThroughHaze, ClearBlueSkyBehindACloseUpStaysSky) {
   std::printf("blue sky behind a close-up (%s): %.3f of the open sky kept\n",
               est.geometry.scale_cue.c_str(), double(in) / double(total));
   EXPECT_GT(double(in) / double(total), 0.95);
+}
+
+// The standing subject's search (photo/subject.h) never throws for any image content: tiny
+// frames, all subject, nearly no background for GrabCut's colour models (which need several
+// pixels of each), one channel, NaN and infinite pixels. What it returns is the photo's size or
+// empty, and only where the ground mask found a standing subject.
+TEST(StandingSubject, NeverThrowsForAnyImageContent) {
+  const std::array<PixelPoint, 2> horizon{PixelPoint{0, 3.5}, PixelPoint{15, 3.5}};
+  for (const int size : {8, 9, 16, 40}) {
+    for (const int background : {0, 1, 2, 3, 7}) {  // pixels neither subject nor sky
+      for (const int channels : {1, 3})
+        for (const bool with_sky : {true, false}) {
+          Image photo(size, size, channels);
+          const std::size_t n = std::size_t(size) * size;
+          photo::GroundMask ground;
+          ground.valid = true;
+          ground.standing_subject = true;
+          ground.width = ground.height = size;
+          ground.ground.assign(n, 0);
+          ground.coloured.assign(n, 0);
+          std::vector<std::uint8_t> sky(n, 0);
+          for (int y = 0; y < size; ++y)
+            for (int x = 0; x < size; ++x) {
+              const std::size_t i = std::size_t(y) * size + x;
+              for (int c = 0; c < channels; ++c)
+                photo.at(x, y, c) = (x * 7 + y * 3 + c) % 5 == 0 ? 0.9f : 0.05f;
+              if (with_sky && y == 0 && x >= background) sky[i] = 1;  // the top row: sky
+              if (y == 0 && x < background) ground.coloured[i] = 1;
+            }
+          photo.at(1, size - 1, 0) = std::numeric_limits<float>::quiet_NaN();
+          photo.at(2, size - 1, 0) = std::numeric_limits<float>::infinity();
+          photo::StandingSubject s;
+          EXPECT_NO_THROW(s = photo::find_standing_subject(photo.view(), horizon, sky, ground))
+              << size << " px, " << background << " background pixels, " << channels << " channels";
+          EXPECT_TRUE(s.pixels.empty() || s.pixels.size() == n);
+          for (std::size_t i = 0; i < s.pixels.size(); ++i) EXPECT_FALSE(s.pixels[i] && sky[i]);
+        }
+    }
+  }
+  // No standing subject found by the ground mask, or a mask of another size: nothing.
+  Image photo(16, 16, 3);
+  photo::GroundMask ground;
+  ground.valid = true;
+  ground.coloured.assign(256, 0);
+  EXPECT_TRUE(
+      photo::find_standing_subject(photo.view(), horizon, std::vector<std::uint8_t>(256, 0), ground)
+          .pixels.empty());
+  ground.standing_subject = true;
+  EXPECT_TRUE(
+      photo::find_standing_subject(photo.view(), horizon, std::vector<std::uint8_t>(10, 0), ground)
+          .pixels.empty());
 }
 
 }  // namespace
