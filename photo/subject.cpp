@@ -27,9 +27,10 @@ StandingSubject find_standing_subject(ConstImageView photo,
   const double rise_px = o.min_rise_fraction * h;
   const int gap = std::max(2, int(std::lround(o.max_gap_fraction * h)));
 
-  // The runs, and the candidate: the runs and what joins them low enough.
+  // The runs, and the candidate: the runs and what joins them low enough (or near enough to a
+  // run above that: `above_band`, rows more than rise_px over the horizon).
   cv::Mat candidate(h, w, CV_8U, cv::Scalar(0)), runs(h, w, CV_8U, cv::Scalar(0)),
-      beside_head(h, w, CV_8U, cv::Scalar(0));
+      above_band(h, w, CV_8U, cv::Scalar(0));
   std::vector<std::uint8_t> rising(std::size_t(w), 0);
   for (int x = 0; x < w; ++x) {
     int top = h, miss = 0;
@@ -63,7 +64,7 @@ StandingSubject find_standing_subject(ConstImageView photo,
       const bool low = y > horizon_y(x) - rise_px;
       candidate.at<std::uint8_t>(y, x) =
           r[x] || (!sky[i] && !ground.coloured[i] && (low || near[std::size_t(x)] <= reach));
-      beside_head.at<std::uint8_t>(y, x) = !low;
+      above_band.at<std::uint8_t>(y, x) = !low;
     }
   }
   // Keeps the components of `m` that hold the bottom pixel of a rising column.
@@ -100,7 +101,7 @@ StandingSubject find_standing_subject(ConstImageView photo,
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         const std::size_t i = std::size_t(y) * w + x;
-        if (beside_head.at<std::uint8_t>(y, x) && !candidate.at<std::uint8_t>(y, x) && !sky[i] &&
+        if (above_band.at<std::uint8_t>(y, x) && !candidate.at<std::uint8_t>(y, x) && !sky[i] &&
             !ground.coloured[i])
           ++far_colours[std::size_t(bin(display.at<cv::Vec3b>(y, x)))], ++far_pixels;
       }
@@ -110,7 +111,7 @@ StandingSubject find_standing_subject(ConstImageView photo,
       for (int x = 0; x < w; ++x) {
         const std::size_t i = std::size_t(y) * w + x;
         const bool c = candidate.at<std::uint8_t>(y, x), run = c && runs.at<std::uint8_t>(y, x);
-        const bool high = beside_head.at<std::uint8_t>(y, x);
+        const bool high = above_band.at<std::uint8_t>(y, x);
         const bool far_like =
             high && far_colours[std::size_t(bin(display.at<cv::Vec3b>(y, x)))] >= common;
         // Low down the runs are the subject, and what joins them is more likely the subject
