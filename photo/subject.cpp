@@ -140,8 +140,7 @@ StandingSubject find_standing_subject(ConstImageView photo,
                     std::max(1, o.grabcut_iterations), cv::GC_INIT_WITH_MASK);
         cut = true;
       } catch (const cv::Exception&) {
-        // (Degenerate colours, e.g. a side of one colour: its covariance is singular; OpenCV
-        // regularises it, but any refusal leaves the candidate as it is.)
+        // Any refusal (an input OpenCV will not model) leaves the candidate as it is.
       }
     }
     if (cut) {
@@ -162,8 +161,8 @@ StandingSubject find_standing_subject(ConstImageView photo,
   out.pixels.assign(n, 0);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
-      if (subject.at<std::uint8_t>(y, x)) out.pixels[std::size_t(y) * w + x] = 1, ++out.count;
-  if (out.count == 0) out.pixels.clear();
+      out.pixels[std::size_t(y) * w + x] = subject.at<std::uint8_t>(y, x) != 0;
+  if (cv::countNonZero(subject) == 0) out.pixels.clear();
   return out;
 }
 

@@ -47,7 +47,6 @@ struct StandingSubjectOptions {
 struct StandingSubject {
   /// Row-major at the photo's size, 1 = the subject; empty when none was found.
   std::vector<std::uint8_t> pixels;
-  std::size_t count = 0;  ///< subject pixels
 };
 
 /// `photo` scene-linear (>= 1 channel); `horizon` two points of it (pixel centres); `sky` and

@@ -645,17 +645,21 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // in the structure: a facade beside a shop front has its contacts through it, and cut
       // off from them went to the far billboard. (Only with a measured horizon, as the bottom
       // row's contact below.)
+      // The forward distance of the ground at pixel centre column x, row y (a pixel edge), no
+      // farther than the far billboard: a contact just below the horizon is the least certain
+      // (a pixel there spans many metres), and fog should err towards too much. 0: none.
+      const Vec3 o = g.pose.position_m;
+      auto ground_forward = [&](int x, double y) {
+        const auto gp = photo::ground_point(camera, g.pose, {double(x), y});
+        const double fd = gp ? (gp->x - o.x) * fwd.x + (gp->z - o.z) * fwd.z : 0.0;
+        return fd > 0 && std::isfinite(fd) ? std::min(fd, far_forward) : 0.0;
+      };
       std::vector<double> subject_forward;
       if (ground.standing_subject && g.horizon_source != EstimateSource::fallback) {
         subject = photo::find_standing_subject(photo->view(), g.horizon, mask.sky, ground).pixels;
-        const Vec3 o = g.pose.position_m;
         subject_forward.assign(std::size_t(w), 0.0);
-        for (int x = 0; x < w && !subject.empty(); ++x) {
-          const auto gp = photo::ground_point(camera, g.pose, {double(x), h - 0.5});
-          const double fd = gp ? (gp->x - o.x) * fwd.x + (gp->z - o.z) * fwd.z : 0.0;
-          if (fd > 0 && std::isfinite(fd))
-            subject_forward[std::size_t(x)] = std::min(fd, far_forward);
-        }
+        for (int x = 0; x < w && !subject.empty(); ++x)
+          subject_forward[std::size_t(x)] = ground_forward(x, h - 0.5);
         for (int y = 0; y < h && !subject.empty(); ++y)
           for (int x = 0; x < w; ++x)
             if (!(subject_forward[std::size_t(x)] > 0)) subject[std::size_t(y) * w + x] = 0;
@@ -714,7 +718,6 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         }
       // Its contact: the pixel edge below that row, when it is below the horizon and the pixel
       // beneath is ground-coloured (a structure running off the bottom has no contact).
-      const Vec3 o = g.pose.position_m;
       std::vector<double> forward(total, 0.0);
       for (int l = 1; l < count; ++l) {
         if (!rises[l]) continue;
@@ -753,12 +756,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
               horizon_y(x) - (yc + 1 >= h ? double(stats.at<int>(l, cv::CC_STAT_TOP))
                                           : double(highest[offset[l] + k]));
           if (!(rise >= options.min_rise_ratio * (yc + 0.5 - horizon_y(x)))) continue;
-          const auto gp = photo::ground_point(camera, g.pose, {double(x), yc + 0.5});
-          if (!gp) continue;
-          const double fd = (gp->x - o.x) * fwd.x + (gp->z - o.z) * fwd.z;
-          // No farther than the far billboard: a contact just below the horizon is the least
-          // certain (a pixel there spans many metres), and fog should err towards too much.
-          if (fd > 0 && std::isfinite(fd)) forward[offset[l] + k] = std::min(fd, far_forward);
+          forward[offset[l] + k] = ground_forward(x, yc + 0.5);
         }
       }
       // Smoothed: the median of the contacts within a few columns of the same component; its
