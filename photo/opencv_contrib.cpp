@@ -54,4 +54,9 @@ cv::Mat OnnxNet::forward(const cv::Mat& blob) const {
   return module().forward(net_, blob);
 }
 
+bool detect_faces(const cv::Mat& gray8, const std::string& cascade_path, double scale_factor,
+                  int min_neighbors, int min_size, std::vector<cv::Rect>& faces) {
+  return module().detect_faces(gray8, cascade_path, scale_factor, min_neighbors, min_size, faces);
+}
+
 }  // namespace mr::photo::contrib

@@ -1,7 +1,7 @@
-// Private to libmr: the calls into OpenCV's contrib (ximgproc) and dnn modules, implemented in
-// the module libmr_opencv_contrib.so (photo/opencv_contrib_module.cpp) and loaded on first use
-// (core/modules.h): libopencv_ximgproc alone pulls in some 150 libraries (GDAL, DCMTK, ...
-// through imgcodecs), which a run that estimates nothing never needs. Same signatures and
+// Private to libmr: the calls into OpenCV's contrib (ximgproc), dnn and objdetect modules,
+// implemented in the module libmr_opencv_contrib.so (photo/opencv_contrib_module.cpp) and loaded on
+// first use (core/modules.h): libopencv_ximgproc alone pulls in some 150 libraries (GDAL, DCMTK,
+// ... through imgcodecs), which a run that estimates nothing never needs. Same signatures and
 // parameters as the OpenCV functions they stand for; OpenCV's exceptions pass through.
 #pragma once
 
@@ -9,6 +9,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace mr::photo::contrib {
 
@@ -44,5 +45,11 @@ class OnnxNet {
  private:
   void* net_;  // the module's cv::dnn::Net
 };
+
+/// cv::CascadeClassifier(cascade_path).detectMultiScale(gray8, faces, scale_factor,
+/// min_neighbors, 0, {min_size, min_size}) on a CV_8UC1 picture. False (faces empty) when the
+/// cascade file cannot be read.
+bool detect_faces(const cv::Mat& gray8, const std::string& cascade_path, double scale_factor,
+                  int min_neighbors, int min_size, std::vector<cv::Rect>& faces);
 
 }  // namespace mr::photo::contrib

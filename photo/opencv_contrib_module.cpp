@@ -1,7 +1,9 @@
-// libmr_opencv_contrib.so: libmr's calls into OpenCV's ximgproc and dnn modules (the table in
-// photo/opencv_contrib_module.h), a module of its own so that they and the libraries they pull in
-// are mapped only by the runs that estimate geometry, sky or materials or run a depth network.
+// libmr_opencv_contrib.so: libmr's calls into OpenCV's ximgproc, dnn and objdetect modules (the
+// table in photo/opencv_contrib_module.h), a module of its own so that they and the libraries they
+// pull in are mapped only by the runs that estimate geometry, sky or materials or run a depth
+// network.
 #include <opencv2/dnn.hpp>
+#include <opencv2/objdetect.hpp>
 #include <opencv2/ximgproc/edge_filter.hpp>
 #include <opencv2/ximgproc/slic.hpp>
 
@@ -59,6 +61,18 @@ cv::Mat forward(void* net, const cv::Mat& blob) {
   return n->forward();
 }
 
+bool detect_faces(const cv::Mat& gray8, const std::string& cascade_path, double scale_factor,
+                  int min_neighbors, int min_size, std::vector<cv::Rect>& faces) {
+  faces.clear();
+  // Read per call (~20 ms for the 0.7 MB XML): a classifier is not safe to share between the
+  // threads of a batch.
+  cv::CascadeClassifier cascade;
+  if (cascade_path.empty() || !cascade.load(cascade_path)) return false;
+  cascade.detectMultiScale(gray8, faces, scale_factor, min_neighbors, 0,
+                           cv::Size(min_size, min_size));
+  return true;
+}
+
 const Module kModule{guided_filter,
                      rolling_guidance_filter,
                      fast_global_smoother_filter,
@@ -66,7 +80,8 @@ const Module kModule{guided_filter,
                      read_onnx,
                      delete_net,
                      net_empty,
-                     forward};
+                     forward,
+                     detect_faces};
 
 }  // namespace
 

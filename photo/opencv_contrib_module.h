@@ -5,6 +5,7 @@
 #include <opencv2/core.hpp>
 
 #include <string>
+#include <vector>
 
 namespace mr::photo::contrib {
 
@@ -18,6 +19,8 @@ struct Module {
   void (*delete_net)(void* net);
   bool (*net_empty)(const void* net);
   cv::Mat (*forward)(void* net, const cv::Mat& blob);
+  bool (*detect_faces)(const cv::Mat& gray8, const std::string& cascade_path, double scale_factor,
+                       int min_neighbors, int min_size, std::vector<cv::Rect>& faces);
 };
 
 }  // namespace mr::photo::contrib

@@ -23,6 +23,7 @@
 #include "photo/horizon.h"
 #include "photo/illumination.h"
 #include "photo/lamps.h"
+#include "photo/people.h"
 #include "photo/sky_mask.h"
 #include "photo/sky_matte.h"
 #include "photo/subject.h"
@@ -830,11 +831,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     }
   }
 
-  constexpr int kFar = 5, kContact = 6;
+  constexpr int kFar = 5, kContact = 6, kPerson = 7;
   std::vector<std::uint8_t> pixel_class(n, 0);              // what decided each pixel's distance
   std::vector<double> column_forward(std::size_t(w), 0.0);  // the structure above the horizon
   std::vector<int> column_cov(std::size_t(w), 0);
-  std::size_t counts[7] = {0, 0, 0, 0, 0, 0, 0};  // sky, ground, plane, hint, room, far, contact
+  std::size_t counts[8] = {};  // sky, ground, plane, hint, room, far, contact, person
   // Ground pixels behind a billboard: the billboard's distance over the ground plane's (< 1).
   std::vector<float> ground_ratio(n, 0.0f);
   for (int y = 0; y < h; ++y) {
@@ -876,6 +877,43 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       }
     }
   }
+  // Issue 11 (a couple at a canyon's rim, their horizon guessed from a jacket's zip, on the far
+  // billboard and gone in dense fog; a studio portrait): people near the camera stand at their
+  // faces' distance (photo/people.h), a plane facing the camera. Annotations win.
+  std::vector<float> person_distance;  // per pixel; 0: no person
+  if (options.people) {
+    const photo::People people = photo::find_people(photo->view(), camera.focal_px, mask.sky);
+    // A person the ground's colour model already found standing in the bottom band (above)
+    // keeps that subject's pixels and distance: two outlines of one person would disagree.
+    std::vector<std::uint8_t> skip(people.persons.size() + 1, 0);
+    for (std::size_t k = 0; k < people.persons.size() && !subject.empty(); ++k) {
+      const auto& f = people.persons[k].face;
+      std::size_t inside = 0, all = 0;
+      for (int y = f[1] + f[3] / 4; y < f[1] + f[3] * 3 / 4; ++y)
+        for (int x = f[0] + f[2] / 4; x < f[0] + f[2] * 3 / 4; ++x, ++all)
+          inside += subject[std::size_t(y) * w + x];
+      skip[k + 1] = 2 * inside >= all;
+    }
+    for (int y = 0; y < h && !people.pixels.empty(); ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = std::size_t(y) * w + x;
+        const int k = people.pixels[i];
+        const auto cov = map.coverage[i];
+        if (k == 0 || skip[std::size_t(k)] || mask.sky[i] || cov == photo::Coverage::plane ||
+            cov == photo::Coverage::hint)
+          continue;
+        if (person_distance.empty()) person_distance.assign(n, 0.0f);
+        const float d =
+            float(people.persons[std::size_t(k - 1)].depth_m * camera.z_to_distance(x, y));
+        g.distance_m.at(x, y, 0) = d;
+        person_distance[i] = d;
+        --counts[pixel_class[i]];
+        ++counts[kPerson];
+        pixel_class[i] = kPerson;
+        ground_ratio[i] = 0;
+      }
+  }
+  g.people_pixels = counts[kPerson];
   g.sky_pixels = counts[0];
   g.ground_pixels = counts[1];
   g.plane_pixels = counts[2];
@@ -961,9 +999,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     fold = photo::sky_proximity(photo->view(), mask.sky);
     for (std::size_t i = 0; i < n; ++i) {
       const int cls = pixel_class[i];
-      fold[i] = cls == int(photo::Coverage::hint) || cls == int(photo::Coverage::plane)
-                    ? 1.0f
-                    : photo::sky_fold(fold[i]);
+      fold[i] =
+          cls == int(photo::Coverage::hint) || cls == int(photo::Coverage::plane) || cls == kPerson
+              ? 1.0f
+              : photo::sky_fold(fold[i]);
     }
   }
   // Sky, or a surface the fold takes to the sky's distance (a glow over the horizon).
@@ -973,18 +1012,23 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   };
   if (options.refine_depth && !smooth_bounded) {
     const std::vector<float> q_plane = q;  // before the refinement: the ground plane's
-    if (subject.empty()) {
+    if (subject.empty() && person_distance.empty()) {
       q = photo::refine_inverse_distance(photo->view(), q, c, refine);
     } else {
-      // The subject keeps its distance, and lends none to what is around it: where its outline
-      // is faint (blonde hair against sand) its inverse distance, tens of times the far land's,
-      // spread into the far land beside its head, a clear window in dense fog.
+      // The subject and people keep their distance, and lend none to what is around them:
+      // where an outline is faint (blonde hair against sand) the inverse distance, tens of
+      // times the far land's, spread into the far land beside the head, a clear window in
+      // dense fog.
+      auto own = [&](std::size_t i) {
+        return (!subject.empty() && subject[i]) ||
+               (!person_distance.empty() && person_distance[i] > 0);
+      };
       std::vector<float> weight = c;
       for (std::size_t i = 0; i < n; ++i)
-        if (subject[i]) weight[i] = 0;
+        if (own(i)) weight[i] = 0;
       q = photo::refine_inverse_distance(photo->view(), q, weight, refine);
       for (std::size_t i = 0; i < n; ++i)
-        if (subject[i]) q[i] = q_plane[i];
+        if (own(i)) q[i] = q_plane[i];
     }
     // Only under a horizon that says where the water meets the sky (annotated, or found with
     // some confidence): under a guessed one (the level fall-back, a weak cue, one lowered
@@ -1359,6 +1403,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       g.depth_confidence.at(x, y, 0) = c[i];
       float& d = g.distance_m.at(x, y, 0);
       if (!std::isfinite(d)) continue;  // sky stays sky
+      if (!person_distance.empty() && person_distance[i] > 0) {
+        // Its own distance whatever a bound of the water or the sky did around it; on the sky's
+        // blurred edge (hair) as the matte asks (above).
+        d = person_distance[i] / std::max(1e-3f, 1.0f - 2.0f * mask.alpha[i]);
+        continue;
+      }
       const bool refined = options.refine_depth && photo::refine_keep_weight(c[i]) < 1.0f;
       const bool folded = !fold.empty() && fold[i] < 1.0f;
       if (!refined && !blended[i] && !folded && !smooth_bounded && !sea_bounded[i])
@@ -1405,6 +1455,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         const int cls = pixel_class[i];
         std::size_t* from = cls == kFar       ? &g.billboard_pixels
                             : cls == kContact ? &g.contact_pixels
+                            : cls == kPerson  ? &g.people_pixels
                                               : nullptr;
         if (from && *from > 0) --*from, ++g.sky_pixels;
       }
@@ -1506,6 +1557,9 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
       fmt("%.1f", 100.0 * g.sky_pixels / n) + " % sky" +
       (g.sky_from_mask ? " (automatic sky mask), " + fmt("%.1f", 100.0 * g.contact_pixels / n) +
                              " % structures standing where they meet the ground, " +
+                             (g.people_pixels ? fmt("%.1f", 100.0 * g.people_pixels / n) +
+                                                    " % people (by their faces), "
+                                              : std::string()) +
                              fmt("%.1f", 100.0 * g.billboard_pixels / n) + " % far billboard at " +
                              fmt("%.0f", g.pose.position_m.y /
                                              std::tan(options.billboard_depression_deg * kDeg)) +

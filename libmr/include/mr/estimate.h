@@ -104,6 +104,12 @@ struct MR_API EstimateOptions {
   /// feet (any column meeting the ground counts), canopy included, instead of needing contacts
   /// in 30 % of its columns. false: off (the estimate as before).
   bool vegetation = true;
+  /// Issue 11: people near the camera, found by their faces (a frontal-face detector; Debian's
+  /// opencv-data), stand at their faces' distance (focal length x 0.16 m / the face box's width,
+  /// a plane facing the camera) over the head and body segmented from each face down to the
+  /// frame's bottom, kept out of the depth's refinement. Annotated planes and hints win over
+  /// them. false: off (also when the face cascade is not installed).
+  bool people = true;
   /// Issue 11 item 3: a photo in which the sky mask finds no sky (an interior, a close-up, a
   /// wall, a field seen from above) shows no horizon and no ground running to it, so nothing in
   /// it is known to be far: when the camera height is not annotated (nor derived from a known
@@ -176,6 +182,8 @@ struct MR_API GeometryEstimate {
   std::size_t billboard_pixels = 0;
   /// Pixels on structures standing where they meet the ground (EstimateOptions::ground_contact).
   std::size_t contact_pixels = 0;
+  /// Pixels on people found by their faces (EstimateOptions::people).
+  std::size_t people_pixels = 0;
   /// Why the scene's metres differ from the default camera height's, for a person to read
   /// (EstimateOptions::bounded_scene_depth_m); empty when they do not.
   std::string scale_cue;

@@ -1,0 +1,211 @@
+#include "photo/people.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+#include "photo/display.h"
+#include "photo/opencv_contrib.h"
+
+#ifndef MR_FACE_CASCADE
+#define MR_FACE_CASCADE ""
+#endif
+
+namespace mr::photo {
+
+const char* default_face_cascade() {
+  return MR_FACE_CASCADE;
+}
+
+namespace {
+
+// Whether the photo has colour at all: a black-and-white photo's faces have no skin colour.
+bool has_colour(const cv::Mat& rgb) {
+  double spread = 0;
+  for (int y = 0; y < rgb.rows; y += 4)
+    for (int x = 0; x < rgb.cols; x += 4) {
+      const cv::Vec3b p = rgb.at<cv::Vec3b>(y, x);
+      spread += std::max({p[0], p[1], p[2]}) - std::min({p[0], p[1], p[2]});
+    }
+  const double samples = double((rgb.rows + 3) / 4) * double((rgb.cols + 3) / 4);
+  constexpr double kGreySpread = 6;  // mean max - min of the channels, 8-bit codes
+  return spread >= kGreySpread * samples;
+}
+
+double skin_fraction(const cv::Mat& ycrcb, const cv::Rect& centre) {
+  int skin = 0;
+  for (int y = centre.y; y < centre.y + centre.height; ++y)
+    for (int x = centre.x; x < centre.x + centre.width; ++x) {
+      const cv::Vec3b p = ycrcb.at<cv::Vec3b>(y, x);
+      skin += p[1] >= 133 && p[1] <= 180 && p[2] >= 77 && p[2] <= 135;
+    }
+  return double(skin) / std::max(1, centre.area());
+}
+
+// The person's pixels in `roi` (of the photo): the prior of head and body drawn from the face,
+// settled by GrabCut, the part joined to the face. 1 = the person, at roi's size.
+cv::Mat segment_person(const cv::Mat& display, const std::vector<std::uint8_t>& sky, int w,
+                       const cv::Rect& face, const cv::Rect& roi, const PeopleOptions& o) {
+  const double fw = face.width, fh = face.height;
+  const double cx = face.x + fw / 2 - roi.x, top = face.y - roi.y;
+  cv::Mat labels(roi.size(), CV_8U, cv::Scalar(cv::GC_PR_BGD));
+  cv::Mat prior(roi.size(), CV_8U, cv::Scalar(0));
+  // Head and hair: an ellipse a little larger than the face box. Neck, shoulders, body: down
+  // to the frame's bottom, widening to 4.8 face widths (shoulders, arms, a coat).
+  cv::ellipse(prior, cv::Point(int(std::lround(cx)), int(std::lround(top + 0.42 * fh))),
+              cv::Size(int(std::lround(0.85 * fw)), int(std::lround(0.95 * fh))), 0, 0, 360,
+              cv::Scalar(1), cv::FILLED);
+  // A person leaning or turned has a shoulder beside the chin: the body's prior widens from the
+  // face's middle row, GrabCut takes back what is not the person.
+  const double neck = top + 0.5 * fh, shoulders = top + 1.3 * fh;
+  for (int y = std::max(0, int(std::floor(neck))); y < roi.height; ++y) {
+    const double t = std::clamp((y - neck) / (shoulders - neck), 0.0, 1.0);
+    const double half = (0.7 + t * (1.6 - 0.7)) * fw;
+    const int x0 = std::max(0, int(std::lround(cx - half)));
+    const int x1 = std::min(roi.width - 1, int(std::lround(cx + half)));
+    for (int x = x0; x <= x1; ++x) prior.at<std::uint8_t>(y, x) = 1;
+  }
+  labels.setTo(cv::GC_PR_FGD, prior);
+  // Certain: the face's centre and the chest under it. Certainly not: sky, the far sides, what
+  // is above the hair.
+  const cv::Rect frame(0, 0, roi.width, roi.height);
+  const cv::Rect core = cv::Rect(int(std::lround(cx - 0.3 * fw)), int(std::lround(top + 0.15 * fh)),
+                                 int(std::lround(0.6 * fw)), int(std::lround(0.7 * fh))) &
+                        frame;
+  const cv::Rect chest =
+      cv::Rect(int(std::lround(cx - 0.3 * fw)), int(std::lround(top + 1.25 * fh)),
+               int(std::lround(0.6 * fw)), int(std::lround(1.15 * fh))) &
+      frame;
+  labels(core).setTo(cv::GC_FGD);
+  labels(chest).setTo(cv::GC_FGD);
+  // The head within the face box's width, up to a third of a face above it: hair (blonde hair
+  // is of the sunlit land's colours, and GrabCut took it away), unless it is sky (below).
+  cv::Mat head(roi.size(), CV_8U, cv::Scalar(0));
+  cv::ellipse(head, cv::Point(int(std::lround(cx)), int(std::lround(top + 0.4 * fh))),
+              cv::Size(int(std::lround(0.5 * fw)), int(std::lround(0.72 * fh))), 0, 0, 360,
+              cv::Scalar(1), cv::FILLED);
+  labels.setTo(cv::GC_FGD, head);
+  for (int y = 0; y < roi.height; ++y)
+    for (int x = 0; x < roi.width; ++x) {
+      const bool far_side = std::abs(x + 0.5 - cx) > 2.8 * fw || y + 0.5 < top - 0.6 * fh;
+      if (far_side || (!sky.empty() && sky[std::size_t(y + roi.y) * w + x + roi.x]))
+        labels.at<std::uint8_t>(y, x) = cv::GC_BGD;
+    }
+  cv::Mat person = prior.clone();
+  if (o.grabcut_pixels > 0) {
+    const double scale = std::min(1.0, std::sqrt(o.grabcut_pixels / double(roi.area())));
+    const cv::Size small(std::max(8, int(std::lround(roi.width * scale))),
+                         std::max(8, int(std::lround(roi.height * scale))));
+    cv::Mat small_display, small_labels;
+    cv::resize(display(roi), small_display, small, 0, 0, cv::INTER_AREA);
+    cv::resize(labels, small_labels, small, 0, 0, cv::INTER_NEAREST);
+    // GrabCut's colour models are 5 Gaussians a side (k-means first): too few pixels on a side
+    // (a face filling the frame) and the prior stays as it is.
+    constexpr int kMinSidePixels = 25;
+    const int fg_side =
+        cv::countNonZero((small_labels == cv::GC_FGD) | (small_labels == cv::GC_PR_FGD));
+    const int bg_side = small.area() - fg_side;
+    if (cv::countNonZero(small_labels == cv::GC_FGD) > 0 && fg_side >= kMinSidePixels &&
+        bg_side >= kMinSidePixels) {
+      try {
+        cv::Mat bgd, fgd;
+        cv::grabCut(small_display, small_labels, cv::Rect(), bgd, fgd,
+                    std::max(1, o.grabcut_iterations), cv::GC_INIT_WITH_MASK);
+        cv::Mat fg = (small_labels == cv::GC_FGD) | (small_labels == cv::GC_PR_FGD), fg_full;
+        cv::resize(fg, fg_full, roi.size(), 0, 0, cv::INTER_LINEAR);  // no blocks
+        // Below the shoulders GrabCut may take more than the prior (a coat wider than it, a
+        // helmet held in the arms: the prior's straight sides were seams through them); above
+        // them only the prior's head (far people beside it are of a coat's colours too).
+        cv::Mat free_rows(roi.size(), CV_8U, cv::Scalar(0));
+        free_rows.rowRange(std::clamp(int(std::ceil(top + fh)), 0, roi.height), roi.height)
+            .setTo(1);
+        person = (fg_full >= 128) & (prior | free_rows);
+      } catch (const cv::Exception&) {
+        // Any refusal (an input OpenCV will not model) leaves the prior as it is.
+      }
+    }
+  }
+  // Only what is joined to the face (GrabCut may leave islands of the person's colours).
+  cv::Mat components;
+  cv::connectedComponents(person, components, 8, CV_32S);
+  std::vector<int> keep;
+  for (int y = core.y; y < core.y + core.height; ++y)
+    for (int x = core.x; x < core.x + core.width; ++x)
+      if (const int l = components.at<int>(y, x); l > 0) keep.push_back(l);
+  std::sort(keep.begin(), keep.end());
+  keep.erase(std::unique(keep.begin(), keep.end()), keep.end());
+  for (int y = 0; y < roi.height; ++y)
+    for (int x = 0; x < roi.width; ++x)
+      person.at<std::uint8_t>(y, x) =
+          std::binary_search(keep.begin(), keep.end(), components.at<int>(y, x));
+  return person;
+}
+
+}  // namespace
+
+People find_people(ConstImageView photo, double focal_px, const std::vector<std::uint8_t>& sky,
+                   const PeopleOptions& o) {
+  People out;
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(std::max(0, w)) * std::size_t(std::max(0, h));
+  if (w < 16 || h < 16 || photo.channels < 1 || !(focal_px > 0) || !std::isfinite(focal_px) ||
+      (!sky.empty() && sky.size() != n))
+    return out;
+  const std::string path = o.cascade_path.empty() ? default_face_cascade() : o.cascade_path;
+  const cv::Mat display = display_rgb8(photo);
+  cv::Mat gray;
+  cv::cvtColor(display, gray, cv::COLOR_RGB2GRAY);
+  cv::equalizeHist(gray, gray);
+  const int min_size =
+      std::max(12, int(std::ceil(std::max(0.0, o.min_face_fraction) * std::min(w, h))));
+  std::vector<cv::Rect> faces;
+  try {
+    out.searched =
+        contrib::detect_faces(gray, path, 1.1, std::max(1, o.min_neighbors), min_size, faces);
+  } catch (const cv::Exception&) {
+    return out;
+  }
+  const bool colour = has_colour(display);
+  cv::Mat ycrcb;
+  if (colour) cv::cvtColor(display, ycrcb, cv::COLOR_RGB2YCrCb);
+  const cv::Rect frame(0, 0, w, h);
+  std::vector<cv::Rect> kept;
+  for (const cv::Rect& f0 : faces) {
+    const cv::Rect f = f0 & frame;
+    if (f.width < min_size / 2 || f.height < min_size / 2) continue;
+    const cv::Rect centre = cv::Rect(f.x + f.width / 4, f.y + f.height * 3 / 10,
+                                     std::max(1, f.width / 2), std::max(1, f.height / 2)) &
+                            frame;
+    if (!sky.empty() &&
+        sky[std::size_t(centre.y + centre.height / 2) * w + centre.x + centre.width / 2])
+      continue;
+    if (colour && skin_fraction(ycrcb, centre) < o.min_skin_fraction) continue;
+    kept.push_back(f);
+  }
+  // Nearest (widest) first: a nearer person's pixels win where two overlap.
+  std::sort(kept.begin(), kept.end(),
+            [](const cv::Rect& a, const cv::Rect& b) { return a.width > b.width; });
+  if (kept.size() > 255) kept.resize(255);
+  for (const cv::Rect& f : kept)
+    out.persons.push_back({{f.x, f.y, f.width, f.height}, focal_px * o.face_width_m / f.width});
+  if (out.persons.empty()) return out;
+  out.pixels.assign(n, 0);
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    const cv::Rect& f = kept[k];
+    const double fw = f.width, cx = f.x + fw / 2;
+    const int x0 = std::max(0, int(std::floor(cx - 3.1 * fw)));
+    const int x1 = std::min(w, int(std::ceil(cx + 3.1 * fw)));
+    const int y0 = std::max(0, int(std::floor(f.y - 0.8 * f.height)));
+    const cv::Rect roi(x0, y0, x1 - x0, h - y0);
+    const cv::Mat person = segment_person(display, sky, w, f, roi, o);
+    for (int y = 0; y < roi.height; ++y)
+      for (int x = 0; x < roi.width; ++x) {
+        std::uint8_t& p = out.pixels[std::size_t(y + roi.y) * w + x + roi.x];
+        if (p == 0 && person.at<std::uint8_t>(y, x)) p = std::uint8_t(k + 1);
+      }
+  }
+  return out;
+}
+
+}  // namespace mr::photo
