@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/cv_bridge.h"
+#include "photo/frame_border.h"
 #include "photo/opencv_contrib.h"
 #include "photo/sky_matte.h"
 
@@ -132,8 +133,11 @@ std::vector<std::uint8_t> as_smooth_as_the_sky(const cv::Mat& labels, int m,
 
 }  // namespace
 
-SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
-                          const SkyMaskOptions& o) {
+namespace {
+
+// The mask of a picture without a frame border.
+SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
+                            const SkyMaskOptions& o) {
   SkyMask out;
   out.width = photo.width;
   out.height = photo.height;
@@ -769,6 +773,35 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
     }
   }
   out.gap_pixels = std::size_t(std::lround(double(gap_pixels_working) / (sx * sy)));
+  return out;
+}
+
+}  // namespace
+
+SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>& horizon,
+                          const SkyMaskOptions& o) {
+  // Issue 11: a scanned print's border is not sky, and the sky's tests (touching the frame's
+  // top) read the picture's own edges: the mask is found inside it.
+  const FrameBorder border = find_frame_border(photo);
+  if (!border.any()) return sky_mask_of_picture(photo, horizon, o);
+  const Rect r = border.inside(photo.width, photo.height);
+  const std::array<PixelPoint, 2> shifted{PixelPoint{horizon[0][0] - r.x, horizon[0][1] - r.y},
+                                          PixelPoint{horizon[1][0] - r.x, horizon[1][1] - r.y}};
+  const SkyMask inner = sky_mask_of_picture(photo.sub(r), shifted, o);
+  SkyMask out;
+  out.width = photo.width;
+  out.height = photo.height;
+  out.sky.assign(std::size_t(photo.width) * photo.height, 0);
+  out.alpha.assign(out.sky.size(), 0.0f);
+  for (int y = 0; y < r.height && !inner.sky.empty(); ++y)
+    for (int x = 0; x < r.width; ++x) {
+      const std::size_t from = std::size_t(y) * r.width + x;
+      const std::size_t to = std::size_t(y + r.y) * photo.width + x + r.x;
+      out.sky[to] = inner.sky[from];
+      out.alpha[to] = inner.alpha[from];
+    }
+  out.pixels = inner.pixels;
+  out.gap_pixels = inner.gap_pixels;
   return out;
 }
 

@@ -19,6 +19,7 @@
 #include "mr/scene_json.h"
 #include "photo/airlight.h"
 #include "photo/clouds.h"
+#include "photo/frame_border.h"
 #include "photo/geometry.h"
 #include "photo/horizon.h"
 #include "photo/illumination.h"
@@ -879,9 +880,13 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   }
   // Issue 11 (a couple at a canyon's rim, their horizon guessed from a jacket's zip, on the far
   // billboard and gone in dense fog; a studio portrait): people near the camera stand at their
-  // faces' distance (photo/people.h), a plane facing the camera. Annotations win.
-  std::vector<float> person_distance;  // per pixel; 0: no person
-  if (options.people) {
+  // faces' distance (photo/people.h), a plane facing the camera. Annotations win. Not in a
+  // bounded scene (no sky: an interior, a close-up): its fog deepens gently from the frame's
+  // bottom, where a person stands nearest anyway, and a person cut out of it would outline
+  // every head against a wall metres behind with new contrast.
+  // Per pixel, a distance the refinement and the bounds below leave as it is (0: none).
+  std::vector<float> kept_distance;
+  if (options.people && !bounded) {
     const photo::People people = photo::find_people(photo->view(), camera.focal_px, mask.sky);
     // A person the ground's colour model already found standing in the bottom band (above)
     // keeps that subject's pixels and distance: two outlines of one person would disagree.
@@ -902,11 +907,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         if (k == 0 || skip[std::size_t(k)] || mask.sky[i] || cov == photo::Coverage::plane ||
             cov == photo::Coverage::hint)
           continue;
-        if (person_distance.empty()) person_distance.assign(n, 0.0f);
+        if (kept_distance.empty()) kept_distance.assign(n, 0.0f);
         const float d =
             float(people.persons[std::size_t(k - 1)].depth_m * camera.z_to_distance(x, y));
         g.distance_m.at(x, y, 0) = d;
-        person_distance[i] = d;
+        kept_distance[i] = d;
         --counts[pixel_class[i]];
         ++counts[kPerson];
         pixel_class[i] = kPerson;
@@ -1012,7 +1017,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   };
   if (options.refine_depth && !smooth_bounded) {
     const std::vector<float> q_plane = q;  // before the refinement: the ground plane's
-    if (subject.empty() && person_distance.empty()) {
+    if (subject.empty() && kept_distance.empty()) {
       q = photo::refine_inverse_distance(photo->view(), q, c, refine);
     } else {
       // The subject and people keep their distance, and lend none to what is around them:
@@ -1020,8 +1025,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // times the far land's, spread into the far land beside the head, a clear window in
       // dense fog.
       auto own = [&](std::size_t i) {
-        return (!subject.empty() && subject[i]) ||
-               (!person_distance.empty() && person_distance[i] > 0);
+        return (!subject.empty() && subject[i]) || (!kept_distance.empty() && kept_distance[i] > 0);
       };
       std::vector<float> weight = c;
       for (std::size_t i = 0; i < n; ++i)
@@ -1403,10 +1407,10 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       g.depth_confidence.at(x, y, 0) = c[i];
       float& d = g.distance_m.at(x, y, 0);
       if (!std::isfinite(d)) continue;  // sky stays sky
-      if (!person_distance.empty() && person_distance[i] > 0) {
+      if (!kept_distance.empty() && kept_distance[i] > 0) {
         // Its own distance whatever a bound of the water or the sky did around it; on the sky's
         // blurred edge (hair) as the matte asks (above).
-        d = person_distance[i] / std::max(1e-3f, 1.0f - 2.0f * mask.alpha[i]);
+        d = kept_distance[i] / std::max(1e-3f, 1.0f - 2.0f * mask.alpha[i]);
         continue;
       }
       const bool refined = options.refine_depth && photo::refine_keep_weight(c[i]) < 1.0f;
@@ -1470,6 +1474,34 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
             a = 1.0f;
         }
     }
+  }
+  // Issue 11 (a scanned print's dark top edge): the frame's border is not the scene
+  // (photo/frame_border.h; the sky mask was found inside it). It is veiled as the farthest of
+  // the picture's edge pixels beside it (within 2 % of the frame along the edge), so that the
+  // print is veiled alike and a strip down a side does not flicker between a near person's
+  // distance and the far land behind. (As sky, distance +inf, the border lent its darkness to
+  // the sky's matte under it: a dark line in haze.)
+  if (const photo::FrameBorder border = photo::find_frame_border(photo->view()); border.any()) {
+    const Rect r = border.inside(w, h);
+    const int reach = std::max(1, int(0.02 * std::max(w, h)));
+    for (int y = 0; y < h && r.width > 0 && r.height > 0; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (!border.contains(x, y, w, h)) continue;
+        const int sx = std::clamp(x, r.x, r.x + r.width - 1);
+        const int sy = std::clamp(y, r.y, r.y + r.height - 1);
+        // Along the edge the border pixel faces: rows for a side strip, columns for a band.
+        const bool side = sx != x && sy == y;
+        int bx = sx, by = sy;
+        for (int t = -reach; t <= reach; ++t) {
+          const int cx = side ? sx : std::clamp(sx + t, r.x, r.x + r.width - 1);
+          const int cy = side ? std::clamp(sy + t, r.y, r.y + r.height - 1) : sy;
+          if (!(g.distance_m.at(cx, cy, 0) <= g.distance_m.at(bx, by, 0))) bx = cx, by = cy;
+        }
+        g.distance_m.at(x, y, 0) = g.distance_m.at(bx, by, 0);
+        g.sky_alpha.at(x, y, 0) = g.sky_alpha.at(bx, by, 0);
+        g.depth_confidence.at(x, y, 0) = g.depth_confidence.at(bx, by, 0);
+        ++g.frame_border_pixels;
+      }
   }
   return g;
 }
@@ -1555,16 +1587,20 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                            ", "
                      : std::string()) +
       fmt("%.1f", 100.0 * g.sky_pixels / n) + " % sky" +
-      (g.sky_from_mask ? " (automatic sky mask), " + fmt("%.1f", 100.0 * g.contact_pixels / n) +
-                             " % structures standing where they meet the ground, " +
-                             (g.people_pixels ? fmt("%.1f", 100.0 * g.people_pixels / n) +
-                                                    " % people (by their faces), "
-                                              : std::string()) +
-                             fmt("%.1f", 100.0 * g.billboard_pixels / n) + " % far billboard at " +
-                             fmt("%.0f", g.pose.position_m.y /
-                                             std::tan(options.billboard_depression_deg * kDeg)) +
-                             " m"
-                       : std::string()));
+      (g.sky_from_mask
+           ? " (automatic sky mask), " + fmt("%.1f", 100.0 * g.contact_pixels / n) +
+                 " % structures standing where they meet the ground, " +
+                 (g.people_pixels
+                      ? fmt("%.1f", 100.0 * g.people_pixels / n) + " % people (by their faces), "
+                      : std::string()) +
+                 (g.frame_border_pixels ? fmt("%.1f", 100.0 * g.frame_border_pixels / n) +
+                                              " % the frame's border (as the picture's edge), "
+                                        : std::string()) +
+                 fmt("%.1f", 100.0 * g.billboard_pixels / n) + " % far billboard at " +
+                 fmt("%.0f",
+                     g.pose.position_m.y / std::tan(options.billboard_depression_deg * kDeg)) +
+                 " m"
+           : std::string()));
 
   if (!annotations.shadow_pairs.empty()) {
     std::vector<photo::ShadowPair> pairs;

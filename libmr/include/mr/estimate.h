@@ -108,7 +108,8 @@ struct MR_API EstimateOptions {
   /// opencv-data), stand at their faces' distance (focal length x 0.16 m / the face box's width,
   /// a plane facing the camera) over the head and body segmented from each face down to the
   /// frame's bottom, kept out of the depth's refinement. Annotated planes and hints win over
-  /// them. false: off (also when the face cascade is not installed).
+  /// them; a scene without sky (bounded) keeps its smooth depth. false: off (also when the face
+  /// cascade is not installed).
   bool people = true;
   /// Issue 11 item 3: a photo in which the sky mask finds no sky (an interior, a close-up, a
   /// wall, a field seen from above) shows no horizon and no ground running to it, so nothing in
@@ -184,6 +185,10 @@ struct MR_API GeometryEstimate {
   std::size_t contact_pixels = 0;
   /// Pixels on people found by their faces (EstimateOptions::people).
   std::size_t people_pixels = 0;
+  /// Pixels of a frame around the picture (a scanned print's border; issue 11), not the scene:
+  /// each takes the distance, sky matte and confidence of the picture's nearest edge pixel (also
+  /// included in the counts above).
+  std::size_t frame_border_pixels = 0;
   /// Why the scene's metres differ from the default camera height's, for a person to read
   /// (EstimateOptions::bounded_scene_depth_m); empty when they do not.
   std::string scale_cue;

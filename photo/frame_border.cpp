@@ -1,0 +1,88 @@
+#include "photo/frame_border.h"
+
+#include <opencv2/core/mat.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdlib>
+
+#include "photo/display.h"
+
+namespace mr::photo {
+
+namespace {
+
+using Colour = std::array<int, 3>;
+
+// Line `i` of one side of `rgb`, inward from the edge: pixels j of its middle 90 %.
+struct Side {
+  const cv::Mat& rgb;
+  int side;  // 0 top, 1 bottom, 2 left, 3 right
+
+  int length() const { return side < 2 ? rgb.cols : rgb.rows; }
+  int depth() const { return side < 2 ? rgb.rows : rgb.cols; }
+  Colour at(int i, int j) const {
+    const int x = side == 2 ? i : side == 3 ? rgb.cols - 1 - i : j;
+    const int y = side == 0 ? i : side == 1 ? rgb.rows - 1 - i : j;
+    const cv::Vec3b p = rgb.at<cv::Vec3b>(y, x);
+    return {p[0], p[1], p[2]};
+  }
+  int first() const { return length() / 20; }
+  int last() const { return length() - length() / 20; }
+
+  Colour median(int i) const {
+    std::array<std::array<int, 256>, 3> histogram{};
+    for (int j = first(); j < last(); ++j) {
+      const Colour c = at(i, j);
+      for (int k = 0; k < 3; ++k) ++histogram[std::size_t(k)][std::size_t(c[std::size_t(k)])];
+    }
+    const int half = (last() - first()) / 2;
+    Colour m{};
+    for (std::size_t k = 0; k < 3; ++k) {
+      int seen = 0, v = 0;
+      while (v < 255 && (seen += histogram[k][std::size_t(v)]) <= half) ++v;
+      m[k] = v;
+    }
+    return m;
+  }
+  double fraction_near(int i, const Colour& ref, int codes) const {
+    int near = 0;
+    for (int j = first(); j < last(); ++j) {
+      const Colour c = at(i, j);
+      near += std::abs(c[0] - ref[0]) <= codes && std::abs(c[1] - ref[1]) <= codes &&
+              std::abs(c[2] - ref[2]) <= codes;
+    }
+    return double(near) / std::max(1, last() - first());
+  }
+};
+
+int border_lines(const Side& s, const FrameBorderOptions& o) {
+  const int max_lines = int(std::floor(o.max_fraction * s.depth()));
+  if (max_lines < 1) return 0;
+  const Colour ref = s.median(0);
+  if (*std::max_element(ref.begin(), ref.end()) - *std::min_element(ref.begin(), ref.end()) >
+      o.max_chroma_codes)
+    return 0;
+  int k = 0;
+  while (k < max_lines && s.fraction_near(k, ref, o.uniform_codes) >= o.uniform_fraction) ++k;
+  if (k == 0) return 0;
+  for (int c = k; c <= k + std::max(0, o.max_transition) && c < s.depth() / 2; ++c)
+    if (s.fraction_near(c, ref, o.uniform_codes) <= o.content_like_fraction) return c;
+  return 0;
+}
+
+}  // namespace
+
+FrameBorder find_frame_border(ConstImageView photo, const FrameBorderOptions& o) {
+  FrameBorder out;
+  if (photo.width < 16 || photo.height < 16 || photo.channels < 1) return out;
+  const cv::Mat rgb = display_rgb8(photo);
+  out.top = border_lines({rgb, 0}, o);
+  out.bottom = border_lines({rgb, 1}, o);
+  out.left = border_lines({rgb, 2}, o);
+  out.right = border_lines({rgb, 3}, o);
+  return out;
+}
+
+}  // namespace mr::photo
