@@ -89,7 +89,10 @@ cv::Mat segment_person(const cv::Mat& display, const std::vector<std::uint8_t>& 
   for (int y = 0; y < roi.height; ++y)
     for (int x = 0; x < roi.width; ++x) {
       const bool far_side = std::abs(x + 0.5 - cx) > 2.8 * fw || y + 0.5 < top - 0.6 * fh;
-      if (far_side || (!sky.empty() && sky[std::size_t(y + roi.y) * w + x + roi.x]))
+      // Below the chin, within the body's prior, what the sky mask took for sky (a smooth
+      // silver collar against a pale backdrop) is left to GrabCut.
+      const bool body = prior.at<std::uint8_t>(y, x) && y + 0.5 >= top + fh;
+      if (far_side || (!body && !sky.empty() && sky[std::size_t(y + roi.y) * w + x + roi.x]))
         labels.at<std::uint8_t>(y, x) = cv::GC_BGD;
     }
   cv::Mat person = prior.clone();

@@ -904,9 +904,13 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         const std::size_t i = std::size_t(y) * w + x;
         const int k = people.pixels[i];
         const auto cov = map.coverage[i];
-        if (k == 0 || skip[std::size_t(k)] || mask.sky[i] || cov == photo::Coverage::plane ||
+        if (k == 0 || skip[std::size_t(k)] || cov == photo::Coverage::plane ||
             cov == photo::Coverage::hint)
           continue;
+        if (mask.sky[i]) {  // under a person's chin (photo/people.h): not sky
+          mask.sky[i] = 0, mask.alpha[i] = 0, --mask.pixels;
+          ground_ratio[i] = 0;
+        }
         if (kept_distance.empty()) kept_distance.assign(n, 0.0f);
         const float d =
             float(people.persons[std::size_t(k - 1)].depth_m * camera.z_to_distance(x, y));
