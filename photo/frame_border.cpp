@@ -68,7 +68,19 @@ int border_lines(const Side& s, const FrameBorderOptions& o) {
   while (k < max_lines && s.fraction_near(k, ref, o.uniform_codes) >= o.uniform_fraction) ++k;
   if (k == 0) return 0;
   for (int c = k; c <= k + std::max(0, o.max_transition) && c < s.depth() / 2; ++c)
-    if (s.fraction_near(c, ref, o.uniform_codes) <= o.content_like_fraction) return c;
+    if (s.fraction_near(c, ref, o.uniform_codes) <= o.content_like_fraction) {
+      // The scan's blurred edge: lines still ramping steeply to the picture's colour are the
+      // border's (the picture's sky then touches the frame's top).
+      int end = c;
+      while (end < k + std::max(0, o.max_transition) && end + 1 < s.depth() / 2) {
+        const Colour a = s.median(end), b = s.median(end + 1);
+        int step = 0;
+        for (std::size_t i = 0; i < 3; ++i) step = std::max(step, std::abs(a[i] - b[i]));
+        if (step <= o.uniform_codes) break;
+        ++end;
+      }
+      return end;
+    }
   return 0;
 }
 

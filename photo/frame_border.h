@@ -23,7 +23,9 @@ struct FrameBorderOptions {
   /// median's channels at most this.
   int max_chroma_codes = 30;
   /// The picture starts within `max_transition` lines after the border (a scan's blurred edge),
-  /// at a line where at most `content_like_fraction` of the pixels are of the border's colour.
+  /// at a line where at most `content_like_fraction` of the pixels are of the border's colour;
+  /// lines within those whose median still steps by more than `uniform_codes` to the next line's
+  /// are the blurred edge's too.
   int max_transition = 2;
   double content_like_fraction = 0.3;
 };

@@ -782,7 +782,7 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
                           const SkyMaskOptions& o) {
   // Issue 11: a scanned print's border is not sky, and the sky's tests (touching the frame's
   // top) read the picture's own edges: the mask is found inside it.
-  const FrameBorder border = find_frame_border(photo);
+  const FrameBorder border = o.inside_frame_border ? find_frame_border(photo) : FrameBorder{};
   if (!border.any()) return sky_mask_of_picture(photo, horizon, o);
   const Rect r = border.inside(photo.width, photo.height);
   const std::array<PixelPoint, 2> shifted{PixelPoint{horizon[0][0] - r.x, horizon[0][1] - r.y},

@@ -33,6 +33,9 @@
 namespace mr::photo {
 
 struct SkyMaskOptions {
+  /// Issue 11: found inside a frame border (photo/frame_border.h; a scanned print's edge),
+  /// which is never sky. false: the whole frame.
+  bool inside_frame_border = true;
   double working_pixels = 0.5e6;
   double max_texture = 0.012;  ///< mean |gradient| of the display-referred luma per pixel
   /// The sky keeps only what lies within `core_grow` texture windows (through the sky) of its

@@ -404,7 +404,9 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // The automatic sky: carve it out of the planes. What is above the horizon and not sky is
   // structure: standing on the ground where it meets it (ground_contact), else on the far
   // billboard; the ground behind a column's structure takes the structure's distance.
-  photo::SkyMask mask = photo::estimate_sky_mask(photo->view(), g.horizon);
+  photo::SkyMaskOptions sky_options;
+  sky_options.inside_frame_border = options.frame_border;
+  photo::SkyMask mask = photo::estimate_sky_mask(photo->view(), g.horizon, sky_options);
   g.sky_from_mask = true;
   // Issue 11 (a camera looking up into an all-sky frame; a weak horizon above the land): the
   // sky is only ever seen above the horizon. Where a guessed horizon (the level fall-back, or
@@ -438,8 +440,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     const int min_cut_columns = int(std::ceil(kMinSkyCutByTheGuessFraction * w));
     if (at_guess >= kMinSkyAtGuessFraction * w) {
       const double below = h + 1.0;  // the probe: every pixel is above its horizon
-      probe = photo::estimate_sky_mask(photo->view(),
-                                       {PixelPoint{0, below}, PixelPoint{w - 1.0, below}});
+      probe = photo::estimate_sky_mask(
+          photo->view(), {PixelPoint{0, below}, PixelPoint{w - 1.0, below}}, sky_options);
       if (options.sky_cut_by_a_guess)
         cut_columns = join_sky_cut_by_a_guess(mask, probe, g.horizon, kNear, min_cut_columns);
       for (int x = 0; x < w; ++x) {
@@ -463,7 +465,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       g.ground_pixels = map.counts[int(photo::Coverage::ground)];
       g.plane_pixels = map.counts[int(photo::Coverage::plane)];
       g.hint_pixels = map.counts[int(photo::Coverage::hint)];
-      mask = photo::estimate_sky_mask(photo->view(), g.horizon);
+      mask = photo::estimate_sky_mask(photo->view(), g.horizon, sky_options);
     };
     if (!reach.empty()) {
       std::nth_element(reach.begin(), reach.begin() + std::ptrdiff_t(reach.size() / 2),
@@ -1485,7 +1487,9 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // print is veiled alike and a strip down a side does not flicker between a near person's
   // distance and the far land behind. (As sky, distance +inf, the border lent its darkness to
   // the sky's matte under it: a dark line in haze.)
-  if (const photo::FrameBorder border = photo::find_frame_border(photo->view()); border.any()) {
+  if (const photo::FrameBorder border =
+          options.frame_border ? photo::find_frame_border(photo->view()) : photo::FrameBorder{};
+      border.any()) {
     const Rect r = border.inside(w, h);
     const int reach = std::max(1, int(0.02 * std::max(w, h)));
     for (int y = 0; y < h && r.width > 0 && r.height > 0; ++y)

@@ -111,6 +111,11 @@ struct MR_API EstimateOptions {
   /// them; a scene without sky (bounded) keeps its smooth depth. false: off (also when the face
   /// cascade is not installed).
   bool people = true;
+  /// Issue 11: a frame around the picture (a scanned print's uneven dark edge, a light strip
+  /// down a side: at most 3 % of the frame, near neutral, ending in a step to the picture) is
+  /// not the scene: the sky is found inside it, and it takes the fog of the picture's edge
+  /// beside it (GeometryEstimate::frame_border_pixels). false: the whole frame is the picture.
+  bool frame_border = true;
   /// Issue 11 item 3: a photo in which the sky mask finds no sky (an interior, a close-up, a
   /// wall, a field seen from above) shows no horizon and no ground running to it, so nothing in
   /// it is known to be far: when the camera height is not annotated (nor derived from a known
