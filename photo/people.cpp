@@ -157,18 +157,27 @@ People find_people(ConstImageView photo, double focal_px, const std::vector<std:
     return out;
   const std::string path = o.cascade_path.empty() ? default_face_cascade() : o.cascade_path;
   const cv::Mat display = display_rgb8(photo);
-  cv::Mat gray;
-  cv::cvtColor(display, gray, cv::COLOR_RGB2GRAY);
-  cv::equalizeHist(gray, gray);
   const int min_size =
       std::max(12, int(std::ceil(std::max(0.0, o.min_face_fraction) * std::min(w, h))));
+  // Searched on a copy where the smallest face is 24 px (the cascade's window is 20): the cost
+  // of the search grows with the pixels (0.27 s at 1 MP on this machine; a 12 MP photo needs
+  // none of its resolution for faces of 4 % of its side).
+  constexpr double kSearchFacePx = 24;
+  const double scale = std::min(1.0, kSearchFacePx / min_size);
+  cv::Mat gray;
+  cv::cvtColor(display, gray, cv::COLOR_RGB2GRAY);
+  if (scale < 1) cv::resize(gray, gray, cv::Size(), scale, scale, cv::INTER_AREA);
+  cv::equalizeHist(gray, gray);
   std::vector<cv::Rect> faces;
   try {
-    out.searched =
-        contrib::detect_faces(gray, path, 1.1, std::max(1, o.min_neighbors), min_size, faces);
+    out.searched = contrib::detect_faces(gray, path, 1.1, std::max(1, o.min_neighbors),
+                                         int(std::floor(min_size * scale)), faces);
   } catch (const cv::Exception&) {
     return out;
   }
+  for (cv::Rect& f : faces)
+    f = cv::Rect(int(std::lround(f.x / scale)), int(std::lround(f.y / scale)),
+                 int(std::lround(f.width / scale)), int(std::lround(f.height / scale)));
   const bool colour = has_colour(display);
   cv::Mat ycrcb;
   if (colour) cv::cvtColor(display, ycrcb, cv::COLOR_RGB2YCrCb);
