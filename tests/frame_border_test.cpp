@@ -47,6 +47,19 @@ void scan_edge_on_top(cv::Mat& p, int lines, unsigned seed) {
         0.5f * (p.at<cv::Vec3f>(lines - 1, x) + p.at<cv::Vec3f>(lines + 1, x));
 }
 
+// The gallery's haze look over an estimate: its created-edge pixels in the top 12 rows (under a
+// print's top edge).
+std::size_t haze_created_in_top_rows(const Image& photo, const Camera& camera,
+                                     const SceneEstimate& est) {
+  const FogLayers haze = test::fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
+  Image created;
+  test::gallery_created_edges(photo, haze.composite, &created);
+  std::size_t band = 0;
+  for (int y = 0; y < 12; ++y)
+    for (int x = 0; x < photo.width(); ++x) band += created.at(x, y, 0) == 1.0f;
+  return band;
+}
+
 TEST(FrameBorder, AScannedPrintsUnevenTopEdgeIsFoundAndNothingElse) {
   cv::Mat p = sky_over_land(400, 300);
   scan_edge_on_top(p, 3, 7);
@@ -103,20 +116,8 @@ TEST(FrameBorder, TheSkyUnderAScannedEdgeIsVeiledAsTheRestOfTheSky) {
   EXPECT_GT(est.geometry.sky_pixels, std::size_t(photo.width()) * 100);
   for (int x = 0; x < photo.width(); x += 37)  // sky, as the picture's top row
     EXPECT_TRUE(std::isinf(est.geometry.distance_m.at(x, 0, 0))) << x;
-  const FogLayers haze = test::fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
-  Image created;
-  test::gallery_created_edges(photo, haze.composite, &created);
-  std::size_t top_band = 0;
-  for (int y = 0; y < 12; ++y)
-    for (int x = 0; x < photo.width(); ++x) top_band += created.at(x, y, 0) == 1.0f;
-  EXPECT_EQ(top_band, 0u);
+  EXPECT_EQ(haze_created_in_top_rows(photo, camera, est), 0u);
 }
-
-}  // namespace
-}  // namespace mr
-
-namespace mr {
-namespace {
 
 // The photo the border was found on (gallery/tune canyon_couple: a scanned print, an uneven dark
 // edge along the top and a grey strip down the left). Haze created edges in its top 12 rows:
@@ -130,13 +131,7 @@ TEST(FrameBorder, TheCanyonPrintsTopEdgeDrawsNoLineInHaze) {
     options.frame_border = frame_border;
     const SceneEstimate est = estimate_scene(photo, camera, Annotations{}, options);
     EXPECT_EQ(est.geometry.frame_border_pixels > 0, frame_border);
-    const FogLayers haze = test::fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
-    Image created;
-    test::gallery_created_edges(photo, haze.composite, &created);
-    std::size_t band = 0;
-    for (int y = 0; y < 12; ++y)
-      for (int x = 0; x < photo.width(); ++x) band += created.at(x, y, 0) == 1.0f;
-    return band;
+    return haze_created_in_top_rows(photo, camera, est);
   };
   const std::size_t with = top_band_created(true), without = top_band_created(false);
   RecordProperty("top_band_created_with", int(with));
