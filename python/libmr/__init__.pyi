@@ -418,7 +418,8 @@ def estimate(image: _Image, annotations: Union[dict, str, _Path, None] = None, *
              automatic: bool = True, default_camera_height_m: float = 1.6,
              billboard_depression_deg: float = 2.0, ground_contact: bool = True,
              min_rise_ratio: float = 0.4, refine_depth: bool = True, sky_fold: bool = True,
-             vegetation: bool = True, cancel: Optional[CancelToken] = None) -> SceneEstimate: ...
+             vegetation: bool = True, people: bool = True, frame_border: bool = True,
+             cancel: Optional[CancelToken] = None) -> SceneEstimate: ...
 
 # --- material transfer ---
 class Material:

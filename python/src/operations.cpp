@@ -580,7 +580,8 @@ void bind_operations(py::module_& m) {
       [](py::handle image, py::handle annotations, std::optional<mr::Camera> camera,
          std::optional<mr::Metadata> metadata, bool automatic, double default_camera_height_m,
          double billboard_depression_deg, bool ground_contact, double min_rise_ratio,
-         bool refine_depth, bool sky_fold, bool vegetation, mr::CancelToken* cancel) {
+         bool refine_depth, bool sky_fold, bool vegetation, bool people, bool frame_border,
+         mr::CancelToken* cancel) {
         const ImageArg photo(image, "image", metadata ? &*metadata : nullptr);
         const mr::Annotations notes_in = annotations_arg(annotations);
         mr::EstimateOptions o;
@@ -592,6 +593,8 @@ void bind_operations(py::module_& m) {
         o.refine_depth = refine_depth;
         o.sky_fold = sky_fold;
         o.vegetation = vegetation;
+        o.people = people;
+        o.frame_border = frame_border;
         o.cancel = cancel;
         EstimateResult r;
         mr::SceneEstimate est;
@@ -630,6 +633,8 @@ void bind_operations(py::module_& m) {
         r.pixels["vegetation_gap"] = g.vegetation_gap_pixels;
         r.pixels["tree"] = g.tree_pixels;
         r.pixels["room"] = g.room_pixels;
+        r.pixels["people"] = g.people_pixels;
+        r.pixels["frame_border"] = g.frame_border_pixels;
         return r;
       },
       py::arg("image"), py::arg("annotations") = py::none(), py::kw_only(),
@@ -641,7 +646,9 @@ void bind_operations(py::module_& m) {
       py::arg("min_rise_ratio") = mr::EstimateOptions{}.min_rise_ratio,
       py::arg("refine_depth") = mr::EstimateOptions{}.refine_depth,
       py::arg("sky_fold") = mr::EstimateOptions{}.sky_fold,
-      py::arg("vegetation") = mr::EstimateOptions{}.vegetation, py::arg("cancel") = py::none(),
+      py::arg("vegetation") = mr::EstimateOptions{}.vegetation,
+      py::arg("people") = mr::EstimateOptions{}.people,
+      py::arg("frame_border") = mr::EstimateOptions{}.frame_border, py::arg("cancel") = py::none(),
       "Single-photo estimation (as `mr estimate`): camera pose, a metric distance map and the "
       "light from a scene-linear photo (H, W, 3) and optional annotations (a dict, a JSON "
       "string, or a path to a libmr-annotations document; docs/annotations.md). camera: None "

@@ -36,6 +36,18 @@ def test_estimate_equals_mr_estimate(tmp_path):
     assert est.notes
 
 
+def test_estimate_people_and_frame_border_switches():
+    # gallery/tune canyon_couple: two people found by their faces, a scanned print's border
+    photo = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "canyon_couple.jpg")
+    on = libmr.estimate(photo)
+    off = libmr.estimate(photo, people=False, frame_border=False)
+    assert on.pixels["people"] > 0.2 * photo.shape[0] * photo.shape[1]
+    assert on.pixels["frame_border"] > 0
+    assert off.pixels["people"] == 0 and off.pixels["frame_border"] == 0
+    face = (220, 368)  # her face: at her face's distance, not on the far billboard
+    assert on.distance_m[face][0] < 3 < 40 < off.distance_m[face][0]
+
+
 def test_estimate_errors_and_cancel(tmp_path):
     photo = libmr.read_image(SAMPLES / "aerial.jpg")
     bad = {"format": "libmr-annotations", "version": 1, "horizon": [[0, 10], "x"]}
