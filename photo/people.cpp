@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "photo/display.h"
 #include "photo/opencv_contrib.h"
@@ -19,6 +20,11 @@ const char* default_face_cascade() {
 }
 
 namespace {
+
+// How far from the face's centre a person may reach, in face widths: shoulders 1.4, an arm
+// stretched out 4.7 more (0.75 m; cold_water: a man on a beach with his arms out, whose
+// forearms a search region of 3 face widths cut across, two seams).
+constexpr double kReach = 4.0;
 
 // Whether the photo has colour at all: a black-and-white photo's faces have no skin colour.
 bool has_colour(const cv::Mat& rgb) {
@@ -45,8 +51,18 @@ double skin_fraction(const cv::Mat& ycrcb, const cv::Rect& centre) {
 
 // The person's pixels in `roi` (of the photo): the prior of head and body drawn from the face,
 // settled by GrabCut, the part joined to the face. 1 = the person, at roi's size.
+// A person's certain parts, in the photo: the face's centre and the chest under it.
+std::pair<cv::Rect, cv::Rect> certain_parts(const cv::Rect& face) {
+  const double fw = face.width, fh = face.height, cx = face.x + fw / 2;
+  return {cv::Rect(int(std::lround(cx - 0.3 * fw)), int(std::lround(face.y + 0.15 * fh)),
+                   int(std::lround(0.6 * fw)), int(std::lround(0.7 * fh))),
+          cv::Rect(int(std::lround(cx - 0.3 * fw)), int(std::lround(face.y + 1.25 * fh)),
+                   int(std::lround(0.6 * fw)), int(std::lround(1.15 * fh)))};
+}
+
 cv::Mat segment_person(const cv::Mat& display, const std::vector<std::uint8_t>& sky, int w,
-                       const cv::Rect& face, const cv::Rect& roi, const PeopleOptions& o) {
+                       const cv::Rect& face, const std::vector<cv::Rect>& others,
+                       const cv::Rect& roi, const PeopleOptions& o) {
   const double fw = face.width, fh = face.height;
   const double cx = face.x + fw / 2 - roi.x, top = face.y - roi.y;
   cv::Mat labels(roi.size(), CV_8U, cv::Scalar(cv::GC_PR_BGD));
@@ -69,14 +85,17 @@ cv::Mat segment_person(const cv::Mat& display, const std::vector<std::uint8_t>& 
   labels.setTo(cv::GC_PR_FGD, prior);
   // Certain: the face's centre and the chest under it. Certainly not: sky, the far sides, what
   // is above the hair.
+  // Another person's face and chest are not this person's (two people side by side: the first
+  // one's dark coat in the second's colour model took a dark canyon shadow for her).
   const cv::Rect frame(0, 0, roi.width, roi.height);
-  const cv::Rect core = cv::Rect(int(std::lround(cx - 0.3 * fw)), int(std::lround(top + 0.15 * fh)),
-                                 int(std::lround(0.6 * fw)), int(std::lround(0.7 * fh))) &
-                        frame;
-  const cv::Rect chest =
-      cv::Rect(int(std::lround(cx - 0.3 * fw)), int(std::lround(top + 1.25 * fh)),
-               int(std::lround(0.6 * fw)), int(std::lround(1.15 * fh))) &
-      frame;
+  for (const cv::Rect& other : others) {
+    const auto [other_core, other_chest] = certain_parts(other);
+    labels((other_core - roi.tl()) & frame).setTo(cv::GC_BGD);
+    labels((other_chest - roi.tl()) & frame).setTo(cv::GC_BGD);
+  }
+  const auto [core_in_photo, chest_in_photo] = certain_parts(face);
+  const cv::Rect core = (core_in_photo - roi.tl()) & frame;
+  const cv::Rect chest = (chest_in_photo - roi.tl()) & frame;
   labels(core).setTo(cv::GC_FGD);
   labels(chest).setTo(cv::GC_FGD);
   // The head within the face box's width, up to a third of a face above it: hair (blonde hair
@@ -88,7 +107,7 @@ cv::Mat segment_person(const cv::Mat& display, const std::vector<std::uint8_t>& 
   labels.setTo(cv::GC_FGD, head);
   for (int y = 0; y < roi.height; ++y)
     for (int x = 0; x < roi.width; ++x) {
-      const bool far_side = std::abs(x + 0.5 - cx) > 2.8 * fw || y + 0.5 < top - 0.6 * fh;
+      const bool far_side = std::abs(x + 0.5 - cx) > kReach * fw || y + 0.5 < top - 0.6 * fh;
       // Below the chin, within the body's prior, what the sky mask took for sky (a smooth
       // silver collar against a pale backdrop) is left to GrabCut.
       const bool body = prior.at<std::uint8_t>(y, x) && y + 0.5 >= top + fh;
@@ -206,11 +225,13 @@ People find_people(ConstImageView photo, double focal_px, const std::vector<std:
   for (std::size_t k = 0; k < kept.size(); ++k) {
     const cv::Rect& f = kept[k];
     const double fw = f.width, cx = f.x + fw / 2;
-    const int x0 = std::max(0, int(std::floor(cx - 3.1 * fw)));
-    const int x1 = std::min(w, int(std::ceil(cx + 3.1 * fw)));
+    const int x0 = std::max(0, int(std::floor(cx - (kReach + 0.3) * fw)));
+    const int x1 = std::min(w, int(std::ceil(cx + (kReach + 0.3) * fw)));
     const int y0 = std::max(0, int(std::floor(f.y - 0.8 * f.height)));
     const cv::Rect roi(x0, y0, x1 - x0, h - y0);
-    const cv::Mat person = segment_person(display, sky, w, f, roi, o);
+    std::vector<cv::Rect> others = kept;
+    others.erase(others.begin() + std::ptrdiff_t(k));
+    const cv::Mat person = segment_person(display, sky, w, f, others, roi, o);
     for (int y = 0; y < roi.height; ++y)
       for (int x = 0; x < roi.width; ++x) {
         std::uint8_t& p = out.pixels[std::size_t(y + roi.y) * w + x + roi.x];
