@@ -21,9 +21,11 @@ const char* default_face_cascade() {
 
 namespace {
 
-// How far from the face's centre a person may reach, in face widths: shoulders 1.4, an arm
-// stretched out 4.7 more (0.75 m; cold_water: a man on a beach with his arms out, whose
-// forearms a search region of 3 face widths cut across, two seams).
+// How far from the face's centre a person may reach, in face widths (GrabCut's search region;
+// beyond it, certain background). cold_water (a man on a beach with his arms out, hands at 2.8
+// face widths): 2.8 cut across both forearms, two seams. 6.2 (an arm's full 0.75 m) left no
+// background to one side of a close face, and GrabCut took a dark canyon shadow under a rail
+// for the woman leaning on it (canyon_couple), an unfogged window.
 constexpr double kReach = 4.0;
 
 // Whether the photo has colour at all: a black-and-white photo's faces have no skin colour.
