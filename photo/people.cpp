@@ -28,7 +28,7 @@ namespace {
 // for the woman leaning on it (canyon_couple), an unfogged window.
 constexpr double kReach = 4.0;
 
-// Whether the photo has colour at all: a black-and-white photo's faces have no skin colour.
+// Whether the photo has colour at all.
 bool has_colour(const cv::Mat& rgb) {
   double spread = 0;
   for (int y = 0; y < rgb.rows; y += 4)
@@ -163,6 +163,21 @@ cv::Mat segment_person(const cv::Mat& display, const std::vector<std::uint8_t>& 
     for (int x = 0; x < roi.width; ++x)
       person.at<std::uint8_t>(y, x) =
           std::binary_search(keep.begin(), keep.end(), components.at<int>(y, x));
+  // A person runs to the frame's bottom, not along the search region's sides or along the
+  // chin's row beyond the shoulders: there GrabCut flooded what is of the person's colours
+  // (a dark corridor and a grey floor beside a man in a black-and-white interior; brushes
+  // around a false face), and the region's straight edges would be seams. Such a person is
+  // dropped: better the estimate without them than a block cut out of the scene.
+  const int x_left = int(std::ceil(cx - kReach * fw)), x_right = int(std::floor(cx + kReach * fw));
+  const int chin = int(std::ceil(top + fh));
+  int along_sides = 0, along_chin = 0;
+  for (int y = 0; y < roi.height; ++y)
+    for (const int x : {x_left, x_right})
+      if (x >= 0 && x < roi.width && person.at<std::uint8_t>(y, x)) ++along_sides;
+  if (chin >= 0 && chin < roi.height)
+    for (int x = 0; x < roi.width; ++x)
+      along_chin += person.at<std::uint8_t>(chin, x) && !prior.at<std::uint8_t>(chin, x);
+  if (along_sides > 0.5 * fh || along_chin > fw) person.setTo(0);
   return person;
 }
 
@@ -199,9 +214,12 @@ People find_people(ConstImageView photo, double focal_px, const std::vector<std:
   for (cv::Rect& f : faces)
     f = cv::Rect(int(std::lround(f.x / scale)), int(std::lround(f.y / scale)),
                  int(std::lround(f.width / scale)), int(std::lround(f.height / scale)));
-  const bool colour = has_colour(display);
+  // GrabCut separates a person by colour; a black-and-white photo gives it grey levels only (a
+  // dark corridor and a grey floor went with a man in a black shirt: basketball, a block cut out
+  // of the scene), and its faces pass no skin test.
+  if (!has_colour(display)) return out;
   cv::Mat ycrcb;
-  if (colour) cv::cvtColor(display, ycrcb, cv::COLOR_RGB2YCrCb);
+  cv::cvtColor(display, ycrcb, cv::COLOR_RGB2YCrCb);
   const cv::Rect frame(0, 0, w, h);
   std::vector<cv::Rect> kept;
   for (const cv::Rect& f0 : faces) {
@@ -213,7 +231,7 @@ People find_people(ConstImageView photo, double focal_px, const std::vector<std:
     if (!sky.empty() &&
         sky[std::size_t(centre.y + centre.height / 2) * w + centre.x + centre.width / 2])
       continue;
-    if (colour && skin_fraction(ycrcb, centre) < o.min_skin_fraction) continue;
+    if (skin_fraction(ycrcb, centre) < o.min_skin_fraction) continue;
     kept.push_back(f);
   }
   // Nearest (widest) first: a nearer person's pixels win where two overlap.

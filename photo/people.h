@@ -30,8 +30,9 @@ struct PeopleOptions {
   double min_face_fraction = 0.04;
   /// The detector's votes a face needs (cv::CascadeClassifier::detectMultiScale minNeighbors).
   int min_neighbors = 3;
-  /// In a colour photo, the fraction of the face box's centre that must have a skin colour
-  /// (YCrCb, Cr 133-180, Cb 77-135; Chai and Ngan 1999, widened for low sun and shade).
+  /// The fraction of the face box's centre that must have a skin colour (YCrCb, Cr 133-180,
+  /// Cb 77-135; Chai and Ngan 1999, widened for low sun and shade). A black-and-white photo has
+  /// no people (GrabCut separates them by colour).
   double min_skin_fraction = 0.3;
   /// GrabCut on a copy of at most this many pixels around each person; 0: the prior as it is.
   double grabcut_pixels = 0.1e6;

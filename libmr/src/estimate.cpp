@@ -888,7 +888,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // every head against a wall metres behind with new contrast.
   // Per pixel, a distance the refinement and the bounds below leave as it is (0: none).
   std::vector<float> kept_distance;
-  if (options.people && !bounded) {
+  // Nor where open sky is under 5 % of the frame: a scene nearly all surface (a close-up of paint
+  // brushes whose bright patch passed for sky, with a false face among the brushes) is metres
+  // deep everywhere, and a cut-out there is a block of new contrast.
+  constexpr double kPeopleMinSkyFraction = 0.05;
+  if (options.people && !bounded && double(mask.pixels) >= kPeopleMinSkyFraction * double(n)) {
     const photo::People people = photo::find_people(photo->view(), camera.focal_px, mask.sky);
     // A person the ground's colour model already found standing in the bottom band (above)
     // keeps that subject's pixels and distance: two outlines of one person would disagree.

@@ -108,8 +108,8 @@ struct MR_API EstimateOptions {
   /// opencv-data), stand at their faces' distance (focal length x 0.16 m / the face box's width,
   /// a plane facing the camera) over the head and body segmented from each face down to the
   /// frame's bottom, kept out of the depth's refinement. Annotated planes and hints win over
-  /// them; a scene without sky (bounded) keeps its smooth depth. false: off (also when the face
-  /// cascade is not installed).
+  /// them; a scene with less than 5 % of open sky keeps its depth, and a black-and-white photo
+  /// has no people. false: off (also when the face cascade is not installed).
   bool people = true;
   /// Issue 11: a frame around the picture (a scanned print's uneven dark edge, a light strip
   /// down a side: at most 3 % of the frame, near neutral, ending in a step to the picture) is
