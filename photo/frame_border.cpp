@@ -15,13 +15,16 @@ namespace {
 
 using Colour = std::array<int, 3>;
 
-// Line `i` of one side of `rgb`, inward from the edge: pixels j of its middle 90 %.
+// Line `i` of one side, inward from the edge: pixels j of its middle 90 %. `rgb` is the band of
+// the frame along that side (the lines a border can reach), `frame_depth` the frame's size across
+// the side.
 struct Side {
   const cv::Mat& rgb;
   int side;  // 0 top, 1 bottom, 2 left, 3 right
+  int frame_depth;
 
   int length() const { return side < 2 ? rgb.cols : rgb.rows; }
-  int depth() const { return side < 2 ? rgb.rows : rgb.cols; }
+  int depth() const { return frame_depth; }
   Colour at(int i, int j) const {
     const int x = side == 2 ? i : side == 3 ? rgb.cols - 1 - i : j;
     const int y = side == 0 ? i : side == 1 ? rgb.rows - 1 - i : j;
@@ -58,7 +61,8 @@ struct Side {
 };
 
 int border_lines(const Side& s, const FrameBorderOptions& o) {
-  const int max_lines = int(std::floor(o.max_fraction * s.depth()));
+  const int max_lines = std::min(int(std::floor(o.max_fraction * s.depth())),
+                                 s.depth() / 2 - std::max(0, o.max_transition) - 1);
   if (max_lines < 1) return 0;
   const Colour ref = s.median(0);
   if (*std::max_element(ref.begin(), ref.end()) - *std::min_element(ref.begin(), ref.end()) >
@@ -89,11 +93,19 @@ int border_lines(const Side& s, const FrameBorderOptions& o) {
 FrameBorder find_frame_border(ConstImageView photo, const FrameBorderOptions& o) {
   FrameBorder out;
   if (photo.width < 16 || photo.height < 16 || photo.channels < 1) return out;
-  const cv::Mat rgb = display_rgb8(photo);
-  out.top = border_lines({rgb, 0}, o);
-  out.bottom = border_lines({rgb, 1}, o);
-  out.left = border_lines({rgb, 2}, o);
-  out.right = border_lines({rgb, 3}, o);
+  // Only the bands a border can reach are converted (the search reads at most its longest
+  // border and the transition's lines, and never past the middle): the estimate asks once for
+  // the sky mask and once for the depth, and a full-frame copy each time was most of the cost.
+  const int w = photo.width, h = photo.height;
+  auto band = [&](int dim) {
+    return std::clamp(int(std::floor(o.max_fraction * dim)) + std::max(0, o.max_transition) + 1, 1,
+                      dim / 2);
+  };
+  const int bh = band(h), bw = band(w);
+  out.top = border_lines({display_rgb8(photo.sub({0, 0, w, bh})), 0, h}, o);
+  out.bottom = border_lines({display_rgb8(photo.sub({0, h - bh, w, bh})), 1, h}, o);
+  out.left = border_lines({display_rgb8(photo.sub({0, 0, bw, h})), 2, w}, o);
+  out.right = border_lines({display_rgb8(photo.sub({w - bw, 0, bw, h})), 3, w}, o);
   return out;
 }
 
