@@ -380,4 +380,88 @@ std::optional<FocalFromVanishingPoints> estimate_focal_px(ConstImageView photo,
   return best;
 }
 
+Silhouette find_silhouette(ConstImageView photo, const std::vector<std::uint8_t>& sky,
+                           const SilhouetteOptions& options) {
+  Silhouette result;
+  const int w = photo.width, h = photo.height;
+  if (w < 1 || h < 8 || photo.channels < 3 || sky.size() != std::size_t(w) * std::size_t(h))
+    return result;
+  // Display-referred luma; what is not finite counts as black.
+  std::vector<float> luma(std::size_t(w) * h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* p = photo.pixel(x, y);
+      const double l = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+      luma[std::size_t(y) * w + x] =
+          std::isfinite(l) ? float(std::pow(std::clamp(l, 0.0, 1.0), 1 / 2.2)) : 0.0f;
+    }
+  auto median = [](std::vector<float>& v) {
+    if (v.empty()) return 0.0;
+    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+    return double(v[v.size() / 2]);
+  };
+  std::vector<float> sky_luma;
+  for (std::size_t i = 0; i < luma.size(); ++i)
+    if (sky[i]) sky_luma.push_back(luma[i]);
+  if (sky_luma.empty()) sky_luma.assign(luma.begin(), luma.begin() + w);
+  const double land_max =
+      std::min(options.max_land_luma, options.max_land_to_sky * median(sky_luma));
+  std::vector<int> top;  // per column with land at the bottom: the skyline's row
+  std::vector<float> land_luma, above_luma;
+  const int band = std::max(2, int(std::ceil(options.edge_band * h)));
+  for (int x = 0; x < w; ++x) {
+    if (!(luma[std::size_t(h - 1) * w + x] <= land_max)) continue;
+    int y = h - 1, gap = 0, skyline = h - 1;
+    for (; y >= 0; --y) {
+      if (luma[std::size_t(y) * w + x] <= land_max) {
+        skyline = y, gap = 0;
+      } else if (++gap > options.max_gap_px) {
+        break;
+      }
+    }
+    top.push_back(skyline);
+    for (int r = skyline; r < h && r < skyline + band; ++r)
+      land_luma.push_back(luma[std::size_t(r) * w + x]);
+    for (int r = std::max(0, skyline - band); r < skyline; ++r)
+      above_luma.push_back(luma[std::size_t(r) * w + x]);
+  }
+  result.land_columns = double(top.size()) / w;
+  if (result.land_columns < options.min_land_columns) return result;
+  std::nth_element(top.begin(), top.begin() + std::ptrdiff_t(top.size() / 2), top.end());
+  const int skyline = top[top.size() / 2];
+  if (h - 1 - skyline < options.min_land_height * h) return result;
+  const double land = median(land_luma), above = median(above_luma);
+  result.contrast = above / std::max(land, 1e-4);
+  if (above < options.min_above_luma || result.contrast < options.min_contrast) return result;
+  result.skyline_row = skyline;
+  cv::Mat dark(h, w, CV_8U), labels;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      dark.at<std::uint8_t>(y, x) = luma[std::size_t(y) * w + x] <= land_max;
+  const int n = cv::connectedComponents(dark, labels, 8, CV_32S);
+  std::vector<std::uint8_t> on_bottom(std::size_t(n), 0);
+  for (int x = 0; x < w; ++x) on_bottom[std::size_t(labels.at<int>(h - 1, x))] = 1;
+  on_bottom[0] = 0;
+  result.land.assign(std::size_t(w) * h, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      result.land[std::size_t(y) * w + x] = on_bottom[std::size_t(labels.at<int>(y, x))];
+  cv::Mat open(h, w, CV_8U), open_labels;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) open.at<std::uint8_t>(y, x) = !result.land[std::size_t(y) * w + x];
+  const int m = cv::connectedComponents(open, open_labels, 8, CV_32S);
+  std::vector<std::uint8_t> joined(std::size_t(m), 0);
+  for (int y = 0; y < skyline; ++y)
+    for (int x = 0; x < w; ++x) joined[std::size_t(open_labels.at<int>(y, x))] = 1;
+  joined[0] = 0;
+  result.sky_alpha.assign(std::size_t(w) * h, 0.0f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      if (joined[std::size_t(open_labels.at<int>(y, x))])
+        result.sky_alpha[i] = float(std::clamp((luma[i] - land_max) / land_max, 0.0, 1.0));
+    }
+  return result;
+}
+
 }  // namespace mr::photo

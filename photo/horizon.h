@@ -20,6 +20,8 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
+#include <limits>
 #include <optional>
 #include <vector>
 
@@ -96,5 +98,49 @@ std::optional<FocalFromVanishingPoints> estimate_focal_px(ConstImageView photo,
                                                           const Camera& camera,
                                                           const FocalOptions& options = {},
                                                           const HorizonOptions& lines = {});
+
+/// Issue 11: the dark land of a backlit photo (a sunset or dusk silhouette).
+struct SilhouetteOptions {
+  /// Land: display-referred luma (scene-linear luma ^ (1 / 2.2)) of at most `max_land_luma`
+  /// and at most `max_land_to_sky` times the sky's median display luma.
+  double max_land_luma = 0.08;
+  double max_land_to_sky = 0.25;
+  /// A column's land is its run of land pixels up from the frame's bottom row, through gaps of
+  /// at most `max_gap_px` other pixels (a lit window, a lamp, noise); at least this fraction of
+  /// the columns must have land at the bottom row.
+  int max_gap_px = 2;
+  double min_land_columns = 0.9;
+  /// The median skyline (the top of each column's land) at least this fraction of the height
+  /// above the bottom (a dark foreground strip is not a landscape's land).
+  double min_land_height = 0.03;
+  /// A silhouette: over the `edge_band` of the height above each column's skyline, the median
+  /// display luma is at least `min_contrast` times the land's and at least `min_above_luma`.
+  double edge_band = 0.03;
+  double min_contrast = 4.0;
+  double min_above_luma = 0.1;
+};
+
+struct Silhouette {
+  /// Row (pixel centres, top = 0) of the median skyline, the top of the land; NaN: no silhouette.
+  double skyline_row = std::numeric_limits<double>::quiet_NaN();
+  double land_columns = 0;  ///< fraction of the columns with land at the bottom row
+  double contrast = 0;      ///< median display luma above the skyline over the land's
+  /// Row-major, the photo's size, 1 on the land and what stands on it: the dark pixels (as
+  /// the land's) 8-connected to the frame's bottom row; empty when there is no silhouette.
+  std::vector<std::uint8_t> land;
+  /// Row-major, the photo's size, in [0, 1]: the sky's matte over what is not land and is
+  /// 8-connected (through what is not land) to a pixel above the skyline row: clouds, the
+  /// glow down to the land where it dips below the median skyline. It ramps from 0 at the
+  /// land's luma to 1 at twice it (a branch's mixed pixels); 0 elsewhere. Empty when there is
+  /// no silhouette.
+  std::vector<float> sky_alpha;
+};
+
+/// The land of a backlit photo, seen as a dark silhouette under a brighter sky: every column's
+/// dark run up from the bottom row (see SilhouetteOptions). `photo`: scene-linear, >= 3
+/// channels; `sky`: row-major, the photo's size, non-zero on sky (the sky's median luma is the
+/// reference; with no sky pixel the frame's top row's). Never throws for any image content.
+Silhouette find_silhouette(ConstImageView photo, const std::vector<std::uint8_t>& sky,
+                           const SilhouetteOptions& options = {});
 
 }  // namespace mr::photo

@@ -522,6 +522,32 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         mask.pixels = pixels;
       }
     }
+    // Issue 11 (after_the_rain: a storm's dark cumulus over a sunset, the land a black
+    // silhouette under it). No line cue; the level fall-back through the frame's middle cut the
+    // cumulus, which stood on the ground plane 8 m away, clear under the haze's veil over the
+    // sky around it (0.075 % created edges along its rims). Backlit land is the darkest part
+    // of the frame, and its skyline is where the horizon of a level camera lies: the guess is
+    // lowered to the median skyline, and what stands above it and is not as dark as the land
+    // (clouds, the glow down to where the land dips) is sky (photo/horizon.h, find_silhouette).
+    if (g.horizon_lowered_px == 0 && options.backlit_land) {
+      std::vector<std::uint8_t> sky = mask.sky;
+      for (std::size_t i = 0; i < sky.size() && i < probe.sky.size(); ++i) sky[i] |= probe.sky[i];
+      const photo::Silhouette land = photo::find_silhouette(photo->view(), sky);
+      const double drop = land.skyline_row - guess_y(0.5 * (w - 1)) - 1;
+      if (drop >= kMinHorizonDropFraction * h) {
+        lower(drop);
+        std::size_t pixels = 0;
+        for (std::size_t i = 0; i < mask.sky.size(); ++i) {
+          if (land.sky_alpha[i] > 0) {
+            mask.sky[i] = 1;
+            mask.alpha[i] = land.sky_alpha[i];
+          }
+          pixels += mask.sky[i];
+        }
+        mask.pixels = pixels;
+        g.backlit_land = true;
+      }
+    }
   }
   // Issue 11 item 3: the sky seen through trees (under a canopy, between trunks, through
   // leaves) is sky, so the occluder mesh has holes there and sun shafts pass (photo/vegetation.h).
@@ -1570,9 +1596,10 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                           : "not annotated; assumed level through the image centre";
   est.notes.push_back(
       std::string("horizon: ") + horizon_how + " (" + to_string(g.horizon_source) + ")" +
-      (g.horizon_lowered_px > 0
-           ? ", lowered " + fmt("%.0f", g.horizon_lowered_px) + " px to below the sky it cut"
-           : std::string()) +
+      (g.horizon_lowered_px > 0 ? ", lowered " + fmt("%.0f", g.horizon_lowered_px) +
+                                      (g.backlit_land ? " px to the backlit land's skyline"
+                                                      : " px to below the sky it cut")
+                                : std::string()) +
       ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " + fmt("%.2f", g.pose.roll_deg) +
       " deg, confidence " + fmt("%.2f", g.confidence));
   est.notes.push_back(std::string("camera height: ") + fmt("%.3f", g.pose.position_m.y) + " m (" +

@@ -116,6 +116,12 @@ struct MR_API EstimateOptions {
   /// not the scene: the sky is found inside it, and it takes the fog of the picture's edge
   /// beside it (GeometryEstimate::frame_border_pixels). false: the whole frame is the picture.
   bool frame_border = true;
+  /// Issue 11: backlit land (a sunset or dusk silhouette: the frame's bottom the darkest part
+  /// along 90 % of its width, at least 4x darker than what lies above its skyline) under a
+  /// weak automatic horizon: the horizon goes to the land's median skyline, and what is above
+  /// it and not as dark as the land (clouds, the glow) is sky (GeometryEstimate::backlit_land).
+  /// false: off.
+  bool backlit_land = true;
   /// Issue 11 item 3: a photo in which the sky mask finds no sky (an interior, a close-up, a
   /// wall, a field seen from above) shows no horizon and no ground running to it, so nothing in
   /// it is known to be far: when the camera height is not annotated (nor derived from a known
@@ -233,6 +239,8 @@ struct MR_API GeometryEstimate {
   /// Issue 11: pixels by which a weak automatic horizon (the level fall-back, or a cue of
   /// confidence below 0.2) was lowered because the sky continued below it (0: not moved).
   double horizon_lowered_px = 0;
+  /// Issue 11: the horizon was lowered to a backlit land's skyline (EstimateOptions::backlit_land).
+  bool backlit_land = false;
 };
 
 /// The camera pose whose horizon passes through the two points (pixel-centre coordinates), at
