@@ -446,6 +446,13 @@ Silhouette find_silhouette(ConstImageView photo, const std::vector<std::uint8_t>
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
       result.land[std::size_t(y) * w + x] = on_bottom[std::size_t(labels.at<int>(y, x))];
+  result.column_skyline.assign(std::size_t(w), -1);
+  for (int x = 0; x < w; ++x)
+    for (int y = 0; y < h; ++y)
+      if (result.land[std::size_t(y) * w + x]) {
+        result.column_skyline[std::size_t(x)] = y;
+        break;
+      }
   cv::Mat open(h, w, CV_8U), open_labels;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) open.at<std::uint8_t>(y, x) = !result.land[std::size_t(y) * w + x];
@@ -462,6 +469,34 @@ Silhouette find_silhouette(ConstImageView photo, const std::vector<std::uint8_t>
         result.sky_alpha[i] = float(std::clamp((luma[i] - land_max) / land_max, 0.0, 1.0));
     }
   return result;
+}
+
+std::vector<double> receding_skyline(const std::vector<int>& column_skyline,
+                                     double reach_fraction) {
+  const int w = int(column_skyline.size());
+  std::vector<double> top(column_skyline.begin(), column_skyline.end());
+  for (int x = 1; x < w; ++x)
+    if (top[std::size_t(x)] < 0) top[std::size_t(x)] = top[std::size_t(x - 1)];
+  for (int x = w - 2; x >= 0; --x)
+    if (top[std::size_t(x)] < 0) top[std::size_t(x)] = top[std::size_t(x + 1)];
+  if (w == 0 || top[0] < 0) return {};
+  const int reach = std::max(1, int(std::lround(reach_fraction * w)));
+  std::vector<double> median(top.size()), out(top.size());
+  std::vector<double> window;
+  for (int x = 0; x < w; ++x) {
+    window.assign(top.begin() + std::max(0, x - reach),
+                  top.begin() + std::min(w - 1, x + reach) + 1);
+    std::nth_element(window.begin(), window.begin() + std::ptrdiff_t(window.size() / 2),
+                     window.end());
+    median[std::size_t(x)] = window[window.size() / 2];
+  }
+  for (int x = 0; x < w; ++x) {
+    double sum = 0;
+    const int a = std::max(0, x - reach), b = std::min(w - 1, x + reach);
+    for (int t = a; t <= b; ++t) sum += median[std::size_t(t)];
+    out[std::size_t(x)] = sum / (b - a + 1);
+  }
+  return out;
 }
 
 }  // namespace mr::photo

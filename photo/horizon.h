@@ -128,6 +128,9 @@ struct Silhouette {
   /// Row-major, the photo's size, 1 on the land and what stands on it: the dark pixels (as
   /// the land's) 8-connected to the frame's bottom row; empty when there is no silhouette.
   std::vector<std::uint8_t> land;
+  /// Per column: the top row of its land (the topmost `land` pixel), -1 where it has none;
+  /// empty when there is no silhouette.
+  std::vector<int> column_skyline;
   /// Row-major, the photo's size, in [0, 1]: the sky's matte over what is not land and is
   /// 8-connected (through what is not land) to a pixel above the skyline row: clouds, the
   /// glow down to the land where it dips below the median skyline. It ramps from 0 at the
@@ -142,5 +145,13 @@ struct Silhouette {
 /// reference; with no sky pixel the frame's top row's). Never throws for any image content.
 Silhouette find_silhouette(ConstImageView photo, const std::vector<std::uint8_t>& sky,
                            const SilhouetteOptions& options = {});
+
+/// A backlit land's skyline for its distances: Silhouette::column_skyline with columns without
+/// land filled from their neighbours, its running median over `reach_fraction` of the width to
+/// either side (a lamp or a lit window breaking a column's land, a post), then its running
+/// mean over the same (no step from one column to the next). Empty for an empty input or no
+/// column with land.
+std::vector<double> receding_skyline(const std::vector<int>& column_skyline,
+                                     double reach_fraction = 0.02);
 
 }  // namespace mr::photo

@@ -416,6 +416,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // "standing on the ground". The horizon is then lowered (same roll) to the median lowest row
   // that sky reaches, continuously from the guess, in the columns where it reaches the guess.
   std::vector<std::uint8_t> cloud_bank;  // the bank the guess was lowered under, if any
+  photo::Silhouette backlit;             // backlit land the guess was lowered to, if any
   if (!annotations.horizon && g.confidence < kWeakHorizonConfidence) {
     const int w = camera.width, h = camera.height;
     const double slope0 =
@@ -532,7 +533,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     if (g.horizon_lowered_px == 0 && options.backlit_land) {
       std::vector<std::uint8_t> sky = mask.sky;
       for (std::size_t i = 0; i < sky.size() && i < probe.sky.size(); ++i) sky[i] |= probe.sky[i];
-      const photo::Silhouette land = photo::find_silhouette(photo->view(), sky);
+      photo::Silhouette land = photo::find_silhouette(photo->view(), sky);
       const double drop = land.skyline_row - guess_y(0.5 * (w - 1)) - 1;
       if (drop >= kMinHorizonDropFraction * h) {
         lower(drop);
@@ -546,6 +547,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         }
         mask.pixels = pixels;
         g.backlit_land = true;
+        backlit = std::move(land);
       }
     }
   }
@@ -1510,6 +1512,26 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
             a = 1.0f;
         }
     }
+  }
+  // Issue 11 (after_the_rain): backlit land recedes to its skyline, as far hills do in a
+  // silhouette (photo/horizon.h, receding_skyline). Under the refinement the black land, which
+  // has no edge inside, took one distance of about 25 m up to its skyline: clear and black
+  // under the haze's veil right above it (0.035 % created edges where a dark cloud sat on the
+  // skyline); the ground plane itself veils the land along the straight horizon row instead
+  // (0.16 %). Each column's land is the ground of a horizon kBacklitSkylineDepressionDeg above
+  // its smoothed skyline, so the veil follows the skyline's shape.
+  if (g.backlit_land) {
+    constexpr double kBacklitSkylineDepressionDeg = 0.5;
+    const double offset_px = camera.focal_px * std::tan(kBacklitSkylineDepressionDeg * kDeg);
+    const std::vector<double> skyline = photo::receding_skyline(backlit.column_skyline);
+    for (int y = 0; y < h && skyline.size() == std::size_t(w); ++y)
+      for (int x = 0; x < w; ++x) {
+        float& d = g.distance_m.at(x, y, 0);
+        // The land and what it encloses (a lit window), not the sky found above it.
+        if (backlit.sky_alpha[std::size_t(y) * w + x] > 0 || !std::isfinite(d)) continue;
+        const double below = std::max(1.0, y + 0.5 - skyline[std::size_t(x)] + offset_px);
+        d = billboard(x, y, height * camera.focal_px / below);
+      }
   }
   // Issue 11 (a scanned print's dark top edge): the frame's border is not the scene
   // (photo/frame_border.h; the sky mask was found inside it). It is veiled as the farthest of

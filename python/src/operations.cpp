@@ -581,7 +581,7 @@ void bind_operations(py::module_& m) {
          std::optional<mr::Metadata> metadata, bool automatic, double default_camera_height_m,
          double billboard_depression_deg, bool ground_contact, double min_rise_ratio,
          bool refine_depth, bool sky_fold, bool vegetation, bool people, bool frame_border,
-         mr::CancelToken* cancel) {
+         bool backlit_land, mr::CancelToken* cancel) {
         const ImageArg photo(image, "image", metadata ? &*metadata : nullptr);
         const mr::Annotations notes_in = annotations_arg(annotations);
         mr::EstimateOptions o;
@@ -595,6 +595,7 @@ void bind_operations(py::module_& m) {
         o.vegetation = vegetation;
         o.people = people;
         o.frame_border = frame_border;
+        o.backlit_land = backlit_land;
         o.cancel = cancel;
         EstimateResult r;
         mr::SceneEstimate est;
@@ -648,7 +649,8 @@ void bind_operations(py::module_& m) {
       py::arg("sky_fold") = mr::EstimateOptions{}.sky_fold,
       py::arg("vegetation") = mr::EstimateOptions{}.vegetation,
       py::arg("people") = mr::EstimateOptions{}.people,
-      py::arg("frame_border") = mr::EstimateOptions{}.frame_border, py::arg("cancel") = py::none(),
+      py::arg("frame_border") = mr::EstimateOptions{}.frame_border,
+      py::arg("backlit_land") = mr::EstimateOptions{}.backlit_land, py::arg("cancel") = py::none(),
       "Single-photo estimation (as `mr estimate`): camera pose, a metric distance map and the "
       "light from a scene-linear photo (H, W, 3) and optional annotations (a dict, a JSON "
       "string, or a path to a libmr-annotations document; docs/annotations.md). camera: None "

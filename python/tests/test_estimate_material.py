@@ -2,6 +2,7 @@
 sample photos (same inputs, bit-identical outputs)."""
 
 import json
+import math
 import os
 import pathlib
 import re
@@ -46,6 +47,16 @@ def test_estimate_people_and_frame_border_switches():
     assert off.pixels["people"] == 0 and off.pixels["frame_border"] == 0
     face = (220, 368)  # her face: at her face's distance, not on the far billboard
     assert on.distance_m[face][0] < 3 < 40 < off.distance_m[face][0]
+
+
+def test_estimate_backlit_land_switch():
+    # gallery/tune after_the_rain: a storm's cumulus over a sunset, the land a black silhouette
+    photo = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "after_the_rain.jpg")
+    on = libmr.estimate(photo)
+    off = libmr.estimate(photo, backlit_land=False)
+    cumulus = (500, 640)  # row, column: sky above the land's skyline, not a structure
+    assert math.isinf(on.distance_m[cumulus][0]) and math.isfinite(off.distance_m[cumulus][0])
+    assert on.horizon[0][1] > 600 > 500 > off.horizon[0][1]
 
 
 def test_estimate_errors_and_cancel(tmp_path):
