@@ -406,6 +406,10 @@ Silhouette find_silhouette(ConstImageView photo, const std::vector<std::uint8_t>
   if (sky_luma.empty()) sky_luma.assign(luma.begin(), luma.begin() + w);
   const double land_max =
       std::min(options.max_land_luma, options.max_land_to_sky * median(sky_luma));
+  // A sky too dark to show land against it (a night), or a frame dark along its top as well
+  // (a letterboxed film still's bars): no silhouette.
+  std::vector<float> top_row(luma.begin(), luma.begin() + w);
+  if (!(land_max >= options.min_land_luma) || median(top_row) <= land_max) return result;
   std::vector<int> top;  // per column with land at the bottom: the skyline's row
   std::vector<float> land_luma, above_luma;
   const int band = std::max(2, int(std::ceil(options.edge_band * h)));

@@ -105,6 +105,9 @@ struct SilhouetteOptions {
   /// and at most `max_land_to_sky` times the sky's median display luma.
   double max_land_luma = 0.08;
   double max_land_to_sky = 0.25;
+  /// No silhouette when that bound is below this (a night sky), nor when the frame's top row's
+  /// median is within it (a letterboxed frame's black bars).
+  double min_land_luma = 0.02;
   /// A column's land is its run of land pixels up from the frame's bottom row, through gaps of
   /// at most `max_gap_px` other pixels (a lit window, a lamp, noise); at least this fraction of
   /// the columns must have land at the bottom row.

@@ -70,16 +70,24 @@ TEST(Silhouette, ABacklitLandsSkylineAndWhatIsSkyAboveIt) {
 }
 
 TEST(Silhouette, NoneWithoutABacklitLand) {
-  const std::vector<std::uint8_t> sky(std::size_t(kW) * kH, 0);
+  std::vector<std::uint8_t> sky(std::size_t(kW) * kH, 0);  // the sky's rows under a letterbox
+  for (std::size_t i = std::size_t(kW) * 35; i < std::size_t(kW) * 60; ++i) sky[i] = 1;
   // Frontlit land (brighter than a silhouette), a night (all dark), a dark strip at the
-  // bottom only 2 % of the height, noise.
+  // bottom only 2 % of the height, noise; below, a letterboxed still and a night-dark sky.
   cv::Mat frontlit = backlit_sunset(0.3f);
   cv::Mat night(kH, kW, CV_32FC3, cv::Scalar(0.03, 0.03, 0.04));
   cv::Mat strip = backlit_sunset();
   strip.rowRange(200, 294).setTo(cv::Scalar(0.35, 0.4, 0.3));
   cv::Mat noise(kH, kW, CV_32FC3);
   cv::randu(noise, cv::Scalar::all(0), cv::Scalar::all(1));
-  for (const cv::Mat& p : {frontlit, night, strip, noise}) {
+  // A letterboxed still: black bars along the top and the bottom (10 % each) around a
+  // landscape; and the sunset under a night-dark sky.
+  cv::Mat letterbox = backlit_sunset(0.3f);
+  letterbox.rowRange(0, 30).setTo(cv::Scalar::all(0));
+  letterbox.rowRange(270, 300).setTo(cv::Scalar::all(0));
+  cv::Mat dark_sky = backlit_sunset(0.0f);
+  dark_sky.rowRange(0, 220).setTo(cv::Scalar(0.03, 0.03, 0.06));
+  for (const cv::Mat& p : {frontlit, night, strip, noise, letterbox, dark_sky}) {
     const photo::Silhouette s = photo::find_silhouette(test::linear_photo(p).view(), sky);
     EXPECT_TRUE(std::isnan(s.skyline_row)) << s.skyline_row;
     EXPECT_TRUE(s.sky_alpha.empty());
