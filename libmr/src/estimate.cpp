@@ -521,33 +521,31 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           pixels += mask.sky[i];
         }
         mask.pixels = pixels;
-      }
-    }
-    // Issue 11 (after_the_rain: a storm's dark cumulus over a sunset, the land a black
-    // silhouette under it). No line cue; the level fall-back through the frame's middle cut the
-    // cumulus, which stood on the ground plane 8 m away, clear under the haze's veil over the
-    // sky around it (0.075 % created edges along its rims). Backlit land is the darkest part
-    // of the frame, and its skyline is where the horizon of a level camera lies: the guess is
-    // lowered to the median skyline, and what stands above it and is not as dark as the land
-    // (clouds, the glow down to where the land dips) is sky (photo/horizon.h, find_silhouette).
-    if (g.horizon_lowered_px == 0 && options.backlit_land) {
-      std::vector<std::uint8_t> sky = mask.sky;
-      for (std::size_t i = 0; i < sky.size() && i < probe.sky.size(); ++i) sky[i] |= probe.sky[i];
-      photo::Silhouette land = photo::find_silhouette(photo->view(), sky);
-      const double drop = land.skyline_row - guess_y(0.5 * (w - 1)) - 1;
-      if (drop >= kMinHorizonDropFraction * h) {
-        lower(drop);
-        std::size_t pixels = 0;
-        for (std::size_t i = 0; i < mask.sky.size(); ++i) {
-          if (land.sky_alpha[i] > 0) {
-            mask.sky[i] = 1;
-            mask.alpha[i] = land.sky_alpha[i];
+      } else if (options.backlit_land) {
+        // Issue 11 (after_the_rain: a storm's dark cumulus over a sunset, the land a black
+        // silhouette under it). No line cue; the level fall-back through the frame's middle cut
+        // the cumulus, which stood on the ground plane 8 m away, clear under the haze's veil
+        // over the sky around it (0.075 % created edges along its rims). Backlit land is the
+        // darkest part of the frame, and its skyline is where the horizon of a level camera
+        // lies: the guess is lowered to the median skyline, and what stands above it and is
+        // not as dark as the land (clouds, the glow down to where the land dips) is sky
+        // (photo/horizon.h, find_silhouette). The same sky as the bank's (no bank: unchanged).
+        photo::Silhouette land = photo::find_silhouette(photo->view(), sky);
+        const double drop = land.skyline_row - guess_y(0.5 * (w - 1)) - 1;
+        if (drop >= kMinHorizonDropFraction * h) {
+          lower(drop);
+          std::size_t pixels = 0;
+          for (std::size_t i = 0; i < mask.sky.size(); ++i) {
+            if (land.sky_alpha[i] > 0) {
+              mask.sky[i] = 1;
+              mask.alpha[i] = land.sky_alpha[i];
+            }
+            pixels += mask.sky[i];
           }
-          pixels += mask.sky[i];
+          mask.pixels = pixels;
+          g.backlit_land = true;
+          backlit = std::move(land);
         }
-        mask.pixels = pixels;
-        g.backlit_land = true;
-        backlit = std::move(land);
       }
     }
   }
