@@ -606,8 +606,18 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
       scene.blockers.polygons.push_back(std::move(p));
   }
   ScatteringLayers aovs;
-  const FogLayers layers =
+  FogLayers layers =
       fog(photo, depth.distance_m, sky_alpha, camera, scene, &aovs, progress.token());
+  // Issue 11 item 3: a guessed depth's steps where the photo has no edge become seams in the
+  // fog; softened there (a depth file's fog, and shafts' edges under a sun or lamps, are kept).
+  if (estimated && !lights && o.seams == "soften") {
+    const SeamSoftening s = soften_fog_seams(photo, layers);
+    if (o.verbose && s.rounds > 0)
+      report.info("note: " + job.photo.string() + ": softened the fog's seams at " +
+                  std::to_string(s.pixels_changed) + " pixels (" +
+                  std::to_string(s.created_before) + " created-edge pixels before, " +
+                  std::to_string(s.created_after) + " after)");
+  }
   // The Vulkan fall-back, once per run: a warning when a GPU failed; on a machine without a
   // usable GPU the CPU is the expected choice, a note in verbose mode only.
   if (!aovs.backend_notice.empty() && (aovs.backend_notice_is_warning || o.verbose)) {
@@ -784,6 +794,12 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
                   "'auto': the scene's, else direction when --depth auto estimates the geometry and "
                   "no --airlight or scene sky radiance is given")
       ->default_str("auto");
+  cmd->add_option("--seams", o.seams,
+                  "With --depth auto estimating the geometry and no sun or lamps: 'soften' the "
+                  "fog where the guessed depth makes edges the photo does not have (a smooth fog "
+                  "there instead of a seam), or 'keep' them")
+      ->check(CLI::IsMember({"soften", "keep"}))
+      ->default_str("soften");
   cmd->add_option("--albedo", o.albedo, "Single-scattering albedo: v or R,G,B [default: 1]");
   cmd->add_option("--g", o.g, "Henyey-Greenstein asymmetry in (-1, 1) [default: 0]");
   cmd->add_option("--noise", o.noise, "Wisps: amplitude[,scale m[,octaves[,seed]]]");

@@ -57,6 +57,10 @@ struct FogCommandOptions {
   /// "uniform" (one sky radiance), "auto": the scene file's, else by direction when the geometry
   /// is estimated (--depth auto) with the sky radiance 'auto', uniform otherwise.
   std::string sky_light = "auto";
+  /// With an estimated geometry (--depth auto) and no sun or lamps: "soften" (default) the fog's
+  /// seams where the guessed depth makes edges the photo lacks (mr::soften_fog_seams), or
+  /// "keep" them. A depth file's fog is never softened.
+  std::string seams = "soften";
   std::string albedo;
   std::optional<double> g;
   std::string noise;            ///< "amplitude[,scale[,octaves[,seed]]]"

@@ -14,6 +14,7 @@
 #include "mr/sky_light.h"
 #include "photo/airlight.h"
 #include "photo/composite.h"
+#include "photo/fog_seams.h"
 #include "photo/illumination.h"
 #include "photo/lamps.h"
 #include "photo/sky_matte.h"
@@ -220,6 +221,26 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Image& sky_alph
     layers_out->backend_notice = std::move(layers.backend_notice);
     layers_out->backend_notice_is_warning = layers.backend_notice_is_warning;
   }
+  return out;
+}
+
+SeamSoftening soften_fog_seams(const Image& photo, FogLayers& layers) {
+  if (layers.composite.width() != photo.width() || layers.composite.height() != photo.height() ||
+      layers.composite.channels() != photo.channels())
+    throw Error(ErrorCode::size_mismatch,
+                "soften_fog_seams: the composite is " +
+                    size_text(layers.composite.width(), layers.composite.height()) +
+                    ", the photo " + size_text(photo.width(), photo.height()));
+  const photo::SeamSoftening s =
+      photo::soften_fog_seams(photo.view(), layers.transmittance.view(), layers.inscatter.view());
+  if (s.pixels_changed > 0)
+    photo::composite(photo.view(), layers.transmittance.view(), layers.inscatter.view(),
+                     layers.composite.view());
+  SeamSoftening out;
+  out.created_before = s.created_before;
+  out.created_after = s.created_after;
+  out.pixels_changed = s.pixels_changed;
+  out.rounds = s.rounds;
   return out;
 }
 

@@ -3,6 +3,7 @@
 // own geometry; and the composite C = I * T + R.
 #pragma once
 
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -83,6 +84,28 @@ MR_API FogLayers fog(const Image& photo, const Image& distance_m, const Camera& 
 MR_API FogLayers fog(const Image& photo, const Image& distance_m, const Image& sky_alpha,
               const Camera& camera, const FogScene& scene, ScatteringLayers* layers_out = nullptr,
               const CancelToken* cancel = nullptr);
+
+/// What soften_fog_seams did: created-edge pixels of the composite before and after, the
+/// pixels whose T or R changed, and the filter rounds run (0: the fog made no edge).
+struct MR_API SeamSoftening {
+  std::size_t created_before = 0;
+  std::size_t created_after = 0;
+  std::size_t pixels_changed = 0;
+  int rounds = 0;
+};
+
+/// Issue 11 item 3: for a fog over a *guessed* depth (mr::estimate_scene), softens the seams
+/// the guess makes. Where the composite has an edge the photo does not have (the gallery's
+/// created-edge measure: display luma gradient after a 1 px blur more than twice the photo's
+/// and above 0.01 a pixel), T and R in a feathered band around it are replaced by their guided
+/// filter with the photo as the guide (window 1 % of the longer side, doubled in each of at
+/// most 3 rounds while such edges remain): the fog becomes smooth where the photo is, and may
+/// still step along the photo's own plain edges. Every other pixel keeps T and R exactly, and a
+/// fog that makes no edge is returned unchanged. `layers` (from fog(), with `photo` the image
+/// it fogged) has its transmittance, inscatter and composite updated. Not for a depth the user
+/// measured or drew: there an edge the fog makes is the scene's, and is kept by not calling
+/// this. Throws mr::Error(size_mismatch) when the layers' sizes differ from the photo's.
+MR_API SeamSoftening soften_fog_seams(const Image& photo, FogLayers& layers);
 
 /// Checks every field of a scene and throws mr::Error(invalid_argument) naming the first bad
 /// one by its path ("medium.g", "lighting.lamps[2].position_m") and what was found.

@@ -1,0 +1,191 @@
+#include "photo/fog_seams.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+#include "mr/error.h"
+#include "photo/opencv_contrib.h"
+
+namespace mr::photo {
+
+namespace {
+
+// gallery/measures.py's constants (CREATED_EDGE_RATIO, CREATED_EDGE_FLOOR, EDGE_BLUR_SIGMA_PX).
+constexpr float kCreatedEdgeRatio = 2.0f;
+constexpr float kCreatedEdgeFloor = 0.01f;  // display luma per pixel, after the blur
+// The guided filter's window radius as a fraction of the photo's longer side (13 px at 1280),
+// and its regularization in display units squared: a photo edge of about 0.1 in display luma
+// lets the fog keep a step along it, a weaker one is treated as flat.
+constexpr double kRadiusOfLongerSide = 0.01;
+constexpr int kMinRadiusPx = 4;
+constexpr double kGuideEps = 0.01;
+constexpr int kMaxRounds = 3;
+
+float encode(float linear) {
+  return std::isfinite(linear) ? std::pow(std::clamp(linear, 0.0f, 1.0f), 1 / 2.2f) : 0.0f;
+}
+
+// The measure's edge strength of a display-luma picture: blur sigma 1 px (radius 3, edges
+// replicated), central differences (one-sided at the borders' replicated pixels).
+cv::Mat edge_strength(const cv::Mat& luma) {
+  cv::Mat b;
+  cv::GaussianBlur(luma, b, cv::Size(7, 7), 1.0, 1.0, cv::BORDER_REPLICATE);
+  cv::Mat g(luma.rows, luma.cols, CV_32F);
+  for (int y = 0; y < luma.rows; ++y) {
+    const float* up = b.ptr<float>(std::max(0, y - 1));
+    const float* row = b.ptr<float>(y);
+    const float* down = b.ptr<float>(std::min(luma.rows - 1, y + 1));
+    float* out = g.ptr<float>(y);
+    for (int x = 0; x < luma.cols; ++x) {
+      const int x0 = std::max(0, x - 1), x1 = std::min(luma.cols - 1, x + 1);
+      out[x] = std::hypot(0.5f * (row[x1] - row[x0]), 0.5f * (down[x] - up[x]));
+    }
+  }
+  return g;
+}
+
+float luma_of(float r, float g, float b) {
+  return 0.2126f * encode(r) + 0.7152f * encode(g) + 0.0722f * encode(b);
+}
+
+// Display luma of C = I T + R.
+cv::Mat composite_luma(ConstImageView photo, const cv::Mat& t, const cv::Mat& r) {
+  cv::Mat l(photo.height, photo.width, CV_32F);
+  for (int y = 0; y < photo.height; ++y) {
+    const cv::Vec3f* tr = t.ptr<cv::Vec3f>(y);
+    const cv::Vec3f* rr = r.ptr<cv::Vec3f>(y);
+    float* out = l.ptr<float>(y);
+    for (int x = 0; x < photo.width; ++x) {
+      const float* p = photo.pixel(x, y);
+      float c[3];
+      for (int k = 0; k < 3; ++k) c[k] = (std::isfinite(p[k]) ? p[k] : 0.0f) * tr[x][k] + rr[x][k];
+      out[x] = luma_of(c[0], c[1], c[2]);
+    }
+  }
+  return l;
+}
+
+cv::Mat created_mask(const cv::Mat& photo_strength, const cv::Mat& composite_l) {
+  const cv::Mat g = edge_strength(composite_l);
+  cv::Mat mask(g.rows, g.cols, CV_8U);
+  for (int y = 0; y < g.rows; ++y) {
+    const float* gp = photo_strength.ptr<float>(y);
+    const float* gc = g.ptr<float>(y);
+    std::uint8_t* m = mask.ptr<std::uint8_t>(y);
+    for (int x = 0; x < g.cols; ++x)
+      m[x] = gc[x] > kCreatedEdgeRatio * gp[x] && gc[x] > kCreatedEdgeFloor ? 255 : 0;
+  }
+  return mask;
+}
+
+void check(ConstImageView photo, ConstImageView t, ConstImageView r) {
+  if (photo.channels < 3)
+    throw Error(ErrorCode::invalid_argument, "soften_fog_seams: the photo has " +
+                                                 std::to_string(photo.channels) +
+                                                 " channel(s), needs 3");
+  for (const ConstImageView* v : {&t, &r}) {
+    if (v->channels != 3)
+      throw Error(ErrorCode::invalid_argument,
+                  std::string("soften_fog_seams: ") + (v == &t ? "transmittance" : "inscatter") +
+                      " has " + std::to_string(v->channels) + " channel(s), needs 3");
+    if (v->width != photo.width || v->height != photo.height)
+      throw Error(ErrorCode::size_mismatch,
+                  std::string("soften_fog_seams: ") + (v == &t ? "transmittance" : "inscatter") +
+                      " is " + std::to_string(v->width) + "x" + std::to_string(v->height) +
+                      ", the photo " + std::to_string(photo.width) + "x" +
+                      std::to_string(photo.height));
+  }
+}
+
+}  // namespace
+
+SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, ImageView inscatter) {
+  check(photo, transmittance, inscatter);
+  SeamSoftening result;
+  const int w = photo.width, h = photo.height;
+  if (w < 3 || h < 3) return result;
+
+  // Working copies (CV_32FC3); a pixel whose T or R is not finite is held out.
+  cv::Mat t(h, w, CV_32FC3), r(h, w, CV_32FC3), guide(h, w, CV_32FC3), photo_l(h, w, CV_32F);
+  cv::Mat held(h, w, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* tp = transmittance.pixel(x, y);
+      const float* rp = inscatter.pixel(x, y);
+      bool finite = true;
+      for (int k = 0; k < 3; ++k) finite = finite && std::isfinite(tp[k]) && std::isfinite(rp[k]);
+      held.at<std::uint8_t>(y, x) = finite ? 0 : 1;
+      const float* p = photo.pixel(x, y);
+      for (int k = 0; k < 3; ++k) {
+        t.at<cv::Vec3f>(y, x)[k] = finite ? tp[k] : 0.0f;
+        r.at<cv::Vec3f>(y, x)[k] = finite ? rp[k] : 0.0f;
+        guide.at<cv::Vec3f>(y, x)[k] = encode(p[k]);
+      }
+      photo_l.at<float>(y, x) = luma_of(p[0], p[1], p[2]);
+    }
+  const cv::Mat photo_strength = edge_strength(photo_l);
+  cv::Mat created = created_mask(photo_strength, composite_luma(photo, t, r));
+  result.created_before = std::size_t(cv::countNonZero(created));
+  result.created_after = result.created_before;
+  if (result.created_before == 0) return result;
+
+  const cv::Mat t0 = t.clone(), r0 = r.clone();
+  int radius = std::max(kMinRadiusPx, int(std::lround(kRadiusOfLongerSide * std::max(w, h))));
+  double eps = kGuideEps;
+  for (int round = 0; round < kMaxRounds && result.created_after > 0; ++round) {
+    ++result.rounds;
+    // The band to soften: the created pixels grown by the window, feathered over half of it.
+    cv::Mat band;
+    cv::dilate(
+        created, band,
+        cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * radius + 1, 2 * radius + 1)));
+    cv::Mat weight;
+    band.convertTo(weight, CV_32F, 1.0 / 255.0);
+    cv::GaussianBlur(weight, weight, cv::Size(0, 0), 0.5 * radius, 0.5 * radius,
+                     cv::BORDER_REPLICATE);
+    cv::Mat t_smooth, r_smooth;
+    contrib::guided_filter(guide, t, t_smooth, radius, eps);
+    contrib::guided_filter(guide, r, r_smooth, radius, eps);
+    for (int y = 0; y < h; ++y) {
+      const float* wr = weight.ptr<float>(y);
+      const std::uint8_t* hr = held.ptr<std::uint8_t>(y);
+      const std::uint8_t* cr = created.ptr<std::uint8_t>(y);
+      cv::Vec3f* tr = t.ptr<cv::Vec3f>(y);
+      cv::Vec3f* rr = r.ptr<cv::Vec3f>(y);
+      const cv::Vec3f* ts = t_smooth.ptr<cv::Vec3f>(y);
+      const cv::Vec3f* rs = r_smooth.ptr<cv::Vec3f>(y);
+      for (int x = 0; x < w; ++x) {
+        const float a = cr[x] ? 1.0f : std::min(1.0f, wr[x]);
+        if (hr[x] || a <= 0) continue;
+        for (int k = 0; k < 3; ++k) {
+          tr[x][k] = std::clamp(tr[x][k] + a * (ts[x][k] - tr[x][k]), 0.0f, 1.0f);
+          rr[x][k] = std::max(0.0f, rr[x][k] + a * (rs[x][k] - rr[x][k]));
+        }
+      }
+    }
+    created = created_mask(photo_strength, composite_luma(photo, t, r));
+    result.created_after = std::size_t(cv::countNonZero(created));
+    radius *= 2;
+    eps *= 2;
+  }
+
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (held.at<std::uint8_t>(y, x)) continue;
+      const cv::Vec3f& tn = t.at<cv::Vec3f>(y, x);
+      const cv::Vec3f& rn = r.at<cv::Vec3f>(y, x);
+      if (tn == t0.at<cv::Vec3f>(y, x) && rn == r0.at<cv::Vec3f>(y, x)) continue;
+      ++result.pixels_changed;
+      for (int k = 0; k < 3; ++k) {
+        transmittance.at(x, y, k) = tn[k];
+        inscatter.at(x, y, k) = rn[k];
+      }
+    }
+  return result;
+}
+
+}  // namespace mr::photo

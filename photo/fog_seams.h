@@ -1,0 +1,43 @@
+// Private to libmr: the fog's seams softened where the depth was guessed (issue 11 item 3).
+//
+// An estimated depth map has steps the photo does not explain: a cloud split between sky and
+// a structure, a billboard's edge across a hillside, a column of the ground lifted. Fog turns
+// each into an edge the photo did not have (C = I T + R with T and R stepping where I is
+// smooth): a seam or a window, the artifact a photographer rejects first. Where the depth is the
+// user's own (a depth file), such an edge is the scene's and is kept; where it was guessed,
+// the fog there is unknown anyway, and a smooth fog is the plausible answer.
+//
+// What is done: the pixels where the fogged image has an edge the photo does not have are found
+// with the gallery's created-edge measure (gallery/measures.py: display luma of the clamped
+// scene-linear colour raised to 1 / 2.2, Gaussian blur of 1 px, central differences; the fogged
+// gradient more than twice the photo's and above 0.01 luma a pixel). Around them (a feathered
+// band of the filter's radius) T and R are replaced by their guided filter with the photo as
+// the guide (He et al. 2013, cv::ximgproc::guidedFilter): over a window where the photo is
+// flat the fog becomes its local mean (the step is spread into a ramp), while across a plain
+// edge of the photo the fog may keep a step aligned with it (the filter's output is locally a
+// linear function of the guide). The same linear filter acts on T and R, so a fog whose R is
+// A (1 - T) keeps that relation. Repeated, with a twice larger window, while created-edge pixels
+// remain (at most 3 rounds). Pixels away from any created edge keep T and R exactly.
+#pragma once
+
+#include <cstddef>
+
+#include "mr/image.h"
+
+namespace mr::photo {
+
+struct SeamSoftening {
+  std::size_t created_before = 0;  ///< created-edge pixels of the composite before
+  std::size_t created_after = 0;   ///< ... and after
+  std::size_t pixels_changed = 0;  ///< pixels whose T or R changed
+  int rounds = 0;                  ///< filter rounds run (0: nothing to soften)
+};
+
+/// Softens T and R (3 channels each, the photo's size) where I T + R has edges the photo
+/// (scene-linear, >= 3 channels; a 4th is ignored) lacks, as above. Non-finite values in the
+/// photo count as black; pixels whose T or R is not finite are left as they are and do not feed
+/// the filter. Throws mr::Error(size_mismatch) when sizes differ, (invalid_argument) when T or
+/// R has other than 3 channels or the photo fewer than 3.
+SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, ImageView inscatter);
+
+}  // namespace mr::photo
