@@ -349,6 +349,11 @@ std::shared_ptr<PreviewResult> render_preview(const PreviewRequest& request,
   mr::ScatteringLayers aovs;
   result->layers = mr::fog(result->photo, result->distance_m, result->sky_alpha, result->camera,
                            fog_scene, &aovs, request.cancel.get());
+  // Issue 11 item 3: as `mr fog --depth auto`, a guessed depth's seams softened (not under a
+  // sun or lamps, whose shafts' edges are the scene's).
+  if (request.document->depth_estimated && !fog_scene.lighting.sun &&
+      fog_scene.lighting.lamps.empty())
+    mr::soften_fog_seams(result->photo, result->layers);
   result->render_s = seconds_since(render_start);
   result->backend = aovs.backend;
   result->backend_notice = aovs.backend_notice;

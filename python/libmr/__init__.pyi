@@ -364,7 +364,8 @@ def default_camera(width: int, height: int, scene: Optional[Scene] = None,
                    metadata: Optional[Metadata] = None) -> Camera: ...
 def fog(image: _Image, depth: _Image, scene: Optional[Scene] = None, *,
         camera: Optional[Camera] = None, sky_alpha: Optional[_Image] = None,
-        metadata: Optional[Metadata] = None, cancel: Optional[CancelToken] = None) -> FogLayers: ...
+        metadata: Optional[Metadata] = None, cancel: Optional[CancelToken] = None,
+        soften_seams: bool = False) -> FogLayers: ...
 class FileFogResult:
     streamed: bool
     reason: str

@@ -393,7 +393,7 @@ void bind_operations(py::module_& m) {
       "fog",
       [](py::handle image, py::handle depth, const mr::FogScene* scene,
          std::optional<mr::Camera> camera, py::handle sky_alpha,
-         std::optional<mr::Metadata> metadata, mr::CancelToken* cancel) {
+         std::optional<mr::Metadata> metadata, mr::CancelToken* cancel, bool soften_seams) {
         const ImageArg photo(image, "image", metadata ? &*metadata : nullptr);
         const ImageArg distance(depth, "depth");
         const ImageArg alpha = sky_alpha.is_none() ? ImageArg() : ImageArg(sky_alpha, "sky_alpha");
@@ -409,6 +409,7 @@ void bind_operations(py::module_& m) {
           py::gil_scoped_release release;
           const auto start = std::chrono::steady_clock::now();
           layers = mr::fog(photo.image(), distance.image(), alpha.image(), cam, s, &aovs, cancel);
+          if (soften_seams) mr::soften_fog_seams(photo.image(), layers);
           r.call_s =
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
           r.warnings = mr::scene_warnings(s);
@@ -429,6 +430,7 @@ void bind_operations(py::module_& m) {
       py::arg("image"), py::arg("depth"), py::arg("scene") = py::none(), py::kw_only(),
       py::arg("camera") = py::none(), py::arg("sky_alpha") = py::none(),
       py::arg("metadata") = py::none(), py::arg("cancel") = py::none(),
+      py::arg("soften_seams") = false,
       "Physically based fog (single scattering of sun, sky and lamps with volumetric "
       "shadows; DESIGN.md section 3) in a photo with its depth. image: scene-linear float32 "
       "(H, W, C >= 3); depth: float32 (H, W) or (H, W, 1), metres along each pixel's ray, "
@@ -437,7 +439,9 @@ void bind_operations(py::module_& m) {
       "None = default_camera(W, H, scene, metadata) as `mr fog`. sky_alpha: optional soft "
       "sky matte (H, W, 1) in [0, 1] (estimate().sky_alpha). metadata: replaces the photo's "
       "(arrays from read_image carry their file's; a given one copies the photo). cancel: a "
-      "CancelToken. Returns FogLayers. Arrays libmr returned are used in place; other arrays "
+      "CancelToken. soften_seams: for a guessed depth (estimate()), soften the fog where the "
+      "depth makes edges the photo lacks, as `mr fog --depth auto` does without sun or lamps "
+      "(mr::soften_fog_seams; never for a measured depth). Returns FogLayers. Arrays libmr returned are used in place; other arrays "
       "are copied once. Raises InvalidArgumentError (bad scene field, NaN depth, wrong "
       "dtype/shape), SizeMismatchError, CancelledError. Releases the GIL while rendering.");
 

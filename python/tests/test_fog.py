@@ -111,3 +111,25 @@ def test_shadow_traversals_render_identically(rng):
     # not trivial: some pixels see the sun, some are in the relief's shadow
     shadowed = float((a.sun_visibility < 0.5).mean())
     assert 0.01 < shadowed < 0.99
+
+
+def test_soften_seams_spreads_a_guessed_depth_step():
+    # A depth step where the photo is flat is a seam in the fog; soften_seams=True (as
+    # `mr fog --depth auto` does) spreads it into a ramp, keeping R = L (1 - T) (sky light only).
+    h, w = 60, 120
+    photo = np.full((h, w, 3), 0.18, np.float32)
+    depth = np.full((h, w), 30.0, np.float32)
+    depth[:, w // 2:] = 600.0
+    scene = sky_only_scene(libmr)
+    hard = libmr.fog(photo, depth, scene)
+    soft = libmr.fog(photo, depth, scene, soften_seams=True)
+    step = lambda c: np.abs(np.diff(c[h // 2, :, 1])).max()
+    assert step(soft.composite) < 0.5 * step(hard.composite)
+    sky = np.array(scene.lighting.sky_radiance, np.float32)
+    np.testing.assert_allclose(soft.inscatter, sky * (1 - soft.transmittance), atol=2e-5)
+    # away from the step nothing moved
+    np.testing.assert_array_equal(soft.composite[:, :5], hard.composite[:, :5])
+    # a smooth depth makes no seam: identical with and without
+    smooth = np.tile(np.linspace(30, 40, w, dtype=np.float32), (h, 1))
+    np.testing.assert_array_equal(libmr.fog(photo, smooth, scene, soften_seams=True).composite,
+                                  libmr.fog(photo, smooth, scene).composite)
