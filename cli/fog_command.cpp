@@ -616,7 +616,8 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
       report.info("note: " + job.photo.string() + ": softened the fog's seams at " +
                   std::to_string(s.pixels_changed) + " pixels (" +
                   std::to_string(s.created_before) + " created-edge pixels before, " +
-                  std::to_string(s.created_after) + " after)");
+                  std::to_string(s.created_after) + " after, " + std::to_string(s.rounds) +
+                  " rounds)");
   }
   // The Vulkan fall-back, once per run: a warning when a GPU failed; on a machine without a
   // usable GPU the CPU is the expected choice, a note in verbose mode only.

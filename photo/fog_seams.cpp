@@ -6,9 +6,12 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "mr/error.h"
+#include "photo/display.h"
 #include "photo/opencv_contrib.h"
+#include "photo/sky_matte.h"
 
 namespace mr::photo {
 
@@ -17,17 +20,13 @@ namespace {
 // gallery/measures.py's constants (CREATED_EDGE_RATIO, CREATED_EDGE_FLOOR, EDGE_BLUR_SIGMA_PX).
 constexpr float kCreatedEdgeRatio = 2.0f;
 constexpr float kCreatedEdgeFloor = 0.01f;  // display luma per pixel, after the blur
-// The guided filter's window radius as a fraction of the photo's longer side (13 px at 1280),
-// and its regularization in display units squared: a photo edge of about 0.1 in display luma
-// lets the fog keep a step along it, a weaker one is treated as flat.
-constexpr double kRadiusOfLongerSide = 0.01;
-constexpr int kMinRadiusPx = 4;
-constexpr double kGuideEps = 0.01;
+// The edge-aware smoother (cv::ximgproc fast global smoother, a weighted-least-squares fit
+// guided by the photo in display-referred 8-bit): its smoothness grows with the longer side
+// (lambda = (0.02 x side)^2, 256 at 800 px) and x4 each round; photo edges under about
+// kSigmaColor codes (of 255) are smoothed across, plainer ones hold the fog's step.
+constexpr double kExtentOfLongerSide = 0.02;
+constexpr double kSigmaColor = 20;
 constexpr int kMaxRounds = 3;
-
-float encode(float linear) {
-  return std::isfinite(linear) ? std::pow(std::clamp(linear, 0.0f, 1.0f), 1 / 2.2f) : 0.0f;
-}
 
 // The measure's edge strength of a display-luma picture: blur sigma 1 px (radius 3, edges
 // replicated), central differences (one-sided at the borders' replicated pixels).
@@ -48,12 +47,16 @@ cv::Mat edge_strength(const cv::Mat& luma) {
   return g;
 }
 
-float luma_of(float r, float g, float b) {
-  return 0.2126f * encode(r) + 0.7152f * encode(g) + 0.0722f * encode(b);
+// Display luma: Rec. 709 weights on the encoded values (the measure's), non-finite as black.
+float luma_of(const float* rgb, float (*encode)(float)) {
+  float e[3];
+  for (int k = 0; k < 3; ++k) e[k] = std::isfinite(rgb[k]) ? encode(rgb[k]) : 0.0f;
+  return 0.2126f * e[0] + 0.7152f * e[1] + 0.0722f * e[2];
 }
 
 // Display luma of C = I T + R.
-cv::Mat composite_luma(ConstImageView photo, const cv::Mat& t, const cv::Mat& r) {
+cv::Mat composite_luma(ConstImageView photo, const cv::Mat& t, const cv::Mat& r,
+                       float (*encode)(float)) {
   cv::Mat l(photo.height, photo.width, CV_32F);
   for (int y = 0; y < photo.height; ++y) {
     const cv::Vec3f* tr = t.ptr<cv::Vec3f>(y);
@@ -63,7 +66,7 @@ cv::Mat composite_luma(ConstImageView photo, const cv::Mat& t, const cv::Mat& r)
       const float* p = photo.pixel(x, y);
       float c[3];
       for (int k = 0; k < 3; ++k) c[k] = (std::isfinite(p[k]) ? p[k] : 0.0f) * tr[x][k] + rr[x][k];
-      out[x] = luma_of(c[0], c[1], c[2]);
+      out[x] = luma_of(c, encode);
     }
   }
   return l;
@@ -103,14 +106,15 @@ void check(ConstImageView photo, ConstImageView t, ConstImageView r) {
 
 }  // namespace
 
-SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, ImageView inscatter) {
+SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, ImageView inscatter,
+                               const SeamDisplay& display) {
   check(photo, transmittance, inscatter);
   SeamSoftening result;
   const int w = photo.width, h = photo.height;
   if (w < 3 || h < 3) return result;
 
   // Working copies (CV_32FC3); a pixel whose T or R is not finite is held out.
-  cv::Mat t(h, w, CV_32FC3), r(h, w, CV_32FC3), guide(h, w, CV_32FC3), photo_l(h, w, CV_32F);
+  cv::Mat t(h, w, CV_32FC3), r(h, w, CV_32FC3), photo_l(h, w, CV_32F);
   cv::Mat held(h, w, CV_8U, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -123,22 +127,40 @@ SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, Im
       for (int k = 0; k < 3; ++k) {
         t.at<cv::Vec3f>(y, x)[k] = finite ? tp[k] : 0.0f;
         r.at<cv::Vec3f>(y, x)[k] = finite ? rp[k] : 0.0f;
-        guide.at<cv::Vec3f>(y, x)[k] = encode(p[k]);
       }
-      photo_l.at<float>(y, x) = luma_of(p[0], p[1], p[2]);
+      photo_l.at<float>(y, x) = luma_of(p, display.photo);
     }
   const cv::Mat photo_strength = edge_strength(photo_l);
-  cv::Mat created = created_mask(photo_strength, composite_luma(photo, t, r));
+  cv::Mat created = created_mask(photo_strength, composite_luma(photo, t, r, display.fogged));
   result.created_before = std::size_t(cv::countNonZero(created));
   result.created_after = result.created_before;
   if (result.created_before == 0) return result;
 
+  // A pixel held out takes its nearest finite neighbour's T and R for the filter's sake (it is
+  // never written back), so no made-up value spreads from it.
+  std::vector<std::uint8_t> finite_px(std::size_t(w) * h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) finite_px[std::size_t(y) * w + x] = !held.at<std::uint8_t>(y, x);
+  if (cv::countNonZero(held) > 0) {
+    const std::vector<std::int32_t> nearest = nearest_source(w, h, finite_px);
+    if (nearest.empty()) return result;  // no finite fog at all
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (held.at<std::uint8_t>(y, x)) {
+          const std::int32_t n = nearest[std::size_t(y) * w + x];
+          t.at<cv::Vec3f>(y, x) = t.at<cv::Vec3f>(n / w, n % w);
+          r.at<cv::Vec3f>(y, x) = r.at<cv::Vec3f>(n / w, n % w);
+        }
+  }
+
+  const cv::Mat guide = display_rgb8(photo);
   const cv::Mat t0 = t.clone(), r0 = r.clone();
-  int radius = std::max(kMinRadiusPx, int(std::lround(kRadiusOfLongerSide * std::max(w, h))));
-  double eps = kGuideEps;
+  const double extent = std::max(2.0, kExtentOfLongerSide * std::max(w, h));
+  double lambda = extent * extent;
+  const int radius = std::max(2, int(std::lround(extent)));
   for (int round = 0; round < kMaxRounds && result.created_after > 0; ++round) {
-    ++result.rounds;
-    // The band to soften: the created pixels grown by the window, feathered over half of it.
+    // The band to soften: the created pixels grown by the smoother's extent, feathered over
+    // half of it.
     cv::Mat band;
     cv::dilate(
         created, band,
@@ -148,29 +170,35 @@ SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, Im
     cv::GaussianBlur(weight, weight, cv::Size(0, 0), 0.5 * radius, 0.5 * radius,
                      cv::BORDER_REPLICATE);
     cv::Mat t_smooth, r_smooth;
-    contrib::guided_filter(guide, t, t_smooth, radius, eps);
-    contrib::guided_filter(guide, r, r_smooth, radius, eps);
+    contrib::fast_global_smoother_filter(guide, t, t_smooth, lambda, kSigmaColor);
+    contrib::fast_global_smoother_filter(guide, r, r_smooth, lambda, kSigmaColor);
+    cv::Mat t_next = t.clone(), r_next = r.clone();
     for (int y = 0; y < h; ++y) {
       const float* wr = weight.ptr<float>(y);
-      const std::uint8_t* hr = held.ptr<std::uint8_t>(y);
       const std::uint8_t* cr = created.ptr<std::uint8_t>(y);
-      cv::Vec3f* tr = t.ptr<cv::Vec3f>(y);
-      cv::Vec3f* rr = r.ptr<cv::Vec3f>(y);
+      cv::Vec3f* tr = t_next.ptr<cv::Vec3f>(y);
+      cv::Vec3f* rr = r_next.ptr<cv::Vec3f>(y);
       const cv::Vec3f* ts = t_smooth.ptr<cv::Vec3f>(y);
       const cv::Vec3f* rs = r_smooth.ptr<cv::Vec3f>(y);
       for (int x = 0; x < w; ++x) {
         const float a = cr[x] ? 1.0f : std::min(1.0f, wr[x]);
-        if (hr[x] || a <= 0) continue;
+        if (a <= 0) continue;
         for (int k = 0; k < 3; ++k) {
           tr[x][k] = std::clamp(tr[x][k] + a * (ts[x][k] - tr[x][k]), 0.0f, 1.0f);
           rr[x][k] = std::max(0.0f, rr[x][k] + a * (rs[x][k] - rr[x][k]));
         }
       }
     }
-    created = created_mask(photo_strength, composite_luma(photo, t, r));
-    result.created_after = std::size_t(cv::countNonZero(created));
-    radius *= 2;
-    eps *= 2;
+    // A round that does not lower the count is dropped; the next one smooths harder.
+    const cv::Mat next =
+        created_mask(photo_strength, composite_luma(photo, t_next, r_next, display.fogged));
+    const std::size_t count = std::size_t(cv::countNonZero(next));
+    ++result.rounds;
+    if (count < result.created_after) {
+      t = t_next, r = r_next, created = next;
+      result.created_after = count;
+    }
+    lambda *= 4;
   }
 
   for (int y = 0; y < h; ++y)

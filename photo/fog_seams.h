@@ -8,16 +8,19 @@
 // the fog there is unknown anyway, and a smooth fog is the plausible answer.
 //
 // What is done: the pixels where the fogged image has an edge the photo does not have are found
-// with the gallery's created-edge measure (gallery/measures.py: display luma of the clamped
-// scene-linear colour raised to 1 / 2.2, Gaussian blur of 1 px, central differences; the fogged
-// gradient more than twice the photo's and above 0.01 luma a pixel). Around them (a feathered
-// band of the filter's radius) T and R are replaced by their guided filter with the photo as
-// the guide (He et al. 2013, cv::ximgproc::guidedFilter): over a window where the photo is
-// flat the fog becomes its local mean (the step is spread into a ramp), while across a plain
-// edge of the photo the fog may keep a step aligned with it (the filter's output is locally a
-// linear function of the guide). The same linear filter acts on T and R, so a fog whose R is
-// A (1 - T) keeps that relation. Repeated, with a twice larger window, while created-edge pixels
-// remain (at most 3 rounds). Pixels away from any created edge keep T and R exactly.
+// with the gallery's created-edge measure (gallery/measures.py: luma of the display-encoded
+// colour, Gaussian blur of 1 px, central differences; the fogged gradient more than twice the
+// photo's and above 0.01 luma a pixel), on the image as the caller displays it (SeamDisplay).
+// Around them (a feathered band of the smoother's reach) T and R are replaced by an edge-aware
+// smoothing of them guided by the photo (cv::ximgproc's fast global smoother, a weighted
+// least-squares fit, Min et al. 2014): where the photo is flat or only faintly textured the fog
+// becomes smooth (the step is spread into a ramp), while across a plain edge of the photo the fog
+// keeps its step. Each output is a weighted average of its neighbours' values, so the smoothing
+// cannot sharpen the photo's texture (a guided filter's local linear model did: it copied the
+// texture of a roof into T, which then deepened it). The same filter acts on T and R, so a fog
+// whose R is A (1 - T) keeps that relation. Repeated with a 4x stronger smoothing while
+// created-edge pixels remain (at most 3 rounds); a round that does not lower their count is dropped
+// and ends the softening. Pixels away from any created edge keep T and R exactly.
 #pragma once
 
 #include <cstddef>
@@ -33,11 +36,20 @@ struct SeamSoftening {
   int rounds = 0;                  ///< filter rounds run (0: nothing to soften)
 };
 
+/// How the photo and the fogged image are displayed, per channel from scene-linear to the
+/// encoded values whose luma the measure takes (e.g. the sRGB encoding; for the fog the output's
+/// highlight roll-off first). Non-finite inputs never reach them.
+struct SeamDisplay {
+  float (*photo)(float linear);
+  float (*fogged)(float linear);
+};
+
 /// Softens T and R (3 channels each, the photo's size) where I T + R has edges the photo
 /// (scene-linear, >= 3 channels; a 4th is ignored) lacks, as above. Non-finite values in the
 /// photo count as black; pixels whose T or R is not finite are left as they are and do not feed
 /// the filter. Throws mr::Error(size_mismatch) when sizes differ, (invalid_argument) when T or
 /// R has other than 3 channels or the photo fewer than 3.
-SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, ImageView inscatter);
+SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, ImageView inscatter,
+                               const SeamDisplay& display);
 
 }  // namespace mr::photo

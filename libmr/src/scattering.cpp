@@ -9,6 +9,7 @@
 #include <string>
 
 #include "mr/cancel.h"
+#include "mr/color.h"
 #include "mr/depth.h"
 #include "mr/error.h"
 #include "mr/sky_light.h"
@@ -224,6 +225,21 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Image& sky_alph
   return out;
 }
 
+namespace {
+
+// IEC 61966-2-1 sRGB encoding of a clamped scene-linear value.
+float srgb_encode(float linear) {
+  const float v = std::clamp(linear, 0.0f, 1.0f);
+  return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1 / 2.4f) - 0.055f;
+}
+
+// `mr fog`'s default display output (colorspace::srgb_rolloff): the roll-off, then sRGB.
+float srgb_rolloff_encode(float linear) {
+  return srgb_encode(float(highlight_rolloff(linear)));
+}
+
+}  // namespace
+
 SeamSoftening soften_fog_seams(const Image& photo, FogLayers& layers) {
   if (layers.composite.width() != photo.width() || layers.composite.height() != photo.height() ||
       layers.composite.channels() != photo.channels())
@@ -232,7 +248,8 @@ SeamSoftening soften_fog_seams(const Image& photo, FogLayers& layers) {
                     size_text(layers.composite.width(), layers.composite.height()) +
                     ", the photo " + size_text(photo.width(), photo.height()));
   const photo::SeamSoftening s =
-      photo::soften_fog_seams(photo.view(), layers.transmittance.view(), layers.inscatter.view());
+      photo::soften_fog_seams(photo.view(), layers.transmittance.view(), layers.inscatter.view(),
+                              photo::SeamDisplay{srgb_encode, srgb_rolloff_encode});
   if (s.pixels_changed > 0)
     photo::composite(photo.view(), layers.transmittance.view(), layers.inscatter.view(),
                      layers.composite.view());

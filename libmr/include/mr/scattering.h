@@ -95,16 +95,17 @@ struct MR_API SeamSoftening {
 };
 
 /// Issue 11 item 3: for a fog over a *guessed* depth (mr::estimate_scene), softens the seams
-/// the guess makes. Where the composite has an edge the photo does not have (the gallery's
-/// created-edge measure: display luma gradient after a 1 px blur more than twice the photo's
-/// and above 0.01 a pixel), T and R in a feathered band around it are replaced by their guided
-/// filter with the photo as the guide (window 1 % of the longer side, doubled in each of at
-/// most 3 rounds while such edges remain): the fog becomes smooth where the photo is, and may
-/// still step along the photo's own plain edges. Every other pixel keeps T and R exactly, and a
-/// fog that makes no edge is returned unchanged. `layers` (from fog(), with `photo` the image
-/// it fogged) has its transmittance, inscatter and composite updated. Not for a depth the user
-/// measured or drew: there an edge the fog makes is the scene's, and is kept by not calling
-/// this. Throws mr::Error(size_mismatch) when the layers' sizes differ from the photo's.
+/// the guess makes. Where the composite, as `mr fog` displays it by default (sRGB after the
+/// highlight roll-off, mr/color.h), has an edge the photo (sRGB) does not have (the gallery's
+/// created-edge measure: luma gradient after a 1 px blur more than twice the photo's and above
+/// 0.01 a pixel), T and R in a feathered band around it are smoothed edge-aware against the
+/// photo (photo/fog_seams.h: a few rounds, each kept only if it leaves fewer such edges): the
+/// fog becomes smooth where the photo is, and keeps its steps along the photo's plain edges. Every
+/// other pixel keeps T and R exactly, and a fog that makes no edge is returned unchanged. `layers`
+/// (from fog(), with `photo` the image it fogged) has its transmittance, inscatter and composite
+/// updated. Not for a depth the user measured or drew: there an edge the fog makes is the scene's,
+/// and is kept by not calling this. Throws mr::Error(size_mismatch) when the layers' sizes differ
+/// from the photo's.
 MR_API SeamSoftening soften_fog_seams(const Image& photo, FogLayers& layers);
 
 /// Checks every field of a scene and throws mr::Error(invalid_argument) naming the first bad
