@@ -22,10 +22,15 @@ constexpr float kCreatedEdgeRatio = 2.0f;
 constexpr float kCreatedEdgeFloor = 0.01f;  // display luma per pixel, after the blur
 // The edge-aware smoother (cv::ximgproc fast global smoother, a weighted-least-squares fit
 // guided by the photo in display-referred 8-bit): its smoothness grows with the longer side
-// (lambda = (0.02 x side)^2, 256 at 800 px) and x4 each round; photo edges under about
-// kSigmaColor codes (of 255) are smoothed across, plainer ones hold the fog's step.
+// (lambda = (0.02 x side)^2, 256 at 800 px) and x4 each round; its weights fall by e for each
+// kSigmaColor codes (of 255) of difference in the guide. At 20 it pulled a kite (gallery/tune
+// kite, 150 px across a wide sky) into the sky's fog: the global fit leaks into small objects.
 constexpr double kExtentOfLongerSide = 0.02;
-constexpr double kSigmaColor = 20;
+constexpr double kSigmaColor = 10;
+// The guide's texture removal (rolling guidance: 4 iterations, spatial sigma in px, range
+// sigma in codes of 255).
+constexpr double kTexturePx = 3;
+constexpr double kTextureSigmaColor = 25;
 constexpr int kMaxRounds = 3;
 
 // The measure's edge strength of a display-luma picture: blur sigma 1 px (radius 3, edges
@@ -153,7 +158,12 @@ SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, Im
         }
   }
 
-  const cv::Mat guide = display_rgb8(photo);
+  // The guide without its fine texture (rolling guidance, Zhang et al. 2014: grains of a few
+  // pixels go, outlines stay), so the smoother crosses a textured stretch (a far city's
+  // rooftops) as it crosses a flat one, and stops at an object's outline.
+  cv::Mat guide;
+  contrib::rolling_guidance_filter(display_rgb8(photo), guide, -1, kTextureSigmaColor, kTexturePx,
+                                   4);
   const cv::Mat t0 = t.clone(), r0 = r.clone();
   const double extent = std::max(2.0, kExtentOfLongerSide * std::max(w, h));
   double lambda = extent * extent;

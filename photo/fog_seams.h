@@ -13,14 +13,16 @@
 // photo's and above 0.01 luma a pixel), on the image as the caller displays it (SeamDisplay).
 // Around them (a feathered band of the smoother's reach) T and R are replaced by an edge-aware
 // smoothing of them guided by the photo (cv::ximgproc's fast global smoother, a weighted
-// least-squares fit, Min et al. 2014): where the photo is flat or only faintly textured the fog
-// becomes smooth (the step is spread into a ramp), while across a plain edge of the photo the fog
-// keeps its step. Each output is a weighted average of its neighbours' values, so the smoothing
-// cannot sharpen the photo's texture (a guided filter's local linear model did: it copied the
-// texture of a roof into T, which then deepened it). The same filter acts on T and R, so a fog
-// whose R is A (1 - T) keeps that relation. Repeated with a 4x stronger smoothing while
-// created-edge pixels remain (at most 3 rounds); a round that does not lower their count is dropped
-// and ends the softening. Pixels away from any created edge keep T and R exactly.
+// least-squares fit, Min et al. 2014, on the photo with its fine texture removed by rolling
+// guidance, Zhang et al. 2014): where the photo is flat or only finely textured the fog becomes
+// smooth (the step is spread into a ramp), while at an object's outline the fog keeps its step.
+// Tried first and dropped (gallery/results/seams_tune.md): a guided filter (its local linear
+// model copied a roof's texture into T, which deepened it: new created edges), the domain
+// transform (strictly edge-stopping: it kept a far city's textured skyline cut out), and the
+// smoother at a wider colour range or on the raw photo (the global fit leaked into a kite in a
+// wide sky and veiled it). The same filter acts on T and R, so a fog whose R is A (1 - T) keeps
+// that relation. Up to 3 rounds, each 4x smoother; a round is kept only if it leaves fewer
+// created-edge pixels. Pixels away from any created edge keep T and R exactly.
 #pragma once
 
 #include <cstddef>
