@@ -181,15 +181,24 @@ TEST(FogSeams, BadInputIsNamedOrLeftAlone) {
   }
 }
 
+Image tune_photo(const std::string& name) {
+  return read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / (name + ".jpg"));
+}
+
+// The gallery's haze look on the automatic estimate (60 degrees across, as `mr fog` without
+// EXIF).
+FogLayers auto_haze(const Image& photo) {
+  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
+  return test::fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
+}
+
 // gallery/tune airport_snow (a snowy apron, a far city under an overcast sky): the haze look's
 // created edges were the far city's rooftops cut out against the veiled sky (0.09 % of the
 // frame). Softened, they are within the gallery's target, and the softening stays local.
 TEST(FogSeams, AirportSnowsHazeHasNoCutOutCity) {
-  const Image photo =
-      read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / "airport_snow.jpg");
-  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
-  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
-  FogLayers haze = test::fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
+  const Image photo = tune_photo("airport_snow");
+  FogLayers haze = auto_haze(photo);
   const double before = test::gallery_created_edges(photo, haze.composite);
   const cv::Mat luma_before = test::display_luma(haze.composite);
   soften_fog_seams(photo, haze);
@@ -210,11 +219,8 @@ TEST(FogSeams, AirportSnowsHazeHasNoCutOutCity) {
 // edge-aware smoother guided by the raw photo at a wider colour range did: the kite's
 // transmittance fell from 0.7-0.9 to 0.3-0.5, a clear kite turned into a veiled one).
 TEST(FogSeams, KitesOwnFogIsKept) {
-  const Image photo =
-      read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / "kite.jpg");
-  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
-  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
-  FogLayers haze = test::fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
+  const Image photo = tune_photo("kite");
+  FogLayers haze = auto_haze(photo);
   const Image t_before = haze.transmittance;
   soften_fog_seams(photo, haze);
   // The kite: the pixels whose fog leaves more than half of the photo's light.
