@@ -143,10 +143,10 @@ SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, Im
 
   // A pixel held out takes its nearest finite neighbour's T and R for the filter's sake (it is
   // never written back), so no made-up value spreads from it.
-  std::vector<std::uint8_t> finite_px(std::size_t(w) * h);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) finite_px[std::size_t(y) * w + x] = !held.at<std::uint8_t>(y, x);
   if (cv::countNonZero(held) > 0) {
+    std::vector<std::uint8_t> finite_px(std::size_t(w) * h);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) finite_px[std::size_t(y) * w + x] = !held.at<std::uint8_t>(y, x);
     const std::vector<std::int32_t> nearest = nearest_source(w, h, finite_px);
     if (nearest.empty()) return result;  // no finite fog at all
     for (int y = 0; y < h; ++y)

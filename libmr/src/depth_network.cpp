@@ -14,18 +14,16 @@
 #include <utility>
 #include <vector>
 
-#include "mr/error.h"
 #include "core/oiio_module.h"
+#include "mr/error.h"
 #include "photo/opencv_contrib.h"
+#include "srgb_encode.h"
 
 namespace mr {
 
 namespace {
 
-float srgb_encode(float linear) {
-  const float v = std::clamp(linear, 0.0f, 1.0f);
-  return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
-}
+using detail::srgb_encode;
 
 std::string shape_text(const cv::Mat& m) {
   std::string s = "[";

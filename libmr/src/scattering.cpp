@@ -20,6 +20,7 @@
 #include "photo/lamps.h"
 #include "photo/sky_matte.h"
 #include "render/backend.h"
+#include "srgb_encode.h"
 
 namespace mr {
 
@@ -227,11 +228,7 @@ FogLayers fog(const Image& photo, const Image& distance_m, const Image& sky_alph
 
 namespace {
 
-// IEC 61966-2-1 sRGB encoding of a clamped scene-linear value.
-float srgb_encode(float linear) {
-  const float v = std::clamp(linear, 0.0f, 1.0f);
-  return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1 / 2.4f) - 0.055f;
-}
+using detail::srgb_encode;
 
 // `mr fog`'s default display output (colorspace::srgb_rolloff): the roll-off, then sRGB.
 float srgb_rolloff_encode(float linear) {
