@@ -21,8 +21,11 @@
 // transform (strictly edge-stopping: it kept a far city's textured skyline cut out), and the
 // smoother at a wider colour range or on the raw photo (the global fit leaked into a kite in a
 // wide sky and veiled it). The same filter acts on T and R, so a fog whose R is A (1 - T) keeps
-// that relation. Up to 3 rounds, each 4x smoother; a round is kept only if it leaves fewer
-// created-edge pixels. Pixels away from any created edge keep T and R exactly.
+// that relation. Up to 3 rounds, each 4x smoother; a round is kept only if it weakens the
+// created edges: the sum over their pixels of the squared excess of the fogged gradient over
+// the measure's threshold falls (a step spread into a ramp is fainter even where the ramp keeps
+// more pixels above the floor than the step had, as on a small frame). Pixels away from any
+// created edge keep T and R exactly.
 #pragma once
 
 #include <cstddef>

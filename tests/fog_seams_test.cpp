@@ -117,6 +117,42 @@ TEST(FogSeams, ADepthStepWhereThePhotoIsFlatBecomesARamp) {
       }
 }
 
+// A small frame with a big step: spreading it into a ramp leaves more pixels above the
+// measure's floor than the step itself had (the ramp's slope of ~0.27 luma over the smoother's
+// few pixels), so a test on the count alone dropped every round and kept the seam; the
+// softening judges a round by how strong the created edges are.
+TEST(FogSeams, ASmallFramesBigStepIsSpreadToo) {
+  constexpr int w = 120, h = 120;
+  Image photo(w, h, 3), depth(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = 0.18f;
+      depth.at(x, y, 0) = x < w / 2 ? 30.0f : 600.0f;
+    }
+  FogLayers layers = fog(photo, depth, haze());
+  const FogLayers before = layers;
+  auto max_step = [&](const Image& c) {
+    float m = 0;
+    for (int x = 1; x < w; ++x)
+      m = std::max(m, std::abs(c.at(x, h / 2, 1) - c.at(x - 1, h / 2, 1)));
+    return m;
+  };
+  const float old_step = max_step(before.composite);
+  ASSERT_GT(old_step, 0.1f);
+  const SeamSoftening s = soften_fog_seams(photo, layers);
+  EXPECT_GE(s.rounds, 1);
+  EXPECT_GT(s.pixels_changed, 0u);
+  EXPECT_LT(max_step(layers.composite), 0.25f * old_step);
+  // Still the sky-lit fog's closed form, and the far sides as they were.
+  const Rgb a = *haze().airlight;
+  for (int x = 0; x < w; ++x)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(layers.inscatter.at(x, h / 2, c),
+                  a[c] * (1 - layers.transmittance.at(x, h / 2, c)), 1e-4f * a[c]);
+  EXPECT_EQ(layers.composite.at(0, h / 2, 1), before.composite.at(0, h / 2, 1));
+  EXPECT_EQ(layers.composite.at(w - 1, h / 2, 1), before.composite.at(w - 1, h / 2, 1));
+}
+
 TEST(FogSeams, AFogThatMakesNoEdgeIsUntouched) {
   // A depth step on the photo's own plain edge (near dark wall, far bright background), and a
   // smooth depth: no created edge, nothing changes.

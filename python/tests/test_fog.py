@@ -116,7 +116,7 @@ def test_shadow_traversals_render_identically(rng):
 def test_soften_seams_spreads_a_guessed_depth_step():
     # A depth step where the photo is flat is a seam in the fog; soften_seams=True (as
     # `mr fog --depth auto` does) spreads it into a ramp, keeping R = L (1 - T) (sky light only).
-    h, w = 120, 480
+    h, w = 120, 120
     photo = np.full((h, w, 3), 0.18, np.float32)
     depth = np.full((h, w), 30.0, np.float32)
     depth[:, w // 2:] = 600.0

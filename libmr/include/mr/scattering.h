@@ -99,7 +99,7 @@ struct MR_API SeamSoftening {
 /// highlight roll-off, mr/color.h), has an edge the photo (sRGB) does not have (the gallery's
 /// created-edge measure: luma gradient after a 1 px blur more than twice the photo's and above
 /// 0.01 a pixel), T and R in a feathered band around it are smoothed edge-aware against the
-/// photo (photo/fog_seams.h: a few rounds, each kept only if it leaves fewer such edges): the
+/// photo (photo/fog_seams.h: a few rounds, each kept only if it leaves such edges weaker): the
 /// fog becomes smooth where the photo is, and keeps its steps along the photo's plain edges. Every
 /// other pixel keeps T and R exactly, and a fog that makes no edge is returned unchanged. `layers`
 /// (from fog(), with `photo` the image it fogged) has its transmittance, inscatter and composite
