@@ -1,4 +1,5 @@
 // The `mr` command line: batch front end of libmr.
+#include <malloc.h>
 #include <unistd.h>
 
 #include <csignal>
@@ -68,6 +69,21 @@ extern "C" void on_signal(int signal, siginfo_t* info, void*) {
   }
 }
 
+// A photo's stages allocate and free full-frame buffers one after another (12 MP: 48-144 MB
+// each). glibc serves every block over 32 MiB with a fresh mmap and returns it with munmap, so
+// the kernel faults and zeroes each one in again, page by page: an automatic fog of a 12 MP
+// photo spent 23 s of its 61 s in the kernel (3.3 M page faults). A batch process keeps what it
+// frees for the next buffer instead: all blocks from the heap, none trimmed back to the OS
+// (the heap stays at the run's peak, which the process reached anyway). Output unchanged; the
+// library leaves this to its host (mr-studio keeps glibc's defaults: a long-lived editor
+// should give memory back).
+void keep_freed_memory_for_reuse() {
+#if defined(__GLIBC__)
+  mallopt(M_MMAP_MAX, 0);
+  mallopt(M_TRIM_THRESHOLD, -1);
+#endif
+}
+
 void install_signal_handlers() {
   struct sigaction action {};
   action.sa_sigaction = on_signal;
@@ -82,6 +98,7 @@ void install_signal_handlers() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  keep_freed_memory_for_reuse();
   CLI::App app{"mr: physically based fog for photographs (libmr " + std::string(mr::version()) +
                ")"};
   app.set_version_flag("--version", std::string("mr ") + mr::version());

@@ -405,5 +405,42 @@ TEST(FogStream, TwelveMegapixelRunStaysUnderTheMemoryTarget) {
   EXPECT_NEAR(result.at(0, h - 1, 0), 0.8 * (1 - std::exp(-sigma * d)), 0.02);
 }
 
+// `mr` keeps the memory a photo's stages free for the next buffer (cli/main.cpp) instead of
+// letting glibc unmap every block over 32 MiB, which the kernel then faults and zeroes in again
+// page by page. Scale-free check from the OS (wait4's rusage of the child): the minor page
+// faults, 4 KiB each, add up to at most the peak resident memory, i.e. each page is faulted in
+// about once. An automatic haze of a 1280 x 800 photo: 1.6x its peak before (172 k faults, 415
+// MiB), 0.66x with the reuse; with transparent huge pages always on, fewer faults still.
+TEST(CliMemory, AnAutomaticFogFaultsEachPageInAboutOnce) {
+  test::ScratchDir dir;
+  const fs::path gallery = fs::path(MR_SOURCE_DIR) / "gallery";
+  const std::string photo = (gallery / "tune" / "kite.jpg").string();
+  const std::string look = (gallery / "looks" / "haze.json").string();
+  const std::string out = (dir / "out").string();
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    execl(MR_CLI_PATH, MR_CLI_PATH, "fog", photo.c_str(), "--depth", "auto", "--scene",
+          look.c_str(), "--out-dir", out.c_str(), "-q", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  int status = 0;
+  rusage usage{};
+  ASSERT_EQ(wait4(pid, &status, 0, &usage), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  ASSERT_EQ(WEXITSTATUS(status), 0);
+  const Image result = read_image(dir / "out" / "kite_fog.jpg");
+  ASSERT_EQ(result.width(), 1280);
+  const double faulted_mib = double(usage.ru_minflt) * double(sysconf(_SC_PAGESIZE)) / (1 << 20);
+  const double peak_mib = double(usage.ru_maxrss) / 1024.0;
+  std::printf("automatic haze, 1280 x 800: %ld minor faults (%.0f MiB), peak RSS %.0f MiB\n",
+              usage.ru_minflt, faulted_mib, peak_mib);
+#if !defined(__SANITIZE_ADDRESS__)
+  EXPECT_LT(faulted_mib, peak_mib);
+#else
+  (void)faulted_mib;  // AddressSanitizer's allocator maps and unmaps as it likes
+#endif
+}
+
 }  // namespace
 }  // namespace mr
