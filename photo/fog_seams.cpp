@@ -12,6 +12,7 @@
 #include "mr/error.h"
 #include "photo/display.h"
 #include "photo/opencv_contrib.h"
+#include "photo/sky_light.h"
 #include "photo/sky_matte.h"
 
 namespace mr::photo {
@@ -109,6 +110,23 @@ Created created_edges(const cv::Mat& photo_strength, const cv::Mat& composite_l)
   return c;
 }
 
+// Where to soften, 0..1: the created pixels grown by `radius` (a disc), feathered by a Gaussian
+// of half of it. A distance transform and box filters (photo/sky_light.h): O(1) a pixel, where a
+// dilation by the disc and a direct Gaussian took 2.5 s at 12 MP (radius 80 px).
+cv::Mat softening_weight(const cv::Mat& created_mask, int radius) {
+  cv::Mat outside, distance;
+  cv::bitwise_not(created_mask, outside);
+  cv::distanceTransform(outside, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE, CV_32F);
+  cv::Mat weight(distance.size(), CV_32F);
+  for (int y = 0; y < distance.rows; ++y) {
+    const float* d = distance.ptr<float>(y);
+    float* out = weight.ptr<float>(y);
+    for (int x = 0; x < distance.cols; ++x) out[x] = d[x] <= float(radius) ? 1.0f : 0.0f;
+  }
+  wide_gaussian_blur(weight, 0.5 * radius);
+  return weight;
+}
+
 void check(ConstImageView photo, ConstImageView t, ConstImageView r) {
   if (photo.channels < 3)
     throw Error(ErrorCode::invalid_argument, "soften_fog_seams: the photo has " +
@@ -190,14 +208,7 @@ SeamSoftening soften_fog_seams(ConstImageView photo, ImageView transmittance, Im
   for (int round = 0; round < kMaxRounds && result.created_after > 0; ++round) {
     // The band to soften: the created pixels grown by the smoother's extent, feathered over
     // half of it.
-    cv::Mat band;
-    cv::dilate(
-        created.mask, band,
-        cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * radius + 1, 2 * radius + 1)));
-    cv::Mat weight;
-    band.convertTo(weight, CV_32F, 1.0 / 255.0);
-    cv::GaussianBlur(weight, weight, cv::Size(0, 0), 0.5 * radius, 0.5 * radius,
-                     cv::BORDER_REPLICATE);
+    const cv::Mat weight = softening_weight(created.mask, radius);
     cv::Mat t_smooth, r_smooth;
     contrib::fast_global_smoother_filter(guide, t, t_smooth, lambda, kSigmaColor);
     contrib::fast_global_smoother_filter(guide, r, r_smooth, lambda, kSigmaColor);
