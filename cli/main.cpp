@@ -72,11 +72,11 @@ extern "C" void on_signal(int signal, siginfo_t* info, void*) {
 // A photo's stages allocate and free full-frame buffers one after another (12 MP: 48-144 MB
 // each). glibc serves every block over 32 MiB with a fresh mmap and returns it with munmap, so
 // the kernel faults and zeroes each one in again, page by page: an automatic fog of a 12 MP
-// photo spent 23 s of its 61 s in the kernel (3.3 M page faults). A batch process keeps what it
-// frees for the next buffer instead: all blocks from the heap, none trimmed back to the OS
-// (the heap stays at the run's peak, which the process reached anyway). Output unchanged; the
-// library leaves this to its host (mr-studio keeps glibc's defaults: a long-lived editor
-// should give memory back).
+// photo spent about 22 s of its 60 s in the kernel (3.3 M page faults). A batch process keeps what
+// it frees for the next buffer instead: all blocks from the heap, none trimmed back to the OS (the
+// heap stays at the run's peak, which the process reached anyway). Output unchanged; the library
+// leaves this to its host (mr-studio keeps glibc's defaults: a long-lived editor should give memory
+// back).
 void keep_freed_memory_for_reuse() {
 #if defined(__GLIBC__)
   mallopt(M_MMAP_MAX, 0);
