@@ -114,15 +114,10 @@ Created created_edges(const cv::Mat& photo_strength, const cv::Mat& composite_l)
 // of half of it. A distance transform and box filters (photo/sky_light.h): O(1) a pixel, where a
 // dilation by the disc and a direct Gaussian took 2.5 s at 12 MP (radius 80 px).
 cv::Mat softening_weight(const cv::Mat& created_mask, int radius) {
-  cv::Mat outside, distance;
+  cv::Mat outside, weight;
   cv::bitwise_not(created_mask, outside);
-  cv::distanceTransform(outside, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE, CV_32F);
-  cv::Mat weight(distance.size(), CV_32F);
-  for (int y = 0; y < distance.rows; ++y) {
-    const float* d = distance.ptr<float>(y);
-    float* out = weight.ptr<float>(y);
-    for (int x = 0; x < distance.cols; ++x) out[x] = d[x] <= float(radius) ? 1.0f : 0.0f;
-  }
+  cv::distanceTransform(outside, weight, cv::DIST_L2, cv::DIST_MASK_PRECISE, CV_32F);
+  cv::threshold(weight, weight, radius, 1.0, cv::THRESH_BINARY_INV);  // 1 within the radius
   wide_gaussian_blur(weight, 0.5 * radius);
   return weight;
 }
