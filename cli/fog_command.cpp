@@ -551,9 +551,22 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   const bool estimated = o.depth == "auto" && !fs::exists(job.depth, ec);
   // Estimating the geometry, a photo without EXIF focal length may get it from its vanishing
   // points (camera_for_photo); a supplied depth map keeps the documented default.
-  const Camera camera = estimated && !o.focal_px && !o.fov_deg && !plan.scene.camera
-                            ? camera_for_photo(photo).camera
-                            : make_camera(o, plan.scene, job.photo, photo);
+  // Issue 11: a camera-size photo is estimated, fogged and softened at a working size (the size
+  // the estimate was tuned at), and its fog brought to the photo's size by guided upsampling.
+  // Annotations (pixel positions) and objects (placed by pixel) keep the photo's own size.
+  const std::optional<WorkingSize> working =
+      estimated && o.annotations.empty() && plan.scene.objects.empty()
+          ? working_size(photo.width(), photo.height(), o.working_size)
+          : std::nullopt;
+  const Image working_photo =
+      working ? working_copy(photo, working->width, working->height) : Image();
+  const Image& work = working ? working_photo : photo;
+  const Camera camera =
+      estimated && !o.focal_px && !o.fov_deg && !plan.scene.camera
+          ? scale_camera(camera_for_photo(work).camera, photo.width(), photo.height())
+          : make_camera(o, plan.scene, job.photo, photo);
+  const Camera work_camera =
+      working ? scale_camera(camera, working->width, working->height) : camera;
   scene.camera = scene_camera(camera);  // what --save-scene records for this photo
   // Progress inside the photo (a bar on a terminal, -v notes in a pipe): the estimate's steps,
   // the occluders (with a sun or lamps) and the render, weighted by their usual shares of time.
@@ -564,7 +577,7 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
                                 {{"render"}, 2}});
   Image sky_alpha;  // the estimate's soft sky matte (empty for a depth file)
   DepthMap depth =
-      estimated ? estimate_depth(o, job, photo, camera, scene, progress.token(), sky_alpha)
+      estimated ? estimate_depth(o, job, work, work_camera, scene, progress.token(), sky_alpha)
                 : read_depth(job.depth, camera, plan.depth);
   // Issue 11 item 4: an estimated scene's fog lies in a layer with a top, so the sky is seen
   // through it (clouds and sunsets attenuated, not painted over) and the sun enters it from
@@ -607,17 +620,37 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   }
   ScatteringLayers aovs;
   FogLayers layers =
-      fog(photo, depth.distance_m, sky_alpha, camera, scene, &aovs, progress.token());
+      fog(work, depth.distance_m, sky_alpha, work_camera, scene, &aovs, progress.token());
   // Issue 11 item 3: a guessed depth's steps where the photo has no edge become seams in the
   // fog; softened there (a depth file's fog, and shafts' edges under a sun or lamps, are kept).
   if (estimated && !lights && o.seams == "soften") {
-    const SeamSoftening s = soften_fog_seams(photo, layers);
+    const SeamSoftening s = soften_fog_seams(work, layers);
     if (o.verbose && s.rounds > 0)
       report.info("note: " + job.photo.string() + ": softened the fog's seams at " +
                   std::to_string(s.pixels_changed) + " pixels (" +
                   std::to_string(s.created_before) + " created-edge pixels before, " +
                   std::to_string(s.created_after) + " after, " + std::to_string(s.rounds) +
                   " rounds)");
+  }
+  if (working) {
+    if (o.verbose)
+      report.info("note: " + job.photo.string() + ": estimated and fogged at " +
+                  std::to_string(work.width()) + "x" + std::to_string(work.height()) +
+                  ", brought to " + std::to_string(photo.width()) + "x" +
+                  std::to_string(photo.height()) + " (--working-size)");
+    layers = upsample_fog_layers(photo, working_photo, layers, o.aovs);
+    if (o.aovs) {  // the other layers each working pixel's value (distances are not mixed)
+      depth.distance_m = resize_nearest(depth.distance_m, photo.width(), photo.height());
+      for (Image* aov : {&aovs.sun_visibility, &aovs.optical_depth})
+        if (!aov->empty()) *aov = resize_nearest(*aov, photo.width(), photo.height());
+    }
+    for (CompletedBlocker& b : aovs.completed_blockers) {  // (-v notes: the photo's pixels)
+      const double s = b.edge == CompletedBlocker::Edge::top
+                           ? double(photo.width()) / work.width()
+                           : double(photo.height()) / work.height();
+      b.first_px = int(std::lround(b.first_px * s));
+      b.last_px = int(std::lround(b.last_px * s));
+    }
   }
   // The Vulkan fall-back, once per run: a warning when a GPU failed; on a machine without a
   // usable GPU the CPU is the expected choice, a note in verbose mode only.
@@ -801,6 +834,13 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
                   "there instead of a seam), or 'keep' them")
       ->check(CLI::IsMember({"soften", "keep"}))
       ->default_str("soften");
+  cmd->add_option("--working-size", o.working_size,
+                  "With --depth auto estimating the geometry (no annotations, no objects): a "
+                  "photo larger than this (its longer side, px) is estimated, fogged and softened "
+                  "at this size, and the fog brought to the photo's size by guided upsampling "
+                  "(its edges follow the photo's); 0: at the photo's own size")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd->add_option("--albedo", o.albedo, "Single-scattering albedo: v or R,G,B [default: 1]");
   cmd->add_option("--g", o.g, "Henyey-Greenstein asymmetry in (-1, 1) [default: 0]");
   cmd->add_option("--noise", o.noise, "Wisps: amplitude[,scale m[,octaves[,seed]]]");

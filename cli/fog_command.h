@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "mr/working_size.h"  // kDefaultWorkingLongSidePx
+
 namespace CLI {
 class App;
 }
@@ -61,6 +63,10 @@ struct FogCommandOptions {
   /// seams where the guessed depth makes edges the photo lacks (mr::soften_fog_seams), or
   /// "keep" them. A depth file's fog is never softened.
   std::string seams = "soften";
+  /// With --depth auto estimating the geometry: the longer side (px) the photo is estimated,
+  /// rendered and softened at, the fog then brought to the photo's size by guided upsampling
+  /// (mr/working_size.h); 0: the photo's own size. Not used with annotations or objects.
+  int working_size = kDefaultWorkingLongSidePx;
   std::string albedo;
   std::optional<double> g;
   std::string noise;            ///< "amplitude[,scale[,octaves[,seed]]]"

@@ -23,3 +23,4 @@
 #include "mr/scene_json.h"
 #include "mr/sky_light.h"
 #include "mr/version.h"
+#include "mr/working_size.h"
