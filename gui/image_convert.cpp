@@ -61,31 +61,6 @@ mr::Image downscale_area(const mr::Image& image, int width, int height) {
   return out;
 }
 
-mr::Image downscale_nearest(const mr::Image& image, int width, int height) {
-  if (width == image.width() && height == image.height()) return image;
-  const int c = image.channels();
-  mr::Image out(width, height, c, image.channel_names());
-  for (int y = 0; y < height; ++y) {
-    const int sy = std::min(image.height() - 1, int((y + 0.5) * image.height() / height));
-    for (int x = 0; x < width; ++x) {
-      const int sx = std::min(image.width() - 1, int((x + 0.5) * image.width() / width));
-      std::copy_n(image.pixel(sx, sy), c, out.pixel(x, y));
-    }
-  }
-  return out;
-}
-
-mr::Camera scale_camera(const mr::Camera& camera, int width, int height) {
-  mr::Camera out = camera;
-  const double sx = double(width) / camera.width, sy = double(height) / camera.height;
-  out.width = width;
-  out.height = height;
-  out.focal_px = camera.focal_px * sx;
-  out.cx = camera.cx * sx;
-  out.cy = camera.cy * sy;
-  return out;
-}
-
 QImage depth_colormap(const mr::Image& distance_m) {
   const int w = distance_m.width(), h = distance_m.height();
   QImage out(w, h, QImage::Format_RGB888);

@@ -1,6 +1,6 @@
 // Conversions between libmr images and what the GUI shows: scene-linear -> 8-bit sRGB QImage,
-// box-filtered downscaling of photos (nearest for depth) with the matching camera, and a
-// colour map of a distance map.
+// box-filtered downscaling of photos (depth maps and the camera: mr::resize_nearest and
+// mr::scale_camera, mr/working_size.h), and a colour map of a distance map.
 #pragma once
 #include <QImage>
 
@@ -20,12 +20,6 @@ QSize fit_pixels(int width, int height, double max_pixels);
 
 /// Box-filtered (area-averaged) downscale to width x height (same size: a copy). Channels kept.
 mr::Image downscale_area(const mr::Image& image, int width, int height);
-
-/// Nearest-sample downscale (for distance maps: averaging across edges or with +inf is wrong).
-mr::Image downscale_nearest(const mr::Image& image, int width, int height);
-
-/// The camera of the photo scaled to width x height (focal length and principal point scaled).
-mr::Camera scale_camera(const mr::Camera& camera, int width, int height);
 
 /// Distance map (1 channel, metres, +inf = sky) as a colour map: log distance from near (red)
 /// through green to far (blue), sky light grey.

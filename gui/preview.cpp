@@ -193,10 +193,10 @@ std::shared_ptr<const PreviewInputs> preview_inputs(const Document& document, do
   }
   auto inputs = std::make_shared<PreviewInputs>();
   inputs->photo = downscale_area(document.photo, size.width(), size.height());
-  inputs->distance_m = downscale_nearest(document.distance_m, size.width(), size.height());
+  inputs->distance_m = mr::resize_nearest(document.distance_m, size.width(), size.height());
   if (!document.sky_alpha.empty())
     inputs->sky_alpha = downscale_area(document.sky_alpha, size.width(), size.height());
-  inputs->camera = scale_camera(document.camera, size.width(), size.height());
+  inputs->camera = mr::scale_camera(document.camera, size.width(), size.height());
   inputs->photo_image = to_display(inputs->photo, color);
   inputs->depth = depth_colormap(inputs->distance_m);
   const std::lock_guard<std::mutex> lock(document.inputs_mutex);

@@ -296,10 +296,10 @@ void GuiTest::previewFollowsVisibilitySlider() {
   const Document& doc = *w.document();
   const int width = p->photo.width(), height = p->photo.height();
   const mr::Image photo = downscale_area(doc.photo, width, height);
-  const mr::Image depth = downscale_nearest(doc.distance_m, width, height);
+  const mr::Image depth = mr::resize_nearest(doc.distance_m, width, height);
   const mr::Image sky_alpha =
       doc.sky_alpha.empty() ? mr::Image() : downscale_area(doc.sky_alpha, width, height);
-  const mr::Camera camera = scale_camera(doc.camera, width, height);
+  const mr::Camera camera = mr::scale_camera(doc.camera, width, height);
   mr::FogScene scene = doc.scene;
   const float sigma = float(3.912 / visibility);
   scene.medium.sigma_t_per_m = {sigma, sigma, sigma};
@@ -1118,7 +1118,7 @@ void GuiTest::scaledAnnotationsKeepThePose() {
   const mr::Annotations back = scale_annotations(half, 2, 2);
   QCOMPARE(annotationsJson(back), annotationsJson(a));
   const mr::Camera camera = mr::Camera::from_metadata(4000, 3000, mr::Metadata{});
-  const mr::Camera small = scale_camera(camera, 2000, 1500);
+  const mr::Camera small = mr::scale_camera(camera, 2000, 1500);
   const mr::CameraPose full = mr::pose_from_horizon(camera, *a.horizon, 1.6);
   const mr::CameraPose scaled = mr::pose_from_horizon(small, *half.horizon, 1.6);
   QVERIFY(std::abs(full.pitch_deg - scaled.pitch_deg) < 1e-9);

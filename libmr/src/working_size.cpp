@@ -73,7 +73,7 @@ Image working_copy(const Image& photo, int width, int height) {
 }
 
 Image resize_nearest(const Image& image, int width, int height) {
-  return resized(image, width, height, cv::INTER_NEAREST, "resize_nearest");
+  return resized(image, width, height, cv::INTER_NEAREST_EXACT, "resize_nearest");
 }
 
 Camera scale_camera(const Camera& camera, int width, int height) {

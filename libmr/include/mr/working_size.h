@@ -38,9 +38,9 @@ MR_API std::optional<WorkingSize> working_size(int width, int height, int long_s
 /// that is not positive.
 MR_API Image working_copy(const Image& photo, int width, int height);
 
-/// `image` resized to `width` x `height` by taking each output pixel's nearest input pixel (for
-/// maps whose values must not be mixed: distances with +inf sky, the sun's visibility). Throws as
-/// working_copy.
+/// `image` resized to `width` x `height` by taking, for each output pixel, the input pixel under
+/// its centre (cv::INTER_NEAREST_EXACT; for maps whose values must not be mixed: distances with
+/// +inf sky, the sun's visibility). Throws as working_copy.
 MR_API Image resize_nearest(const Image& image, int width, int height);
 
 /// The camera of the same photo stored at `width` x `height`: focal length and principal point
