@@ -19,6 +19,7 @@
 #include "mr/material.h"
 #include "mr/scattering.h"
 #include "mr/scene_json.h"
+#include "mr/working_size.h"
 
 namespace mrpy {
 namespace {
@@ -444,6 +445,79 @@ void bind_operations(py::module_& m) {
       "(mr::soften_fog_seams; never for a measured depth). Returns FogLayers. Arrays libmr returned are used in place; other arrays "
       "are copied once. Raises InvalidArgumentError (bad scene field, NaN depth, wrong "
       "dtype/shape), SizeMismatchError, CancelledError. Releases the GIL while rendering.");
+
+  // Camera-size photos at a working size (mr/working_size.h): what `mr fog --depth auto` does.
+  m.def(
+      "working_size",
+      [](int width, int height, int long_side_px) -> py::object {
+        const std::optional<mr::WorkingSize> s = mr::working_size(width, height, long_side_px);
+        if (!s) return py::none();
+        return py::make_tuple(s->width, s->height);
+      },
+      py::arg("width"), py::arg("height"), py::arg("long_side_px") = mr::kDefaultWorkingLongSidePx,
+      "The (width, height) a photo is estimated and fogged at when its longer side may be at "
+      "most long_side_px (default 1280, the size the estimate was tuned at), or None when it is "
+      "not larger (or long_side_px <= 0).");
+  m.def(
+      "working_copy",
+      [](py::handle image, int width, int height) {
+        const ImageArg photo(image, "image");
+        mr::Image out;
+        {
+          py::gil_scoped_release release;
+          out = mr::working_copy(photo.image(), width, height);
+        }
+        return to_array(std::move(out));
+      },
+      py::arg("image"), py::arg("width"), py::arg("height"),
+      "The photo (scene-linear float32) reduced to width x height as the estimate's tuning "
+      "photos were: sRGB-encoded values averaged over each pixel's area, decoded again.");
+  m.def("scale_camera", &mr::scale_camera, py::arg("camera"), py::arg("width"), py::arg("height"),
+        "The camera of the same photo stored at width x height (focal length and principal "
+        "point scaled).");
+  m.def(
+      "upsample_fog",
+      [](py::handle image, py::handle working_image, const FogResult& working) {
+        const ImageArg photo(image, "image"), work(working_image, "working_image");
+        mr::FogLayers layers;
+        layers.transmittance = ImageArg(working.transmittance, "working.transmittance").take();
+        layers.inscatter = ImageArg(working.inscatter, "working.inscatter").take();
+        layers.airlight = working.sky_radiance;
+        const int w = photo.image().width(), h = photo.image().height();
+        mr::Image sun, od;
+        if (!working.sun_visibility.is_none())
+          sun = ImageArg(working.sun_visibility, "working.sun_visibility").take();
+        if (!working.optical_depth.is_none())
+          od = ImageArg(working.optical_depth, "working.optical_depth").take();
+        FogResult r;
+        mr::FogLayers up;
+        {
+          py::gil_scoped_release release;
+          const auto start = std::chrono::steady_clock::now();
+          up = mr::upsample_fog_layers(photo.image(), work.image(), layers);
+          if (!sun.empty()) sun = mr::resize_nearest(sun, w, h);
+          if (!od.empty()) od = mr::resize_nearest(od, w, h);
+          r.call_s =
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        }
+        r.composite = to_array(std::move(up.composite));
+        r.transmittance = to_array(std::move(up.transmittance));
+        r.inscatter = to_array(std::move(up.inscatter));
+        r.sun_visibility = sun.empty() ? py::none() : to_array(std::move(sun));
+        r.optical_depth = od.empty() ? py::none() : to_array(std::move(od));
+        r.sky_radiance = up.airlight;
+        r.camera = mr::scale_camera(working.camera, w, h);
+        r.backend = working.backend;
+        r.timings = working.timings;
+        r.warnings = working.warnings;
+        return r;
+      },
+      py::arg("image"), py::arg("working_image"), py::arg("working"),
+      "A fog made on working_copy(image, ...) (working: its FogLayers, seams already softened) "
+      "brought to the image's size by guided upsampling (mr::upsample_fog_layers): T and R "
+      "follow the full-size photo's outlines; sun_visibility and optical_depth are their working "
+      "pixels' (nearest), the camera scaled. Raises SizeMismatchError, InvalidArgumentError. "
+      "Releases the GIL.");
 
   m.def(
       "fog_homogeneous",

@@ -133,3 +133,43 @@ def test_soften_seams_spreads_a_guessed_depth_step():
     smooth = np.tile(np.linspace(30, 40, w, dtype=np.float32), (h, 1))
     np.testing.assert_array_equal(libmr.fog(photo, smooth, scene, soften_seams=True).composite,
                                   libmr.fog(photo, smooth, scene).composite)
+
+
+def test_working_size_fog_follows_the_full_size_outline():
+    # `mr fog --depth auto`'s working size from Python: a dark near square on a bright far
+    # background, fogged at half size and brought back. The result's T is the full-size truth
+    # away from the outline, and on it closer to the truth than a plain bilinear upsampling.
+    h, w = 200, 300
+    photo = np.full((h, w, 3), (0.6, 0.65, 0.7), np.float32)
+    depth = np.full((h, w), 800.0, np.float32)
+    photo[61:141, 91:191] = (0.05, 0.04, 0.03)
+    depth[61:141, 91:191] = 15.0
+    size = libmr.working_size(w, h, 150)
+    assert size == (150, 100)
+    assert libmr.working_size(w, h, 300) is None
+    work = libmr.working_copy(photo, *size)
+    assert work.shape == (100, 150, 3)
+    scene = sky_only_scene(libmr)
+    camera = libmr.Camera.from_horizontal_fov(w, h, 60.0)
+    small_camera = libmr.scale_camera(camera, *size)
+    assert abs(small_camera.focal_px - camera.focal_px / 2) < 1e-9
+    # the working fog over the working pixels' own distances (nearest)
+    small_depth = np.ascontiguousarray(depth[1::2, 1::2])
+    working = libmr.fog(work, small_depth, scene, camera=small_camera)
+    full = libmr.upsample_fog(photo, work, working)
+    truth = libmr.fog(photo, depth, scene, camera=camera)
+    assert full.composite.shape == (h, w, 3) and full.transmittance.shape == (h, w, 3)
+    assert abs(full.camera.focal_px - camera.focal_px) < 1e-9
+    np.testing.assert_allclose(full.composite, photo * full.transmittance + full.inscatter,
+                               rtol=1e-6, atol=1e-6)
+    err = np.abs(full.transmittance - truth.transmittance)[..., 0]
+    outline = np.zeros((h, w), bool)
+    outline[58:144, 88:194] = True
+    outline[64:138, 94:188] = False
+    assert err[~outline].max() < 1e-5
+    ys, xs = (np.arange(h) + 0.5) / 2 - 0.5, (np.arange(w) + 0.5) / 2 - 0.5
+    bilinear = np.array([[np.interp(x, np.arange(150), row) for x in xs]
+                         for row in working.transmittance[..., 0]])
+    bilinear = np.array([np.interp(ys, np.arange(100), bilinear[:, j]) for j in range(w)]).T
+    bilinear_err = np.abs(bilinear - truth.transmittance[..., 0])
+    assert err[outline].mean() < 0.5 * bilinear_err[outline].mean()
