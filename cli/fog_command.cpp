@@ -311,18 +311,23 @@ Camera make_camera(const FogCommandOptions& o, const FogScene& scene, const fs::
 // annotations when --annotations finds them, else the automatic / level-camera estimate). The
 // estimated pose (and sun, sky, when the annotations give them) replace the plan's; options on
 // the command line still win. --camera-height also scales the estimated depth.
+// The photo's annotations file (--annotations: one file, or a pattern whose file may be missing,
+// meaning none), or nullopt.
+std::optional<fs::path> annotations_path(const FogCommandOptions& o, const Job& job) {
+  if (o.annotations.empty()) return std::nullopt;
+  if (!is_pattern(o.annotations)) return fs::path(o.annotations);
+  const fs::path path = expand_pattern(o.annotations, job.photo);
+  std::error_code ec;
+  return fs::exists(path, ec) ? std::optional<fs::path>(path) : std::nullopt;
+}
+
 DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image& photo,
                         const Camera& camera, FogScene& scene, const CancelToken* progress,
                         Image& sky_alpha) {
   try {
     Annotations annotations;
-    if (!o.annotations.empty()) {
-      const bool pattern = is_pattern(o.annotations);
-      const fs::path path =
-          pattern ? expand_pattern(o.annotations, job.photo) : fs::path(o.annotations);
-      std::error_code ec;
-      if (!pattern || fs::exists(path, ec)) annotations = load_annotations(path);
-    }
+    if (const std::optional<fs::path> path = annotations_path(o, job))
+      annotations = load_annotations(*path);
     EstimateOptions options;
     options.cancel = progress;
     if (o.camera_height_m) options.default_camera_height_m = *o.camera_height_m;
@@ -555,7 +560,7 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   // the estimate was tuned at), and its fog brought to the photo's size by guided upsampling.
   // Annotations (pixel positions) and objects (placed by pixel) keep the photo's own size.
   const std::optional<WorkingSize> working =
-      estimated && o.annotations.empty() && plan.scene.objects.empty()
+      estimated && !annotations_path(o, job) && plan.scene.objects.empty()
           ? working_size(photo.width(), photo.height(), o.working_size)
           : std::nullopt;
   const Image working_photo =

@@ -8,8 +8,6 @@
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 #include <sys/resource.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <cmath>
 #include <limits>
@@ -355,24 +353,6 @@ TEST(FogStream, CommandLineMatchesTheFullFramePath) {
   }
 }
 
-// Runs `mr` with `args` in a child process and gives its resource usage as the OS counted it
-// (wait4); fails the test unless the child exited with 0.
-void run_mr_measured(const std::vector<std::string>& args, rusage* usage) {
-  std::vector<char*> argv{const_cast<char*>(MR_CLI_PATH)};
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    execv(MR_CLI_PATH, argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  ASSERT_EQ(wait4(pid, &status, 0, usage), pid);
-  ASSERT_TRUE(WIFEXITED(status));
-  ASSERT_EQ(WEXITSTATUS(status), 0);
-}
-
 // Peak resident memory of `mr fog` on a 12 MP JPEG with a float depth EXR, from the OS
 // (wait4's rusage of the child). Target (issue 12): 400 MiB. The full-frame path needed ~1.6 GiB.
 TEST(FogStream, TwelveMegapixelRunStaysUnderTheMemoryTarget) {
@@ -392,10 +372,12 @@ TEST(FogStream, TwelveMegapixelRunStaysUnderTheMemoryTarget) {
     write_image(dir / "big_depth.exr", depth, raw);
   }
   rusage usage{};
-  ASSERT_NO_FATAL_FAILURE(
-      run_mr_measured({"fog", (dir / "big.jpg").string(), "--out-dir", (dir / "out").string(),
-                       "--visibility", "150m", "--airlight", "0.8", "--backend", "cpu", "-q"},
-                      &usage));
+  ASSERT_EQ(
+      test::run_measured(MR_CLI_PATH,
+                         {"fog", (dir / "big.jpg").string(), "--out-dir", (dir / "out").string(),
+                          "--visibility", "150m", "--airlight", "0.8", "--backend", "cpu", "-q"},
+                         &usage),
+      0);
   ASSERT_TRUE(fs::exists(dir / "out" / "big_fog.jpg"));
   const double peak_mib = double(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
   std::printf("12 MP mr fog: peak RSS %.1f MiB\n", peak_mib);
@@ -427,9 +409,11 @@ TEST(CliMemory, AnAutomaticFogFaultsEachPageInAboutOnce) {
   const std::string photo = (gallery / "tune" / "kite.jpg").string();
   const std::string look = (gallery / "looks" / "haze.json").string();
   rusage usage{};
-  ASSERT_NO_FATAL_FAILURE(run_mr_measured(
-      {"fog", photo, "--depth", "auto", "--scene", look, "--out-dir", (dir / "out").string(), "-q"},
-      &usage));
+  ASSERT_EQ(test::run_measured(MR_CLI_PATH,
+                               {"fog", photo, "--depth", "auto", "--scene", look, "--out-dir",
+                                (dir / "out").string(), "-q"},
+                               &usage),
+            0);
   // (And it fogged: the haze veils the deep blue sky, so the picture changed.)
   const Image photo_in = read_image(photo), result = read_image(dir / "out" / "kite_fog.jpg");
   ASSERT_EQ(result.width(), photo_in.width());

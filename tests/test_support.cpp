@@ -1,5 +1,6 @@
 #include "test_support.h"
 
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -127,6 +128,22 @@ void write_reduced_sample(const std::filesystem::path& samples, const std::strin
 
 std::string shell_quoted(const std::filesystem::path& p) {
   return "'" + p.string() + "'";
+}
+
+int run_measured(const std::string& program, const std::vector<std::string>& args,
+                 rusage* usage) {
+  std::vector<char*> argv{const_cast<char*>(program.c_str())};
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  const pid_t pid = fork();
+  if (pid < 0) return -1;
+  if (pid == 0) {
+    execv(program.c_str(), argv.data());
+    _exit(127);
+  }
+  int status = 0;
+  if (wait4(pid, &status, 0, usage) != pid || !WIFEXITED(status)) return -1;
+  return WEXITSTATUS(status);
 }
 
 }  // namespace mr::test

@@ -1,6 +1,8 @@
 // Helpers shared by the tests: scratch folders, checksums, running the CLI.
 #pragma once
 
+#include <sys/resource.h>
+
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -35,6 +37,11 @@ struct CommandResult {
 };
 /// Runs a shell command line, capturing its output.
 CommandResult run(const std::string& command_line);
+/// Runs `program` with `args` in a child process (no shell) and waits for it; `usage` gets the
+/// child's resource usage as the OS counted it (wait4: peak RSS, page faults). Returns its exit
+/// code, or -1 when it could not be started or did not exit normally.
+int run_measured(const std::string& program, const std::vector<std::string>& args,
+                 rusage* usage);
 
 /// A smooth synthetic RGB test image in scene-linear [0, 1]: gradients plus a hue sweep.
 Image make_test_photo(int width, int height);

@@ -4,8 +4,6 @@
 // composite, its errors, and `mr fog --depth auto` on a photo larger than the working size.
 #include <gtest/gtest.h>
 #include <sys/resource.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -251,22 +249,6 @@ TEST(FogUpsample, NamesWhatDoesNotFit) {
 // `mr fog --depth auto` on a photo larger than the working size: the photo's size comes out,
 // and shrunk to the working size it is the fog made from the working-size copy itself (the
 // same estimate; only the upsampling and the shrinking between them).
-void run_mr(const std::vector<std::string>& args, rusage* usage) {
-  std::vector<char*> argv{const_cast<char*>(MR_CLI_PATH)};
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    execv(MR_CLI_PATH, argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  ASSERT_EQ(wait4(pid, &status, 0, usage), pid);
-  ASSERT_TRUE(WIFEXITED(status));
-  ASSERT_EQ(WEXITSTATUS(status), 0);
-}
-
 TEST(WorkingSizeCli, ALargePhotosFogIsItsWorkingCopysFogAtFullSize) {
   test::ScratchDir dir;
   const Image kite = read_image(fs::path(MR_SOURCE_DIR) / "gallery/tune/kite.jpg");  // 1280x800
@@ -294,9 +276,11 @@ TEST(WorkingSizeCli, ALargePhotosFogIsItsWorkingCopysFogAtFullSize) {
   const std::string look = (fs::path(MR_SOURCE_DIR) / "gallery/looks/haze.json").string();
   rusage usage{};
   for (const char* name : {"big.exr", "work.exr"})
-    ASSERT_NO_FATAL_FAILURE(run_mr({"fog", (dir / name).string(), "--depth", "auto", "--scene",
-                                    look, "--out-dir", (dir / "out").string(), "-q"},
-                                   &usage));
+    ASSERT_EQ(test::run_measured(MR_CLI_PATH,
+                                 {"fog", (dir / name).string(), "--depth", "auto", "--scene", look,
+                                  "--out-dir", (dir / "out").string(), "-q"},
+                                 &usage),
+              0);
   const Image big_fog = read_image(dir / "out" / "big_fog.exr");
   const Image work_fog = read_image(dir / "out" / "work_fog.exr");
   ASSERT_EQ(big_fog.width(), w);
@@ -330,10 +314,12 @@ TEST(WorkingSizeCli, TwelveMegapixelAutomaticFogStaysUnderAGibibyte) {
   const int w = 4000, h = 3000;
   write_image(dir / "big.jpg", test::make_test_photo(w, h));
   rusage usage{};
-  ASSERT_NO_FATAL_FAILURE(run_mr({"fog", (dir / "big.jpg").string(), "--depth", "auto", "--scene",
-                                  (fs::path(MR_SOURCE_DIR) / "gallery/looks/haze.json").string(),
-                                  "--out-dir", (dir / "out").string(), "-q"},
-                                 &usage));
+  ASSERT_EQ(test::run_measured(MR_CLI_PATH,
+                               {"fog", (dir / "big.jpg").string(), "--depth", "auto", "--scene",
+                                (fs::path(MR_SOURCE_DIR) / "gallery/looks/haze.json").string(),
+                                "--out-dir", (dir / "out").string(), "-q"},
+                               &usage),
+            0);
   const double peak_mib = double(usage.ru_maxrss) / 1024.0;  // KiB on Linux
   std::printf("12 MP automatic fog: peak RSS %.0f MiB\n", peak_mib);
 #if !defined(__SANITIZE_ADDRESS__)
