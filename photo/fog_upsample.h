@@ -11,10 +11,10 @@
 // at the low resolution, their coefficients upsampled bilinearly and applied to the full-size
 // guide). T and R are smooth where the depth is, and step where the photo has an outline: the
 // fit at each working pixel writes them as a linear function of the photo's colour there, so
-// the full-size step follows the full-size photo's outline, not the working grid's. The same
-// models serve the refinement of coarse transmission maps in dehazing (He et al. 2011), where
-// they were introduced. A model is only trusted within the values it was fit to: each result is
-// clamped to the range of its four working-size neighbours (no overshoot, no halo).
+// the full-size step follows the full-size photo's outline, not the working grid's. The guided
+// filter's paper shows the same use: refining a coarse dehazing transmission map to the photo. A
+// model is only trusted within the values it was fit to: each result is clamped to the range of its
+// four working-size neighbours (no overshoot, no halo).
 #pragma once
 
 #include "mr/image.h"
@@ -23,10 +23,9 @@ namespace mr::photo {
 
 // Chosen on gallery/tune originals at full size (3-20 MP): radius 1-4 and epsilon 1e-6..1e-3
 // changed the created edges of the worst (sunset_aitzol haze, a backlit ridge whose bright rim
-// the guide takes for sky) only between 0.0070 and 0.0100 %; this pair gave the least. On a
-// synthetic outline (tests/working_size_test.cpp) a wider window and a smaller epsilon fit
-// better (mean |T error| on the outline 0.087 here, 0.054 at 3 and 1e-5; bilinear 0.286), but
-// copy more of the guide's texture where T is smooth.
+// the guide takes for sky) only between 0.0070 and 0.0100 %; this pair gave the least. A larger
+// window or a smaller epsilon follows colour edges more closely but copies more of the guide's
+// texture into T where T is smooth.
 struct FogUpsampleOptions {
   int radius = 2;         ///< the local models' window: (2 radius + 1)^2 working pixels
   double epsilon = 1e-3;  ///< their regularisation, in squared guide units (0..1 per channel)

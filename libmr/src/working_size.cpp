@@ -1,5 +1,7 @@
 #include "mr/working_size.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
@@ -57,18 +59,20 @@ Image working_copy(const Image& photo, int width, int height) {
     return std::copysign(v, e);
   };
   const int colour = std::min(photo.channels(), 3);
+  // Each colour value through `f`, rows in parallel (a 24 MP photo: 72 M powers).
+  auto each_colour = [&](Image& image, auto f) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, image.height()),
+                      [&](const tbb::blocked_range<int>& rows) {
+                        for (int y = rows.begin(); y < rows.end(); ++y)
+                          for (int x = 0; x < image.width(); ++x)
+                            for (int c = 0; c < colour; ++c)
+                              image.pixel(x, y)[c] = f(image.pixel(x, y)[c]);
+                      });
+  };
   Image encoded = photo;
-  for (std::size_t i = 0; i < encoded.pixel_count(); ++i)
-    for (int c = 0; c < colour; ++c) {
-      float& v = encoded.data()[i * photo.channels() + c];
-      v = std::isfinite(v) ? encode(v) : 0.0f;
-    }
+  each_colour(encoded, [&](float v) { return std::isfinite(v) ? encode(v) : 0.0f; });
   Image out = resized(encoded, width, height, cv::INTER_AREA, "working_copy");
-  for (std::size_t i = 0; i < out.pixel_count(); ++i)
-    for (int c = 0; c < colour; ++c) {
-      float& v = out.data()[i * photo.channels() + c];
-      v = decode(v);
-    }
+  each_colour(out, decode);
   return out;
 }
 
