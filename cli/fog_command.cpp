@@ -844,7 +844,7 @@ CLI::App* add_fog_command(CLI::App& app, FogCommandOptions& o) {
                   "photo larger than this (its longer side, px) is estimated, fogged and softened "
                   "at this size, and the fog brought to the photo's size by guided upsampling "
                   "(its edges follow the photo's); 0: at the photo's own size")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0, 1000000))
       ->capture_default_str();
   cmd->add_option("--albedo", o.albedo, "Single-scattering albedo: v or R,G,B [default: 1]");
   cmd->add_option("--g", o.g, "Henyey-Greenstein asymmetry in (-1, 1) [default: 0]");
