@@ -12,6 +12,7 @@
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <tuple>
 
 #include "mr/error.h"
 #include "mr/fog.h"
@@ -611,6 +612,49 @@ TEST_F(Scattering, ForestShaftsMatchAManyStepReference) {
   EXPECT_GT(exact_fraction, 0.5);  // the scene is what it is for: shaft edges everywhere
   EXPECT_LT(err, 4.5e-3);
   EXPECT_LT(std::fabs(bias), 1e-3);
+}
+
+// Pass 2 marches a shaft-edge cell's pixels with kShaftRefinement times the steps only around
+// the crossings its corners' marches found (carried along the sun onto the pixel's view ray),
+// not along the whole ray. Four broad pillars against a low sun (their shafts cross most view
+// rays once or twice, the case of a street), against every pixel marched with 256 steps: mean
+// relative error of R 0.1468 % in 538 k shadow rays refining the whole ray, 0.1484 % in 443 k
+// around the crossings, 0.1543 % in 417 k without refining (the forest above: 0.4178 / 0.4204 /
+// 0.4286 %; there most corners cross more shafts than they keep, and the whole ray is refined).
+// The bars fail with the whole ray refined (rays) and with no refinement (error).
+TEST_F(Scattering, ShaftEdgeCellsMarchFinerOnlyAroundTheCornersCrossings) {
+  const Camera cam = Camera::from_horizontal_fov(192, 108, 60);
+  FogScene s = test::low_sun_height_fog_scene();
+  s.pose.yaw_deg = 15;
+  Image depth = ground_depth(cam, s.pose);
+  for (const auto& [x0, x1, d] : {std::tuple{30, 44, 14.0f}, std::tuple{80, 90, 22.0f},
+                                  std::tuple{120, 128, 30.0f}, std::tuple{160, 166, 45.0f}})
+    for (int y = 0; y < 70; ++y)
+      for (int x = x0; x < x1; ++x) depth.at(x, y, 0) = std::min(depth.at(x, y, 0), d);
+  const ScatteringLayers fast = render(depth, cam, s);
+  s.render.gradient_acceleration = false;
+  s.render.march_steps = 256;
+  const ScatteringLayers reference = render(depth, cam, s);
+  double mean = 0;
+  for (float v : reference.inscatter.pixels()) mean += v;
+  mean /= double(reference.inscatter.pixels().size());
+  double err = 0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < reference.inscatter.pixels().size(); ++i) {
+    const double r = reference.inscatter.pixels()[i];
+    if (r < 0.01 * mean) continue;
+    err += std::fabs(fast.inscatter.pixels()[i] - r) / r;
+    ++n;
+  }
+  err /= double(n);
+  std::printf(
+      "[ Pillars ] exact %.1f %% of the pixels, %zu shadow rays, R vs 256 steps: mean "
+      "|error| %.4f %%\n",
+      100.0 * double(fast.timings.exact_pixels) / (192.0 * 108.0), fast.timings.shadow_rays,
+      100 * err);
+  EXPECT_GT(double(fast.timings.exact_pixels) / (192.0 * 108.0), 0.25);  // many edge cells
+  EXPECT_LT(fast.timings.shadow_rays, 480000u);
+  EXPECT_LT(err, 1.5e-3);
 }
 #endif
 
