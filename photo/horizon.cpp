@@ -286,6 +286,14 @@ AutoHorizon estimate_horizon(ConstImageView photo, const Camera& camera, const H
       n = unit({vectors.at<double>(2, 0), vectors.at<double>(2, 1), vectors.at<double>(2, 2)});
     if (n) {
       if (auto pts = points_of(camera, *n)) {
+        // Lines that give an implausible roll were not verticals or level ones: none of the
+        // cues below is trusted then (a level line through a vanishing point of the same lines
+        // would be as wrong).
+        const double roll_deg = pitch_roll_from_horizon(camera, *pts).roll_deg;
+        if (std::abs(roll_deg) > o.max_roll_deg) {
+          out.rejected_roll_deg = roll_deg;
+          return out;
+        }
         double residual = 0;  // largest angle (degrees) between the fit and a cue
         for (const VanishingPoint* vp : horizontal)
           residual =

@@ -15,7 +15,9 @@
 //
 // Weak echoes (support < 0.3 x the strongest, or within 10 degrees of a stronger one) are left
 // out; a fit more than 2 (5) degrees from one of its cues loses a quarter (half) of its
-// confidence.
+// confidence. A fit whose roll exceeds HorizonOptions::max_roll_deg is not used at all (the
+// lines were not verticals or level ones: brush handles, a bridge's cable stays, a leaning
+// trunk), and the result is the level fall-back.
 // Pixel coordinates as in CameraPose::ray_direction: (0, 0) is the centre of the top-left pixel.
 #pragma once
 
@@ -55,6 +57,9 @@ struct AutoHorizon {
   HorizonCue cue = HorizonCue::none;
   std::vector<VanishingPoint> vanishing_points;  ///< all found, strongest first
   int segments = 0;                              ///< line segments used (after the length filter)
+  /// The roll (degrees) of the lines' fit when it was rejected for exceeding max_roll_deg
+  /// (the result is then the fall-back); NaN otherwise.
+  double rejected_roll_deg = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct HorizonOptions {
@@ -65,6 +70,14 @@ struct HorizonOptions {
   int max_vanishing_points = 4;
   int ransac_iterations = 600;
   unsigned seed = 1;  ///< the RANSAC draws (equal seeds, equal results)
+  /// Largest roll (degrees) a fit may have. Photos are held level to within a few degrees; on
+  /// the tuning half of the gallery every fit beyond 8 degrees was wrong (10.5-21 degrees, from
+  /// lines that were not verticals: brush handles, a railing, a leaning trunk, a bridge's cable
+  /// stays) and every one within it was right (at most 4.9 degrees). Not 8: at 10.5-14 degrees
+  /// (kleiber, canyon_couple, brushes) the wrong horizon, pitched up, happens to serve the
+  /// close-up and far-billboard rules that decide those photos' looks, and the level
+  /// fall-back lost them (kleiber's bird veiled in dense fog; README, issue 11).
+  double max_roll_deg = 15;
 };
 
 /// The horizon of `photo` (scene-linear, >= 1 channel; the camera's size). Never throws for any

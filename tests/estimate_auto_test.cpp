@@ -246,6 +246,43 @@ TEST(AutoHorizon, BlankAndNoiseFallBackLevel) {
   }
 }
 
+// Lines that lean like a bridge's cable stays (issue 11, gallery/tune/bridge: a zenith 21
+// degrees off the image's vertical, so a horizon rolled 21 degrees): a fit rolled beyond
+// HorizonOptions::max_roll_deg is not a photo's, and the result is the level fall-back, with
+// the rejected roll said. The same lines leaning 5 degrees still give the zenith's horizon.
+TEST(AutoHorizon, LinesThatLeanFarFromVerticalAreNotTheZenith) {
+  const Rig rig(0, 0, 0, 1.6);
+  for (const double lean_deg : {22.0, 5.0}) {
+    Canvas c(rig);
+    c.sky_and_ground(5);
+    // Eight dark cables converging 2000 px away, up the image and leaning lean_deg to the right.
+    const cv::Point2d vp{rig.camera.cx + 2000 * std::sin(lean_deg * kDeg),
+                         rig.camera.cy - 2000 * std::cos(lean_deg * kDeg)};
+    for (int i = 0; i < 8; ++i) {
+      const cv::Point2d bottom{40.0 + 80 * i, double(rig.camera.height + 50)};
+      const cv::Point2d top = bottom + 0.9 * (vp - bottom) * (600.0 / cv::norm(vp - bottom));
+      cv::line(c.img, c.fixed(bottom), c.fixed(top), cv::Scalar(0.08, 0.08, 0.1), 3, cv::LINE_AA,
+               Canvas::kShift);
+    }
+    const Image photo = c.photo();
+    const photo::AutoHorizon h = photo::estimate_horizon(photo.view(), rig.camera);
+    std::printf("lines leaning %g deg: cue %s, rejected roll %.1f deg\n", lean_deg,
+                photo::to_string(h.cue), h.rejected_roll_deg);
+    if (lean_deg > 15) {
+      EXPECT_EQ(h.cue, photo::HorizonCue::none);
+      EXPECT_NEAR(std::abs(h.rejected_roll_deg), lean_deg, 3);  // (leaning right: roll < 0)
+      EXPECT_NEAR(h.points[0][1], rig.camera.cy - 0.5, 1e-9);   // level through the centre
+      const GeometryEstimate g = estimate_geometry(photo, rig.camera, Annotations{});
+      EXPECT_EQ(g.horizon_source, EstimateSource::fallback);
+      EXPECT_NEAR(std::abs(g.horizon_rejected_roll_deg), lean_deg, 3);
+      EXPECT_NEAR(g.pose.roll_deg, 0, 1e-9);
+    } else {
+      EXPECT_EQ(h.cue, photo::HorizonCue::zenith);
+      EXPECT_TRUE(std::isnan(h.rejected_roll_deg));
+    }
+  }
+}
+
 double iou(const std::vector<std::uint8_t>& a, const std::vector<std::uint8_t>& b) {
   std::size_t inter = 0, uni = 0;
   for (std::size_t i = 0; i < a.size(); ++i) inter += a[i] && b[i], uni += a[i] || b[i];

@@ -325,6 +325,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   std::optional<photo::AutoHorizon> auto_horizon;
   if (!annotations.horizon && automatic) {
     auto_horizon = photo::estimate_horizon(photo->view(), camera);
+    g.horizon_rejected_roll_deg = auto_horizon->rejected_roll_deg;
     if (auto_horizon->cue == photo::HorizonCue::none) auto_horizon.reset();
   }
   if (annotations.horizon) {
@@ -1603,7 +1604,7 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
   // The scene records the camera it was estimated with (a focal length from vanishing points
   // would otherwise be lost when the scene is reused: mr fog --scene, mr-studio projects).
   est.scene.camera = scene_camera(camera);
-  const char* horizon_how =
+  const std::string horizon_how =
       g.horizon_source == EstimateSource::annotations ? "annotated"
       : g.horizon_source == EstimateSource::horizontal_vps
           ? "automatic, through two horizontal vanishing points"
@@ -1612,6 +1613,10 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
       : g.horizon_source == EstimateSource::zenith ? "automatic, from the vertical vanishing point"
       : g.horizon_source == EstimateSource::horizontal_vp_level
           ? "automatic, level through a horizontal vanishing point"
+      : options.automatic && std::isfinite(g.horizon_rejected_roll_deg)
+          ? "not annotated; the lines' horizon (roll " + fmt("%.1f", g.horizon_rejected_roll_deg) +
+                " deg) is not a photo's, they are not verticals or level; assumed level through "
+                "the image centre"
       : options.automatic ? "not annotated, no usable lines; assumed level through the image centre"
                           : "not annotated; assumed level through the image centre";
   est.notes.push_back(

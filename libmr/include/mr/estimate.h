@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstddef>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -241,6 +242,10 @@ struct MR_API GeometryEstimate {
   double horizon_lowered_px = 0;
   /// Issue 11: the horizon was lowered to a backlit land's skyline (EstimateOptions::backlit_land).
   bool backlit_land = false;
+  /// Issue 11: the roll (degrees) of the horizon the photo's lines gave, when it was rejected as
+  /// implausible for a photo (beyond 15 degrees: the lines were not verticals or level ones) and
+  /// the level fall-back taken instead; NaN otherwise.
+  double horizon_rejected_roll_deg = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// The camera pose whose horizon passes through the two points (pixel-centre coordinates), at
