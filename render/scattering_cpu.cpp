@@ -133,7 +133,7 @@ struct Hints {
 // (pass 2's thin cells: where their corners saw shadow; its shaft-edge cells: around the
 // corners' crossings).
 struct StepZone {
-  static constexpr int kMax = 4 * PixelSample::kMaxCrossings;
+  static constexpr int kMax = 4 * PixelSample::kMaxCrossings + 1;  // (edge_zone: + beyond)
   double lo_m[kMax] = {}, hi_m[kMax] = {};  // stretches lo > hi are empty
   int n = 0;
   int factor = 1;

@@ -573,6 +573,34 @@ TEST_F(Scattering, AccelerationKeepsThinSurfaceShadows) {
 #endif
 
 #ifndef MR_SCATTERING_TEST_VULKAN  // the CPU core's shaft-edge cells (pass 2)
+// R of `fast` against the same scene marched at every pixel with 256 steps: the mean relative
+// error and bias over the pixels whose reference R is at least 1 % of its mean.
+struct ManyStepError {
+  double mean_abs = 0, bias = 0;
+};
+ManyStepError many_step_error(const ScatteringLayers& fast, const Image& depth, const Camera& cam,
+                              FogScene s) {
+  s.render.gradient_acceleration = false;
+  s.render.march_steps = 256;
+  const ScatteringLayers reference = render(depth, cam, s);
+  double mean = 0;
+  for (float v : reference.inscatter.pixels()) mean += v;
+  mean /= double(reference.inscatter.pixels().size());
+  ManyStepError out;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < reference.inscatter.pixels().size(); ++i) {
+    const double r = reference.inscatter.pixels()[i];
+    if (r < 0.01 * mean) continue;
+    const double e = (fast.inscatter.pixels()[i] - r) / r;
+    out.mean_abs += std::fabs(e);
+    out.bias += e;
+    ++n;
+  }
+  out.mean_abs /= double(n);
+  out.bias /= double(n);
+  return out;
+}
+
 // Shafts in a forest (tests/scattering_scenes.h's forest_depth under the sun bank look, 192 x
 // 108): most grid cells have a shadow edge, so most pixels are marched exactly with
 // kShaftRefinement times the steps. The accelerated render against every pixel marched with
@@ -583,27 +611,10 @@ TEST_F(Scattering, AccelerationKeepsThinSurfaceShadows) {
 // the refinement is weakened.
 TEST_F(Scattering, ForestShaftsMatchAManyStepReference) {
   const Camera cam = Camera::from_horizontal_fov(192, 108, 60);
-  FogScene s = test::low_sun_height_fog_scene();
+  const FogScene s = test::low_sun_height_fog_scene();
   const Image depth = test::forest_depth(cam, s.pose);
   const ScatteringLayers fast = render(depth, cam, s);
-  s.render.gradient_acceleration = false;
-  s.render.march_steps = 256;
-  const ScatteringLayers reference = render(depth, cam, s);
-  double mean = 0;
-  for (float v : reference.inscatter.pixels()) mean += v;
-  mean /= double(reference.inscatter.pixels().size());
-  double err = 0, bias = 0;
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < reference.inscatter.pixels().size(); ++i) {
-    const double r = reference.inscatter.pixels()[i];
-    if (r < 0.01 * mean) continue;
-    const double e = (fast.inscatter.pixels()[i] - r) / r;
-    err += std::fabs(e);
-    bias += e;
-    ++n;
-  }
-  err /= double(n);
-  bias /= double(n);
+  const auto [err, bias] = many_step_error(fast, depth, cam, s);
   const double exact_fraction = double(fast.timings.exact_pixels) / (192.0 * 108.0);
   std::printf(
       "[ Forest ] exact %.1f %% of the pixels, R vs 256 steps: mean |error| %.4f %%, "
@@ -632,21 +643,7 @@ TEST_F(Scattering, ShaftEdgeCellsMarchFinerOnlyAroundTheCornersCrossings) {
     for (int y = 0; y < 70; ++y)
       for (int x = x0; x < x1; ++x) depth.at(x, y, 0) = std::min(depth.at(x, y, 0), d);
   const ScatteringLayers fast = render(depth, cam, s);
-  s.render.gradient_acceleration = false;
-  s.render.march_steps = 256;
-  const ScatteringLayers reference = render(depth, cam, s);
-  double mean = 0;
-  for (float v : reference.inscatter.pixels()) mean += v;
-  mean /= double(reference.inscatter.pixels().size());
-  double err = 0;
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < reference.inscatter.pixels().size(); ++i) {
-    const double r = reference.inscatter.pixels()[i];
-    if (r < 0.01 * mean) continue;
-    err += std::fabs(fast.inscatter.pixels()[i] - r) / r;
-    ++n;
-  }
-  err /= double(n);
+  const double err = many_step_error(fast, depth, cam, s).mean_abs;
   std::printf(
       "[ Pillars ] exact %.1f %% of the pixels, %zu shadow rays, R vs 256 steps: mean "
       "|error| %.4f %%\n",
