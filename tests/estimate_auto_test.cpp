@@ -12,6 +12,7 @@
 #include <limits>
 #include <numbers>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "mr/estimate.h"
@@ -276,6 +277,13 @@ TEST(AutoHorizon, LinesThatLeanFarFromVerticalAreNotTheZenith) {
       EXPECT_EQ(g.horizon_source, EstimateSource::fallback);
       EXPECT_NEAR(std::abs(g.horizon_rejected_roll_deg), lean_deg, 3);
       EXPECT_NEAR(g.pose.roll_deg, 0, 1e-9);
+      // `mr estimate`'s report says why the lines were not used.
+      const SceneEstimate est = estimate_scene(photo, rig.camera, Annotations{});
+      bool said = false;
+      for (const std::string& note : est.notes)
+        said |= note.find("the lines' horizon (roll -2") != std::string::npos &&
+                note.find("deg) is not a photo's") != std::string::npos;
+      EXPECT_TRUE(said);
     } else {
       EXPECT_EQ(h.cue, photo::HorizonCue::zenith);
       EXPECT_TRUE(std::isnan(h.rejected_roll_deg));
