@@ -307,10 +307,6 @@ Camera make_camera(const FogCommandOptions& o, const FogScene& scene, const fs::
   return make_camera(o, scene, photo_path, photo.width(), photo.height(), photo.metadata());
 }
 
-// --depth auto without a depth file: the geometry from mr::estimate_scene (the photo's
-// annotations when --annotations finds them, else the automatic / level-camera estimate). The
-// estimated pose (and sun, sky, when the annotations give them) replace the plan's; options on
-// the command line still win. --camera-height also scales the estimated depth.
 // The photo's annotations file (--annotations: one file, or a pattern whose file may be missing,
 // meaning none), or nullopt.
 std::optional<fs::path> annotations_path(const FogCommandOptions& o, const Job& job) {
@@ -321,13 +317,17 @@ std::optional<fs::path> annotations_path(const FogCommandOptions& o, const Job& 
   return fs::exists(path, ec) ? std::optional<fs::path>(path) : std::nullopt;
 }
 
-DepthMap estimate_depth(const FogCommandOptions& o, const Job& job, const Image& photo,
+// --depth auto without a depth file: the geometry from mr::estimate_scene (the photo's
+// annotations file when there is one, else the automatic / level-camera estimate). The
+// estimated pose (and sun, sky, when the annotations give them) replace the plan's; options on
+// the command line still win. --camera-height also scales the estimated depth.
+DepthMap estimate_depth(const FogCommandOptions& o, const Job& job,
+                        const std::optional<fs::path>& annotations_file, const Image& photo,
                         const Camera& camera, FogScene& scene, const CancelToken* progress,
                         Image& sky_alpha) {
   try {
     Annotations annotations;
-    if (const std::optional<fs::path> path = annotations_path(o, job))
-      annotations = load_annotations(*path);
+    if (annotations_file) annotations = load_annotations(*annotations_file);
     EstimateOptions options;
     options.cancel = progress;
     if (o.camera_height_m) options.default_camera_height_m = *o.camera_height_m;
@@ -559,8 +559,10 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
   // Issue 11: a camera-size photo is estimated, fogged and softened at a working size (the size
   // the estimate was tuned at), and its fog brought to the photo's size by guided upsampling.
   // Annotations (pixel positions) and objects (placed by pixel) keep the photo's own size.
+  const std::optional<fs::path> annotations_file =
+      estimated ? annotations_path(o, job) : std::nullopt;
   const std::optional<WorkingSize> working =
-      estimated && !annotations_path(o, job) && plan.scene.objects.empty()
+      estimated && !annotations_file && plan.scene.objects.empty()
           ? working_size(photo.width(), photo.height(), o.working_size)
           : std::nullopt;
   const Image working_photo =
@@ -581,9 +583,9 @@ Outcome run_job(const FogCommandOptions& o, const FogPlan& plan, const Job& job,
                                 {{"occluders"}, lights ? 1.0 : 0.0},
                                 {{"render"}, 2}});
   Image sky_alpha;  // the estimate's soft sky matte (empty for a depth file)
-  DepthMap depth =
-      estimated ? estimate_depth(o, job, work, work_camera, scene, progress.token(), sky_alpha)
-                : read_depth(job.depth, camera, plan.depth);
+  DepthMap depth = estimated ? estimate_depth(o, job, annotations_file, work, work_camera, scene,
+                                              progress.token(), sky_alpha)
+                             : read_depth(job.depth, camera, plan.depth);
   // Issue 11 item 4: an estimated scene's fog lies in a layer with a top, so the sky is seen
   // through it (clouds and sunsets attenuated, not painted over) and the sun enters it from
   // above. Only where nothing gave the fog a top or a height profile.

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "mr/error.h"
+#include "photo/composite.h"
 
 namespace mr::photo {
 
@@ -202,9 +203,7 @@ void upsample_fog(ConstImageView working_photo, ConstImageView working_t, ConstI
             }
             const float t[3] = {q[0], grey_t ? q[0] : q[1], grey_t ? q[0] : q[2]};
             const float* r = q + (grey_t ? 1 : 3);
-            float* out = composite.pixel(x, y);
-            for (int c = 0; c < 3; ++c) out[c] = p[c] * t[c] + r[c];
-            for (int c = 3; c < photo.channels; ++c) out[c] = p[c];
+            composite_pixel(p, t, r, composite.pixel(x, y), photo.channels);
             if (transmittance.data) std::copy(t, t + 3, transmittance.pixel(x, y));
             if (inscatter.data) std::copy(r, r + 3, inscatter.pixel(x, y));
           }
