@@ -596,6 +596,10 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
       // lattice; where the ground around it does not (the tower's foot on a dark cloud bank,
       // rocket's middle tower), the whole of it as a surface left the lattice's blue inside a
       // hard outline while the sky around it took the haze's grey (issue 11, helper haze16).
+      // Only where members go on below it too: a smooth band of the sky's colour alone below it
+      // is the band a guessed horizon was drawn in, which the open sky beside it shares, and
+      // refused, an opening as large as bridge's triangle between its cable stays stood as a
+      // wall at the far billboard (a grey triangle in the night look).
       cv::Mat ground(h, w, CV_8U, cv::Scalar(0));
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
@@ -666,7 +670,8 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
         bool changed = false;
         for (int i = 1; i < m; ++i) {
           if (made[i] || !sky_coloured[i] || !(ring_sky[i] > 0)) continue;
-          if (reaches_ground[i] && ring_ground_sky[i] > o.thin_max_ground_sky * ring_ground[i])
+          if (reaches_ground[i] && ring_ground_sky[i] > o.thin_max_ground_sky * ring_ground[i] &&
+              ring_ground[i] - ring_ground_sky[i] >= o.thin_min_ground_members * ring_ground[i])
             continue;
           const double members = ring_thin[i] + ring_thick[i];
           if (members >= o.thin_min_bounded * ring_all[i] &&
