@@ -109,6 +109,7 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
   std::vector<int> bluish(std::size_t(m), 0), leafy(std::size_t(m), 0);
   std::vector<double> saturation(std::size_t(m), 0.0), radius(std::size_t(m), 0.0);
   std::vector<double> gradient(std::size_t(m), 0.0), luma(std::size_t(m), 0.0);
+  std::vector<int> body(std::size_t(m), 0);  // pixels at least min_radius inside the outline
   std::vector<std::vector<float>> ratios;
   ratios.resize(std::size_t(m));
   std::vector<std::size_t> component(std::size_t(m), 0);
@@ -136,6 +137,7 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
       luma[k] += display.at<float>(y, x);
       ratios[k].push_back(distance_ratio[i]);
       radius[k] = std::max(radius[k], double(inside.at<float>(y, x)));
+      body[k] += inside.at<float>(y, x) >= min_radius;
       // The outline: next to the sky, or to the frame's top, left or right border, or to the
       // surface that holds it up (or another surface).
       bool sky = false, other = x == 0 || y == 0 || x == w - 1;
@@ -154,7 +156,9 @@ std::vector<std::uint8_t> overhanging_clouds(ConstImageView photo,
   for (int l = 1; l < m; ++l) {
     const std::size_t k = std::size_t(l);
     const double area = double(stats.at<int>(l, cv::CC_STAT_AREA));
-    if (area < options.min_overhang_fraction * double(n) || radius[k] < min_radius) continue;
+    if (area < options.min_overhang_fraction * double(n) || radius[k] < min_radius ||
+        body[k] < options.min_overhang_body_fraction * area)
+      continue;
     if (2 * leafy[k] >= area) continue;
     std::vector<float>& r = ratios[k];
     std::nth_element(r.begin(), r.begin() + std::ptrdiff_t(r.size() / 2), r.end());

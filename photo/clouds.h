@@ -120,7 +120,10 @@ struct FloatingCloudOptions {
   /// component's pixels rising from where it meets the horizon) and is 8-connected is judged
   /// on its own: a cloud when at least `min_overhang_fraction` of the frame, a body at least
   /// `min_overhang_radius_px` and `min_overhang_radius_fraction` of the frame's smaller side
-  /// from its outline at its thickest (a cornice, a crane's jib, a cable or a branch is thin),
+  /// from its outline at its thickest (a cornice, a crane's jib, a cable or a branch is thin)
+  /// over at least `min_overhang_body_fraction` of its area (crossing cables are that thick only
+  /// where they cross: bridge's white cable stays, 6 %, went into the sky and vanished in haze;
+  /// a disc twice that radius is 25 % body; tuning half: a cloud's part 31 %),
   /// not foliage, grey (a mean saturation of at most `max_saturation`) and of a sky's colours
   /// (and smooth, below) or joined to the sky (as `min_distance_ratio`), with at least
   /// `min_sky_ring` of its outline next to the sky (the seam with what holds it up counts as not),
@@ -130,6 +133,7 @@ struct FloatingCloudOptions {
   double min_overhang_fraction = 5e-4;
   double min_overhang_radius_px = 3;
   double min_overhang_radius_fraction = 0.01;
+  double min_overhang_body_fraction = 0.15;
   double max_overhang_holes = 0.1;
   /// A part of the sky's colours but not joined to the sky is a cloud only when also as smooth
   /// as one: a mean per-pixel gradient of the display-referred luma (Sobel / 8) of at most

@@ -1122,6 +1122,36 @@ TEST(SkyLight, FloatingCloudRuleForJoinedClouds) {
       0);
 }
 
+// The joined-cloud rule and cables (gallery/tune bridge: white cable stays crossing at a clamp,
+// cut off from the cables that rest on the horizon where the sky shows between them): a white
+// pylon rising from the horizon, a white cable 4 px thick hanging from it across the sky, and
+// a clamp 12 px across on the cable. The part beside the pylon's columns reached the radius of
+// a cloud's body only at the clamp (a small part of its area is that deep); it was taken for a
+// cloud and went into the sky (bridge's cables vanished in haze). A cloud's part is mostly body.
+TEST(SkyLight, JoinedCloudRuleRefusesCablesThickOnlyAtAClamp) {
+  CloudRuleMap m;
+  constexpr int w = CloudRuleMap::w, h = CloudRuleMap::h, horizon = CloudRuleMap::horizon;
+  const Rgb white{0.8f, 0.82f, 0.9f};
+  m.put(0, w, horizon, h, 1.0f, {0.1f, 0.2f, 0.05f});  // the ground
+  m.put(20, 24, 5, horizon, 1.0f, white);              // the pylon
+  m.put(24, 110, 14, 18, 1.0f, white);                 // the cable
+  m.put(70, 82, 10, 22, 1.0f, white);                  // the clamp
+  const std::vector<std::uint8_t> cloud =
+      photo::floating_clouds(m.photo.view(), m.ratio, m.above, {}, {});
+  EXPECT_EQ(cloud[std::size_t(16) * w + 76], 0);   // the clamp
+  EXPECT_EQ(cloud[std::size_t(16) * w + 100], 0);  // the cable beside it
+  photo::FloatingCloudOptions before;
+  before.min_overhang_body_fraction = 0;
+  EXPECT_EQ(photo::floating_clouds(m.photo.view(), m.ratio, m.above, {}, {},
+                                   before)[std::size_t(16) * w + 100],
+            1);
+  // A cloud 12 px thick hanging there instead is one (as FloatingCloudRuleForJoinedClouds').
+  m.put(24, 110, 10, 22, 1.0f, white);
+  EXPECT_EQ(
+      photo::floating_clouds(m.photo.view(), m.ratio, m.above, {}, {})[std::size_t(16) * w + 100],
+      1);
+}
+
 // The joined-cloud rule in a scene that is all bluish grey (airport_snow: snow, a terminal and
 // its jet bridges under an overcast sky, where the rule took a 72 x 105 px block of jet bridges
 // hanging beside the terminal's columns for a cloud): of the sky's colours is not enough, the
