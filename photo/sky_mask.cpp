@@ -596,10 +596,11 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
       // lattice; where the ground around it does not (the tower's foot on a dark cloud bank,
       // rocket's middle tower), the whole of it as a surface left the lattice's blue inside a
       // hard outline while the sky around it took the haze's grey (issue 11, helper haze16).
-      // Only where members go on below it too: a smooth band of the sky's colour alone below it
-      // is the band a guessed horizon was drawn in, which the open sky beside it shares, and
-      // refused, an opening as large as bridge's triangle between its cable stays stood as a
-      // wall at the far billboard (a grey triangle in the night look).
+      // Only where members go on below it too, or the sky's colour goes on far below it: a thin
+      // band of the sky's colour alone below it is the band a guessed horizon was drawn in,
+      // which the open sky beside it shares, and refused, an opening as large as bridge's
+      // triangle between its cable stays stood as a wall at the far billboard (a grey triangle
+      // in the night look); a pale wall taken for sky goes on far below (friends' siding).
       cv::Mat ground(h, w, CV_8U, cv::Scalar(0));
       for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
@@ -667,11 +668,34 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
                 ring_thin[l] += 1;
             }
           }
+        // How far below the horizon the sky's colour goes on under opening i: the median, over
+        // the columns where it meets the horizon, of the rows of the sky's colour from there.
+        auto band_below = [&](int i) {
+          std::vector<int> rows;
+          const int x0 = os.at<int>(i, cv::CC_STAT_LEFT), y0 = os.at<int>(i, cv::CC_STAT_TOP);
+          const int x1 = x0 + os.at<int>(i, cv::CC_STAT_WIDTH),
+                    y1 = y0 + os.at<int>(i, cv::CC_STAT_HEIGHT);
+          for (int x = x0; x < x1; ++x)
+            for (int y = y1 - 1; y >= y0; --y) {
+              if (ol.at<int>(y, x) != i) continue;
+              if (y + 1 < h && !above(x, y + 1)) {
+                int run = 0;
+                while (y + 1 + run < h && sky_like_ground.at<std::uint8_t>(y + 1 + run, x)) ++run;
+                rows.push_back(run);
+              }
+              break;
+            }
+          if (rows.empty()) return 0;
+          std::nth_element(rows.begin(), rows.begin() + std::ptrdiff_t(rows.size() / 2),
+                           rows.end());
+          return rows[rows.size() / 2];
+        };
         bool changed = false;
         for (int i = 1; i < m; ++i) {
           if (made[i] || !sky_coloured[i] || !(ring_sky[i] > 0)) continue;
           if (reaches_ground[i] && ring_ground_sky[i] > o.thin_max_ground_sky * ring_ground[i] &&
-              ring_ground[i] - ring_ground_sky[i] >= o.thin_min_ground_members * ring_ground[i])
+              (ring_ground[i] - ring_ground_sky[i] >= o.thin_min_ground_members * ring_ground[i] ||
+               band_below(i) > o.thin_max_band_fraction * h))
             continue;
           const double members = ring_thin[i] + ring_thick[i];
           if (members >= o.thin_min_bounded * ring_all[i] &&

@@ -91,16 +91,20 @@ struct SkyMaskOptions {
   /// there ends where the photo's opening ends; issue 11, helper haze16); negative: every
   /// opening that reaches the horizon is refused (the rule before). That refusal is for an
   /// opening cut across, which members bound below the horizon too: where less than
-  /// `thin_min_ground_members` of those pixels around it lack the sky's colour, nothing but the
-  /// band the horizon was drawn in lies below it (bridge's triangle of sky between cable stays,
-  /// its guessed horizon lowered into the pale band over the far shore: 0.4 %; rocket's left
-  /// tower 14 %), and it is judged as any other opening; 0: the refusal as before. Only under a
-  /// blue sky. thin_member_width 0: off.
+  /// `thin_min_ground_members` of those pixels around it lack the sky's colour and the sky's
+  /// colour goes on at most `thin_max_band_fraction` of the height below it (the median over
+  /// the columns where it meets the horizon), nothing but the band the horizon was drawn in lies
+  /// below it (bridge's triangle of sky between cable stays, its guessed horizon lowered into
+  /// the pale band over the far shore: 0.4 % and 2.8 %; rocket's left tower 14 %; a white
+  /// house's siding taken for sky, which goes on below: 10 %), and it is judged as any other
+  /// opening; thin_min_ground_members 0: the refusal as before. Only under a blue sky.
+  /// thin_member_width 0: off.
   double thin_member_width = 0.008;
   double thin_min_bounded = 0.25;
   double thin_max_thick = 0.2;
   double thin_max_ground_sky = 0.5;
   double thin_min_ground_members = 0.05;
+  double thin_max_band_fraction = 0.05;
   /// Along the mask's edges, unmix each pixel against the colours on both sides (the two-colour
   /// matting model) where the sides differ, so the matte sits on the photo's edge and is as wide
   /// as it (issue 11 item 4); false: the guided filter's output alone.
