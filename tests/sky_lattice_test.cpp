@@ -317,6 +317,14 @@ TEST(SkyLight, LatticeOpeningGoingOnBelowTheHorizonIsNotCutThere) {
   EXPECT_EQ(differ, 0u);
 }
 
+// A photo of the gallery's tuning half, at the size the test's pixel coordinates are for.
+Image tuning_photo(const char* name, int width, int height) {
+  Image photo = read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / name);
+  EXPECT_EQ(photo.width(), width) << name;
+  EXPECT_EQ(photo.height(), height) << name;
+  return photo;
+}
+
 // Sky between cables down to a horizon drawn in the haze band (the tuning half's bridge; a
 // drawn photo would have to copy its clouds and noise to reach this rule): its guessed horizon
 // is lowered to just below the sky it cut (row 596.5, in the pale band over the far shore), and
@@ -327,10 +335,7 @@ TEST(SkyLight, LatticeOpeningGoingOnBelowTheHorizonIsNotCutThere) {
 // member goes on below it (0.4 % of its ring there is not sky-coloured; rocket's left tower,
 // which that rule is for, 14 %), so it is not an opening cut across: it is sky.
 TEST(SkyLight, SkyBetweenCablesDownToAHorizonInTheHazeBandIsSky) {
-  const Image photo =
-      read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / "bridge.jpg");
-  ASSERT_EQ(photo.width(), 1280);
-  ASSERT_EQ(photo.height(), 720);
+  const Image photo = tuning_photo("bridge.jpg", 1280, 720);
   const std::array<PixelPoint, 2> horizon{PixelPoint{0, 596.5}, PixelPoint{1279, 596.5}};
   photo::SkyMaskOptions before;
   before.thin_min_ground_members = 0;  // every opening whose ground ring is sky-coloured refused
@@ -364,10 +369,7 @@ TEST(SkyLight, SkyBetweenCablesDownToAHorizonInTheHazeBandIsSky) {
 // bridge's triangle 2.8 %. Without the band limit the false sky grew by 39 k pixels in the mask
 // (46 k more infinite distances in the estimate).
 TEST(SkyLight, APaleWallGoingOnBelowTheHorizonIsNoOpeningBetweenCables) {
-  const Image photo =
-      read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / "friends.jpg");
-  ASSERT_EQ(photo.width(), 852);
-  ASSERT_EQ(photo.height(), 1280);
+  const Image photo = tuning_photo("friends.jpg", 852, 1280);
   // The estimate's horizon (a horizontal and the vertical vanishing point).
   const std::array<PixelPoint, 2> horizon{PixelPoint{0, 596.8}, PixelPoint{851, 595.6}};
   photo::SkyMaskOptions no_limit;
