@@ -123,7 +123,7 @@ struct FloatingCloudOptions {
   /// from its outline at its thickest (a cornice, a crane's jib, a cable or a branch is thin)
   /// over at least `min_overhang_body_fraction` of its area (crossing cables are that thick only
   /// where they cross: bridge's white cable stays, 6 %, went into the sky and vanished in haze;
-  /// a disc twice that radius is 25 % body; tuning half: a cloud's part 31 %),
+  /// a disc twice that radius is 25 % body; the tuning half's one other such part 31 %),
   /// not foliage, grey (a mean saturation of at most `max_saturation`) and of a sky's colours
   /// (and smooth, below) or joined to the sky (as `min_distance_ratio`), with at least
   /// `min_sky_ring` of its outline next to the sky (the seam with what holds it up counts as not),

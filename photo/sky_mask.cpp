@@ -639,6 +639,27 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
           ring_thick(std::size_t(m), 0.0), ring_all(std::size_t(m), 0.0);
       std::vector<std::uint8_t> reaches_ground(std::size_t(m), 0);
       std::vector<double> ring_ground(std::size_t(m), 0.0), ring_ground_sky(std::size_t(m), 0.0);
+      // How far below the horizon the sky's colour goes on under opening i: the median, over
+      // the columns where it meets the horizon, of the rows of the sky's colour from there.
+      auto band_below = [&](int i) {
+        std::vector<int> rows;
+        const int x0 = os.at<int>(i, cv::CC_STAT_LEFT), y0 = os.at<int>(i, cv::CC_STAT_TOP);
+        const int x1 = x0 + os.at<int>(i, cv::CC_STAT_WIDTH),
+                  y1 = y0 + os.at<int>(i, cv::CC_STAT_HEIGHT);
+        for (int x = x0; x < x1; ++x)
+          for (int y = y1 - 1; y >= y0; --y) {
+            if (ol.at<int>(y, x) != i) continue;
+            if (y + 1 < h && !above(x, y + 1)) {
+              int run = 0;
+              while (y + 1 + run < h && sky_like_ground.at<std::uint8_t>(y + 1 + run, x)) ++run;
+              rows.push_back(run);
+            }
+            break;
+          }
+        if (rows.empty()) return 0;
+        std::nth_element(rows.begin(), rows.begin() + std::ptrdiff_t(rows.size() / 2), rows.end());
+        return rows[rows.size() / 2];
+      };
       for (int round = 0; round < 16; ++round) {
         std::fill(ring_sky.begin(), ring_sky.end(), 0.0);
         std::fill(ring_thin.begin(), ring_thin.end(), 0.0);
@@ -668,28 +689,6 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
                 ring_thin[l] += 1;
             }
           }
-        // How far below the horizon the sky's colour goes on under opening i: the median, over
-        // the columns where it meets the horizon, of the rows of the sky's colour from there.
-        auto band_below = [&](int i) {
-          std::vector<int> rows;
-          const int x0 = os.at<int>(i, cv::CC_STAT_LEFT), y0 = os.at<int>(i, cv::CC_STAT_TOP);
-          const int x1 = x0 + os.at<int>(i, cv::CC_STAT_WIDTH),
-                    y1 = y0 + os.at<int>(i, cv::CC_STAT_HEIGHT);
-          for (int x = x0; x < x1; ++x)
-            for (int y = y1 - 1; y >= y0; --y) {
-              if (ol.at<int>(y, x) != i) continue;
-              if (y + 1 < h && !above(x, y + 1)) {
-                int run = 0;
-                while (y + 1 + run < h && sky_like_ground.at<std::uint8_t>(y + 1 + run, x)) ++run;
-                rows.push_back(run);
-              }
-              break;
-            }
-          if (rows.empty()) return 0;
-          std::nth_element(rows.begin(), rows.begin() + std::ptrdiff_t(rows.size() / 2),
-                           rows.end());
-          return rows[rows.size() / 2];
-        };
         bool changed = false;
         for (int i = 1; i < m; ++i) {
           if (made[i] || !sky_coloured[i] || !(ring_sky[i] > 0)) continue;
