@@ -223,7 +223,8 @@ TEST(MaterialTransfer, GlossySphereOntoMatteGround) {
   for (int y = 0; y < 120; ++y)
     for (int x = 0; x < 160; ++x)
       if (target.labels.at(x, y, 0) == 0) {
-        for (int c = 0; c < 3; ++c) ASSERT_EQ(r.image.at(x, y, c), target.photo.at(x, y, c));
+        for (int c = 0; c < 3; ++c)
+          ASSERT_EQ(r.image.at(x, y, c), target.photo.at(x, y, c)) << x << ", " << y;
       }
 }
 
@@ -710,6 +711,180 @@ TEST(MaterialApply, DetailIsOneOnAnUntexturedSurfaceAndPlainRenderingIsExact) {
       const Rgb e = render::shade_pixel(kGlossy, g, s.scene.lighting, x, y);
       for (int c = 0; c < 3; ++c) ASSERT_NEAR(out.at(x, y, c), e[c], 1e-5f * std::max(1.0f, e[c]));
     }
+}
+
+// The untextured ground of make_geometry (labels 2 | 3 at x = 0), its geometry and unit-albedo
+// shading, for the detail and compositing tests below.
+struct GroundScene {
+  Synthetic s;
+  render::SurfaceGeometry g;
+  Image shading;
+};
+GroundScene untextured_ground() {
+  GroundScene out{make_geometry(160, 120, -40, false, {}, 0, true), {}, {}};
+  render(out.s, {Material{}, kMatte, kMatte});
+  out.g = render::surface_geometry_from_depth(out.s.distance_m, out.s.camera, out.s.scene.pose,
+                                              out.s.scene.lighting);
+  out.shading = photo::diffuse_shading(out.g, out.s.scene.lighting);
+  return out;
+}
+
+TEST(MaterialApply, DetailIsLuminanceAndCarriesNoNoiseOfABarelyRecordedChannel) {
+  // A red surface (albedo 0.6, 0, 0 over the shading) whose green and blue channels are JPEG-like
+  // noise at 0.2-0.6 % of the red: per channel, D of green and blue would swing by +-50 %, a
+  // coloured grain in any new colour. The luminance barely moves: D within 1 % of 1, the three
+  // channels equal.
+  GroundScene t = untextured_ground();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> noise(0.002f, 0.006f);
+  Image photo = t.shading;
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      photo.at(x, y, 0) = 0.6f * t.shading.at(x, y, 0);
+      for (int c = 1; c < 3; ++c) photo.at(x, y, c) = noise(rng) * photo.at(x, y, 0);
+    }
+  const Image detail = photo::photo_detail(photo, t.shading, t.g);
+  float worst = 0;
+  int surface = 0;
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      if (!(t.g.surface.at(x, y, 0) > 0)) continue;
+      ++surface;
+      EXPECT_EQ(detail.at(x, y, 1), detail.at(x, y, 0));
+      EXPECT_EQ(detail.at(x, y, 2), detail.at(x, y, 0));
+      worst = std::max(worst, std::abs(detail.at(x, y, 0) - 1.0f));
+    }
+  EXPECT_GT(surface, 10000);
+  EXPECT_LT(worst, 0.01f);
+}
+
+TEST(MaterialApply, NoiseFloorKeepsANearBlackSurfaceFromBecomingGrain) {
+  // Left half near black (albedo 0.002 with +-60 % noise, as a silhouette in a JPEG), right half
+  // a bright wall (albedo 0.8) that sets the exposure. Without the floor D on the left is the
+  // noise (log deviation ~0.38); with it (0.003 of the 99th percentile, 1.2 x the left's mean)
+  // less than half of that.
+  GroundScene t = untextured_ground();
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> noise(0.4f, 1.6f);
+  Image photo = t.shading;
+  Image labels(160, 120, 1);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const float albedo = x < 80 ? 0.002f * noise(rng) : 0.8f;
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo * t.shading.at(x, y, c);
+      labels.at(x, y, 0) = x < 80 ? 1.0f : 2.0f;
+    }
+  auto log_deviation = [&](double noise_floor) {
+    photo::DetailOptions options;
+    options.region_labels = &labels;
+    options.noise_floor = noise_floor;
+    const Image detail = photo::photo_detail(photo, t.shading, t.g, options);
+    double sum = 0;
+    int n = 0;
+    for (int y = 10; y < 110; ++y)
+      for (int x = 10; x < 70; ++x)
+        if (t.g.surface.at(x, y, 0) > 0) {
+          const double l = std::log(detail.at(x, y, 0));
+          sum += l * l;
+          ++n;
+        }
+    return std::sqrt(sum / std::max(1, n));
+  };
+  const double without = log_deviation(0), with = log_deviation(0.003);
+  std::printf("log D deviation on the near-black half: without floor %.3f, with %.3f\n", without,
+              with);
+  EXPECT_GT(without, 0.25);
+  EXPECT_LT(with, without / 2);  // a floor about the signal's size halves it
+}
+
+TEST(MaterialApply, ARegionsAntialiasedBorderPixelsMakeNoRim) {
+  // A dark region (albedo 0.05, label 1, x < 80) against a bright one (0.8, label 2) whose border
+  // column x = 79 is a half-and-half mix, as an antialiased silhouette is: measured against the
+  // dark region's base its D would be 8.5 (a bright rim in any new material); faded over the
+  // border it stays within a factor 1.3 of 1 (the border pixel keeps a third of its log D).
+  GroundScene t = untextured_ground();
+  Image photo = t.shading;
+  Image labels(160, 120, 1);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const float albedo = x < 79 ? 0.05f : x == 79 ? 0.425f : 0.8f;
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo * t.shading.at(x, y, c);
+      labels.at(x, y, 0) = x < 80 ? 1.0f : 2.0f;
+    }
+  photo::DetailOptions options;
+  options.region_labels = &labels;
+  options.border_px = 0;
+  const Image raw = photo::photo_detail(photo, t.shading, t.g, options);
+  options.border_px = 2;
+  const Image faded = photo::photo_detail(photo, t.shading, t.g, options);
+  for (int y = 20; y < 100; ++y) {
+    if (!(t.g.surface.at(79, y, 0) > 0)) continue;
+    EXPECT_GT(raw.at(79, y, 0), 5.0f) << y;
+    EXPECT_LT(faded.at(79, y, 0), 2.2f) << y;                       // 8.5^(1/3) = 2.04
+    EXPECT_NEAR(faded.at(60, y, 0), raw.at(60, y, 0), 1e-6f) << y;  // inside: unchanged
+  }
+}
+
+TEST(MaterialApply, RegionBordersSnapToThePhotosEdges) {
+  // The photo changes colour at x = 80; the mask puts the border at x = 83 (3 px off, a sliver
+  // of the right-hand surface inside region 1) and has 1-pixel teeth. Snapped, every row's
+  // border is at x = 80; pixels farther than the window (4 px) from the mask's border keep
+  // their label, the sky its own.
+  GroundScene t = untextured_ground();
+  Image photo = t.shading;
+  Image labels(160, 120, 1);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const Rgb albedo = x < 80 ? Rgb{0.6f, 0.3f, 0.1f} : Rgb{0.2f, 0.3f, 0.6f};
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo[c] * t.shading.at(x, y, c);
+      const int border = 83 + (y % 5 == 0 ? 1 : 0);
+      labels.at(x, y, 0) = x < border ? 1.0f : 2.0f;
+    }
+  const Image snapped = photo::snap_regions_to_edges(labels, photo, t.g);
+  int rows = 0, wrong = 0;
+  for (int y = 0; y < 120; ++y) {
+    if (!(t.g.surface.at(0, y, 0) > 0)) continue;
+    ++rows;
+    for (int x = 70; x < 95; ++x)
+      if (snapped.at(x, y, 0) != (x < 80 ? 1.0f : 2.0f)) {
+        ++wrong;
+        std::printf("(%d, %d): %g\n", x, y, snapped.at(x, y, 0));
+      }
+  }
+  EXPECT_GT(rows, 60);
+  EXPECT_EQ(wrong, 0);
+  for (int y = 0; y < 120; ++y)
+    for (int x : {10, 150}) EXPECT_EQ(snapped.at(x, y, 0), labels.at(x, y, 0));
+}
+
+TEST(MaterialApply, TwoRegionsBorderBlendsTheirRenderingsNotThePhoto) {
+  // An orange photo, regions 1 | 2 re-rendered grey and blue-grey: the border pixels are a blend
+  // of the two renderings, with none of the photo's orange (a ramp into the photo on each side
+  // would leave an orange line between them); at a region's outer border the photo blends in,
+  // outside it is untouched.
+  GroundScene t = untextured_ground();
+  Image photo = t.shading;
+  Image labels(160, 120, 1);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const Rgb albedo{0.7f, 0.35f, 0.05f};
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo[c] * t.shading.at(x, y, c);
+      labels.at(x, y, 0) = x < 80 ? 1.0f : x < 150 ? 2.0f : 0.0f;
+    }
+  const std::vector<Material> materials{{{0.4f, 0.4f, 0.4f}, 0.0f, 1.0f},
+                                        {{0.35f, 0.4f, 0.5f}, 0.0f, 1.0f}};
+  const Image out =
+      photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels, materials, nullptr);
+  for (int y = 20; y < 100; ++y) {
+    if (!(t.g.surface.at(80, y, 0) > 0)) continue;
+    for (int x = 77; x < 83; ++x) {
+      const float* p = out.pixel(x, y);
+      EXPECT_LT(p[0] / p[2], 1.05f) << x << ", " << y;  // orange has R / B = 14
+    }
+    EXPECT_GT(out.at(149, y, 0) / out.at(149, y, 2), 1.1f) << y;  // outer border: photo mixed in
+    for (int x = 150; x < 160; ++x)                               // outside the regions: the photo
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(out.at(x, y, c), photo.at(x, y, c)) << x << ", " << y;
+  }
 }
 
 // Progress (mr/cancel.h): the steps in order, the fits forward to their count, the same

@@ -562,7 +562,12 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     const Lighting& lighting = target.scene.lighting;
     // Thin unlabelled seams between or inside regions (masks from depth or painted by hand)
     // join their nearest region, so no line of the old material is left between new pixels.
-    const Image region_labels = photo::close_region_gaps(region_labels_in, traced);
+    // A photo's regions then snap to its edges (photo/material/apply.h); a 3D scene's masks are
+    // exact.
+    const Image region_labels =
+        scene_only ? photo::close_region_gaps(region_labels_in, traced)
+                   : photo::snap_regions_to_edges(
+                         photo::close_region_gaps(region_labels_in, traced), target_rgb, traced);
     // A photo's geometry is estimated: its pixel-scale junk would show as lines in the new
     // material's shading (photo/material/apply.h); a 3D scene's is exact and kept.
     const render::SurfaceGeometry geometry =

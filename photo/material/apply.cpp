@@ -29,6 +29,22 @@ void require_size(const Image& image, const render::SurfaceGeometry& geometry, c
 // floored shading still reproduces the photo's radiance, so its brightness there is kept.
 constexpr double kShadingFloor = 0.05;
 
+// The 99th percentile of the photo's luminance over the surfaces (0 when none): the level of
+// its bright surfaces, which sets the scale of the noise floor and of the snapping's colours.
+float bright_surface_level(const Image& photo, const render::SurfaceGeometry& geometry) {
+  std::vector<float> levels;
+  for (int y = 0; y < photo.height(); ++y)
+    for (int x = 0; x < photo.width(); ++x) {
+      const float* p = photo.pixel(x, y);
+      const float level = 0.2126f * p[0] + 0.7152f * p[1] + 0.0722f * p[2];
+      if (geometry.surface.at(x, y, 0) > 0 && std::isfinite(level)) levels.push_back(level);
+    }
+  if (levels.empty()) return 0;
+  const auto at = levels.begin() + std::ptrdiff_t(0.99 * double(levels.size() - 1));
+  std::nth_element(levels.begin(), at, levels.end());
+  return std::max(0.0f, *at);
+}
+
 }  // namespace
 
 Image diffuse_shading(const render::SurfaceGeometry& geometry, const Lighting& lighting) {
@@ -130,18 +146,25 @@ Image photo_detail(const Image& photo, const Image& shading_in,
     throw Error(ErrorCode::invalid_argument, "photo_detail: the photo needs 3 channels");
   if (!(options.min_detail > 0 && options.max_detail >= options.min_detail))
     throw Error(ErrorCode::invalid_argument, "photo_detail: bad options (min/max detail)");
+  if (!(options.noise_floor >= 0) || options.border_px < 0)
+    throw Error(ErrorCode::invalid_argument, "photo_detail: bad options (noise floor, border)");
   const int w = photo.width(), h = photo.height();
   const Image shading = floored_shading(shading_in, geometry);
   constexpr float kFloorRadiance = 1e-5f;
   Image detail(w, h, 3);
   for (float& v : detail.pixels()) v = 1.0f;
+  auto luminance = [](const float* v) { return 0.2126f * v[0] + 0.7152f * v[1] + 0.0722f * v[2]; };
+
+  // The noise floor in the photo's units: a share of its bright surfaces' luminance (99th
+  // percentile), so that it means the same for a display-referred JPEG and an EXR.
+  const float noise = float(options.noise_floor) * bright_surface_level(photo, geometry);
 
   // Groups whose base is smoothed separately: the regions (label > 0; label 0 is one more
   // group), or all surfaces as one. Smoothing across a region's border would bleed the
   // neighbour's albedo into the base and leave a band of wrong D (a halo, speckle on thin gaps).
   cv::Mat group(h, w, CV_32S, cv::Scalar(-1));
   int groups = 0;
-  cv::Mat log_albedo(h, w, CV_32FC3, cv::Scalar::all(0));
+  cv::Mat log_albedo(h, w, CV_32F, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       if (!(geometry.surface.at(x, y, 0) > 0)) continue;
@@ -153,9 +176,11 @@ Image photo_detail(const Image& photo, const Image& shading_in,
                         : 0;
       group.at<int>(y, x) = g;
       groups = std::max(groups, g + 1);
-      auto& la = log_albedo.ptr<cv::Vec3f>(y)[x];
-      for (int c = 0; c < 3; ++c)
-        la[c] = std::log(std::max(photo.at(x, y, c), kFloorRadiance) / shading.at(x, y, c));
+      // Luminance only: a channel the photo barely records (green and blue of a red saucer)
+      // holds mostly JPEG and sensor noise, which a new colour would show as coloured grain.
+      log_albedo.at<float>(y, x) =
+          std::log((std::max(luminance(photo.pixel(x, y)), kFloorRadiance) + noise) /
+                   luminance(shading.pixel(x, y)));
     }
   const int radius = options.radius_px > 0
                          ? options.radius_px
@@ -166,36 +191,51 @@ Image photo_detail(const Image& photo, const Image& shading_in,
   // mean taken again. Otherwise a dark window pulls the wall's base down around it, and the
   // wall's D, hence the new material, glows in a halo the size of the filter.
   constexpr float kRobustLog = 0.5f;
-  cv::Mat base(h, w, CV_32FC3, cv::Scalar::all(0));
+  cv::Mat base(h, w, CV_32F, cv::Scalar(0));
   cv::Mat robust_weight(h, w, CV_32F, cv::Scalar(1));
   for (int pass = 0; pass < 3; ++pass) {
     for (int g = 0; g < groups; ++g)
       group_mean(
           log_albedo, group, g, radius,
-          [&](int x, int y, const float* b) {
-            for (int c = 0; c < 3; ++c) base.at<cv::Vec3f>(y, x)[c] = b[c];
-          },
+          [&](int x, int y, const float* b) { base.at<float>(y, x) = b[0]; },
           pass == 0 ? nullptr : &robust_weight);
     if (pass == 2) break;
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         if (group.at<int>(y, x) < 0) continue;
-        float r2 = 0;
-        for (int c = 0; c < 3; ++c) {
-          const float r = log_albedo.at<cv::Vec3f>(y, x)[c] - base.at<cv::Vec3f>(y, x)[c];
-          r2 += r * r / 3;
-        }
+        const float r = log_albedo.at<float>(y, x) - base.at<float>(y, x);
         // A floor keeps every pixel in its own mean (no empty windows).
         robust_weight.at<float>(y, x) =
-            std::max(1e-3f, std::exp(-r2 / (2 * kRobustLog * kRobustLog)));
+            std::max(1e-3f, std::exp(-r * r / (2 * kRobustLog * kRobustLog)));
       }
   }
+  // A pixel on a region's border is mostly a mix of the region and what lies beyond it (an
+  // antialiased ridge against the haze behind it): its D would be that mix's brightness over the
+  // region's base, a bright or dark rim in the new material. D fades to 1 over the border's
+  // pixels (distance to the nearest pixel of another group, the sky and unusable pixels
+  // included), the feather in apply_materials blending them with the photo instead.
+  cv::Mat inside(h, w, CV_8U, cv::Scalar(0)), border_distance;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int g = group.at<int>(y, x);
+      if (g < 0) continue;
+      bool same = true;
+      for (int dy = -1; dy <= 1 && same; ++dy)
+        for (int dx = -1; dx <= 1 && same; ++dx) {
+          const int nx = std::clamp(x + dx, 0, w - 1), ny = std::clamp(y + dy, 0, h - 1);
+          same = group.at<int>(ny, nx) == g;
+        }
+      inside.at<unsigned char>(y, x) = same ? 255 : 0;
+    }
+  cv::distanceTransform(inside, border_distance, cv::DIST_L2, 3);
   tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       if (group.at<int>(y, x) < 0) continue;
-      const auto& la = log_albedo.at<cv::Vec3f>(y, x);
-      const auto& b = base.at<cv::Vec3f>(y, x);
-      for (int c = 0; c < 3; ++c) detail.at(x, y, c) = std::exp(std::clamp(la[c] - b[c], lo, hi));
+      const float fade =
+          std::min(1.0f, (border_distance.at<float>(y, x) + 1) / float(options.border_px + 1));
+      const float d =
+          std::exp(fade * std::clamp(log_albedo.at<float>(y, x) - base.at<float>(y, x), lo, hi));
+      for (int c = 0; c < 3; ++c) detail.at(x, y, c) = d;
     }
   });
   return detail;
@@ -307,6 +347,108 @@ Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometr
   return out;
 }
 
+Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
+                            const render::SurfaceGeometry& geometry, int radius_px) {
+  require_size(region_labels, geometry, "region labels");
+  require_size(photo, geometry, "photo");
+  if (region_labels.channels() != 1)
+    throw Error(ErrorCode::invalid_argument, "region labels must have 1 channel");
+  if (photo.channels() < 3)
+    throw Error(ErrorCode::invalid_argument, "snap_regions_to_edges: the photo needs 3 channels");
+  if (radius_px <= 0) return region_labels;
+  const int w = photo.width(), h = photo.height();
+  // Colours compared display-encoded (gamma 1/2.2 of the value over the bright surfaces'
+  // level), closer to how different they look than linear values, for a JPEG or an EXR alike.
+  const float exposure = bright_surface_level(photo, geometry);
+  if (!(exposure > 0)) return region_labels;
+  cv::Mat guide(h, w, CV_32FC3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const float v = photo.at(x, y, c) / exposure;
+        guide.at<cv::Vec3f>(y, x)[c] =
+            std::pow(std::clamp(std::isfinite(v) ? v : 0.0f, 0.0f, 1.0f), 1 / 2.2f);
+      }
+  // Classes: the unlabelled surface (0) and each region; the sky is none (it stays sky).
+  int regions = 0;
+  for (float v : region_labels.pixels())
+    if (std::isfinite(v)) regions = std::max(regions, int(v));
+  const int classes = regions + 1;
+  cv::Mat label(h, w, CV_32S, cv::Scalar(-1));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (geometry.surface.at(x, y, 0) > 0) {
+        const float v = region_labels.at(x, y, 0);
+        label.at<int>(y, x) = std::isfinite(v) ? std::clamp(int(v), 0, regions) : 0;
+      }
+  // Trusted pixels: their whole (2 r + 1)^2 window is of their class (the sky counting as
+  // another). Each class's local colour: the mean and variance of its trusted pixels within 3 r.
+  const int r = radius_px, reach = 3 * radius_px;
+  const cv::Mat square = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1));
+  const cv::Size window(2 * reach + 1, 2 * reach + 1);
+  cv::Mat guide_squared;
+  cv::multiply(guide, guide, guide_squared);
+  std::vector<cv::Mat> sum(classes), sum_squares(classes), count(classes), trusted(classes);
+  for (int k = 0; k < classes; ++k) {
+    cv::Mat mask = (label == k) / 255;  // CV_8U 0 / 1
+    if (cv::countNonZero(mask) == 0) continue;
+    cv::erode(mask, trusted[k], square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    cv::Mat weight, weight3, colour, colour_squared;
+    trusted[k].convertTo(weight, CV_32F);
+    cv::cvtColor(weight, weight3, cv::COLOR_GRAY2BGR);
+    cv::multiply(weight3, guide, colour);
+    cv::multiply(weight3, guide_squared, colour_squared);
+    cv::boxFilter(weight, count[k], -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    cv::boxFilter(colour, sum[k], -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    cv::boxFilter(colour_squared, sum_squares[k], -1, window, cv::Point(-1, -1), false,
+                  cv::BORDER_CONSTANT);
+  }
+  // An untrusted pixel (near a border) takes the class whose local colour it is clearly closer
+  // to: squared distance to the class's mean over the class's variance (plus the noise of an
+  // 8-bit photo), under a quarter of its own class's. A sliver of the neighbour inside a region
+  // goes to the neighbour; where both sides look alike (no edge in the photo, or a texture
+  // whose spread covers both) the mask's own border stays.
+  constexpr float kClearlyCloser = 0.25f;
+  constexpr float kNoiseVariance = 0.02f * 0.02f;
+  // At least a full trusted window's worth of the search window (its part inside the image).
+  const float min_share =
+      float((2 * r + 1) * (2 * r + 1)) / float((2 * reach + 1) * (2 * reach + 1));
+  Image out = region_labels;
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const int own = label.at<int>(y, x);
+      if (own < 0 || trusted[own].at<unsigned char>(y, x)) continue;
+      const cv::Vec3f colour = guide.at<cv::Vec3f>(y, x);
+      const float min_count =
+          min_share * float((std::min(x + reach, w - 1) - std::max(x - reach, 0) + 1) *
+                            (std::min(y + reach, h - 1) - std::max(y - reach, 0) + 1));
+      auto distance = [&](int k) {
+        // A class seen in only a corner of the window has no reliable colour (a few pixels of
+        // one texture phase would look like an exact match).
+        const float n = count[k].empty() ? 0.0f : count[k].at<float>(y, x);
+        if (!(n >= min_count)) return INFINITY;
+        const cv::Vec3f mean = sum[k].at<cv::Vec3f>(y, x) / n;
+        const cv::Vec3f spread = sum_squares[k].at<cv::Vec3f>(y, x) / n - mean.mul(mean);
+        const cv::Vec3f d = colour - mean;
+        return d.dot(d) /
+               (std::max(0.0f, (spread[0] + spread[1] + spread[2]) / 3) + kNoiseVariance);
+      };
+      int best = own;
+      float best_distance = INFINITY;
+      for (int k = 0; k < classes; ++k) {
+        const float d = distance(k);
+        if (d < best_distance) best = k, best_distance = d;
+      }
+      // (Without enough trusted pixels of its own class nearby there is nothing to compare.)
+      const float own_distance = distance(own);
+      if (best != own && std::isfinite(own_distance) &&
+          best_distance < kClearlyCloser * own_distance)
+        out.at(x, y, 0) = float(best);
+    }
+  });
+  return out;
+}
+
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail, double feather_px) {
@@ -317,49 +459,65 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
   if (!(feather_px >= 0)) throw Error(ErrorCode::invalid_argument, "feather_px must be >= 0");
   const int w = photo.width(), h = photo.height();
   const int regions = int(materials.size());
-  // Per region: its pixels (surface only) and, for feathering, the distance to its border.
+  // Per region: its pixels (surface only).
   std::vector<std::vector<std::int32_t>> pixels(regions);
-  cv::Mat label_mat(h, w, CV_32S, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const float v = region_labels.at(x, y, 0);
       const int k = v >= 1 && v <= float(regions) ? int(v) : 0;
       if (k == 0 || !(geometry.surface.at(x, y, 0) > 0)) continue;
-      label_mat.at<int>(y, x) = k;
       pixels[k - 1].push_back(y * w + x);
     }
-  Image rendered = photo;
-  for (int k = 0; k < regions; ++k)
-    render_with_detail(geometry, lighting, shading, detail, materials[k], pixels[k], rendered);
-  // Distance (px) from each region pixel to the nearest pixel not of its own region, sky
-  // included (a region's sky pixels stay the photo's, so its surface is feathered into them as
-  // into any other border): a pixel is "inside" when its 4-neighbours share its label (image
-  // borders count as inside).
-  cv::Mat same(h, w, CV_8U, cv::Scalar(0));
+  Image out = photo;
+  if (!(feather_px > 0)) {
+    for (int k = 0; k < regions; ++k)
+      render_with_detail(geometry, lighting, shading, detail, materials[k], pixels[k], out);
+    return out;
+  }
+  // Soft edges: each region's weight is its indicator blurred by a Gaussian of sigma feather_px,
+  // the photo's the blurred indicator of everything else (unlabelled surfaces and the sky), so the
+  // weights sum to 1 at every pixel: between two regions the border blends their two renderings
+  // (a ramp into the photo on each side would leave a line of the old material between them),
+  // and a ragged border's 1-pixel teeth take their neighbourhood's majority instead of staying
+  // specks. Each material is rendered where its weight reaches into other regions; outside the
+  // regions nothing changes.
+  const int reach = std::max(1, int(std::ceil(3 * feather_px)));
+  const cv::Size kernel(2 * reach + 1, 2 * reach + 1);
+  cv::Mat indicator(h, w, CV_32F), weight;
+  cv::Mat accumulated(h, w, CV_32FC3, cv::Scalar::all(0)),
+      region_weight(h, w, CV_32F, cv::Scalar(0));
+  Image rendered(w, h, 3);
+  std::vector<std::int32_t> band;
+  for (int k = 1; k <= regions; ++k) {
+    if (pixels[k - 1].empty()) continue;
+    indicator.setTo(0);
+    for (std::int32_t index : pixels[k - 1]) indicator.at<float>(index / w, index % w) = 1.0f;
+    cv::GaussianBlur(indicator, weight, kernel, feather_px, feather_px, cv::BORDER_REPLICATE);
+    band.clear();
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (weight.at<float>(y, x) > 1e-4f && geometry.surface.at(x, y, 0) > 0)
+          band.push_back(y * w + x);
+    render_with_detail(geometry, lighting, shading, detail, materials[k - 1], band, rendered);
+    for (std::int32_t index : band) {
+      const int x = index % w, y = index / w;
+      const float wk = weight.at<float>(y, x);
+      region_weight.at<float>(y, x) += wk;
+      for (int c = 0; c < 3; ++c) accumulated.at<cv::Vec3f>(y, x)[c] += wk * rendered.at(x, y, c);
+    }
+  }
+  // Pixels outside the regions and the sky stay the photo's; in a region the photo fills what
+  // the regions' weights leave (a ramp inside its border with the photo).
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const int k = label_mat.at<int>(y, x);
-      same.at<unsigned char>(y, x) = k > 0 ? 255 : 0;
-      if (k == 0) continue;
-      const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
-      for (int i = 0; i < 4; ++i) {
-        if (nx[i] < 0 || ny[i] < 0 || nx[i] >= w || ny[i] >= h) continue;
-        if (label_mat.at<int>(ny[i], nx[i]) != k) same.at<unsigned char>(y, x) = 0;
-      }
-    }
-  cv::Mat distance;
-  cv::distanceTransform(same, distance, cv::DIST_L2, 3);
-  Image out = photo;
-  for (int k = 0; k < regions; ++k)
-    for (std::int32_t index : pixels[k]) {
-      const int x = index % w, y = index / w;
-      // Border pixels (distance 0) get half weight, full weight from feather_px inwards.
-      const float alpha =
-          feather_px > 0
-              ? std::min(1.0f, (distance.at<float>(y, x) + 0.5f) / float(feather_px + 0.5))
-              : 1.0f;
+      const float total = region_weight.at<float>(y, x);
+      const float v = region_labels.at(x, y, 0);
+      if (!(total > 0) || !(v >= 1 && v <= float(regions)) || !(geometry.surface.at(x, y, 0) > 0))
+        continue;
+      const float wr = std::min(1.0f, total);
       for (int c = 0; c < 3; ++c)
-        out.at(x, y, c) = alpha * rendered.at(x, y, c) + (1 - alpha) * photo.at(x, y, c);
+        out.at(x, y, c) =
+            wr / total * accumulated.at<cv::Vec3f>(y, x)[c] + (1 - wr) * photo.at(x, y, c);
     }
   return out;
 }

@@ -5,15 +5,20 @@
 //   photo I = A * S + specular,  S = shading of a unit-albedo Lambert surface under the photo's
 //   lights (sun with shadows, sky, lamps; render/surface_shading.h), so A = I / S is the photo's
 //   apparent albedo, with everything the lighting model does not explain folded into it.
-//   A is split in log space by a robust local mean over each region's own pixels (a normalised
-//   tent filter, re-weighted twice against pixels far from it, so a window does not pull a
-//   wall's base down into a halo): log A = log A_smooth + log D. A_smooth is the material's base colour, which the new
-//   material replaces; D is the texture and the shading the model misses (mortar lines, grain,
-//   leaves, small unmodelled shadows), which is kept:
+//   A's luminance (plus a noise floor) is split in log space by a robust local mean over each
+//   region's own pixels (a normalised tent filter, re-weighted twice against pixels far from it,
+//   so a window does not pull a wall's base down into a halo): log A = log A_smooth + log D.
+//   A_smooth is the material's base, which the new material replaces; D is the texture and the
+//   shading the model misses (mortar lines, grain, leaves, small unmodelled shadows), which is
+//   kept, in luminance only (one value for the three channels):
 //   new = D * diffuse_albedo * S + min(1, Y(D)) * specular(new material),
-//   so the diffuse part is the photo's radiance times diffuse_albedo / A_smooth: its texture and
-//   shading kept, only the base colour changed. (An edge-aware split, tried first, put real
-//   photos' strong texture into A_smooth, where it was replaced by a flat pastel colour.)
+//   so the diffuse part has the photo's texture and small-scale shading in the new colour. (Per
+//   channel, tried first, a channel the photo barely records, e.g. the green and blue of a red
+//   saucer, put its JPEG and sensor noise into D as coloured grain; and colour variation inside
+//   a region stayed relative to the old colour.) The noise floor keeps D near 1 where the photo
+//   is too dark to record texture (a black silhouette): there D is the photo's noise. (An
+//   edge-aware split, tried first, put real photos' strong texture into A_smooth, where it was
+//   replaced by a flat pastel colour.)
 // Limits: the photo's own highlights are part of A (a glossy original leaves bright blobs in D
 // when they are smaller than the filter radius, and in A_smooth otherwise, where they are
 // replaced); large-scale errors of the lighting estimate (a wrong sun direction, shadows of things
@@ -38,6 +43,13 @@ struct DetailOptions {
   const Image* region_labels = nullptr;
   float min_detail = 1.0f / 32;  ///< D is clamped to [min_detail, max_detail] (a safety only:
   float max_detail = 32.0f;      ///< with the shading floor D x S reproduces the photo)
+  /// Added to the photo's luminance before the split, as a share of its surfaces' 99th
+  /// percentile luminance (0.003: about code 10 of 255 of an sRGB photo exposed to white), so
+  /// that D is not the relative noise of near-black pixels. 0: none.
+  double noise_floor = 0.003;
+  /// D fades to 1 over this many pixels at each group's border (the border pixel itself gets
+  /// 1 / (border_px + 1) of its log D): border pixels mix the region with its neighbour. 0: none.
+  int border_px = 2;
 };
 
 /// Unit-albedo diffuse shading S (3 channels, the geometry's size; 0 where there is no surface):
@@ -67,21 +79,37 @@ render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry
 Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometry& geometry,
                         int gap_px = 2);
 
+/// Region labels whose borders follow the photo's edges. Classes: the unlabelled surface (0) and
+/// each region; a pixel is trusted when its whole (2 radius_px + 1)^2 window is of its class.
+/// An untrusted surface pixel (near a border) moves to the class whose local colour (mean and
+/// variance of its trusted pixels within 3 radius_px, display-encoded; at least a full trusted
+/// window's worth of them) is clearly closer (squared
+/// distance over the variance under a quarter of its own class's). A mask painted or segmented a
+/// few pixels off an object's edge leaves slivers of the neighbour inside a region: their D,
+/// measured against the region's base, would show in the new material as a darker or lighter line
+/// where the photo has a plain edge. Where the photo shows no edge, or a texture spans both sides,
+/// the mask's border stays. Sky pixels keep their label (they stay the photo's whatever it is).
+/// radius_px 0: unchanged.
+Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
+                            const render::SurfaceGeometry& geometry, int radius_px = 4);
+
 /// The detail layer D of `photo` (scene-linear RGB, the geometry's size) given its diffuse
-/// shading S (see the file comment). 3 channels; 1 where there is no surface or S is ~0.
+/// shading S (see the file comment). 3 equal channels; 1 where there is no surface or S is ~0.
 /// Throws mr::Error(size_mismatch) for images of different sizes.
 Image photo_detail(const Image& photo, const Image& shading,
                    const render::SurfaceGeometry& geometry, const DetailOptions& options = {});
 
 /// `photo` with each region k (labels(x, y) = k in 1..materials.size(), surface pixels only)
 /// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular, or without `detail`
-/// (null) the plain rendering. Composited with a linear ramp of `feather_px` pixels inside each
-/// region's border, sky pixels counting as outside (0: hard edges); pixels outside the regions
-/// and sky pixels are the photo's. With `detail`, pass floored_shading().
+/// (null) the plain rendering. Composited with soft weights, each region's indicator blurred by
+/// a Gaussian of sigma `feather_px` (0: hard edges), the photo filling the rest, sky pixels
+/// counting as outside: two regions' border blends their renderings, a region's border with the
+/// photo ramps inside the region; pixels outside the regions and sky pixels are the photo's.
+/// With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
-                      double feather_px = 1.5);
+                      double feather_px = 1.0);
 
 /// Renders what apply_materials puts into region pixels, for one material at the listed pixels
 /// (indices y * width + x) into `out` (3 channels, the geometry's size; other pixels untouched).

@@ -1,0 +1,112 @@
+#!/usr/bin/python3
+"""Tests of the material transfer's gallery measures (gallery/material_measures.py) on images whose
+answer is known, and of scripts/gallery_material end to end on one tuning photo.
+
+    gallery_material_measures_test.py [path/to/mr]
+
+Without the mr binary only the numpy cases run. Exit 0 when every check passes; each failed check
+prints one line.
+"""
+
+import csv
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "gallery"))
+import material_measures as MM  # noqa: E402
+
+W, H = 160, 120
+failures = []
+
+
+def check(cond, what):
+    print(("ok    " if cond else "FAIL  ") + what)
+    if not cond:
+        failures.append(what)
+
+
+def textured(seed, strength=0.3):
+    """A grey photo with a smooth multi-scale texture (log contrast ~strength)."""
+    rng = np.random.default_rng(seed)
+    t = np.zeros((H, W))
+    for scale in (2, 4, 8):
+        small = rng.normal(size=(H // scale + 1, W // scale + 1))
+        t += np.kron(small, np.ones((scale, scale)))[:H, :W]
+    t = np.exp(strength * t / t.std())
+    return np.repeat((0.2 * t)[..., None], 3, axis=2).astype(np.float32)
+
+
+def main():
+    labels = np.zeros((H, W), int)
+    labels[:, 20:80] = 1
+    labels[:, 80:140] = 2
+    photo = textured(1)
+
+    # Speckle: a new colour on both regions, clean, is no speckle (its steps at the regions'
+    # borders lie between their neighbours), whether or not the photo has an edge there.
+    result = photo.copy()
+    result[labels == 1] *= np.array([1.5, 0.6, 0.4], np.float32)
+    result[labels == 2] *= np.array([0.4, 0.7, 1.6], np.float32)
+    frac, band, _ = MM.speckle(photo, result, labels)
+    check(band > 6 * H and frac == 0, f"clean re-colouring: speckle {100 * frac:.3f} % of {band} band pixels is 0")
+    # A 1-pixel dark line along the border between the regions (a sliver of an old dark
+    # material) and isolated bright specks along the outer border are counted.
+    lined = result.copy()
+    lined[:, 80] *= 0.3
+    for y in range(0, H, 4):
+        lined[y, 139] *= 3.0
+    frac, band, spk = MM.speckle(photo, lined, labels)
+    expected = H + H // 4
+    # Every line pixel and speck; a few of their neighbours on a step of the texture too (the
+    # line makes them local extremes).
+    check(spk[:, 80].all() and spk[::4, 139].all() and spk.sum() < 1.2 * expected,
+          f"a dark line and {H // 4} specks: {int(spk.sum())} speckle pixels, all {expected} of them found")
+    # Where the photo itself has the line, it is not created by the transfer.
+    photo_lined = photo.copy()
+    photo_lined[:, 80] *= 0.3
+    frac, _, _ = MM.speckle(photo_lined, np.where((labels > 0)[..., None], lined, photo_lined), labels)
+    check(frac < 0.05, f"a line the photo has: speckle {100 * frac:.2f} % (only the specks)")
+    # Texture: kept exactly (a colour gain) gives correlation 1 and ratio 1; flattened halves the
+    # ratio; replaced by another texture drops the correlation.
+    tex = MM.texture(photo, result, labels)
+    check(set(tex) == {1, 2} and all(abs(c - 1) < 1e-4 and abs(r - 1) < 1e-3 for _, c, r in tex.values()),
+          f"texture under a colour gain: {tex}")
+    flattened = np.where((labels > 0)[..., None], 0.3 * photo ** 0.5, photo)
+    tex = MM.texture(photo, flattened, labels)
+    check(all(abs(r - 0.5) < 0.02 and c > 0.99 for _, c, r in tex.values()),
+          f"texture flattened (photo^0.5): ratios {[round(r, 3) for _, _, r in tex.values()]} ~0.5")
+    other = np.where((labels > 0)[..., None], textured(2), photo)
+    tex = MM.texture(photo, other, labels)
+    check(all(abs(c) < 0.2 for _, c, _ in tex.values()),
+          f"another texture: correlations {[round(c, 3) for _, c, _ in tex.values()]} ~0")
+
+    # Colour change: 0 for the photo itself, large for the re-colouring.
+    check(MM.colour_change(photo, photo, labels) == 0, "colour change of the photo itself is 0")
+    check(MM.colour_change(photo, result, labels) > 10, "colour change of a strong re-colouring > 10")
+
+    # The script end to end on one tuning photo (plant, 500 x 333; its sample is rocket).
+    if len(sys.argv) > 1:
+        with tempfile.TemporaryDirectory(prefix="gallery_material_") as tmp:
+            p = subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "gallery_material"), "--half", "tune",
+                                "--photos", "plant", "--mr", sys.argv[1], "--out", tmp],
+                               capture_output=True, text=True)
+            check(p.returncode == 0, "scripts/gallery_material ran: " + (p.stderr.strip().splitlines() or [""])[-1])
+            rows = list(csv.DictReader(open(os.path.join(tmp, "results.csv")))) if p.returncode == 0 else []
+            row = rows[0] if rows else {}
+            check(row.get("status") == "ok" and row.get("regions", "0") != "0",
+                  f"plant: status {row.get('status')!r}, {row.get('regions')} regions ({row.get('message', '')})")
+            check(row.get("speckle_pct", "") != "" and float(row.get("delta_e") or 0) > 5,
+                  f"plant: measured (speckle {row.get('speckle_pct')} %, colour change {row.get('delta_e')})")
+            check(os.path.exists(os.path.join(tmp, "contact_sheet_01.png")), "contact sheet written")
+
+    print(f"{len(failures)} failed" if failures else "all passed")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
