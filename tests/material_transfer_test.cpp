@@ -499,6 +499,29 @@ TEST(MaterialRealPhoto, LooseFitsAreKeptWithAWarningInsteadOfFailing) {
   EXPECT_EQ(r.warnings, c.warnings);
 }
 
+TEST(MaterialRealPhoto, AFitBrighterThanItsLightIsScaledToAPhysicalReflectance) {
+  // The glossy sphere's photo 3 x too bright for its light (an exposure the default light
+  // guesses wrong): the fits saturate (diffuse and F0 at 1), a material that would blow any
+  // region out to white. Every candidate reflects at most 1.2 (max diffuse + F0), its hue kept,
+  // and the notes say which were scaled.
+  Synthetic sample = glossy_sphere();
+  for (float& v : sample.photo.pixels()) v *= 3.0f;
+  const MaterialCandidates c = extract_material_candidates(shaded(sample));
+  ASSERT_FALSE(c.candidates.empty());
+  bool scaled_note = false;
+  for (const std::string& n : c.notes)
+    scaled_note = scaled_note || n.find("fit reflected") != std::string::npos;
+  EXPECT_TRUE(scaled_note);
+  for (const MaterialCandidate& m : c.candidates) {
+    const Rgb& d = m.material.diffuse_albedo;
+    EXPECT_LE(std::max({d[0], d[1], d[2]}) + m.material.specular_albedo, 1.2f + 1e-5f);
+  }
+  // The sphere's orange stays orange (red > green > blue) in the largest candidate.
+  const Rgb& d = c.candidates[0].material.diffuse_albedo;
+  EXPECT_GT(d[0], d[1]);
+  EXPECT_GT(d[1], d[2]);
+}
+
 TEST(MaterialRealPhoto, NothingUsableStillGivesAClearError) {
   // A 14 x 12 sample: no segment reaches the 256 pixels a fit needs. The message says what was
   // tried, why nothing fits and what to do.

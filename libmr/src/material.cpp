@@ -59,6 +59,10 @@ constexpr int kFitPixels = 1000;
 // small shadows and an approximate light all count as misfit), the segments fitting within this
 // factor of the best fit are kept, with a warning, instead of failing.
 constexpr double kLooseFitFactor = 1.5;
+// Bound on a candidate's reflectance, max(diffuse) + F0: 1 (energy conservation of the additive
+// Lambert + GGX model at normal incidence) with a margin for the GGX lobe's own energy loss at
+// high roughness and for fit noise; the project's glossy test material has 0.6 + 0.5.
+constexpr double kMaxReflectance = 1.2;
 // Pixel budget of candidate extraction: a larger sample is reduced by an integer factor (the
 // nearest surface per block for the distance map, the block mean for the photo) before its
 // geometry is traced, segmented and fitted. The fits use kFitPixels per segment and the
@@ -396,7 +400,22 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
   });
   std::vector<int> owner(seg.count, -1);  // segment -> the segment whose candidate it is shown by
   for (int s : order) {
-    const Material& m = fits[s].fit.material;
+    Material m = fits[s].fit.material;
+    // A fit that reflects more than the light it receives (max diffuse + F0 above
+    // kMaxReflectance) is a segment brighter than any surface under the light assumed for the
+    // sample (a guessed exposure: its sky, a lamp, a white coat in sun): rendered as is, it blows
+    // the target's regions out to white. Scaled down to the bound, hue and gloss kept.
+    const double reflectance =
+        std::max({m.diffuse_albedo[0], m.diffuse_albedo[1], m.diffuse_albedo[2]}) +
+        m.specular_albedo;
+    std::string scaled;
+    if (reflectance > kMaxReflectance) {
+      const float k = float(kMaxReflectance / reflectance);
+      for (float& v : m.diffuse_albedo) v *= k;
+      m.specular_albedo *= k;
+      scaled = format(" (fit reflected %.2f of its light: diffuse and specular x %.2f)",
+                      reflectance, double(k));
+    }
     int duplicate_of = -1;
     for (const MaterialCandidate& c : out.candidates)
       if (parameter_distance(c.material, m) < kDuplicateMaterialDistance) {
@@ -422,9 +441,9 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
     c.pixel_count = fits[s].fit.pixels_used;
     c.relative_rms = fits[s].fit.relative_rms;
     out.candidates.push_back(c);
-    out.notes.push_back(format("candidate %zu = segment %d (%zu px): %s, relative RMS %.3f",
+    out.notes.push_back(format("candidate %zu = segment %d (%zu px): %s, relative RMS %.3f%s",
                                out.candidates.size() - 1, s, segment_pixels[s].size(),
-                               describe(m).c_str(), c.relative_rms));
+                               describe(m).c_str(), c.relative_rms, scaled.c_str()));
   }
   // Labels at the sample's own size (a reduced sample's blocks map back to their pixels; pixels
   // that are not usable at full size stay -1).
