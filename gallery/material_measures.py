@@ -21,10 +21,15 @@ median speckle the C++ test's definition (MaterialRealPhoto.NoSpeckleAlongRegion
              the photo), in the same band. It also counts step pixels where a ragged border's
              corner makes the 3 x 3 median the other side's. Reported, no bar.
 texture      per region, over its pixels at least TEXTURE_INSET_PX (6) from its border: the
-             correlation of the high-pass of log luminance (value - 7 x 7 box mean) between the
-             photo and the result (bar >= TARGET_TEXTURE_CORRELATION, 0.9), and the ratio of their
+             correlation of the high-pass of log(luminance + TEXTURE_NOISE_FLOOR) (value - 7 x 7
+             box mean) between the photo and the result (bar >= TARGET_TEXTURE_CORRELATION, 0.9), and the ratio of their
              standard deviations (the result's over the photo's; bar > TARGET_CONTRAST_RATIO, 0.5:
-             not flattened). Regions with fewer than 500 such pixels are skipped.
+             not flattened). Regions with fewer than 500 such pixels are skipped. The floor,
+             0.003 (linear, white = 1: sRGB code 10 of 255), is the 8-bit photo's coding noise
+             (one code is 10 % of the value there, JPEG blocks more): without it a near-black
+             region's "texture" is its JPEG blocks and noise, and a result that shows them (as
+             grain) scores better than a clean one. The synthetic C++ tests have no floor (no
+             noise). Applied to photo and result alike.
 colour change the mean CIELAB Delta E*ab (D65, both images scaled by the same exposure, the photo's
              99th percentile luminance to 1) between photo and result over the regions: shows that
              the transfer changed something (a result equal to the photo passes the other two).
@@ -38,6 +43,7 @@ SPECKLE_PHOTO_CALM = 0.1
 TEXTURE_INSET_PX = 6
 TEXTURE_WINDOW_PX = 7
 TEXTURE_MIN_PIXELS = 500
+TEXTURE_NOISE_FLOOR = 0.003
 
 TARGET_SPECKLE = 0.005
 TARGET_TEXTURE_CORRELATION = 0.9
@@ -134,8 +140,8 @@ def luminance(img):
     return 0.2126 * img[..., 0] + 0.7152 * img[..., 1] + 0.0722 * img[..., 2]
 
 
-def high_pass(img):
-    lg = np.log(np.maximum(luminance(img), 1e-6)).astype(np.float32)
+def high_pass(img, floor=TEXTURE_NOISE_FLOOR):
+    lg = np.log(np.maximum(luminance(img), 0) + max(floor, 1e-6)).astype(np.float32)
     return lg - _box_mean(lg, TEXTURE_WINDOW_PX // 2)
 
 

@@ -71,19 +71,28 @@ def main():
     photo_lined[:, 80] *= 0.3
     frac, _, _ = MM.speckle(photo_lined, np.where((labels > 0)[..., None], lined, photo_lined), labels)
     check(frac < 0.05, f"a line the photo has: speckle {100 * frac:.2f} % (only the specks)")
-    # Texture: kept exactly (a colour gain) gives correlation 1 and ratio 1; flattened halves the
+    # Texture: kept exactly (a colour gain) gives correlation 1 and ratio 1 (within 1 %: the noise
+    # floor, 0.003, is not scaled by the gain; the photo's level is ~0.2); flattened halves the
     # ratio; replaced by another texture drops the correlation.
     tex = MM.texture(photo, result, labels)
-    check(set(tex) == {1, 2} and all(abs(c - 1) < 1e-4 and abs(r - 1) < 1e-3 for _, c, r in tex.values()),
+    check(set(tex) == {1, 2} and all(abs(c - 1) < 1e-4 and abs(r - 1) < 0.01 for _, c, r in tex.values()),
           f"texture under a colour gain: {tex}")
     flattened = np.where((labels > 0)[..., None], 0.3 * photo ** 0.5, photo)
     tex = MM.texture(photo, flattened, labels)
-    check(all(abs(r - 0.5) < 0.02 and c > 0.99 for _, c, r in tex.values()),
+    check(all(abs(r - 0.5) < 0.03 and c > 0.99 for _, c, r in tex.values()),
           f"texture flattened (photo^0.5): ratios {[round(r, 3) for _, _, r in tex.values()]} ~0.5")
     other = np.where((labels > 0)[..., None], textured(2), photo)
     tex = MM.texture(photo, other, labels)
     check(all(abs(c) < 0.2 for _, c, _ in tex.values()),
           f"another texture: correlations {[round(c, 3) for _, c, _ in tex.values()]} ~0")
+
+    # A near-black region (level 0.001, 8-bit-like noise of +-50 %): with the floor its high-pass
+    # is a fraction of the noise's, so a clean result of it is not scored as flattened.
+    rng = np.random.default_rng(3)
+    dark = np.full((H, W, 3), 0.001, np.float32) * rng.uniform(0.5, 1.5, (H, W, 1)).astype(np.float32)
+    raw = MM.high_pass(dark, floor=0)[labels == 1].std()
+    floored = MM.high_pass(dark)[labels == 1].std()
+    check(floored < 0.3 * raw, f"near-black noise: high-pass std {floored:.3f} with the floor, {raw:.3f} without")
 
     # Colour change: 0 for the photo itself, large for the re-colouring.
     check(MM.colour_change(photo, photo, labels) == 0, "colour change of the photo itself is 0")

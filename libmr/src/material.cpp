@@ -399,15 +399,38 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
     return segment_pixels[a].size() > segment_pixels[b].size();
   });
   std::vector<int> owner(seg.count, -1);  // segment -> the segment whose candidate it is shown by
+  // A fit that reflects more than the light it receives (max diffuse + F0 above
+  // kMaxReflectance) is a segment brighter than any surface under the light assumed for the
+  // sample: rendered as is, it blows the target's regions out to white. When the typical fit
+  // does (the median of the kept ones), the light was guessed too dim: it is taken brighter by
+  // the median's excess, every fit darker by as much, and the sample's light level with it (so
+  // the style statistics, normalised by it, are unchanged). A fit still above the bound after
+  // that (the sample's sky, a lamp, a white coat in sun) is scaled down to it, hue and gloss kept.
+  auto reflectance_of = [](const Material& m) {
+    return std::max({m.diffuse_albedo[0], m.diffuse_albedo[1], m.diffuse_albedo[2]}) +
+           double(m.specular_albedo);
+  };
+  double exposure = 1;
+  if (!order.empty()) {
+    std::vector<double> reflectances;
+    for (int s : order) reflectances.push_back(reflectance_of(fits[s].fit.material));
+    std::nth_element(reflectances.begin(), reflectances.begin() + reflectances.size() / 2,
+                     reflectances.end());
+    const double median = reflectances[reflectances.size() / 2];
+    if (median > kMaxReflectance) {
+      exposure = kMaxReflectance / median;
+      if (light_level_out) *light_level_out /= exposure;
+      out.notes.push_back(format(
+          "exposure: the sample's fits reflect a median %.2f of its light (more than %.1f): its "
+          "light taken %.2f x brighter, the fits %.2f x darker",
+          median, kMaxReflectance, 1 / exposure, exposure));
+    }
+  }
   for (int s : order) {
     Material m = fits[s].fit.material;
-    // A fit that reflects more than the light it receives (max diffuse + F0 above
-    // kMaxReflectance) is a segment brighter than any surface under the light assumed for the
-    // sample (a guessed exposure: its sky, a lamp, a white coat in sun): rendered as is, it blows
-    // the target's regions out to white. Scaled down to the bound, hue and gloss kept.
-    const double reflectance =
-        std::max({m.diffuse_albedo[0], m.diffuse_albedo[1], m.diffuse_albedo[2]}) +
-        m.specular_albedo;
+    for (float& v : m.diffuse_albedo) v *= float(exposure);
+    m.specular_albedo *= float(exposure);
+    const double reflectance = reflectance_of(m);
     std::string scaled;
     if (reflectance > kMaxReflectance) {
       const float k = float(kMaxReflectance / reflectance);
@@ -718,11 +741,25 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
       result.notes.push_back(
           format("style distance of the rendered regions to the sample: %.4f (objective %.4f)",
                  photo::style_distance(sample_stats, after), result.objective));
-    else
+    else {
+      const double distance_before = photo::style_distance(sample_stats, before);
+      const double distance_after = photo::style_distance(sample_stats, after);
       result.notes.push_back(format(
           "style distance of the regions to the sample: before %.4f, after %.4f (objective %.4f)",
-          photo::style_distance(sample_stats, before), photo::style_distance(sample_stats, after),
-          result.objective));
+          distance_before, distance_after, result.objective));
+      // The search picks the best of the candidates; with few and loose ones (a sample that is
+      // mostly sky) the best can still move the regions away from the sample's look.
+      if (distance_after > distance_before) {
+        const std::string warning = format(
+            "warning: the result is further from the sample's look than the photo was (style "
+            "distance %.2f -> %.2f): none of the %zu candidate materials suits these regions "
+            "(use a sample with larger surfaces of the wanted material, or give its depth and "
+            "light)",
+            distance_before, distance_after, candidates.size());
+        result.warnings.push_back(warning);
+        result.notes.push_back(warning);
+      }
+    }
     result.notes.push_back(format(
         "transfer %.1f s: target geometry (%dx%d, sky and sun traced) %.1f s, detail layer %.1f s, "
         "statistics and search %.1f s",
