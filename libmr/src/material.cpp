@@ -432,7 +432,7 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
     m.specular_albedo *= float(exposure);
     const double reflectance = reflectance_of(m);
     std::string scaled;
-    if (reflectance > kMaxReflectance) {
+    if (reflectance > kMaxReflectance * (1 + 1e-6)) {  // (not the exposure's own rounding)
       const float k = float(kMaxReflectance / reflectance);
       for (float& v : m.diffuse_albedo) v *= k;
       m.specular_albedo *= k;
