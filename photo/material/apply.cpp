@@ -479,8 +479,8 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
   // weights sum to 1 at every pixel: between two regions the border blends their two renderings
   // (a ramp into the photo on each side would leave a line of the old material between them),
   // and a ragged border's 1-pixel teeth take their neighbourhood's majority instead of staying
-  // specks. Each material is rendered where its weight reaches into other regions; outside the
-  // regions nothing changes.
+  // specks. Each material is rendered where its weight reaches into the other regions; outside
+  // the regions nothing changes.
   const int reach = std::max(1, int(std::ceil(3 * feather_px)));
   const cv::Size kernel(2 * reach + 1, 2 * reach + 1);
   cv::Mat indicator(h, w, CV_32F), weight;
@@ -493,11 +493,14 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
     indicator.setTo(0);
     for (std::int32_t index : pixels[k - 1]) indicator.at<float>(index / w, index % w) = 1.0f;
     cv::GaussianBlur(indicator, weight, kernel, feather_px, feather_px, cv::BORDER_REPLICATE);
-    band.clear();
+    band.clear();  // the region's pixels and its neighbours' within the blur's reach
     for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x)
-        if (weight.at<float>(y, x) > 1e-4f && geometry.surface.at(x, y, 0) > 0)
+      for (int x = 0; x < w; ++x) {
+        const float v = region_labels.at(x, y, 0);
+        if (weight.at<float>(y, x) > 1e-4f && v >= 1 && v <= float(regions) &&
+            geometry.surface.at(x, y, 0) > 0)
           band.push_back(y * w + x);
+      }
     render_with_detail(geometry, lighting, shading, detail, materials[k - 1], band, rendered);
     for (std::int32_t index : band) {
       const int x = index % w, y = index / w;
