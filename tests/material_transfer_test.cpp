@@ -937,6 +937,36 @@ TEST(MaterialApply, TwoRegionsBorderBlendsTheirRenderingsNotThePhoto) {
   }
 }
 
+TEST(MaterialApply, AnObjectsEdgePixelOutsideTheRegionTakesTheNewColour) {
+  // A dark object (albedo 0.05, region 1, x < 80) on a light background (0.8); column x = 80,
+  // outside the region, is the object's antialiased edge (half and half). Re-coloured light grey,
+  // the edge column kept as it was would be a dark line between two lighter sides; decontaminated
+  // (its object half replaced by the new colour) it lies between them. One column further out,
+  // with no region pixel beside it, nothing changes.
+  GroundScene t = untextured_ground();
+  Image photo = t.shading;
+  Image labels(160, 120, 1);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const float albedo = x < 80 ? 0.05f : x == 80 ? 0.425f : 0.8f;
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo * t.shading.at(x, y, c);
+      labels.at(x, y, 0) = x < 80 ? 1.0f : 0.0f;
+    }
+  const std::vector<Material> grey{{{0.6f, 0.6f, 0.6f}, 0.0f, 1.0f}};
+  const Image out =
+      photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels, grey, nullptr);
+  int rows = 0;
+  for (int y = 20; y < 100; ++y) {
+    if (!(t.g.surface.at(80, y, 0) > 0)) continue;
+    ++rows;
+    const float inside = out.at(79, y, 1), edge = out.at(80, y, 1), beyond = out.at(81, y, 1);
+    EXPECT_GT(edge, 0.95f * std::min(inside, beyond)) << y;  // no dark line
+    EXPECT_GT(edge, 1.3f * photo.at(80, y, 1)) << y;         // the object's half re-coloured
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(out.at(82, y, c), photo.at(82, y, c)) << y;
+  }
+  EXPECT_GT(rows, 40);
+}
+
 // Progress (mr/cancel.h): the steps in order, the fits forward to their count, the same
 // result as without a token; a callback that cancels during the fits stops the transfer.
 TEST(MaterialTransfer, ReportsItsStepsAndCanBeCancelledFromTheCallback) {

@@ -45,6 +45,59 @@ float bright_surface_level(const Image& photo, const render::SurfaceGeometry& ge
   return std::max(0.0f, *at);
 }
 
+// A pixel just outside a region (unlabelled or sky) on the object's edge is a mix of the
+// object and what lies behind it (antialiasing, blur): kept as it is, the old object's colour in it
+// shows as a dark or bright line along the new material (a dark outline between a re-coloured
+// light shirt and the sand). Its share alpha of the object is estimated from the colour line
+// between the object's old colour F (the mean of its region neighbours in the photo) and the
+// background B (the mean of its outside neighbours): alpha = (P - B).(F - B) / |F - B|^2, clamped
+// to [0, 1]; the pixel becomes P + alpha (F_new - F), F_new the neighbours' new colour. Where F
+// and B differ by less than a third of the brighter (no edge to read a mix from: a texture's
+// +-15 % is not one) the pixel stays as it is.
+constexpr double kMinEdgeContrast = 1.0 / 3;
+void decontaminate_outer_border(const Image& photo, const render::SurfaceGeometry& geometry,
+                                const Image& region_labels, int regions, Image& out) {
+  const int w = photo.width(), h = photo.height();
+  auto region_at = [&](int x, int y) {
+    const float v = region_labels.at(x, y, 0);
+    return v >= 1 && v <= float(regions) && geometry.surface.at(x, y, 0) > 0;
+  };
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      if (region_at(x, y)) continue;
+      double f_old[3] = {0, 0, 0}, f_new[3] = {0, 0, 0}, back[3] = {0, 0, 0};
+      int in = 0, outside = 0;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int nx = x + dx, ny = y + dy;
+          if ((dx == 0 && dy == 0) || nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+          if (region_at(nx, ny)) {
+            for (int c = 0; c < 3; ++c)
+              f_old[c] += photo.at(nx, ny, c), f_new[c] += out.at(nx, ny, c);
+            ++in;
+          } else {
+            for (int c = 0; c < 3; ++c) back[c] += photo.at(nx, ny, c);
+            ++outside;
+          }
+        }
+      if (in == 0 || outside == 0) continue;
+      double d[3], p[3], dd = 0, pd = 0, f2 = 0, b2 = 0;
+      for (int c = 0; c < 3; ++c) {
+        f_old[c] /= in, f_new[c] /= in, back[c] /= outside;
+        d[c] = f_old[c] - back[c];
+        p[c] = double(photo.at(x, y, c)) - back[c];
+        dd += d[c] * d[c], pd += p[c] * d[c];
+        f2 += f_old[c] * f_old[c], b2 += back[c] * back[c];
+      }
+      if (!(dd > kMinEdgeContrast * kMinEdgeContrast * std::max(f2, b2))) continue;
+      const double alpha = std::clamp(pd / dd, 0.0, 1.0);
+      for (int c = 0; c < 3; ++c)
+        out.at(x, y, c) =
+            float(std::max(0.0, double(photo.at(x, y, c)) + alpha * (f_new[c] - f_old[c])));
+    }
+  });
+}
+
 }  // namespace
 
 Image diffuse_shading(const render::SurfaceGeometry& geometry, const Lighting& lighting) {
@@ -522,6 +575,7 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
         out.at(x, y, c) =
             wr / total * accumulated.at<cv::Vec3f>(y, x)[c] + (1 - wr) * photo.at(x, y, c);
     }
+  decontaminate_outer_border(photo, geometry, region_labels, regions, out);
   return out;
 }
 

@@ -104,8 +104,10 @@ Image photo_detail(const Image& photo, const Image& shading,
 /// (null) the plain rendering. Composited with soft weights, each region's indicator blurred by
 /// a Gaussian of sigma `feather_px` (0: hard edges), the photo filling the rest, sky pixels
 /// counting as outside: two regions' border blends their renderings, a region's border with the
-/// photo ramps inside the region; pixels outside the regions and sky pixels are the photo's.
-/// With `detail`, pass floored_shading().
+/// photo ramps inside the region; pixels outside the regions and sky pixels are the photo's,
+/// except the 1-pixel edge of an object beside a region, a mix of the object and its background
+/// whose object share (read from the colour line between them, where they differ by a third or
+/// more) takes the new colour. With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
