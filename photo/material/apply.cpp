@@ -499,6 +499,23 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
         out.at(x, y, 0) = float(best);
     }
   });
+  // A moved pixel with fewer than 3 of its 8 neighbours in its new class is a lone flip (noise,
+  // a speck of clutter near the border): it would leave a speck of the other material. Back.
+  Image snapped = out;
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const float now = snapped.at(x, y, 0);
+      if (now == region_labels.at(x, y, 0)) continue;
+      int same = 0;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int nx = x + dx, ny = y + dy;
+          if ((dx || dy) && nx >= 0 && ny >= 0 && nx < w && ny < h && snapped.at(nx, ny, 0) == now)
+            ++same;
+        }
+      if (same < 3) out.at(x, y, 0) = region_labels.at(x, y, 0);
+    }
+  });
   return out;
 }
 
