@@ -88,7 +88,9 @@ Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometr
 /// few pixels off an object's edge leaves slivers of the neighbour inside a region: their D,
 /// measured against the region's base, would show in the new material as a darker or lighter line
 /// where the photo has a plain edge. Where the photo shows no edge, or a texture spans both sides,
-/// the mask's border stays. Sky pixels keep their label (they stay the photo's whatever it is).
+/// the mask's border stays; a moved pixel with fewer than 3 of its 8 neighbours in its new class
+/// (a lone flip: noise, clutter) goes back. Sky pixels keep their label (they stay the photo's
+/// whatever it is).
 /// radius_px 0: unchanged.
 Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
                             const render::SurfaceGeometry& geometry, int radius_px = 4);
