@@ -779,6 +779,23 @@ GroundScene untextured_ground() {
   return out;
 }
 
+// A photo of that ground with albedo(x, y) (an Rgb) under its shading, and region labels
+// label(x, y); both called once per pixel, row by row.
+template <class Albedo, class Label>
+std::pair<Image, Image> painted(const GroundScene& t, Albedo&& albedo, Label&& label) {
+  Image photo = t.shading, labels(160, 120, 1);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const Rgb a = albedo(x, y);
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = a[c] * t.shading.at(x, y, c);
+      labels.at(x, y, 0) = label(x, y);
+    }
+  return {photo, labels};
+}
+Rgb grey(float v) {
+  return {v, v, v};
+}
+
 TEST(MaterialApply, DetailIsLuminanceAndCarriesNoNoiseOfABarelyRecordedChannel) {
   // A red surface (albedo 0.6, 0, 0 over the shading) whose green and blue channels are JPEG-like
   // noise at 0.2-0.6 % of the red: per channel, D of green and blue would swing by +-50 %, a
@@ -816,14 +833,9 @@ TEST(MaterialApply, NoiseFloorKeepsANearBlackSurfaceFromBecomingGrain) {
   GroundScene t = untextured_ground();
   std::mt19937 rng(9);
   std::uniform_real_distribution<float> noise(0.4f, 1.6f);
-  Image photo = t.shading;
-  Image labels(160, 120, 1);
-  for (int y = 0; y < 120; ++y)
-    for (int x = 0; x < 160; ++x) {
-      const float albedo = x < 80 ? 0.002f * noise(rng) : 0.8f;
-      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo * t.shading.at(x, y, c);
-      labels.at(x, y, 0) = x < 80 ? 1.0f : 2.0f;
-    }
+  const auto [photo, labels] = painted(
+      t, [&](int x, int) { return grey(x < 80 ? 0.002f * noise(rng) : 0.8f); },
+      [](int x, int) { return x < 80 ? 1.0f : 2.0f; });
   auto log_deviation = [&](double noise_floor) {
     photo::DetailOptions options;
     options.region_labels = &labels;
@@ -853,14 +865,11 @@ TEST(MaterialApply, ARegionsAntialiasedBorderPixelsMakeNoRim) {
   // dark region's base its D would be 8.5 (a bright rim in any new material); faded over the
   // border it stays within a factor 1.3 of 1 (the border pixel keeps a third of its log D).
   GroundScene t = untextured_ground();
-  Image photo = t.shading;
-  Image labels(160, 120, 1);
-  for (int y = 0; y < 120; ++y)
-    for (int x = 0; x < 160; ++x) {
-      const float albedo = x < 79 ? 0.05f : x == 79 ? 0.425f : 0.8f;
-      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo * t.shading.at(x, y, c);
-      labels.at(x, y, 0) = x < 80 ? 1.0f : 2.0f;
-    }
+  const auto [photo, labels] = painted(
+      t, [](int x, int) { return grey(x < 79    ? 0.05f
+                                      : x == 79 ? 0.425f
+                                                : 0.8f); },
+      [](int x, int) { return x < 80 ? 1.0f : 2.0f; });
   photo::DetailOptions options;
   options.region_labels = &labels;
   options.border_px = 0;
@@ -881,15 +890,12 @@ TEST(MaterialApply, RegionBordersSnapToThePhotosEdges) {
   // border is at x = 80; pixels farther than the window (4 px) from the mask's border keep
   // their label, the sky its own.
   GroundScene t = untextured_ground();
-  Image photo = t.shading;
-  Image labels(160, 120, 1);
-  for (int y = 0; y < 120; ++y)
-    for (int x = 0; x < 160; ++x) {
-      const Rgb albedo = x < 80 ? Rgb{0.6f, 0.3f, 0.1f} : Rgb{0.2f, 0.3f, 0.6f};
-      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo[c] * t.shading.at(x, y, c);
-      const int border = 83 + (y % 5 == 0 ? 1 : 0);
-      labels.at(x, y, 0) = x < border ? 1.0f : 2.0f;
-    }
+  auto [photo, labels] = painted(
+      t,
+      [](int x, int) {
+        return x < 80 ? Rgb{0.6f, 0.3f, 0.1f} : Rgb{0.2f, 0.3f, 0.6f};
+      },
+      [](int x, int y) { return x < 83 + (y % 5 == 0 ? 1 : 0) ? 1.0f : 2.0f; });
   // A lone pixel of the left-hand colour near the border on the right (noise, clutter): moved
   // alone, it would become a speck of the other material; it stays.
   for (int c = 0; c < 3; ++c) photo.at(85, 60, c) = photo.at(70, 60, c);
@@ -916,14 +922,14 @@ TEST(MaterialApply, TwoRegionsBorderBlendsTheirRenderingsNotThePhoto) {
   // would leave an orange line between them); at a region's outer border the photo blends in,
   // outside it is untouched.
   GroundScene t = untextured_ground();
-  Image photo = t.shading;
-  Image labels(160, 120, 1);
-  for (int y = 0; y < 120; ++y)
-    for (int x = 0; x < 160; ++x) {
-      const Rgb albedo{0.7f, 0.35f, 0.05f};
-      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo[c] * t.shading.at(x, y, c);
-      labels.at(x, y, 0) = x < 80 ? 1.0f : x < 150 ? 2.0f : 0.0f;
-    }
+  const auto [photo, labels] = painted(
+      t,
+      [](int, int) {
+        return Rgb{0.7f, 0.35f, 0.05f};
+      },
+      [](int x, int) { return x < 80    ? 1.0f
+                              : x < 150 ? 2.0f
+                                        : 0.0f; });
   const std::vector<Material> materials{{{0.4f, 0.4f, 0.4f}, 0.0f, 1.0f},
                                         {{0.35f, 0.4f, 0.5f}, 0.0f, 1.0f}};
   const Image out =
@@ -947,17 +953,14 @@ TEST(MaterialApply, AnObjectsEdgePixelOutsideTheRegionTakesTheNewColour) {
   // (its object half replaced by the new colour) it lies between them. One column further out,
   // with no region pixel beside it, nothing changes.
   GroundScene t = untextured_ground();
-  Image photo = t.shading;
-  Image labels(160, 120, 1);
-  for (int y = 0; y < 120; ++y)
-    for (int x = 0; x < 160; ++x) {
-      const float albedo = x < 80 ? 0.05f : x == 80 ? 0.425f : 0.8f;
-      for (int c = 0; c < 3; ++c) photo.at(x, y, c) = albedo * t.shading.at(x, y, c);
-      labels.at(x, y, 0) = x < 80 ? 1.0f : 0.0f;
-    }
-  const std::vector<Material> grey{{{0.6f, 0.6f, 0.6f}, 0.0f, 1.0f}};
-  const Image out =
-      photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels, grey, nullptr);
+  const auto [photo, labels] = painted(
+      t, [](int x, int) { return grey(x < 80    ? 0.05f
+                                      : x == 80 ? 0.425f
+                                                : 0.8f); },
+      [](int x, int) { return x < 80 ? 1.0f : 0.0f; });
+  const std::vector<Material> light_grey{{{0.6f, 0.6f, 0.6f}, 0.0f, 1.0f}};
+  const Image out = photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels,
+                                           light_grey, nullptr);
   int rows = 0;
   for (int y = 20; y < 100; ++y) {
     if (!(t.g.surface.at(80, y, 0) > 0)) continue;

@@ -403,9 +403,10 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
   // kMaxReflectance) is a segment brighter than any surface under the light assumed for the
   // sample: rendered as is, it blows the target's regions out to white. When the typical fit
   // does (the median of the kept ones), the light was guessed too dim: it is taken brighter by
-  // the median's excess, every fit darker by as much, and the sample's light level with it (so
-  // the style statistics, normalised by it, are unchanged). A fit still above the bound after
-  // that (the sample's sky, a lamp, a white coat in sun) is scaled down to it, hue and gloss kept.
+  // the median's excess, every fit darker by as much, and the sample's light level brighter with
+  // it (its look, normalised by that level for the style statistics, is then measured under the
+  // light its fits assume). A fit still above the bound after that (the sample's sky, a lamp, a
+  // white coat in sun) is scaled down to it, hue and gloss kept.
   auto reflectance_of = [](const Material& m) {
     return std::max({m.diffuse_albedo[0], m.diffuse_albedo[1], m.diffuse_albedo[2]}) +
            double(m.specular_albedo);
