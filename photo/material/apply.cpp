@@ -436,69 +436,91 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
       }
   // Trusted pixels: their whole (2 r + 1)^2 window is of their class (the sky counting as
   // another). Each class's local colour: the mean and variance of its trusted pixels within 3 r.
-  const int r = radius_px, reach = 3 * radius_px;
-  const cv::Mat square = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1));
-  const cv::Size window(2 * reach + 1, 2 * reach + 1);
-  cv::Mat guide_squared;
-  cv::multiply(guide, guide, guide_squared);
-  std::vector<cv::Mat> sum(classes), sum_squares(classes), count(classes), trusted(classes);
-  for (int k = 0; k < classes; ++k) {
-    cv::Mat mask = (label == k) / 255;  // CV_8U 0 / 1
-    if (cv::countNonZero(mask) == 0) continue;
-    cv::erode(mask, trusted[k], square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
-    cv::Mat weight, weight3, colour, colour_squared;
-    trusted[k].convertTo(weight, CV_32F);
-    cv::cvtColor(weight, weight3, cv::COLOR_GRAY2BGR);
-    cv::multiply(weight3, guide, colour);
-    cv::multiply(weight3, guide_squared, colour_squared);
-    cv::boxFilter(weight, count[k], -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-    cv::boxFilter(colour, sum[k], -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-    cv::boxFilter(colour_squared, sum_squares[k], -1, window, cv::Point(-1, -1), false,
-                  cv::BORDER_CONSTANT);
-  }
+  // Classes are taken one at a time, each over its bounding box grown by the windows' reach (a
+  // mask may hold thousands of small regions), keeping per pixel the nearest class so far and
+  // its own class's distance.
+  //
   // An untrusted pixel (near a border) takes the class whose local colour it is clearly closer
   // to: squared distance to the class's mean over the class's variance (plus the noise of an
   // 8-bit photo), under a quarter of its own class's. A sliver of the neighbour inside a region
   // goes to the neighbour; where both sides look alike (no edge in the photo, or a texture
   // whose spread covers both) the mask's own border stays.
+  const int r = radius_px, reach = 3 * radius_px;
+  const cv::Mat square = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1));
+  const cv::Size window(2 * reach + 1, 2 * reach + 1);
   constexpr float kClearlyCloser = 0.25f;
   constexpr float kNoiseVariance = 0.02f * 0.02f;
-  // At least a full trusted window's worth of the search window (its part inside the image).
+  // At least a full trusted window's worth of the search window (its part inside the image): a
+  // class seen in only a corner of the window has no reliable colour (a few pixels of one
+  // texture phase would look like an exact match).
   const float min_share =
       float((2 * r + 1) * (2 * r + 1)) / float((2 * reach + 1) * (2 * reach + 1));
-  Image out = region_labels;
-  tbb::parallel_for(0, h, [&](int y) {
-    for (int x = 0; x < w; ++x) {
-      const int own = label.at<int>(y, x);
-      if (own < 0 || trusted[own].at<unsigned char>(y, x)) continue;
-      const cv::Vec3f colour = guide.at<cv::Vec3f>(y, x);
-      const float min_count =
-          min_share * float((std::min(x + reach, w - 1) - std::max(x - reach, 0) + 1) *
-                            (std::min(y + reach, h - 1) - std::max(y - reach, 0) + 1));
-      auto distance = [&](int k) {
-        // A class seen in only a corner of the window has no reliable colour (a few pixels of
-        // one texture phase would look like an exact match).
-        const float n = count[k].empty() ? 0.0f : count[k].at<float>(y, x);
-        if (!(n >= min_count)) return INFINITY;
-        const cv::Vec3f mean = sum[k].at<cv::Vec3f>(y, x) / n;
-        const cv::Vec3f spread = sum_squares[k].at<cv::Vec3f>(y, x) / n - mean.mul(mean);
-        const cv::Vec3f d = colour - mean;
-        return d.dot(d) /
-               (std::max(0.0f, (spread[0] + spread[1] + spread[2]) / 3) + kNoiseVariance);
-      };
-      int best = own;
-      float best_distance = INFINITY;
-      for (int k = 0; k < classes; ++k) {
-        const float d = distance(k);
-        if (d < best_distance) best = k, best_distance = d;
+  std::vector<cv::Rect> box(classes);
+  {
+    std::vector<int> x0(classes, w), y0(classes, h), x1(classes, -1), y1(classes, -1);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        if (const int k = label.at<int>(y, x); k >= 0) {
+          x0[k] = std::min(x0[k], x), x1[k] = std::max(x1[k], x);
+          y0[k] = std::min(y0[k], y), y1[k] = std::max(y1[k], y);
+        }
+    const int grow = reach + r;
+    for (int k = 0; k < classes; ++k)
+      if (x1[k] >= 0)
+        box[k] = cv::Rect(cv::Point(std::max(0, x0[k] - grow), std::max(0, y0[k] - grow)),
+                          cv::Point(std::min(w, x1[k] + grow + 1), std::min(h, y1[k] + grow + 1)));
+  }
+  cv::Mat trusted_own(h, w, CV_8U, cv::Scalar(0));
+  cv::Mat best_distance(h, w, CV_32F, cv::Scalar(INFINITY)), own_distance = best_distance.clone();
+  cv::Mat best_class(h, w, CV_32S, cv::Scalar(-1));
+  for (int k = 0; k < classes; ++k) {
+    if (box[k].empty()) continue;
+    const cv::Rect roi = box[k];
+    const cv::Mat mask = (label(roi) == k) / 255;  // CV_8U 0 / 1
+    cv::Mat trusted, weight, weight3, colour, colour_squared, count, sum, sum_squares;
+    cv::erode(mask, trusted, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    trusted.convertTo(weight, CV_32F);
+    cv::cvtColor(weight, weight3, cv::COLOR_GRAY2BGR);
+    cv::multiply(weight3, guide(roi), colour);
+    cv::multiply(colour, guide(roi), colour_squared);
+    cv::boxFilter(weight, count, -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    cv::boxFilter(colour, sum, -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    cv::boxFilter(colour_squared, sum_squares, -1, window, cv::Point(-1, -1), false,
+                  cv::BORDER_CONSTANT);
+    tbb::parallel_for(0, roi.height, [&](int j) {
+      const int y = roi.y + j;
+      for (int i = 0; i < roi.width; ++i) {
+        const int x = roi.x + i, own = label.at<int>(y, x);
+        if (own < 0) continue;
+        if (own == k && trusted.at<unsigned char>(j, i)) trusted_own.at<unsigned char>(y, x) = 1;
+        const float n = count.at<float>(j, i);
+        const float min_count =
+            min_share * float((std::min(x + reach, w - 1) - std::max(x - reach, 0) + 1) *
+                              (std::min(y + reach, h - 1) - std::max(y - reach, 0) + 1));
+        if (!(n >= min_count)) continue;
+        const cv::Vec3f mean = sum.at<cv::Vec3f>(j, i) / n;
+        const cv::Vec3f spread = sum_squares.at<cv::Vec3f>(j, i) / n - mean.mul(mean);
+        const cv::Vec3f d = guide.at<cv::Vec3f>(y, x) - mean;
+        const float distance =
+            d.dot(d) / (std::max(0.0f, (spread[0] + spread[1] + spread[2]) / 3) + kNoiseVariance);
+        if (own == k) own_distance.at<float>(y, x) = distance;
+        if (distance < best_distance.at<float>(y, x)) {
+          best_distance.at<float>(y, x) = distance;
+          best_class.at<int>(y, x) = k;
+        }
       }
+    });
+  }
+  Image out = region_labels;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int own = label.at<int>(y, x), best = best_class.at<int>(y, x);
+      if (own < 0 || trusted_own.at<unsigned char>(y, x) || best < 0 || best == own) continue;
       // (Without enough trusted pixels of its own class nearby there is nothing to compare.)
-      const float own_distance = distance(own);
-      if (best != own && std::isfinite(own_distance) &&
-          best_distance < kClearlyCloser * own_distance)
+      const float own_d = own_distance.at<float>(y, x);
+      if (std::isfinite(own_d) && best_distance.at<float>(y, x) < kClearlyCloser * own_d)
         out.at(x, y, 0) = float(best);
     }
-  });
   // A moved pixel with fewer than 3 of its 8 neighbours in its new class is a lone flip (noise,
   // a speck of clutter near the border): it would leave a speck of the other material. Back.
   Image snapped = out;
@@ -558,23 +580,34 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
       region_weight(h, w, CV_32F, cv::Scalar(0));
   Image rendered(w, h, 3);
   std::vector<std::int32_t> band;
+  indicator.setTo(0);
   for (int k = 1; k <= regions; ++k) {
     if (pixels[k - 1].empty()) continue;
-    indicator.setTo(0);
-    for (std::int32_t index : pixels[k - 1]) indicator.at<float>(index / w, index % w) = 1.0f;
-    cv::GaussianBlur(indicator, weight, kernel, feather_px, feather_px, cv::BORDER_REPLICATE);
+    // Over the region's bounding box grown by the blur's reach only (a mask may hold thousands
+    // of small regions); the blur of a sub-matrix reads its parent beyond it, as a whole-frame
+    // blur would.
+    int x0 = w, y0 = h, x1 = -1, y1 = -1;
+    for (std::int32_t index : pixels[k - 1]) {
+      const int x = index % w, y = index / w;
+      indicator.at<float>(y, x) = 1.0f;
+      x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+    }
+    const cv::Rect roi(cv::Point(std::max(0, x0 - reach), std::max(0, y0 - reach)),
+                       cv::Point(std::min(w, x1 + reach + 1), std::min(h, y1 + reach + 1)));
+    cv::GaussianBlur(indicator(roi), weight, kernel, feather_px, feather_px, cv::BORDER_REPLICATE);
+    for (std::int32_t index : pixels[k - 1]) indicator.at<float>(index / w, index % w) = 0.0f;
     band.clear();  // the region's pixels and its neighbours' within the blur's reach
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
+    for (int y = roi.y; y < roi.y + roi.height; ++y)
+      for (int x = roi.x; x < roi.x + roi.width; ++x) {
         const float v = region_labels.at(x, y, 0);
-        if (weight.at<float>(y, x) > 1e-4f && v >= 1 && v <= float(regions) &&
+        if (weight.at<float>(y - roi.y, x - roi.x) > 1e-4f && v >= 1 && v <= float(regions) &&
             geometry.surface.at(x, y, 0) > 0)
           band.push_back(y * w + x);
       }
     render_with_detail(geometry, lighting, shading, detail, materials[k - 1], band, rendered);
     for (std::int32_t index : band) {
       const int x = index % w, y = index / w;
-      const float wk = weight.at<float>(y, x);
+      const float wk = weight.at<float>(y - roi.y, x - roi.x);
       region_weight.at<float>(y, x) += wk;
       for (int c = 0; c < 3; ++c) accumulated.at<cv::Vec3f>(y, x)[c] += wk * rendered.at(x, y, c);
     }
