@@ -29,14 +29,18 @@ void require_size(const Image& image, const render::SurfaceGeometry& geometry, c
 // floored shading still reproduces the photo's radiance, so its brightness there is kept.
 constexpr double kShadingFloor = 0.05;
 
+// Rec. 709 luminance of a linear RGB pixel.
+float luminance(const float* rgb) {
+  return 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2];
+}
+
 // The 99th percentile of the photo's luminance over the surfaces (0 when none): the level of
 // its bright surfaces, which sets the scale of the noise floor and of the snapping's colours.
 float bright_surface_level(const Image& photo, const render::SurfaceGeometry& geometry) {
   std::vector<float> levels;
   for (int y = 0; y < photo.height(); ++y)
     for (int x = 0; x < photo.width(); ++x) {
-      const float* p = photo.pixel(x, y);
-      const float level = 0.2126f * p[0] + 0.7152f * p[1] + 0.0722f * p[2];
+      const float level = luminance(photo.pixel(x, y));
       if (geometry.surface.at(x, y, 0) > 0 && std::isfinite(level)) levels.push_back(level);
     }
   if (levels.empty()) return 0;
@@ -206,7 +210,6 @@ Image photo_detail(const Image& photo, const Image& shading_in,
   constexpr float kFloorRadiance = 1e-5f;
   Image detail(w, h, 3);
   for (float& v : detail.pixels()) v = 1.0f;
-  auto luminance = [](const float* v) { return 0.2126f * v[0] + 0.7152f * v[1] + 0.0722f * v[2]; };
 
   // The noise floor in the photo's units: a share of its bright surfaces' luminance (99th
   // percentile), so that it means the same for a display-referred JPEG and an EXR.
@@ -317,8 +320,7 @@ void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting&
                         float occlusion = 1.0f;
                         if (detail) {
                           const float* d = detail->pixel(x, y);
-                          occlusion = std::min(
-                              1.0f, 0.2126f * d[0] + 0.7152f * d[1] + 0.0722f * d[2]);
+                          occlusion = std::min(1.0f, luminance(d));
                         }
                         for (int c = 0; c < 3; ++c) {
                           const float d = detail ? detail->at(x, y, c) : 1.0f;
