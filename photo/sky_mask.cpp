@@ -833,6 +833,41 @@ SkyMask estimate_sky_mask(ConstImageView photo, const std::array<PixelPoint, 2>&
   return out;
 }
 
+int count_lamps_in_sky(ConstImageView photo, const std::vector<std::uint8_t>& sky,
+                       const LampsInSkyOptions& o) {
+  const int w = photo.width, h = photo.height;
+  const std::size_t n = std::size_t(w) * h;
+  if (w < 1 || h < 1 || photo.channels < 1 || sky.size() != n) return 0;
+  cv::Mat clipped(h, w, CV_8U);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* p = photo.pixel(x, y);
+      bool all = sky[std::size_t(y) * w + x] != 0;
+      for (int c = 0; c < std::min(3, photo.channels) && all; ++c) all = p[c] >= o.min_clipped;
+      clipped.at<std::uint8_t>(y, x) = all;
+    }
+  cv::Mat labels, stats, centroids;
+  const int m = cv::connectedComponentsWithStats(clipped, labels, stats, centroids, 8, CV_32S);
+  int lamps = 0;
+  for (int l = 1; l < m; ++l) {
+    const int area = stats.at<int>(l, cv::CC_STAT_AREA);
+    if (double(area) < o.min_area_fraction * double(n)) continue;
+    const cv::Rect box(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
+                       stats.at<int>(l, cv::CC_STAT_WIDTH), stats.at<int>(l, cv::CC_STAT_HEIGHT));
+    std::vector<std::vector<cv::Point>> contours;
+    cv::findContours(cv::Mat(labels(box) == l), contours, cv::RETR_EXTERNAL,
+                     cv::CHAIN_APPROX_SIMPLE);
+    std::vector<cv::Point> points;
+    for (const auto& c : contours) points.insert(points.end(), c.begin(), c.end());
+    std::vector<cv::Point> hull;
+    cv::convexHull(points, hull);
+    // The hull runs through the outline pixels' centres: half a pixel of rim is outside it.
+    const double hull_area = cv::contourArea(hull) + 0.5 * cv::arcLength(hull, true) + 1.0;
+    lamps += double(area) >= o.min_solidity * hull_area;
+  }
+  return lamps;
+}
+
 CloseUpSky keep_evident_sky(ConstImageView photo, SkyMask& mask, const CloseUpSkyOptions& o) {
   CloseUpSky out;
   const int w = photo.width, h = photo.height;

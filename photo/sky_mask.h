@@ -155,6 +155,23 @@ struct CloseUpSky {
 CloseUpSky keep_evident_sky(ConstImageView photo, SkyMask& mask,
                             const CloseUpSkyOptions& options = {});
 
+/// Issue 11 (free: a ceiling lit by its lamps, seen from below). A smooth, pale ceiling passes
+/// the sky tests as an overcast sky does, and a frame that is all "sky" is veiled flat, its
+/// subject a metre away vanishing in dense fog. A sky holds one light source at most (the sun);
+/// a ceiling holds its lamps. The lamps: 8-connected components of the pixels clipped in every
+/// channel (scene-linear >= `min_clipped`) under `sky` (row-major, the photo's size), each at
+/// least `min_area_fraction` of the frame and compact (its area at least `min_solidity` of its
+/// convex hull's: a lamp's disc or globe, cut by the frame or not, not a cloud's thin silver
+/// lining). Returns how many there are. Never throws for any image content (0 for a sky of
+/// another size).
+struct LampsInSkyOptions {
+  double min_clipped = 0.95;
+  double min_area_fraction = 0.01;
+  double min_solidity = 0.75;
+};
+int count_lamps_in_sky(ConstImageView photo, const std::vector<std::uint8_t>& sky,
+                       const LampsInSkyOptions& options = {});
+
 /// Ground-coloured pixels (issue 4 item 2: where structures meet the ground). The ground's
 /// colour is modelled from the bottom band of the photo (the lowest `band_fraction` of the rows,
 /// the middle `band_width_fraction` of the columns (walls and kerbs line the sides), at least

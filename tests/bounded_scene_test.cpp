@@ -18,14 +18,18 @@
 #include <cstddef>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <limits>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "mr/estimate.h"
+#include "mr/fog.h"
 #include "mr/image.h"
+#include "mr/io.h"
 #include "photo/geometry.h"
+#include "photo/sky_mask.h"
 #include "tests/gallery_look.h"
 
 namespace mr {
@@ -257,6 +261,100 @@ TEST(BoundedScene, BoundedDepthMeetsGroundAndBillboardClosedForms) {
   EXPECT_NEAR(photo::smooth_max(2.0, 2.0, 0.5), 2.0 + 0.5 * std::log(2.0), 1e-15);
   EXPECT_DOUBLE_EQ(photo::smooth_max(1.0, 3.0, 0.7), photo::smooth_max(3.0, 1.0, 0.7));
   EXPECT_DOUBLE_EQ(photo::smooth_max(1.0, 3.0, 0.0), 3.0);
+}
+
+}  // namespace
+}  // namespace mr
+
+namespace mr {
+namespace {
+
+// Issue 11 (gallery/tune free: a bird hanging under a ceiling lit by its lamps, seen from
+// below). Drawn display-referred (RGB): a smooth warm-grey ceiling lit by two
+// lamps at the top of the frame (clipped discs cut by the frame's edge, a glow falling off around
+// them) and a small textured subject hanging in the middle.
+cv::Mat ceiling_display(int lamps) {
+  cv::Mat m(kH, kW, CV_32FC3);
+  const cv::Point2f lamp_at[2] = {{180, 10}, {470, 30}};
+  constexpr float kLampRadius = 75;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> grain(-0.006f, 0.006f), bark(-0.12f, 0.12f);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      float glow = 0;
+      bool lamp = false;
+      for (int l = 0; l < lamps; ++l) {
+        const float r = std::hypot(x - lamp_at[l].x, y - lamp_at[l].y);
+        lamp |= r <= kLampRadius;
+        glow += std::exp(-std::max(0.0f, r - kLampRadius) / 160.0f);
+      }
+      // A cool grey (daylight from a window) under the lamps' warm glow.
+      const float v = 0.42f + grain(rng), l = 0.3f * glow;
+      cv::Vec3f c(std::min(1.0f, 0.95f * v + l), std::min(1.0f, 0.98f * v + 0.96f * l),
+                  std::min(1.0f, v + 0.88f * l));
+      if (lamp) c = cv::Vec3f(1, 1, 1);
+      if (std::abs(x - 320) < 40 && std::abs(y - 300) < 25) {
+        const float b = 0.45f + bark(rng);
+        c = cv::Vec3f(0.5f * b, 0.6f * b, 0.25f * b);  // a green-yellow bird's body
+      }
+      m.at<cv::Vec3f>(y, x) = c;
+    }
+  cv::GaussianBlur(m, m, cv::Size(0, 0), 0.8);  // a lens
+  return m;
+}
+
+// The lamps: compact clipped blobs of at least 1 % of the frame under the sky; a cloud's thin
+// clipped lining of the same area is none, nor a lamp outside the sky.
+TEST(BoundedScene, LampsInTheSkyAreCompactClippedBlobs) {
+  const std::vector<std::uint8_t> all_sky(std::size_t(kW) * kH, 1);
+  for (const int lamps : {0, 1, 2}) {
+    const Image photo = test::linear_photo(ceiling_display(lamps));
+    EXPECT_EQ(photo::count_lamps_in_sky(photo.view(), all_sky), lamps);
+    // Outside the sky they do not count.
+    EXPECT_EQ(photo::count_lamps_in_sky(photo.view(), std::vector<std::uint8_t>(all_sky.size(), 0)),
+              0);
+  }
+  // A silver lining: an arc 4 px thick with the area of a lamp (2.4 % of the frame).
+  cv::Mat lining = ceiling_display(0);
+  cv::ellipse(lining, cv::Point(320, 400), cv::Size(300, 300), 0, 200, 340, cv::Scalar(1, 1, 1), 4);
+  EXPECT_EQ(photo::count_lamps_in_sky(test::linear_photo(lining).view(), all_sky), 0);
+  // A sky of another size: none.
+  EXPECT_EQ(photo::count_lamps_in_sky(test::linear_photo(lining).view(), {1, 1, 1}), 0);
+}
+
+// The photo the rule was made on (gallery/tune free, 1280x960: a bird hanging under a ceiling
+// lit by its lamps, seen from below). The whole frame passes for an overcast sky: without the
+// rule all of it is sky (the horizon lowered out of the frame), a flat veil in any fog, the bird
+// gone in dense fog. With it the ceiling has no sky and is a bounded scene.
+TEST(BoundedScene, ACeilingLitByItsLampsIsNoSky) {
+  const Image photo =
+      read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / "free.jpg");
+  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
+  EstimateOptions without;
+  without.lamps_not_sky = false;
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
+  const SceneEstimate before = estimate_scene(photo, camera, Annotations{}, without);
+  const double n = double(photo.width()) * photo.height();
+  const float bird_m = est.geometry.distance_m.at(640, 740, 0);  // the bird's body
+  const test::GalleryLooks looks = test::haze_and_dense_looks(photo, camera, est, "free");
+  const FogLayers dense = test::fog_auto_look(photo, camera, est, 60, 80, 0.3);
+  std::printf(
+      "free: %s; %s; sky %.1f %% (without the rule %.1f %%), the bird at %.2f m, its dense-fog "
+      "transmittance %.2f; created-edge pixels haze %.4f %%, dense %.4f %%\n",
+      est.notes.front().c_str(), est.geometry.scale_cue.c_str(), 100 * est.geometry.sky_pixels / n,
+      100 * before.geometry.sky_pixels / n, bird_m, dense.transmittance.at(640, 740, 1),
+      100 * looks.haze_edges, 100 * looks.dense_edges);
+  ASSERT_GT(double(before.geometry.sky_pixels), 0.9 * n);  // the defect reproduced
+  EXPECT_FALSE(before.geometry.lamps_not_sky);
+  EXPECT_TRUE(est.geometry.lamps_not_sky);
+  EXPECT_EQ(est.geometry.sky_pixels, 0u);
+  // A bounded scene: nothing beyond the far billboard (8 m ahead) at the frame's widest angle,
+  // so dense fog (60 m visibility) leaves the bird at least exp(-3.912 x 8.2 / 60) = 0.59.
+  const double widest = std::atan(std::hypot(640.0, 480.0) / camera.focal_px);
+  EXPECT_LT(bird_m, 8.0 / std::cos(widest) + 0.01);
+  EXPECT_GT(dense.transmittance.at(640, 740, 1), 0.55f);
+  EXPECT_LE(looks.haze_edges, 2e-4);
+  EXPECT_LE(looks.dense_edges, 2e-4);
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <random>
 #include <string>
 
@@ -326,6 +327,93 @@ TEST(FarShore, WaterBesideTheBandsEndHasNoSeamAcrossColumns) {
       "row %d)\n",
       worst, worst_x, worst_y);
   EXPECT_LT(worst, 1.5);
+}
+
+}  // namespace
+}  // namespace mr
+
+namespace mr {
+namespace {
+
+// Issue 11 (gallery/tune darkesthour: a lake at blue hour, no line to find the horizon from).
+// The level fall-back cuts through the sky 20 px above the waterline; the calm water mirrors
+// the sky as smoothly as the sky itself, so the sky "went on" below the guess down to the
+// frame's bottom and the horizon was lowered out of the frame: the lake was sky, veiled flat by
+// any fog. The horizon goes down only to the water's mirror line; with the rule off it goes
+// past it (the defect, reproduced).
+TEST(FarShore, MirroringWaterStopsAWeakHorizonAtItsWaterline) {
+  const Camera camera = Camera::from_horizontal_fov(kW, kH, 60);
+  // No far shore: nothing but the glow's gradient and its mirror image gives the horizon away.
+  const Image photo = far_shore_photo([](int) { return 0; });
+  EstimateOptions with_rule, without;
+  without.water_mirror = false;
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{}, with_rule);
+  const SceneEstimate est_before = estimate_scene(photo, camera, Annotations{}, without);
+  auto horizon_row = [](const SceneEstimate& e) {
+    return 0.5 * (e.geometry.horizon[0][1] + e.geometry.horizon[1][1]);
+  };
+  // Pixels of open water (away from the post and the band's reflection) that are sky.
+  auto water_sky = [&](const SceneEstimate& e) {
+    std::size_t sky = 0, all = 0;
+    for (int y = kHorizon + 20; y < kH; ++y)
+      for (int x = 440; x < kW; ++x) {
+        if (std::abs(x - kPostX) <= kPostHalfWidth + 4) continue;
+        ++all;
+        sky += std::isinf(e.geometry.distance_m.at(x, y, 0));
+      }
+    return double(sky) / double(all);
+  };
+  const test::GalleryLooks looks = haze_and_dense_looks(photo, camera, est, "water_mirror");
+  std::printf(
+      "mirroring water under the level fall-back: %s; horizon row %.1f (waterline %d; without "
+      "the rule %.1f); open water that is sky %.1f %% (without %.1f %%); created-edge pixels "
+      "haze %.4f %%, dense %.4f %%\n",
+      est.notes.front().c_str(), horizon_row(est), kHorizon, horizon_row(est_before),
+      100 * water_sky(est), 100 * water_sky(est_before), 100 * looks.haze_edges,
+      100 * looks.dense_edges);
+  ASSERT_GT(est_before.geometry.horizon_lowered_px, 0.0);  // the case: a weak guess lowered
+  EXPECT_FALSE(est_before.geometry.lowered_to_water);
+  EXPECT_GT(horizon_row(est_before), kHorizon + 20.0);
+  EXPECT_GT(water_sky(est_before), 0.5);
+  EXPECT_TRUE(est.geometry.lowered_to_water);
+  EXPECT_NEAR(horizon_row(est), kHorizon, 3.0);
+  EXPECT_EQ(water_sky(est), 0.0);
+  EXPECT_LE(looks.haze_edges, 2e-4);
+  EXPECT_LE(looks.dense_edges, 2e-4);
+}
+
+// The photo the rule was made on (gallery/tune darkesthour, 1280x800: a lake at blue hour, the
+// far shore's trees on its waterline near row 530). Without the rule the horizon went out of
+// the frame and 99.9 % of it was sky, the lake veiled flat in every look.
+TEST(FarShore, DarkestHoursLakeIsWaterUnderItsWaterline) {
+  const Image photo =
+      read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / "darkesthour.jpg");
+  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
+  EstimateOptions without;
+  without.water_mirror = false;
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
+  const SceneEstimate before = estimate_scene(photo, camera, Annotations{}, without);
+  const double n = double(photo.width()) * photo.height();
+  std::size_t lake_sky = 0;
+  for (int y = 560; y < photo.height(); ++y)
+    for (int x = 0; x < photo.width(); ++x)
+      lake_sky += std::isinf(est.geometry.distance_m.at(x, y, 0));
+  const test::GalleryLooks looks = haze_and_dense_looks(photo, camera, est, "darkesthour");
+  std::printf(
+      "darkesthour: %s; sky %.1f %% (without the rule %.1f %%), sky below row 560: %zu px; "
+      "created-edge pixels haze %.4f %%, dense %.4f %%\n",
+      est.notes.front().c_str(), 100 * est.geometry.sky_pixels / n,
+      100 * before.geometry.sky_pixels / n, lake_sky, 100 * looks.haze_edges,
+      100 * looks.dense_edges);
+  ASSERT_GT(double(before.geometry.sky_pixels), 0.99 * n);  // the defect reproduced
+  EXPECT_TRUE(est.geometry.lowered_to_water);
+  for (const auto& end : est.geometry.horizon) {
+    EXPECT_GE(end[1], 520.0);
+    EXPECT_LE(end[1], 540.0);
+  }
+  EXPECT_EQ(lake_sky, 0u);
+  EXPECT_LE(looks.haze_edges, 2e-4);
+  EXPECT_LE(looks.dense_edges, 2e-4);
 }
 
 }  // namespace

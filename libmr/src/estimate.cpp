@@ -201,6 +201,9 @@ constexpr double kWeakHorizonConfidence = 0.2;
 constexpr double kMinSkyAtGuessFraction = 0.25;
 constexpr double kMinHorizonDropFraction = 0.02;
 constexpr double kMinSkyBelowGuessFraction = 0.75;
+// A frame whose sky and cloud bank cover this much of it (its subject, a bird or a kite, the
+// rest) is all sky, or a ceiling.
+constexpr double kAllSkyFraction = 0.9;
 // The probe's sky joined to the mask's, reaching the guess where the mask's does not, in at
 // least this fraction of the columns, is sky above the guess (join_sky_cut_by_a_guess): as
 // much evidence as the lowering asks of the mask's own sky (kMinSkyAtGuessFraction). A cloud
@@ -255,6 +258,60 @@ float mirror_correlation(const cv::Mat& photo, int x, int axis, int rows, int ha
   const double gain = std::sqrt(bb / aa);
   const double plausible = std::clamp((1.4 - gain) / 0.2, 0.0, 1.0);
   return float(plausible * ab / std::sqrt(aa * bb));
+}
+
+// The photo's first three channels (a grey one repeated), scene-linear, blurred vertically over
+// `blur_rows` rows: ripples blur a reflection vertically, and mirror_correlation compares both
+// sides blurred alike.
+cv::Mat vertically_blurred_rgb(const Image& photo, int blur_rows) {
+  const int w = photo.width(), h = photo.height();
+  const int c1 = std::min(1, photo.channels() - 1), c2 = std::min(2, photo.channels() - 1);
+  cv::Mat rgb(h, w, CV_32FC3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* p = photo.pixel(x, y);
+      rgb.at<cv::Vec3f>(y, x) = cv::Vec3f(p[0], p[c1], p[c2]);
+    }
+  cv::blur(rgb, rgb, cv::Size(1, blur_rows | 1));
+  return rgb;
+}
+
+// Issue 11 (darkesthour: a lake at blue hour under the level fall-back). The lake mirrors the
+// sky as smoothly as the sky itself, so the sky "continued" below the guess down to the frame's
+// bottom and the horizon was lowered out of the frame: all of it sky, the lake and the far
+// shore veiled flat. Calm water's surface is a mirror line: the photo under it is the photo
+// over it flipped (mirror_correlation). The row in [from_row, to_row] about which it is most
+// plainly so, over the median of the columns (boxes of 2 half_width + 1 across, `rows` = a tenth
+// of the height or what the frame holds on either side, at least a twentieth below it), when
+// that median is at least kMinWaterMirror; -1 when no row is. An all-sky frame or a cloud deck
+// over land mirrors nothing (the tuning half's lowered horizons: at most 0.43).
+constexpr float kMinWaterMirror = 0.8f;
+int water_mirror_row(const cv::Mat& rgb, int from_row, int to_row) {
+  const int w = rgb.cols, h = rgb.rows, half_width = std::max(4, w / 80);
+  const int min_below = std::max(2, h / 20);
+  from_row = std::max(from_row, min_below), to_row = std::min(to_row, h - min_below);
+  std::vector<float> column_scores;
+  auto score = [&](int axis) {
+    const int rows = std::min({axis, h - axis, std::max(2, h / 10)});
+    column_scores.clear();
+    for (int x = half_width; x + half_width < w; x += 2 * half_width)
+      column_scores.push_back(mirror_correlation(rgb, x, axis, rows, half_width));
+    if (column_scores.empty()) return 0.0f;
+    const auto mid = column_scores.begin() + std::ptrdiff_t(column_scores.size() / 2);
+    std::nth_element(column_scores.begin(), mid, column_scores.end());
+    return *mid;
+  };
+  // Every other row, then the best one's neighbours (a mirror's peak is a few rows wide: the
+  // vertical blur).
+  int best = -1;
+  float best_score = kMinWaterMirror;
+  for (int axis = from_row; axis <= to_row; axis += 2)
+    if (const float s = score(axis); s >= best_score) best = axis, best_score = s;
+  if (best < 0) return -1;
+  for (const int axis : {best - 1, best + 1})
+    if (axis >= from_row && axis <= to_row)
+      if (const float s = score(axis); s > best_score) best = axis, best_score = s;
+  return best;
 }
 
 // Issue 11 (valendas: a storm's cloud deck over mountains under the level fall-back horizon):
@@ -472,7 +529,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     if (!reach.empty()) {
       std::nth_element(reach.begin(), reach.begin() + std::ptrdiff_t(reach.size() / 2),
                        reach.end());
-      const double drop = reach[reach.size() / 2];
+      double drop = reach[reach.size() / 2];
       // The horizon is a line across the whole frame, and open sky below it is sky in
       // (nearly) every column: lowered only when the band between the guess and the lowered
       // line is mostly sky. A smooth bluish band running diagonally through the frame (the
@@ -491,8 +548,23 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       }
       if (drop >= kMinHorizonDropFraction * h &&
           double(band_sky) >= kMinSkyBelowGuessFraction * double(band)) {
-        lower(drop);
-        if (cut_columns > 0) join_sky_cut_by_a_guess(mask, probe, g.horizon, kNear, 1);
+        // Sky mirrored in calm water goes on below the horizon as smoothly as above it: the
+        // horizon goes only as far down as the water's mirror line (water_mirror_row); one at or
+        // just above the guess (within two lines' widths) leaves the guess where it is.
+        bool lower_it = true;
+        if (options.water_mirror) {
+          const int guess_row = int(std::floor(guess_y(0.5 * (w - 1))));
+          const int line_px = std::max(3, h / 100);
+          const int axis = water_mirror_row(vertically_blurred_rgb(*photo, line_px),
+                                            guess_row - 2 * line_px, guess_row + int(drop) + 1);
+          if (axis >= 0) {
+            drop = std::min(drop, double(axis - guess_row - 1));
+            lower_it = drop >= 1;
+            g.lowered_to_water = lower_it;
+          }
+        }
+        if (lower_it) lower(drop);
+        if (lower_it && cut_columns > 0) join_sky_cut_by_a_guess(mask, probe, g.horizon, kNear, 1);
       }
     }
     // Issue 11: a cloud bank on the guessed line (god_rays' backlit bank under the level
@@ -548,6 +620,22 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           backlit = std::move(land);
         }
       }
+    }
+  }
+  // A frame that the sky (with a cloud bank) fills from top to bottom, the weak horizon lowered
+  // out of it, but that holds lamps is a ceiling seen from below (photo/sky_mask.h,
+  // count_lamps_in_sky): it has no sky, and is a bounded scene.
+  if (options.lamps_not_sky && g.horizon_lowered_px > 0) {
+    std::size_t all_sky = 0;
+    for (std::size_t i = 0; i < mask.sky.size(); ++i)
+      all_sky += mask.sky[i] || (i < cloud_bank.size() && cloud_bank[i]);
+    if (double(all_sky) >= kAllSkyFraction * double(mask.sky.size()) &&
+        photo::count_lamps_in_sky(photo->view(), mask.sky) >= 2) {
+      std::fill(mask.sky.begin(), mask.sky.end(), std::uint8_t(0));
+      std::fill(mask.alpha.begin(), mask.alpha.end(), 0.0f);
+      mask.pixels = mask.gap_pixels = 0;
+      cloud_bank.clear();
+      g.lamps_not_sky = true;
     }
   }
   // Issue 11 item 3: the sky seen through trees (under a canopy, between trunks, through
@@ -1149,16 +1237,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       std::vector<int> waterline(std::size_t(w), -1);
       std::vector<float> band_mirror(std::size_t(w), 0.0f);
       if (options.far_shore) {
-        cv::Mat rgb(h, w, CV_32FC3);
-        for (int y = 0; y < h; ++y)
-          for (int x = 0; x < w; ++x) {
-            const float* p = photo->pixel(x, y);
-            const int c1 = std::min(1, photo->channels() - 1),
-                      c2 = std::min(2, photo->channels() - 1);
-            rgb.at<cv::Vec3f>(y, x) = cv::Vec3f(p[0], p[c1], p[c2]);
-          }
         // Ripples blur a reflection vertically: both sides blurred alike over a line's width.
-        cv::blur(rgb, rgb, cv::Size(1, std::max(3, h / 100) | 1));
+        const cv::Mat rgb = vertically_blurred_rgb(*photo, std::max(3, h / 100));
         const int search = 2 * line_px, half_width = std::max(4, w / 80);
         std::vector<std::vector<float>> score(static_cast<std::size_t>(w));
         std::vector<int> best(std::size_t(w), -1);
@@ -1622,9 +1702,12 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
   est.notes.push_back(
       std::string("horizon: ") + horizon_how + " (" + to_string(g.horizon_source) + ")" +
       (g.horizon_lowered_px > 0 ? ", lowered " + fmt("%.0f", g.horizon_lowered_px) +
-                                      (g.backlit_land ? " px to the backlit land's skyline"
-                                                      : " px to below the sky it cut")
+                                      (g.backlit_land       ? " px to the backlit land's skyline"
+                                       : g.lowered_to_water ? " px to the water's mirror line"
+                                                            : " px to below the sky it cut")
                                 : std::string()) +
+      (g.lamps_not_sky ? "; the frame, all sky-like, holds lamps: a ceiling, no sky"
+                       : std::string()) +
       ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " + fmt("%.2f", g.pose.roll_deg) +
       " deg, confidence " + fmt("%.2f", g.confidence));
   est.notes.push_back(std::string("camera height: ") + fmt("%.3f", g.pose.position_m.y) + " m (" +

@@ -92,6 +92,17 @@ struct MR_API EstimateOptions {
   /// the band's top mirrored about it (gallery/results/shore15_tune.md). false: the band keeps
   /// the refinement's distance (the far billboard's, 46 m from 1.6 m) and bounds no water.
   bool far_shore = true;
+  /// Issue 11: when a weak automatic horizon is lowered because the sky goes on below it, calm
+  /// water mirroring the sky goes on as smoothly: the horizon is lowered only to the row about
+  /// which the photo below mirrors the photo above (the median over the columns of their
+  /// correlation at least 0.8; the waterline), not out of the frame with the lake taken for sky
+  /// (GeometryEstimate::lowered_to_water). false: lowered as far as the sky-like pixels go.
+  bool water_mirror = true;
+  /// Issue 11: under a weak automatic horizon, a frame that is all "sky" (99 % of it without a
+  /// horizon) but holds two or more lamps (compact clipped blobs of at least 1 % of the frame;
+  /// photo/sky_mask.h, count_lamps_in_sky) is a ceiling seen from below: it has no sky, and is
+  /// a bounded scene (GeometryEstimate::lamps_not_sky). false: all sky, as the mask says.
+  bool lamps_not_sky = true;
   /// The sky matte's spill onto a surface beyond a sharp edge trimmed: on the surface side of
   /// the matte (alpha < 0.5), where sky and surface differ plainly in brightness, alpha is at
   /// most the pixel's unmixed share of the sky's colour (issue 11, helper haze11b; photo/sky_matte.h,
@@ -242,6 +253,12 @@ struct MR_API GeometryEstimate {
   double horizon_lowered_px = 0;
   /// Issue 11: the horizon was lowered to a backlit land's skyline (EstimateOptions::backlit_land).
   bool backlit_land = false;
+  /// Issue 11: the horizon was lowered only to calm water's mirror line
+  /// (EstimateOptions::water_mirror).
+  bool lowered_to_water = false;
+  /// Issue 11: the all-sky frame held lamps and was taken for a ceiling, without sky
+  /// (EstimateOptions::lamps_not_sky).
+  bool lamps_not_sky = false;
   /// Issue 11: the roll (degrees) of the horizon the photo's lines gave, when it was rejected as
   /// implausible for a photo (beyond 15 degrees: the lines were not verticals or level ones) and
   /// the level fall-back taken instead; NaN otherwise.
