@@ -424,7 +424,8 @@ def estimate(image: _Image, annotations: Union[dict, str, _Path, None] = None, *
              billboard_depression_deg: float = 2.0, ground_contact: bool = True,
              min_rise_ratio: float = 0.4, refine_depth: bool = True, sky_fold: bool = True,
              vegetation: bool = True, people: bool = True, frame_border: bool = True,
-             backlit_land: bool = True, cancel: Optional[CancelToken] = None) -> SceneEstimate: ...
+             backlit_land: bool = True, water_mirror: bool = True, lamps_not_sky: bool = True,
+             cancel: Optional[CancelToken] = None) -> SceneEstimate: ...
 
 # --- material transfer ---
 class Material:

@@ -59,6 +59,19 @@ def test_estimate_backlit_land_switch():
     assert on.horizon[0][1] > 600 > 500 > off.horizon[0][1]
 
 
+def test_estimate_water_mirror_and_lamps_switches():
+    # gallery/tune darkesthour: a lake at blue hour; free: a ceiling lit by its lamps
+    lake = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "darkesthour.jpg")
+    on = libmr.estimate(lake)
+    off = libmr.estimate(lake, water_mirror=False)
+    water = (700, 640)  # row, column: the lake near the frame's bottom
+    assert math.isfinite(on.distance_m[water][0]) and math.isinf(off.distance_m[water][0])
+    ceiling = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "free.jpg")
+    on = libmr.estimate(ceiling)
+    off = libmr.estimate(ceiling, lamps_not_sky=False)
+    assert on.pixels["sky"] == 0 and off.pixels["sky"] > 0.9 * 1280 * 960
+
+
 def test_estimate_errors_and_cancel(tmp_path):
     photo = libmr.read_image(SAMPLES / "aerial.jpg")
     bad = {"format": "libmr-annotations", "version": 1, "horizon": [[0, 10], "x"]}
