@@ -543,9 +543,45 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
   return out;
 }
 
+namespace {
+
+// Per pixel in [0, 1]: 1 where the photo shows no edge within 2 px (the largest step of log
+// luminance between neighbours, after a blur of 1 px, at most kPlainStep), falling to 0 at a
+// step of kEdgeStep (a region's border on the photo's own edge).
+cv::Mat photo_plainness(const Image& photo) {
+  constexpr float kPlainStep = 0.05f, kEdgeStep = 0.2f;
+  const int w = photo.width(), h = photo.height();
+  cv::Mat log_y(h, w, CV_32F);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      log_y.at<float>(y, x) = std::log(luminance(photo.pixel(x, y)) + 0.003f);
+  cv::GaussianBlur(log_y, log_y, cv::Size(0, 0), 1.0);
+  cv::Mat step(h, w, CV_32F, cv::Scalar(0));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float v = log_y.at<float>(y, x);
+      float s = 0;
+      if (x + 1 < w) s = std::max(s, std::abs(log_y.at<float>(y, x + 1) - v));
+      if (x > 0) s = std::max(s, std::abs(log_y.at<float>(y, x - 1) - v));
+      if (y + 1 < h) s = std::max(s, std::abs(log_y.at<float>(y + 1, x) - v));
+      if (y > 0) s = std::max(s, std::abs(log_y.at<float>(y - 1, x) - v));
+      step.at<float>(y, x) = s;
+    }
+  cv::dilate(step, step, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
+  cv::Mat plain(h, w, CV_32F);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      plain.at<float>(y, x) =
+          std::clamp((kEdgeStep - step.at<float>(y, x)) / (kEdgeStep - kPlainStep), 0.0f, 1.0f);
+  return plain;
+}
+
+}  // namespace
+
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
-                      std::span<const Material> materials, const Image* detail, double feather_px) {
+                      std::span<const Material> materials, const Image* detail, double feather_px,
+                      double smooth_feather_px) {
   require_size(photo, geometry, "photo");
   require_size(region_labels, geometry, "region labels");
   if (region_labels.channels() != 1)
@@ -575,9 +611,32 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
   // and a ragged border's 1-pixel teeth take their neighbourhood's majority instead of staying
   // specks. Each material is rendered where its weight reaches into the other regions; outside
   // the regions nothing changes.
-  const int reach = std::max(1, int(std::ceil(3 * feather_px)));
-  const cv::Size kernel(2 * reach + 1, 2 * reach + 1);
-  cv::Mat indicator(h, w, CV_32F), weight;
+  // Where the photo shows no edge across a region's border with the unlabelled surface (a
+  // brush's border through a plain saucer or a smooth blur), a border ragged by a pixel or two
+  // against a strong change of colour left 1-pixel teeth and notches, the ramp lying inside the
+  // region only: there the feather goes on outside it, a blur of sigma smooth_feather_px
+  // weighted by how plain the photo is (photo_plainness); on the photo's edges nothing outside
+  // changes, so the new material stops at the edge.
+  // The wide feather reaches 2 sigma outside a region, and only where the photo is plain over
+  // as far around (plainness eroded by that reach): it never crosses the photo's edge onto
+  // another surface as a glow.
+  const double wide_px = std::max(feather_px, smooth_feather_px);
+  const int wide_reach = int(std::ceil(2 * wide_px));
+  cv::Mat plain;
+  if (wide_px > feather_px)
+    cv::erode(photo_plainness(photo), plain,
+              cv::getStructuringElement(cv::MORPH_RECT,
+                                        cv::Size(2 * wide_reach + 1, 2 * wide_reach + 1)));
+  const int reach = std::max({1, int(std::ceil(3 * feather_px)), wide_reach});
+  const cv::Size kernel(2 * std::max(1, int(std::ceil(3 * feather_px))) + 1,
+                        2 * std::max(1, int(std::ceil(3 * feather_px))) + 1),
+      wide_kernel(2 * wide_reach + 1, 2 * wide_reach + 1);
+  cv::Mat indicator(h, w, CV_32F), weight, wide_weight;
+  auto is_surface = [&](int x, int y) { return geometry.surface.at(x, y, 0) > 0; };
+  auto is_region = [&](int x, int y) {
+    const float v = region_labels.at(x, y, 0);
+    return v >= 1 && v <= float(regions) && is_surface(x, y);
+  };
   cv::Mat accumulated(h, w, CV_32FC3, cv::Scalar::all(0)),
       region_weight(h, w, CV_32F, cv::Scalar(0));
   Image rendered(w, h, 3);
@@ -597,15 +656,25 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
     const cv::Rect roi(cv::Point(std::max(0, x0 - reach), std::max(0, y0 - reach)),
                        cv::Point(std::min(w, x1 + reach + 1), std::min(h, y1 + reach + 1)));
     cv::GaussianBlur(indicator(roi), weight, kernel, feather_px, feather_px, cv::BORDER_REPLICATE);
+    // Outside the regions, over the unlabelled surface, the wide feather by how plain the photo
+    // is there; inside them (and between two regions) the narrow one, so a region a few pixels
+    // across keeps its own colour.
+    if (!plain.empty()) {
+      cv::GaussianBlur(indicator(roi), wide_weight, wide_kernel, wide_px, wide_px,
+                       cv::BORDER_REPLICATE);
+      for (int y = 0; y < roi.height; ++y)
+        for (int x = 0; x < roi.width; ++x)
+          if (!is_region(x + roi.x, y + roi.y))
+            weight.at<float>(y, x) =
+                plain.at<float>(y + roi.y, x + roi.x) * wide_weight.at<float>(y, x);
+    }
     for (std::int32_t index : pixels[k - 1]) indicator.at<float>(index / w, index % w) = 0.0f;
     band.clear();  // the region's pixels and its neighbours' within the blur's reach
     for (int y = roi.y; y < roi.y + roi.height; ++y)
-      for (int x = roi.x; x < roi.x + roi.width; ++x) {
-        const float v = region_labels.at(x, y, 0);
-        if (weight.at<float>(y - roi.y, x - roi.x) > 1e-4f && v >= 1 && v <= float(regions) &&
-            geometry.surface.at(x, y, 0) > 0)
+      for (int x = roi.x; x < roi.x + roi.width; ++x)
+        if (weight.at<float>(y - roi.y, x - roi.x) > 1e-4f && is_surface(x, y) &&
+            (is_region(x, y) || !plain.empty()))
           band.push_back(y * w + x);
-      }
     render_with_detail(geometry, lighting, shading, detail, materials[k - 1], band, rendered);
     for (std::int32_t index : band) {
       const int x = index % w, y = index / w;
@@ -614,14 +683,13 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
       for (int c = 0; c < 3; ++c) accumulated.at<cv::Vec3f>(y, x)[c] += wk * rendered.at(x, y, c);
     }
   }
-  // Pixels outside the regions and the sky stay the photo's; in a region the photo fills what
-  // the regions' weights leave (a ramp inside its border with the photo).
+  // Sky pixels stay the photo's, and so do those outside the regions but where the wide feather
+  // reaches over a plain photo; the photo fills what the regions' weights leave (a ramp inside a
+  // region's border with the photo, and on across it where the photo is plain).
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const float total = region_weight.at<float>(y, x);
-      const float v = region_labels.at(x, y, 0);
-      if (!(total > 0) || !(v >= 1 && v <= float(regions)) || !(geometry.surface.at(x, y, 0) > 0))
-        continue;
+      if (!(total > 0) || !is_surface(x, y)) continue;
       const float wr = std::min(1.0f, total);
       for (int c = 0; c < 3; ++c)
         out.at(x, y, c) =

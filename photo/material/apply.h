@@ -104,16 +104,17 @@ Image photo_detail(const Image& photo, const Image& shading,
 /// `photo` with each region k (labels(x, y) = k in 1..materials.size(), surface pixels only)
 /// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular, or without `detail`
 /// (null) the plain rendering. Composited with soft weights, each region's indicator blurred by
-/// a Gaussian of sigma `feather_px` (0: hard edges), the photo filling the rest, sky pixels
-/// counting as outside: two regions' border blends their renderings, a region's border with the
-/// photo ramps inside the region; pixels outside the regions and sky pixels are the photo's,
-/// except the 1-pixel edge of an object beside a region, a mix of the object and its background
-/// whose object share (read from the colour line between them, where they differ by a third or
-/// more) takes the new colour. With `detail`, pass floored_shading().
+/// a Gaussian of sigma `feather_px` (0: hard edges), or of `smooth_feather_px` where the photo
+/// shows no edge (mixed by how plain it is within 2 px; <= feather_px: off), the photo filling the
+/// rest, sky pixels counting as outside: two regions' border blends their renderings, a region's
+/// border with the photo ramps inside the region; pixels outside the regions and sky pixels are the
+/// photo's, except the 1-pixel edge of an object beside a region, a mix of the object and its
+/// background whose object share (read from the colour line between them, where they differ by a
+/// third or more) takes the new colour. With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
-                      double feather_px = 1.0);
+                      double feather_px = 1.0, double smooth_feather_px = 3.0);
 
 /// Renders what apply_materials puts into region pixels, for one material at the listed pixels
 /// (indices y * width + x) into `out` (3 channels, the geometry's size; other pixels untouched).

@@ -93,7 +93,11 @@ struct MR_API MaterialTransferResult {
 /// regions are rendered over black with the chosen materials (no photo detail: keep_detail is
 /// ignored), everything else is black.
 /// Region labels: `region_labels` is 1 channel of the target's size with
-/// 0 = untouched and 1..n = region n (every id in 1..n must have pixels). Throws
+/// 0 = untouched and 1..n = region n (every id in 1..n must have pixels). A photo's regions are
+/// taken as a brush's, a pixel or two off: their borders snap to the photo's edges and are
+/// feathered (1 px; where the photo is plain across a border with an untouched surface the
+/// feather goes on up to 6 px outside it, so a plain surface's untouched pixels next to a
+/// region can change); a 3D scene's are exact. Throws
 /// mr::Error(invalid_argument) for an empty region set, a region id with no pixels, or a region
 /// entirely in the sky; mr::Error(size_mismatch) for labels of another size.
 MR_API MaterialTransferResult transfer_material(const ShadedPhoto& sample, const ShadedPhoto& target,
