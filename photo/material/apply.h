@@ -104,13 +104,16 @@ Image photo_detail(const Image& photo, const Image& shading,
 /// `photo` with each region k (labels(x, y) = k in 1..materials.size(), surface pixels only)
 /// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular, or without `detail`
 /// (null) the plain rendering. Composited with soft weights, each region's indicator blurred by
-/// a Gaussian of sigma `feather_px` (0: hard edges), or of `smooth_feather_px` where the photo
-/// shows no edge (mixed by how plain it is within 2 px; <= feather_px: off), the photo filling the
-/// rest, sky pixels counting as outside: two regions' border blends their renderings, a region's
-/// border with the photo ramps inside the region; pixels outside the regions and sky pixels are the
-/// photo's, except the 1-pixel edge of an object beside a region, a mix of the object and its
-/// background whose object share (read from the colour line between them, where they differ by a
-/// third or more) takes the new colour. With `detail`, pass floored_shading().
+/// a Gaussian of sigma `feather_px` (0: hard edges), the photo filling the rest, sky pixels
+/// counting as outside: two regions' border blends their renderings, a region's border with the
+/// photo ramps inside the region. Pixels outside the regions and sky pixels are the photo's,
+/// except (1) the 1-pixel edge of an object beside a region, a mix of the object and its
+/// background whose object share (read from the colour line between them, where they differ by
+/// a third or more) takes the new colour, and (2) with `smooth_feather_px` > `feather_px`, the
+/// untouched surface within 2 x smooth_feather_px of a region where the photo is plain that far
+/// around (no step of log luminance over 0.05 between neighbours, none at all from 0.2), which
+/// the region's indicator blurred by a Gaussian of that sigma reaches: a border ragged by a
+/// pixel or two through a plain surface leaves no teeth. With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
