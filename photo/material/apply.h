@@ -110,10 +110,11 @@ Image photo_detail(const Image& photo, const Image& shading,
 /// except (1) the 1-pixel edge of an object beside a region, a mix of the object and its
 /// background whose object share (read from the colour line between them, where they differ by
 /// a third or more) takes the new colour, and (2) with `smooth_feather_px` > `feather_px`, the
-/// untouched surface within 2 x smooth_feather_px of a region where the photo is plain that far
-/// around (no step of log luminance over 0.05 between neighbours, none at all from 0.2), which
-/// the region's indicator blurred by a Gaussian of that sigma reaches: a border ragged by a
-/// pixel or two through a plain surface leaves no teeth. With `detail`, pass floored_shading().
+/// untouched surface within 2 x smooth_feather_px of a region, which takes the region's
+/// indicator blurred by a Gaussian of that sigma times how plain the photo is that far around
+/// (1 where no step of the blurred log luminance between neighbours exceeds 0.05, 0 from 0.2;
+/// the least over the reach): a border ragged by a pixel or two through a plain surface leaves
+/// no teeth, and nothing crosses the photo's edges. With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
