@@ -18,7 +18,6 @@
 #include <cstddef>
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
 #include <limits>
 #include <random>
 #include <string>
@@ -327,13 +326,12 @@ TEST(BoundedScene, LampsInTheSkyAreCompactClippedBlobs) {
 // rule all of it is sky (the horizon lowered out of the frame), a flat veil in any fog, the bird
 // gone in dense fog. With it the ceiling has no sky and is a bounded scene.
 TEST(BoundedScene, ACeilingLitByItsLampsIsNoSky) {
-  const Image photo =
-      read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / "free.jpg");
-  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
+  const Image photo = test::tuning_photo("free.jpg");
   EstimateOptions without;
   without.lamps_not_sky = false;
-  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
-  const SceneEstimate before = estimate_scene(photo, camera, Annotations{}, without);
+  const test::WithAndWithout e = test::estimate_with_and_without(photo, without);
+  const Camera& camera = e.camera;
+  const SceneEstimate &est = e.with, &before = e.without;
   const double n = double(photo.width()) * photo.height();
   const float bird_m = est.geometry.distance_m.at(640, 740, 0);  // the bird's body
   const test::GalleryLooks looks = test::haze_and_dense_looks(photo, camera, est, "free");

@@ -15,7 +15,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
 #include <random>
 #include <string>
 
@@ -386,13 +385,12 @@ TEST(FarShore, MirroringWaterStopsAWeakHorizonAtItsWaterline) {
 // far shore's trees on its waterline near row 530). Without the rule the horizon went out of
 // the frame and 99.9 % of it was sky, the lake veiled flat in every look.
 TEST(FarShore, DarkestHoursLakeIsWaterUnderItsWaterline) {
-  const Image photo =
-      read_image(std::filesystem::path(MR_SOURCE_DIR) / "gallery" / "tune" / "darkesthour.jpg");
-  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
+  const Image photo = test::tuning_photo("darkesthour.jpg");
   EstimateOptions without;
   without.water_mirror = false;
-  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
-  const SceneEstimate before = estimate_scene(photo, camera, Annotations{}, without);
+  const test::WithAndWithout e = test::estimate_with_and_without(photo, without);
+  const Camera& camera = e.camera;
+  const SceneEstimate &est = e.with, &before = e.without;
   const double n = double(photo.width()) * photo.height();
   std::size_t lake_sky = 0;
   for (int y = 560; y < photo.height(); ++y)

@@ -22,6 +22,27 @@
 
 namespace mr::test {
 
+#ifdef MR_SOURCE_DIR
+// A photo of the gallery's tuning half (gallery/tune/<name>), scene-linear.
+inline Image tuning_photo(const std::string& name) {
+  return read_image(std::string(MR_SOURCE_DIR) + "/gallery/tune/" + name);
+}
+#endif
+
+// The automatic estimate of `photo` (a 60 degree lens, no annotations) with the default
+// options and with `without` (a rule switched off): the rule's effect.
+struct WithAndWithout {
+  Camera camera;
+  SceneEstimate with, without;
+};
+inline WithAndWithout estimate_with_and_without(const Image& photo,
+                                                const EstimateOptions& without) {
+  WithAndWithout out{Camera::from_horizontal_fov(photo.width(), photo.height(), 60), {}, {}};
+  out.with = estimate_scene(photo, out.camera, Annotations{});
+  out.without = estimate_scene(photo, out.camera, Annotations{}, without);
+  return out;
+}
+
 // Display-referred [0, 1] colour -> scene-linear (gamma 2.2).
 inline float linear(float display) {
   return std::pow(display, 2.2f);
