@@ -98,10 +98,11 @@ struct MR_API EstimateOptions {
   /// correlation at least 0.8; the waterline), not out of the frame with the lake taken for sky
   /// (GeometryEstimate::lowered_to_water). false: lowered as far as the sky-like pixels go.
   bool water_mirror = true;
-  /// Issue 11: under a weak automatic horizon, a frame that is all "sky" (99 % of it without a
-  /// horizon) but holds two or more lamps (compact clipped blobs of at least 1 % of the frame;
-  /// photo/sky_mask.h, count_lamps_in_sky) is a ceiling seen from below: it has no sky, and is
-  /// a bounded scene (GeometryEstimate::lamps_not_sky). false: all sky, as the mask says.
+  /// Issue 11: a frame whose weak automatic horizon was lowered under its "sky", the sky (with
+  /// a cloud bank) covering at least 90 % of it, but which holds two or more lamps (compact
+  /// clipped blobs of at least 1 % of the frame; photo/sky_mask.h, count_lamps_in_sky) is a
+  /// ceiling seen from below: it has no sky, and is a bounded scene
+  /// (GeometryEstimate::lamps_not_sky). false: all sky, as the mask says.
   bool lamps_not_sky = true;
   /// The sky matte's spill onto a surface beyond a sharp edge trimmed: on the surface side of
   /// the matte (alpha < 0.5), where sky and surface differ plainly in brightness, alpha is at
