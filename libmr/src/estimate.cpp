@@ -473,6 +473,14 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // under the haze's veil, a hard line between them) and clouds reaching the guess were
   // "standing on the ground". The horizon is then lowered (same roll) to the median lowest row
   // that sky reaches, continuously from the guess, in the columns where it reaches the guess.
+  // The photo blurred vertically over a line's width, for the mirror tests (the water under a
+  // lowered horizon, the far shores below): made once, when first asked for.
+  cv::Mat blurred_rgb_once;
+  auto blurred_rgb = [&]() -> const cv::Mat& {
+    if (blurred_rgb_once.empty())
+      blurred_rgb_once = vertically_blurred_rgb(*photo, std::max(3, camera.height / 100));
+    return blurred_rgb_once;
+  };
   std::vector<std::uint8_t> cloud_bank;  // the bank the guess was lowered under, if any
   photo::Silhouette backlit;             // backlit land the guess was lowered to, if any
   if (!annotations.horizon && g.confidence < kWeakHorizonConfidence) {
@@ -555,8 +563,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         if (options.water_mirror) {
           const int guess_row = int(std::floor(guess_y(0.5 * (w - 1))));
           const int line_px = std::max(3, h / 100);
-          const int axis = water_mirror_row(vertically_blurred_rgb(*photo, line_px),
-                                            guess_row - 2 * line_px, guess_row + int(drop) + 1);
+          const int axis =
+              water_mirror_row(blurred_rgb(), guess_row - 2 * line_px, guess_row + int(drop) + 1);
           if (axis >= 0) {
             drop = std::min(drop, double(axis - guess_row - 1));
             lower_it = drop >= 1;
@@ -1238,7 +1246,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       std::vector<float> band_mirror(std::size_t(w), 0.0f);
       if (options.far_shore) {
         // Ripples blur a reflection vertically: both sides blurred alike over a line's width.
-        const cv::Mat rgb = vertically_blurred_rgb(*photo, std::max(3, h / 100));
+        const cv::Mat& rgb = blurred_rgb();
         const int search = 2 * line_px, half_width = std::max(4, w / 80);
         std::vector<std::vector<float>> score(static_cast<std::size_t>(w));
         std::vector<int> best(std::size_t(w), -1);

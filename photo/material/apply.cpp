@@ -627,9 +627,9 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
     cv::erode(photo_plainness(photo), plain,
               cv::getStructuringElement(cv::MORPH_RECT,
                                         cv::Size(2 * wide_reach + 1, 2 * wide_reach + 1)));
-  const int reach = std::max({1, int(std::ceil(3 * feather_px)), wide_reach});
-  const cv::Size kernel(2 * std::max(1, int(std::ceil(3 * feather_px))) + 1,
-                        2 * std::max(1, int(std::ceil(3 * feather_px))) + 1),
+  const int narrow_reach = std::max(1, int(std::ceil(3 * feather_px)));
+  const int reach = std::max(narrow_reach, wide_reach);
+  const cv::Size kernel(2 * narrow_reach + 1, 2 * narrow_reach + 1),
       wide_kernel(2 * wide_reach + 1, 2 * wide_reach + 1);
   cv::Mat indicator(h, w, CV_32F), weight, wide_weight;
   auto is_surface = [&](int x, int y) { return geometry.surface.at(x, y, 0) > 0; };
