@@ -355,5 +355,55 @@ TEST(BoundedScene, ACeilingLitByItsLampsIsNoSky) {
   EXPECT_LE(looks.dense_edges, 2e-4);
 }
 
+// The photo the wall rule was made on (gallery/tune basketball, 640x480: two men throwing a
+// ball in an office, a white wall behind them). The photo's lines measure its horizon
+// (confidence 0.27, not a weak guess), and the wall above it passed for an overcast sky: 24 % of
+// the frame sky, the office an outdoor scene 46 m deep, the men veiled in dense fog. The wall
+// goes on below the horizon to the floor with no edge (36 % of the height), which no sky does:
+// with the rule it is no sky, and the office a bounded scene.
+TEST(BoundedScene, AWallTheHorizonCutsAcrossIsNoSky) {
+  const Image photo = test::tuning_photo("basketball.jpg");
+  EstimateOptions without;
+  without.wall_not_sky = false;
+  const test::WithAndWithout e = test::estimate_with_and_without(photo, without);
+  const Camera& camera = e.camera;
+  const SceneEstimate &est = e.with, &before = e.without;
+  const double n = double(photo.width()) * photo.height();
+  const int man_x = 85, man_y = 260;  // the left man's shirt
+  const test::GalleryLooks looks = test::haze_and_dense_looks(photo, camera, est, "basketball");
+  const FogLayers dense = test::fog_auto_look(photo, camera, est, 60, 80, 0.3);
+  const FogLayers dense_before = test::fog_auto_look(photo, camera, before, 60, 80, 0.3);
+  std::printf(
+      "basketball: %s; sky %.1f %% (without the rule %.1f %%), the man at %.2f m (%.2f m), his "
+      "dense-fog transmittance %.2f (%.2f); created-edge pixels haze %.4f %%, dense %.4f %%\n",
+      est.notes.front().c_str(), 100 * est.geometry.sky_pixels / n,
+      100 * before.geometry.sky_pixels / n, est.geometry.distance_m.at(man_x, man_y, 0),
+      before.geometry.distance_m.at(man_x, man_y, 0), dense.transmittance.at(man_x, man_y, 1),
+      dense_before.transmittance.at(man_x, man_y, 1), 100 * looks.haze_edges,
+      100 * looks.dense_edges);
+  ASSERT_GT(double(before.geometry.sky_pixels), 0.2 * n);  // the defect reproduced
+  EXPECT_EQ(before.geometry.wall_not_sky_pixels, 0u);
+  EXPECT_GT(double(est.geometry.wall_not_sky_pixels), 0.2 * n);
+  EXPECT_LT(double(est.geometry.sky_pixels), 0.002 * n);  // a bounded scene's "no sky"
+  const double widest = std::atan(std::hypot(320.0, 240.0) / camera.focal_px);
+  EXPECT_LT(est.geometry.distance_m.at(man_x, man_y, 0), 8.0 / std::cos(widest) + 0.01);
+  EXPECT_GT(dense.transmittance.at(man_x, man_y, 1), 0.6f);
+  EXPECT_LE(looks.haze_edges, 2e-4);
+  EXPECT_LE(looks.dense_edges, 2e-4);
+}
+
+// A real sky under a horizon from the photo's lines, going on a little below it (gallery/tune
+// rocket: a dusk sky 5.6 % of the height below the measured line), stays sky: a horizon
+// measured from lines errs by a few percent, a wall crosses it by far more.
+TEST(BoundedScene, ASkyGoingOnALittleBelowAMeasuredHorizonStaysSky) {
+  const Image photo = test::tuning_photo("rocket.jpg");
+  EstimateOptions without;
+  without.wall_not_sky = false;
+  const test::WithAndWithout e = test::estimate_with_and_without(photo, without);
+  EXPECT_EQ(e.with.geometry.wall_not_sky_pixels, 0u);
+  EXPECT_EQ(e.with.geometry.sky_pixels, e.without.geometry.sky_pixels);
+  EXPECT_GT(double(e.with.geometry.sky_pixels), 0.5 * photo.width() * photo.height());
+}
+
 }  // namespace
 }  // namespace mr

@@ -201,6 +201,10 @@ constexpr double kWeakHorizonConfidence = 0.2;
 constexpr double kMinSkyAtGuessFraction = 0.25;
 constexpr double kMinHorizonDropFraction = 0.02;
 constexpr double kMinSkyBelowGuessFraction = 0.75;
+// A horizon measured from the photo's lines errs by a few percent of the height (rocket's dusk
+// sky goes on 5.6 % below its own): sky going on below it by this fraction of the height is a
+// surface it cuts across (basketball's office wall: 36 %; EstimateOptions::wall_not_sky).
+constexpr double kMinWallDropFraction = 0.15;
 // A frame whose sky and cloud bank cover this much of it (its subject, a bird or a kite, the
 // rest) is all sky, or a ceiling.
 constexpr double kAllSkyFraction = 0.9;
@@ -364,6 +368,102 @@ int join_sky_cut_by_a_guess(photo::SkyMask& mask, const photo::SkyMask& probe,
     }
   mask.pixels = pixels;
   return columns;
+}
+
+// Issue 11: how the sky goes on below a line it reaches. `reaching`: per column, whether the
+// mask's sky reaches the line (within `near` rows above it) and the probe's sky (the mask found
+// with its horizon below the frame: every pixel above it) goes on below it there; `columns`:
+// how many columns the mask's sky reaches it in; `drop`: the median, over those columns, of
+// the rows the probe's sky goes on below the line (0 where it does not); `band_fraction`: the
+// probe's share of the band between the line and `drop` rows below it, in those columns.
+// Nothing (columns 0) when the mask's sky reaches the line in fewer than `min_fraction` of
+// the columns: the probe costs about a third of the estimate's CPU time.
+struct SkyBelowLine {
+  std::vector<std::uint8_t> reaching;
+  int columns = 0;
+  double drop = 0, band_fraction = 0;
+};
+SkyBelowLine sky_below_line(const Image& photo, const photo::SkyMask& mask,
+                            const std::array<PixelPoint, 2>& line,
+                            const photo::SkyMaskOptions& sky_options, double min_fraction,
+                            int near = 4) {
+  SkyBelowLine out;
+  const int w = mask.width, h = mask.height;
+  const double slope = (line[1][1] - line[0][1]) / std::max(1.0, line[1][0] - line[0][0]);
+  auto line_row = [&](int x) { return int(std::floor(line[0][1] + (x - line[0][0]) * slope)); };
+  std::vector<int> reach_row(std::size_t(w), -1);  // the mask's sky row near the line
+  for (int x = 0; x < w; ++x) {
+    const int row = line_row(x);
+    if (row < near || row >= h - 1) continue;
+    for (int r = row; r >= row - near && reach_row[std::size_t(x)] < 0; --r)
+      if (mask.sky[std::size_t(r) * w + x]) reach_row[std::size_t(x)] = r;
+    out.columns += reach_row[std::size_t(x)] >= 0;
+  }
+  if (out.columns < min_fraction * w || out.columns == 0) {
+    out.columns = 0;
+    return out;
+  }
+  const double below_frame = h + 1.0;
+  const photo::SkyMask probe = photo::estimate_sky_mask(
+      photo.view(), {PixelPoint{0, below_frame}, PixelPoint{w - 1.0, below_frame}}, sky_options);
+  out.reaching.assign(std::size_t(w), 0);
+  std::vector<int> drops;
+  for (int x = 0; x < w; ++x) {
+    int row = reach_row[std::size_t(x)];
+    if (row < 0) continue;
+    if (probe.sky[std::size_t(row) * w + x])
+      while (row + 1 < h && probe.sky[std::size_t(row + 1) * w + x]) ++row;
+    drops.push_back(std::max(0, row - line_row(x)));
+    out.reaching[std::size_t(x)] = drops.back() > 0;
+  }
+  std::nth_element(drops.begin(), drops.begin() + std::ptrdiff_t(drops.size() / 2), drops.end());
+  out.drop = drops[drops.size() / 2];
+  std::size_t band = 0, band_sky = 0;
+  for (int x = 0; x < w; ++x) {
+    if (reach_row[std::size_t(x)] < 0) continue;
+    const int y0 = line_row(x);
+    for (int y = std::max(0, y0 + 1); y <= std::min(h - 1, y0 + int(out.drop)); ++y)
+      ++band, band_sky += probe.sky[std::size_t(y) * w + x];
+  }
+  out.band_fraction = band ? double(band_sky) / double(band) : 0.0;
+  return out;
+}
+
+// Takes out of `mask` the 8-connected components of its matte (alpha > 0: the sky and the soft
+// band along its edges) that reach `line` (within `near` rows above it) in a column marked in
+// `columns`; returns the sky pixels taken out.
+std::size_t drop_sky_reaching_line(photo::SkyMask& mask, const std::array<PixelPoint, 2>& line,
+                                   const std::vector<std::uint8_t>& columns, int near = 4) {
+  const int w = mask.width, h = mask.height;
+  const std::size_t count = std::size_t(w) * h;
+  if (columns.size() != std::size_t(w) || mask.sky.size() != count || mask.alpha.size() != count)
+    return 0;
+  const double slope = (line[1][1] - line[0][1]) / std::max(1.0, line[1][0] - line[0][0]);
+  cv::Mat matte(h, w, CV_8U), labels;
+  for (std::size_t i = 0; i < count; ++i) matte.data[i] = mask.sky[i] != 0 || mask.alpha[i] > 0;
+  const int n = cv::connectedComponents(matte, labels, 8, CV_32S);
+  std::vector<std::uint8_t> drop(std::size_t(n), 0);
+  for (int x = 0; x < w; ++x) {
+    if (!columns[std::size_t(x)]) continue;
+    const int row = int(std::floor(line[0][1] + (x - line[0][0]) * slope));
+    for (int r = std::min(row, h - 1); r >= std::max(0, row - near); --r)
+      drop[std::size_t(labels.at<int>(r, x))] = 1;
+  }
+  drop[0] = 0;
+  std::size_t dropped = 0, pixels = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = std::size_t(y) * w + x;
+      if (drop[std::size_t(labels.at<int>(y, x))]) {
+        dropped += mask.sky[i];
+        mask.sky[i] = 0;
+        mask.alpha[i] = 0.0f;
+      }
+      pixels += mask.sky[i];
+    }
+  mask.pixels = pixels;
+  mask.gap_pixels = std::min(mask.gap_pixels, pixels);
+  return dropped;
 }
 
 GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annotations& annotations,
@@ -628,6 +728,23 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           backlit = std::move(land);
         }
       }
+    }
+  }
+  // Issue 11 (basketball: an office's white wall taken for an overcast sky): the sky is only
+  // ever seen above the horizon, and ends there (land, a shore, a cloud bank: an edge). A pale,
+  // smooth surface that a horizon the photo's lines measured cuts across goes on below it with
+  // no edge: a wall, a ceiling, a screen. Where the mask's sky reaches such a horizon in at
+  // least kMinSkyAtGuessFraction of the columns and the probe's sky (the mask without a
+  // horizon) goes on below it there by at least kMinWallDropFraction of the height, filling
+  // kMinSkyBelowGuessFraction of the band (as the weak guess's lowering asks), the sky
+  // components that reach the horizon are that surface, not sky.
+  if (options.wall_not_sky && !annotations.horizon && g.confidence >= kWeakHorizonConfidence &&
+      mask.pixels > 0) {
+    const SkyBelowLine below =
+        sky_below_line(*photo, mask, g.horizon, sky_options, kMinSkyAtGuessFraction);
+    if (below.columns > 0 && below.drop >= kMinWallDropFraction * camera.height &&
+        below.band_fraction >= kMinSkyBelowGuessFraction) {
+      g.wall_not_sky_pixels = drop_sky_reaching_line(mask, g.horizon, below.reaching);
     }
   }
   // A frame that the sky (with a cloud bank) fills from top to bottom, the weak horizon lowered
@@ -1716,6 +1833,12 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
                                 : std::string()) +
       (g.lamps_not_sky ? "; the frame, all sky-like, holds lamps: a ceiling, no sky"
                        : std::string()) +
+      (g.wall_not_sky_pixels > 0
+           ? "; " +
+                 fmt("%.1f",
+                     100.0 * double(g.wall_not_sky_pixels) / double(g.distance_m.pixels().size())) +
+                 " % of the frame, sky-like, goes on far below it: a wall, not sky"
+           : std::string()) +
       ", pitch " + fmt("%.2f", g.pose.pitch_deg) + " deg, roll " + fmt("%.2f", g.pose.roll_deg) +
       " deg, confidence " + fmt("%.2f", g.confidence));
   est.notes.push_back(std::string("camera height: ") + fmt("%.3f", g.pose.position_m.y) + " m (" +

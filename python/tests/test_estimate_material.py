@@ -59,7 +59,7 @@ def test_estimate_backlit_land_switch():
     assert on.horizon[0][1] > 600 > 500 > off.horizon[0][1]
 
 
-def test_estimate_water_mirror_and_lamps_switches():
+def test_estimate_water_mirror_lamps_and_wall_switches():
     # gallery/tune darkesthour: a lake at blue hour; free: a ceiling lit by its lamps
     lake = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "darkesthour.jpg")
     on = libmr.estimate(lake)
@@ -70,6 +70,10 @@ def test_estimate_water_mirror_and_lamps_switches():
     on = libmr.estimate(ceiling)
     off = libmr.estimate(ceiling, lamps_not_sky=False)
     assert on.pixels["sky"] == 0 and off.pixels["sky"] > 0.9 * 1280 * 960
+    office = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "basketball.jpg")
+    on = libmr.estimate(office)
+    off = libmr.estimate(office, wall_not_sky=False)
+    assert on.pixels["sky"] < 0.002 * 640 * 480 and off.pixels["sky"] > 0.2 * 640 * 480
 
 
 def test_estimate_errors_and_cancel(tmp_path):

@@ -104,6 +104,13 @@ struct MR_API EstimateOptions {
   /// ceiling seen from below: it has no sky, and is a bounded scene
   /// (GeometryEstimate::lamps_not_sky). false: all sky, as the mask says.
   bool lamps_not_sky = true;
+  /// Issue 11: a pale, smooth surface that a horizon measured from the photo's lines (not the
+  /// level fall-back, not a weak cue) cuts across, going on below it with no edge, is a wall
+  /// (an office's white wall), not an overcast sky: where the sky reaches the horizon in at
+  /// least a quarter of the columns and goes on below it by at least 15 % of the height, filling
+  /// 75 % of that band, the sky that reaches the horizon is taken out
+  /// (GeometryEstimate::wall_not_sky_pixels). false: sky, as the mask says.
+  bool wall_not_sky = true;
   /// The sky matte's spill onto a surface beyond a sharp edge trimmed: on the surface side of
   /// the matte (alpha < 0.5), where sky and surface differ plainly in brightness, alpha is at
   /// most the pixel's unmixed share of the sky's colour (issue 11, helper haze11b; photo/sky_matte.h,
@@ -260,6 +267,9 @@ struct MR_API GeometryEstimate {
   /// Issue 11: the all-sky frame held lamps and was taken for a ceiling, without sky
   /// (EstimateOptions::lamps_not_sky).
   bool lamps_not_sky = false;
+  /// Issue 11: pixels of "sky" taken out as a wall that goes on below the horizon
+  /// (EstimateOptions::wall_not_sky; 0: none).
+  std::size_t wall_not_sky_pixels = 0;
   /// Issue 11: the roll (degrees) of the horizon the photo's lines gave, when it was rejected as
   /// implausible for a photo (beyond 15 degrees: the lines were not verticals or level ones) and
   /// the level fall-back taken instead; NaN otherwise.
