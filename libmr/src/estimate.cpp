@@ -813,9 +813,12 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     g.sharp_fraction = defocus.sharp_fraction();
     // ... with the subject filling most of the frame: a landscape with a wide sky whose smooth
     // glow and calm water pass for blur (a lake at twilight) is not a close-up.
-    const bool closeup = defocus.blurred_fraction() >= options.closeup_min_defocused &&
-                         defocus.sharp_fraction() >= options.closeup_min_sharp &&
-                         double(mask.pixels) <= options.closeup_max_sky_fraction * double(n);
+    const double blurred = defocus.blurred_fraction(), sharp = defocus.sharp_fraction();
+    const bool closeup =
+        ((blurred >= options.closeup_min_defocused && sharp >= options.closeup_min_sharp) ||
+         (blurred >= options.closeup_small_subject_defocused &&
+          sharp >= options.closeup_small_subject_sharp)) &&
+        double(mask.pixels) <= options.closeup_max_sky_fraction * double(n);
     double limit_m = kInfinity;
     std::string cue;
     if (closeup) {

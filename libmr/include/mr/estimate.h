@@ -169,6 +169,12 @@ struct MR_API EstimateOptions {
   /// the photo's own focus is the cue.
   double closeup_scene_depth_m = 3.0;
   double closeup_min_defocused = 0.12, closeup_min_sharp = 0.1, closeup_max_sky_fraction = 0.5;
+  /// ... or a small sharp subject (an insect, a flower's stamen) in a frame mostly strongly
+  /// blurred: at least `closeup_small_subject_defocused` of the blocks blurred and at least
+  /// `closeup_small_subject_sharp` sharp (gallery ladybird: 64 % and 4 %; a photo blurred all
+  /// over, by shake or a missed focus, has no sharp block, and no landscape of the tuning half
+  /// is even 30 % blurred).
+  double closeup_small_subject_defocused = 0.4, closeup_small_subject_sharp = 0.02;
   /// Optional, caller-owned (mr/cancel.h): requested, the estimate stops at its next step with
   /// mr::Error(cancelled); its progress callback hears each step as it starts, in order
   /// "horizon", "sky mask", "depth", "refine" (and "light" for estimate_scene), with done = the
