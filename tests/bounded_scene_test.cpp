@@ -392,6 +392,33 @@ TEST(BoundedScene, AWallTheHorizonCutsAcrossIsNoSky) {
   EXPECT_LE(looks.dense_edges, 2e-4);
 }
 
+// Calm water mirroring an overcast sky goes on below the horizon as smoothly as a wall. The
+// tuning photo's top half over its own mirror image (basketball's rows 0-239 flipped below row
+// 240: the photo's lines still put the horizon there, confidence 0.27): its "sky" goes on far
+// below the horizon, in the water. The water mirror test keeps it sky; without that test the
+// wall rule takes it out.
+TEST(BoundedScene, SkyMirroredInCalmWaterIsNoWall) {
+  const Image office = test::tuning_photo("basketball.jpg");
+  const int axis = 240;
+  Image photo(office.width(), office.height(), office.channels());
+  for (int y = 0; y < photo.height(); ++y) {
+    const int from = y < axis ? y : 2 * axis - 1 - y;
+    for (int x = 0; x < photo.width(); ++x)
+      for (int c = 0; c < photo.channels(); ++c) photo.at(x, y, c) = office.at(x, from, c);
+  }
+  EstimateOptions no_mirror_test;
+  no_mirror_test.water_mirror = false;
+  const test::WithAndWithout e = test::estimate_with_and_without(photo, no_mirror_test);
+  const double n = double(photo.width()) * photo.height();
+  std::printf("office over its mirror: %s; sky %.1f %% (without the mirror test %.1f %%)\n",
+              e.with.notes.front().c_str(), 100 * e.with.geometry.sky_pixels / n,
+              100 * e.without.geometry.sky_pixels / n);
+  ASSERT_GE(e.with.geometry.confidence, 0.2);  // a measured horizon, as the rule asks
+  EXPECT_GT(double(e.without.geometry.wall_not_sky_pixels), 0.2 * n);  // the rule would fire
+  EXPECT_EQ(e.with.geometry.wall_not_sky_pixels, 0u);
+  EXPECT_GT(double(e.with.geometry.sky_pixels), 0.2 * n);
+}
+
 // A real sky under a horizon from the photo's lines, going on a little below it (gallery/tune
 // rocket: a dusk sky 5.6 % of the height below the measured line), stays sky: a horizon
 // measured from lines errs by a few percent, a wall crosses it by far more.

@@ -744,7 +744,20 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         sky_below_line(*photo, mask, g.horizon, sky_options, kMinSkyAtGuessFraction);
     if (below.columns > 0 && below.drop >= kMinWallDropFraction * camera.height &&
         below.band_fraction >= kMinSkyBelowGuessFraction) {
-      g.wall_not_sky_pixels = drop_sky_reaching_line(mask, g.horizon, below.reaching);
+      // Calm water mirroring an overcast sky goes on below the horizon as smoothly as a wall
+      // (water_mirror_row): where the photo below mirrors the photo above about a row between
+      // two lines' widths above the horizon and the sky's end below it, that is water, and the
+      // sky above it stays sky.
+      const double centre_x = 0.5 * (camera.width - 1);
+      const int horizon_row = int(std::floor(
+          g.horizon[0][1] + (centre_x - g.horizon[0][0]) * (g.horizon[1][1] - g.horizon[0][1]) /
+                                std::max(1.0, g.horizon[1][0] - g.horizon[0][0])));
+      const int line_px = std::max(3, camera.height / 100);
+      const bool mirrored =
+          options.water_mirror && water_mirror_row(blurred_rgb(), horizon_row - 2 * line_px,
+                                                   horizon_row + int(below.drop)) >= 0;
+      if (!mirrored)
+        g.wall_not_sky_pixels = drop_sky_reaching_line(mask, g.horizon, below.reaching);
     }
   }
   // A frame that the sky (with a cloud bank) fills from top to bottom, the weak horizon lowered

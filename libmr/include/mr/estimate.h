@@ -108,7 +108,8 @@ struct MR_API EstimateOptions {
   /// level fall-back, not a weak cue) cuts across, going on below it with no edge, is a wall
   /// (an office's white wall), not an overcast sky: where the sky reaches the horizon in at
   /// least a quarter of the columns and goes on below it by at least 15 % of the height, filling
-  /// 75 % of that band, the sky that reaches the horizon is taken out
+  /// 75 % of that band, and the photo below does not mirror the photo above (calm water under
+  /// an overcast sky, with water_mirror), the sky that reaches the horizon is taken out
   /// (GeometryEstimate::wall_not_sky_pixels). false: sky, as the mask says.
   bool wall_not_sky = true;
   /// The sky matte's spill onto a surface beyond a sharp edge trimmed: on the surface side of
