@@ -334,8 +334,8 @@ TEST(BoundedScene, ACeilingLitByItsLampsIsNoSky) {
   const SceneEstimate &est = e.with, &before = e.without;
   const double n = double(photo.width()) * photo.height();
   const float bird_m = est.geometry.distance_m.at(640, 740, 0);  // the bird's body
-  const test::GalleryLooks looks = test::haze_and_dense_looks(photo, camera, est, "free");
-  const FogLayers dense = test::fog_auto_look(photo, camera, est, 60, 80, 0.3);
+  FogLayers dense;
+  const test::GalleryLooks looks = test::haze_and_dense_looks(photo, camera, est, "free", &dense);
   std::printf(
       "free: %s; %s; sky %.1f %% (without the rule %.1f %%), the bird at %.2f m, its dense-fog "
       "transmittance %.2f; created-edge pixels haze %.4f %%, dense %.4f %%\n",
@@ -370,8 +370,9 @@ TEST(BoundedScene, AWallTheHorizonCutsAcrossIsNoSky) {
   const SceneEstimate &est = e.with, &before = e.without;
   const double n = double(photo.width()) * photo.height();
   const int man_x = 85, man_y = 260;  // the left man's shirt
-  const test::GalleryLooks looks = test::haze_and_dense_looks(photo, camera, est, "basketball");
-  const FogLayers dense = test::fog_auto_look(photo, camera, est, 60, 80, 0.3);
+  FogLayers dense;
+  const test::GalleryLooks looks =
+      test::haze_and_dense_looks(photo, camera, est, "basketball", &dense);
   const FogLayers dense_before = test::fog_auto_look(photo, camera, before, 60, 80, 0.3);
   std::printf(
       "basketball: %s; sky %.1f %% (without the rule %.1f %%), the man at %.2f m (%.2f m), his "

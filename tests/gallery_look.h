@@ -130,14 +130,17 @@ inline FogLayers fog_auto_look(const Image& photo, const Camera& camera, const S
 struct GalleryLooks {
   double haze_edges = 0, dense_edges = 0;  // fractions of the pixels
 };
+// With `dense_out`: the dense look itself too (its transmittance), not rendered twice.
 inline GalleryLooks haze_and_dense_looks(const Image& photo, const Camera& camera,
-                                         const SceneEstimate& est, const std::string& name) {
+                                         const SceneEstimate& est, const std::string& name,
+                                         FogLayers* dense_out = nullptr) {
   const FogLayers haze = fog_auto_look(photo, camera, est, 2000, 1500, 0.6);
   const FogLayers dense = fog_auto_look(photo, camera, est, 60, 80, 0.3);
   Image haze_map;
   GalleryLooks looks;
   looks.haze_edges = gallery_created_edges(photo, haze.composite, &haze_map);
   looks.dense_edges = gallery_created_edges(photo, dense.composite);
+  if (dense_out) *dense_out = dense;
   if (const char* folder = std::getenv("MR_TEST_IMAGES"); folder && *folder) {
     const std::string f(folder);
     write_image(f + "/" + name + "_photo.png", photo);

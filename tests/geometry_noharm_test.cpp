@@ -26,6 +26,7 @@
 #include "mr/scattering.h"
 #include "photo/geometry.h"
 #include "tests/display_luma.h"
+#include "tests/gallery_look.h"
 
 namespace mr {
 namespace {
@@ -341,15 +342,8 @@ TEST(GeometryNoHarm, LadybirdIsACloseUp) {
   EstimateOptions before;
   before.closeup_small_subject_defocused = 2;
   const SceneEstimate old = estimate_scene(photo, camera, Annotations{}, before);
-  auto dense_t = [&](const SceneEstimate& e) {
-    FogScene s = e.scene;
-    const float sigma = float(extinction_from_visibility(60));
-    s.medium.sigma_t_per_m = {sigma, sigma, sigma};
-    s.medium.layer_top_m = 80;
-    s.render.backend = Backend::cpu;
-    if (!s.lighting.sky_radiance) s.lighting.sky_radiance = estimate_airlight(photo);
-    return fog(photo, e.geometry.distance_m, e.geometry.sky_alpha, camera, s)
-        .transmittance.at(870, 385, 1);
+  auto dense_t = [&](const SceneEstimate& e) {  // the gallery's dense look
+    return test::fog_auto_look(photo, camera, e, 60, 80, 0.3).transmittance.at(870, 385, 1);
   };
   const float t = dense_t(est), t_old = dense_t(old);
   std::printf("ladybird: %s; at %.2f m (%.2f m), dense-fog transmittance %.2f (%.2f)\n",

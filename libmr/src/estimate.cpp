@@ -370,6 +370,12 @@ int join_sky_cut_by_a_guess(photo::SkyMask& mask, const photo::SkyMask& probe,
   return columns;
 }
 
+// The row (floored) of the line through `line`'s two points at column x.
+int row_of_line(const std::array<PixelPoint, 2>& line, double x) {
+  const double slope = (line[1][1] - line[0][1]) / std::max(1.0, line[1][0] - line[0][0]);
+  return int(std::floor(line[0][1] + (x - line[0][0]) * slope));
+}
+
 // Issue 11: how the sky goes on below a line it reaches. `reaching`: per column, whether the
 // mask's sky reaches the line (within `near` rows above it) and the probe's sky (the mask found
 // with its horizon below the frame: every pixel above it) goes on below it there; `columns`:
@@ -389,8 +395,7 @@ SkyBelowLine sky_below_line(const Image& photo, const photo::SkyMask& mask,
                             int near = 4) {
   SkyBelowLine out;
   const int w = mask.width, h = mask.height;
-  const double slope = (line[1][1] - line[0][1]) / std::max(1.0, line[1][0] - line[0][0]);
-  auto line_row = [&](int x) { return int(std::floor(line[0][1] + (x - line[0][0]) * slope)); };
+  auto line_row = [&](int x) { return row_of_line(line, x); };
   std::vector<int> reach_row(std::size_t(w), -1);  // the mask's sky row near the line
   for (int x = 0; x < w; ++x) {
     const int row = line_row(x);
@@ -438,14 +443,13 @@ std::size_t drop_sky_reaching_line(photo::SkyMask& mask, const std::array<PixelP
   const std::size_t count = std::size_t(w) * h;
   if (columns.size() != std::size_t(w) || mask.sky.size() != count || mask.alpha.size() != count)
     return 0;
-  const double slope = (line[1][1] - line[0][1]) / std::max(1.0, line[1][0] - line[0][0]);
   cv::Mat matte(h, w, CV_8U), labels;
   for (std::size_t i = 0; i < count; ++i) matte.data[i] = mask.sky[i] != 0 || mask.alpha[i] > 0;
   const int n = cv::connectedComponents(matte, labels, 8, CV_32S);
   std::vector<std::uint8_t> drop(std::size_t(n), 0);
   for (int x = 0; x < w; ++x) {
     if (!columns[std::size_t(x)]) continue;
-    const int row = int(std::floor(line[0][1] + (x - line[0][0]) * slope));
+    const int row = row_of_line(line, x);
     for (int r = std::min(row, h - 1); r >= std::max(0, row - near); --r)
       drop[std::size_t(labels.at<int>(r, x))] = 1;
   }
@@ -748,10 +752,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // (water_mirror_row): where the photo below mirrors the photo above about a row between
       // two lines' widths above the horizon and the sky's end below it, that is water, and the
       // sky above it stays sky.
-      const double centre_x = 0.5 * (camera.width - 1);
-      const int horizon_row = int(std::floor(
-          g.horizon[0][1] + (centre_x - g.horizon[0][0]) * (g.horizon[1][1] - g.horizon[0][1]) /
-                                std::max(1.0, g.horizon[1][0] - g.horizon[0][0])));
+      const int horizon_row = row_of_line(g.horizon, 0.5 * (camera.width - 1));
       const int line_px = std::max(3, camera.height / 100);
       const bool mirrored =
           options.water_mirror && water_mirror_row(blurred_rgb(), horizon_row - 2 * line_px,
