@@ -933,8 +933,9 @@ TEST(MaterialApply, TwoRegionsBorderBlendsTheirRenderingsNotThePhoto) {
   // An orange photo, regions 1 | 2 re-rendered grey and blue-grey: the border pixels are a blend
   // of the two renderings, with none of the photo's orange (a ramp into the photo on each side
   // would leave an orange line between them); at a region's outer border, on the photo's edge
-  // to a blue surface, the photo blends in, outside it is untouched (where the photo is plain
-  // across the outer border the feather goes on outside it:
+  // to a blue surface, the feather blends the photo in, a 1-pixel orange line between the new
+  // material and the blue, which the despeckling takes out; outside it is untouched (where the
+  // photo is plain across the outer border the feather goes on outside it:
   // ARaggedBorderThroughAPlainSurfaceLeavesNoTeeth).
   GroundScene t = untextured_ground();
   const auto [photo, labels] = painted(
@@ -949,13 +950,17 @@ TEST(MaterialApply, TwoRegionsBorderBlendsTheirRenderingsNotThePhoto) {
                                         {{0.35f, 0.4f, 0.5f}, 0.0f, 1.0f}};
   const Image out =
       photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels, materials, nullptr);
+  const Image speckled = photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels,
+                                                materials, nullptr, 1.0, 3.0, false);
   for (int y = 20; y < 100; ++y) {
     if (!(t.g.surface.at(80, y, 0) > 0)) continue;
     for (int x = 77; x < 83; ++x) {
       const float* p = out.pixel(x, y);
       EXPECT_LT(p[0] / p[2], 1.05f) << x << ", " << y;  // orange has R / B = 14
     }
-    EXPECT_GT(out.at(149, y, 0) / out.at(149, y, 2), 1.1f) << y;  // outer border: photo mixed in
+    // Outer border: the photo mixed in, an orange line; despeckled, none.
+    EXPECT_GT(speckled.at(149, y, 0) / speckled.at(149, y, 2), 1.1f) << y;
+    EXPECT_LT(out.at(149, y, 0) / out.at(149, y, 2), 1.05f) << y;
     for (int x = 151; x < 160; ++x)  // outside the regions, past the object's edge pixel: the photo
       for (int c = 0; c < 3; ++c) EXPECT_EQ(out.at(x, y, c), photo.at(x, y, c)) << x << ", " << y;
   }
@@ -1011,10 +1016,11 @@ TEST(MaterialApply, ARaggedBorderThroughAPlainSurfaceLeavesNoTeeth) {
       },
       [&](int x, int y) { return x < border[std::size_t(y)] ? 1.0f : 0.0f; });
   const std::vector<Material> grey_material{{{0.4f, 0.4f, 0.4f}, 0.0f, 1.0f}};
+  // The feathers without the despeckling (MaterialApply.DespecklingTakesOutTheBordersSpecks).
   const Image narrow = photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels,
-                                              grey_material, nullptr, 1.0, 0.0);
+                                              grey_material, nullptr, 1.0, 0.0, false);
   const Image wide = photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels,
-                                            grey_material, nullptr);
+                                            grey_material, nullptr, 1.0, 3.0, false);
   const auto [narrow_specks, band] = axis_specks(photo, narrow, labels);
   const auto [wide_specks, band_again] = axis_specks(photo, wide, labels);
   std::printf("ragged border through a plain surface: specks %d -> %d of %d band pixels\n",
@@ -1039,6 +1045,70 @@ TEST(MaterialApply, ARaggedBorderThroughAPlainSurfaceLeavesNoTeeth) {
       EXPECT_EQ(on_edge.at(81, y, c), edged.at(81, y, c)) << y;
     }
   }
+}
+
+TEST(MaterialApply, DespecklingTakesOutTheBordersSpecks) {
+  // A photo: a brown left half (region 1, x < 40) and a blue right half, column 40 an
+  // antialiased mix (30 % brown, 70 % blue), a few of its own dark specks (one next to the border
+  // at (41, 30)), and a texture of +-3 % horizontal stripes. The composite re-renders the region
+  // grey and carries the defects of real borders: column 40 rendered as the region but darker (a
+  // dark 1-pixel rim), a bright speck at (38, 10) and a 1-pixel tooth of grey at (41, 50) in the
+  // blue. Despeckled: column 40 is the photo's mix of its new neighbours (30 % grey, 70 % blue),
+  // the speck and the tooth are gone (no pixel of the band a speck by the gallery's measure),
+  // the photo's own speck and everything away from the border are as they were.
+  constexpr int w = 80, h = 60;
+  render::SurfaceGeometry g;
+  g.surface = Image(w, h, 1);
+  for (float& v : g.surface.pixels()) v = 1.0f;
+  const Rgb brown{0.30f, 0.15f, 0.05f}, blue{0.05f, 0.10f, 0.40f}, new_grey{0.25f, 0.25f, 0.25f};
+  Image photo(w, h, 3), labels(w, h, 1), out(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float stripe = y % 2 ? 1.03f : 0.97f;
+      const float share_brown = x < 40 ? 1.0f : x == 40 ? 0.3f : 0.0f;
+      for (int c = 0; c < 3; ++c) {
+        photo.at(x, y, c) = stripe * (share_brown * brown[c] + (1 - share_brown) * blue[c]);
+        out.at(x, y, c) = x < 40 ? stripe * new_grey[c] : photo.at(x, y, c);
+      }
+      labels.at(x, y, 0) = x < 40 ? 1.0f : 0.0f;
+    }
+  for (int c = 0; c < 3; ++c) {
+    for (int y = 0; y < h; ++y) out.at(40, y, c) = 0.4f * new_grey[c];   // the dark rim
+    out.at(38, 10, c) = 3.0f * out.at(38, 10, c);                        // a bright speck
+    out.at(41, 50, c) = new_grey[c];                                     // a tooth
+    for (const auto& [x, y] : {std::pair{41, 30}, std::pair{60, 20}}) {  // the photo's own specks
+      photo.at(x, y, c) *= 0.3f;
+      out.at(x, y, c) = photo.at(x, y, c);
+    }
+  }
+  const Image before = out;
+  EXPECT_GT(axis_specks(photo, before, labels).first, h / 2);  // the rim and the rest
+  const photo::DespeckleStats stats = photo::despeckle_region_borders(photo, g, labels, 1, out);
+  const auto [specks, band] = axis_specks(photo, out, labels);
+  std::printf("despeckled: %d specks of %d band pixels; %zu changes in %d passes, band %zu\n",
+              specks, band, stats.changed, stats.passes, stats.band_pixels);
+  EXPECT_EQ(specks, 0);
+  EXPECT_EQ(stats.band_pixels, std::size_t(h * 2 * photo::kDespeckleBandPx));  // 37..42
+  for (int y = 1; y < h - 1; ++y) {
+    // Beside the tooth, and the photo's own speck (whose rim pixel, not calm in the photo, stays).
+    if (std::abs(y - 50) <= 1 || std::abs(y - 30) <= 1) continue;
+    for (int c = 0; c < 3; ++c) {
+      // The photo's mix, 30 % of the left neighbour, with the new neighbours (grey, blue).
+      const float mixed = 0.3f * out.at(39, y, c) + 0.7f * out.at(41, y, c);
+      EXPECT_NEAR(out.at(40, y, c), mixed, 1e-3f * mixed) << y;
+    }
+  }
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(out.at(38, 10, c), before.at(37, 10, c), 0.1f * before.at(37, 10, c));
+    EXPECT_NEAR(out.at(41, 50, c), photo.at(41, 50, c), 0.15f * photo.at(41, 50, c));
+    EXPECT_EQ(out.at(41, 30, c), photo.at(41, 30, c));  // the photo's own speck stays
+  }
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (x < 40 - photo::kDespeckleBandPx || x >= 40 + photo::kDespeckleBandPx) {
+        for (int c = 0; c < 3; ++c)
+          ASSERT_EQ(out.at(x, y, c), before.at(x, y, c)) << x << ", " << y;
+      }
 }
 
 TEST(MaterialApply, AnObjectsEdgePixelOutsideTheRegionTakesTheNewColour) {

@@ -719,9 +719,11 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     search_step.end();
     Step apply_step(options.cancel, "apply");
     // A photo's region borders are approximate (a brush's): where the photo is plain across one
-    // with an untouched surface, the feather goes on outside it; a 3D scene's masks are exact.
+    // with an untouched surface, the feather goes on outside it, and the specks its mixed
+    // border pixels make are taken out; a 3D scene's masks are exact.
     result.image = photo::apply_materials(target_rgb, geometry, lighting, shading, region_labels,
-                                          assigned, detail_used, 1.0, scene_only ? 0.0 : 3.0);
+                                          assigned, detail_used, 1.0, scene_only ? 0.0 : 3.0,
+                                          /*despeckle_borders=*/!scene_only);
     apply_step.end();
 
     // Style distance of the regions to the sample, before and after (whole composite).

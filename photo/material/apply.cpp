@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <string>
@@ -581,7 +582,7 @@ cv::Mat photo_plainness(const Image& photo) {
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail, double feather_px,
-                      double smooth_feather_px) {
+                      double smooth_feather_px, bool despeckle_borders) {
   require_size(photo, geometry, "photo");
   require_size(region_labels, geometry, "region labels");
   if (region_labels.channels() != 1)
@@ -696,7 +697,164 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
             wr / total * accumulated.at<cv::Vec3f>(y, x)[c] + (1 - wr) * photo.at(x, y, c);
     }
   decontaminate_outer_border(photo, geometry, region_labels, regions, out);
+  if (despeckle_borders) despeckle_region_borders(photo, geometry, region_labels, regions, out);
   return out;
+}
+
+namespace {
+
+float log_value(float v) {
+  return std::log(std::max(v, 1e-6f));
+}
+
+// How far, at most over the channels, the log value at (x, y) lies beyond both its neighbours
+// along the axis (dx, dy) (0 when between them); edges replicated.
+float axis_extremum(const Image& image, int x, int y, int dx, int dy) {
+  const int w = image.width(), h = image.height();
+  const int ax = std::clamp(x + dx, 0, w - 1), ay = std::clamp(y + dy, 0, h - 1);
+  const int bx = std::clamp(x - dx, 0, w - 1), by = std::clamp(y - dy, 0, h - 1);
+  float worst = 0;
+  for (int c = 0; c < 3; ++c) {
+    const float v = log_value(image.at(x, y, c)), a = log_value(image.at(ax, ay, c)),
+                b = log_value(image.at(bx, by, c));
+    worst = std::max({worst, std::min(v - a, v - b), std::min(a - v, b - v)});
+  }
+  return worst;
+}
+
+// The largest over the channels of |log value - the median of the 3 x 3 log values| at (x, y)
+// (edges replicated); `median` gets the medians (linear: the log is monotonic).
+float median_deviation(const Image& image, int x, int y, float median[3]) {
+  const int w = image.width(), h = image.height();
+  float worst = 0;
+  for (int c = 0; c < 3; ++c) {
+    float values[9];
+    int n = 0;
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx)
+        values[n++] = image.at(std::clamp(x + dx, 0, w - 1), std::clamp(y + dy, 0, h - 1), c);
+    std::nth_element(values, values + 4, values + 9);
+    median[c] = values[4];
+    worst = std::max(worst, std::abs(log_value(image.at(x, y, c)) - log_value(values[4])));
+  }
+  return worst;
+}
+
+}  // namespace
+
+DespeckleStats despeckle_region_borders(const Image& photo, const render::SurfaceGeometry& geometry,
+                                        const Image& region_labels, int regions, Image& out) {
+  require_size(photo, geometry, "photo");
+  require_size(region_labels, geometry, "region labels");
+  require_size(out, geometry, "output");
+  if (photo.channels() < 3 || out.channels() < 3)
+    throw Error(ErrorCode::invalid_argument, "despeckle_region_borders: images need 3 channels");
+  const int w = photo.width(), h = photo.height();
+  cv::Mat label(h, w, CV_32S);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float v = region_labels.at(x, y, 0);
+      label.at<int>(y, x) =
+          v >= 1 && v <= float(regions) && geometry.surface.at(x, y, 0) > 0 ? int(v) : 0;
+    }
+  cv::Mat border(h, w, CV_8U, cv::Scalar(0)), region(h, w, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int k = label.at<int>(y, x);
+      region.at<unsigned char>(y, x) = k > 0 ? 255 : 0;
+      if ((x + 1 < w && label.at<int>(y, x + 1) != k) ||
+          (y + 1 < h && label.at<int>(y + 1, x) != k))
+        border.at<unsigned char>(y, x) = 255;
+    }
+  // A border between (x, y) and its right or lower neighbour: the kDespeckleBandPx pixels on
+  // each side of it (x - band + 1 .. x + band).
+  const cv::Mat square = cv::getStructuringElement(
+      cv::MORPH_RECT, cv::Size(2 * kDespeckleBandPx, 2 * kDespeckleBandPx),
+      cv::Point(kDespeckleBandPx, kDespeckleBandPx));
+  const cv::Mat window = cv::getStructuringElement(
+      cv::MORPH_RECT, cv::Size(2 * kDespeckleBandPx + 1, 2 * kDespeckleBandPx + 1));
+  cv::dilate(border, border, square);
+  cv::dilate(region, region, window);
+  std::vector<std::int32_t> band;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (border.at<unsigned char>(y, x) && region.at<unsigned char>(y, x))
+        band.push_back(y * w + x);
+  DespeckleStats stats;
+  stats.band_pixels = band.size();
+  if (band.empty()) return stats;
+  // The photo's own shape at each band pixel: specks it shows are detail, never touched.
+  std::vector<float> photo_axis(band.size()), photo_median(band.size());
+  tbb::parallel_for(std::size_t(0), band.size(), [&](std::size_t i) {
+    const int x = band[i] % w, y = band[i] / w;
+    float unused[3];
+    photo_axis[i] = std::max(axis_extremum(photo, x, y, 1, 0), axis_extremum(photo, x, y, 0, 1));
+    photo_median[i] = median_deviation(photo, x, y, unused);
+  });
+  constexpr int kMaxPasses = 10;
+  std::vector<std::array<float, 3>> replacement(band.size());
+  std::vector<unsigned char> replace(band.size());
+  enum : unsigned char { kKeep, kMixed, kMedian };
+  for (int pass = 0; pass < kMaxPasses; ++pass) {
+    // Each step reads `out` as the step before left it and writes afterwards, so the order of
+    // the pixels does not matter.
+    tbb::parallel_for(std::size_t(0), band.size(), [&](std::size_t i) {
+      replace[i] = kKeep;
+      const int x = band[i] % w, y = band[i] / w;
+      const float horizontal = axis_extremum(out, x, y, 1, 0),
+                  vertical = axis_extremum(out, x, y, 0, 1);
+      float* value = replacement[i].data();
+      if (std::max(horizontal, vertical) > kSpeckJump && photo_axis[i] < kPhotoCalm) {
+        const int dx = horizontal >= vertical ? 1 : 0, dy = 1 - dx;
+        const int ax = std::clamp(x + dx, 0, w - 1), ay = std::clamp(y + dy, 0, h - 1);
+        const int bx = std::clamp(x - dx, 0, w - 1), by = std::clamp(y - dy, 0, h - 1);
+        double dd = 0, pd = 0;
+        for (int c = 0; c < 3; ++c) {
+          const double d = double(photo.at(bx, by, c)) - photo.at(ax, ay, c);
+          dd += d * d, pd += (double(photo.at(x, y, c)) - photo.at(ax, ay, c)) * d;
+        }
+        const float t = dd > 1e-12 ? float(std::clamp(pd / dd, 0.0, 1.0)) : 0.5f;
+        for (int c = 0; c < 3; ++c) value[c] = (1 - t) * out.at(ax, ay, c) + t * out.at(bx, by, c);
+        replace[i] = kMixed;
+      } else if (photo_median[i] < kPhotoCalm && median_deviation(out, x, y, value) > kSpeckJump) {
+        replace[i] = kMedian;
+      }
+    });
+    std::size_t changed = 0;
+    for (std::size_t i = 0; i < band.size(); ++i)
+      if (replace[i] != kKeep) {
+        const int x = band[i] % w, y = band[i] / w;
+        for (int c = 0; c < 3; ++c) out.at(x, y, c) = replacement[i][c];
+        ++changed;
+      }
+    if (changed == 0) break;
+    // A mixed pixel into both axes' ranges of its neighbours as they now are (widened by
+    // kPhotoCalm): one that was a speck along the other axis too is not left one there. (Against
+    // the neighbours before the step, a 1-pixel line would be held at its old value by its own
+    // pixels along it.)
+    const float widen = std::exp(kPhotoCalm);
+    tbb::parallel_for(std::size_t(0), band.size(), [&](std::size_t i) {
+      if (replace[i] != kMixed) return;
+      const int x = band[i] % w, y = band[i] / w;
+      float* value = replacement[i].data();
+      for (const auto& [sx, sy] : {std::pair{1, 0}, std::pair{0, 1}}) {
+        const int px = std::clamp(x + sx, 0, w - 1), py = std::clamp(y + sy, 0, h - 1);
+        const int qx = std::clamp(x - sx, 0, w - 1), qy = std::clamp(y - sy, 0, h - 1);
+        for (int c = 0; c < 3; ++c) {
+          const float a = out.at(px, py, c), b = out.at(qx, qy, c);
+          value[c] = std::clamp(value[c], std::min(a, b) / widen, std::max(a, b) * widen);
+        }
+      }
+    });
+    for (std::size_t i = 0; i < band.size(); ++i)
+      if (replace[i] == kMixed) {
+        const int x = band[i] % w, y = band[i] / w;
+        for (int c = 0; c < 3; ++c) out.at(x, y, c) = replacement[i][c];
+      }
+    stats.changed += changed;
+    stats.passes = pass + 1;
+  }
+  return stats;
 }
 
 }  // namespace mr::photo

@@ -24,6 +24,7 @@
 // replaced); large-scale errors of the lighting estimate (a wrong sun direction, shadows of things
 // the depth map lacks) are larger than the filter and get replaced by the model's shading.
 #pragma once
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include "mr/image.h"
@@ -114,11 +115,48 @@ Image photo_detail(const Image& photo, const Image& shading,
 /// indicator blurred by a Gaussian of that sigma times how plain the photo is that far around
 /// (1 where no step of the blurred log luminance between neighbours exceeds 0.05, 0 from 0.2;
 /// the least over the reach): a border ragged by a pixel or two through a plain surface leaves
-/// no teeth, and nothing crosses the photo's edges. With `detail`, pass floored_shading().
+/// no teeth, and nothing crosses the photo's edges. With `despeckle_borders` (and a feather),
+/// last, despeckle_region_borders(). With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
-                      double feather_px = 1.0, double smooth_feather_px = 3.0);
+                      double feather_px = 1.0, double smooth_feather_px = 3.0,
+                      bool despeckle_borders = true);
+
+/// What the despeckling of despeckle_region_borders() changed.
+struct DespeckleStats {
+  std::size_t band_pixels = 0;  ///< pixels within kDespeckleBandPx of a region's border
+  std::size_t changed = 0;      ///< changes made, over all passes (a pixel may count twice)
+  int passes = 0;               ///< passes that changed something
+};
+
+/// Pixels within this distance of a region's border (a 7 x 7 window holding another label, and
+/// a region pixel) are despeckled: the narrow feather's reach.
+constexpr int kDespeckleBandPx = 3;
+/// A 1-pixel jump of log 0.15 (16 %) in a border pixel is plainly visible at 100 %; the photo's
+/// own jumps under log 0.1 (its noise, JPEG ringing) are calm.
+constexpr float kSpeckJump = 0.15f;
+constexpr float kPhotoCalm = 0.1f;
+
+/// Takes out, in `out` (the composite of `photo`, 3 channels, the photo's size), the 1-pixel
+/// specks, lines and teeth that the compositing makes along the regions' borders where the photo
+/// has none: a border pixel mixes the region with what lies beyond it, so rendered as the region
+/// it comes out a peak or a trough between its neighbours (a dark rim of a saucer's edge in the
+/// new material; a tooth of a ragged border). In the band around the borders (kDespeckleBandPx;
+/// labels as apply_materials reads them: a region id on a surface pixel, else 0):
+///  (1) a pixel whose log value, in some channel, lies beyond both its neighbours along an axis
+///      (horizontal or vertical) by more than kSpeckJump in `out` but by less than kPhotoCalm
+///      in the photo becomes the mix of its two new neighbours along that axis with the weights
+///      that make the photo's pixel from the photo's neighbours (its share along the colour line
+///      between them, clamped to [0, 1]; the mean where they are equal), then is clamped per
+///      channel into each axis's range of its new neighbours widened by kPhotoCalm;
+///  (2) a pixel whose log value lies more than kSpeckJump from the median of its 3 x 3
+///      neighbourhood in `out` but less than kPhotoCalm in the photo takes that median (per
+///      channel): a 1-pixel tooth or notch of a ragged border.
+/// Passes run until none changes anything (at most 10). A pixel the photo shows as a speck is
+/// never touched, so the photo's own detail stays.
+DespeckleStats despeckle_region_borders(const Image& photo, const render::SurfaceGeometry& geometry,
+                                        const Image& region_labels, int regions, Image& out);
 
 /// Renders what apply_materials puts into region pixels, for one material at the listed pixels
 /// (indices y * width + x) into `out` (3 channels, the geometry's size; other pixels untouched).
