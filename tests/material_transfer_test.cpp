@@ -767,7 +767,7 @@ TEST(MaterialApply, DetailIsOneOnAnUntexturedSurfaceAndPlainRenderingIsExact) {
   Image labels = s.labels;
   for (float& v : labels.pixels()) v = v > 0 ? 1.0f : 0.0f;
   const Image out = photo::apply_materials(s.photo, g, s.scene.lighting, shading, labels,
-                                           std::vector{kGlossy}, nullptr, 0);
+                                           std::vector{kGlossy}, nullptr, {.feather_px = 0});
   for (int y = 0; y < 120; ++y)
     for (int x = 0; x < 160; ++x) {
       if (labels.at(x, y, 0) == 0) continue;
@@ -951,7 +951,7 @@ TEST(MaterialApply, TwoRegionsBorderBlendsTheirRenderingsNotThePhoto) {
   const Image out =
       photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels, materials, nullptr);
   const Image speckled = photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels,
-                                                materials, nullptr, 1.0, 3.0, false);
+                                                materials, nullptr, {.despeckle_borders = false});
   for (int y = 20; y < 100; ++y) {
     if (!(t.g.surface.at(80, y, 0) > 0)) continue;
     for (int x = 77; x < 83; ++x) {
@@ -1017,10 +1017,11 @@ TEST(MaterialApply, ARaggedBorderThroughAPlainSurfaceLeavesNoTeeth) {
       [&](int x, int y) { return x < border[std::size_t(y)] ? 1.0f : 0.0f; });
   const std::vector<Material> grey_material{{{0.4f, 0.4f, 0.4f}, 0.0f, 1.0f}};
   // The feathers without the despeckling (MaterialApply.DespecklingTakesOutTheBordersSpecks).
-  const Image narrow = photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels,
-                                              grey_material, nullptr, 1.0, 0.0, false);
+  const Image narrow =
+      photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels, grey_material,
+                             nullptr, {.smooth_feather_px = 0, .despeckle_borders = false});
   const Image wide = photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels,
-                                            grey_material, nullptr, 1.0, 3.0, false);
+                                            grey_material, nullptr, {.despeckle_borders = false});
   const auto [narrow_specks, band] = axis_specks(photo, narrow, labels);
   const auto [wide_specks, band_again] = axis_specks(photo, wide, labels);
   std::printf("ragged border through a plain surface: specks %d -> %d of %d band pixels\n",
@@ -1037,7 +1038,7 @@ TEST(MaterialApply, ARaggedBorderThroughAPlainSurfaceLeavesNoTeeth) {
   const Image on_edge = photo::apply_materials(edged, t.g, t.s.scene.lighting, t.shading, straight,
                                                grey_material, nullptr);
   const Image hard = photo::apply_materials(edged, t.g, t.s.scene.lighting, t.shading, straight,
-                                            grey_material, nullptr, 0.0);
+                                            grey_material, nullptr, {.feather_px = 0});
   for (int y = 20; y < 100; ++y) {
     if (!(t.g.surface.at(80, y, 0) > 0)) continue;
     for (int c = 0; c < 3; ++c) {
@@ -1153,7 +1154,7 @@ TEST(MaterialApply, AMaskOfThousandsOfSmallRegionsIsSnappedAndComposited) {
   for (std::size_t k = 0; k < materials.size(); ++k)
     materials[k] = {{float(k % 7) / 7, 0.5f, 0.5f}, 0.0f, 1.0f};
   const Image out = photo::apply_materials(photo, t.g, t.s.scene.lighting, t.shading, labels,
-                                           materials, nullptr, 0.0);
+                                           materials, nullptr, {.feather_px = 0});
   for (int y = 30; y < 120; y += 7)
     for (int x = 0; x < 160; x += 5) {
       if (!(t.g.surface.at(x, y, 0) > 0)) continue;

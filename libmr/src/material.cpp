@@ -721,9 +721,11 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     // A photo's region borders are approximate (a brush's): where the photo is plain across one
     // with an untouched surface, the feather goes on outside it, and the specks its mixed
     // border pixels make are taken out; a 3D scene's masks are exact.
+    photo::CompositeOptions composite;
+    composite.smooth_feather_px = scene_only ? 0.0 : 3.0;
+    composite.despeckle_borders = !scene_only;
     result.image = photo::apply_materials(target_rgb, geometry, lighting, shading, region_labels,
-                                          assigned, detail_used, 1.0, scene_only ? 0.0 : 3.0,
-                                          /*despeckle_borders=*/!scene_only);
+                                          assigned, detail_used, composite);
     apply_step.end();
 
     // Style distance of the regions to the sample, before and after (whole composite).

@@ -581,13 +581,15 @@ cv::Mat photo_plainness(const Image& photo) {
 
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
-                      std::span<const Material> materials, const Image* detail, double feather_px,
-                      double smooth_feather_px, bool despeckle_borders) {
+                      std::span<const Material> materials, const Image* detail,
+                      const CompositeOptions& options) {
+  const double feather_px = options.feather_px, smooth_feather_px = options.smooth_feather_px;
   require_size(photo, geometry, "photo");
   require_size(region_labels, geometry, "region labels");
   if (region_labels.channels() != 1)
     throw Error(ErrorCode::invalid_argument, "region labels must have 1 channel");
-  if (!(feather_px >= 0)) throw Error(ErrorCode::invalid_argument, "feather_px must be >= 0");
+  if (!(feather_px >= 0) || !(smooth_feather_px >= 0))
+    throw Error(ErrorCode::invalid_argument, "feather_px and smooth_feather_px must be >= 0");
   const int w = photo.width(), h = photo.height();
   const int regions = int(materials.size());
   // Per region: its pixels (surface only).
@@ -697,7 +699,8 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
             wr / total * accumulated.at<cv::Vec3f>(y, x)[c] + (1 - wr) * photo.at(x, y, c);
     }
   decontaminate_outer_border(photo, geometry, region_labels, regions, out);
-  if (despeckle_borders) despeckle_region_borders(photo, geometry, region_labels, regions, out);
+  if (options.despeckle_borders)
+    despeckle_region_borders(photo, geometry, region_labels, regions, out);
   return out;
 }
 

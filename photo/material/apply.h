@@ -104,26 +104,37 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
 Image photo_detail(const Image& photo, const Image& shading,
                    const render::SurfaceGeometry& geometry, const DetailOptions& options = {});
 
+/// How apply_materials composites the re-rendered regions into the photo.
+struct CompositeOptions {
+  /// Sigma of the Gaussian that softens each region's indicator (0: hard edges, and none of
+  /// the options below).
+  double feather_px = 1.0;
+  /// With more than feather_px: the feather goes on outside a region over the untouched
+  /// surface, as far as the photo is plain (see apply_materials).
+  double smooth_feather_px = 3.0;
+  /// Last, despeckle_region_borders().
+  bool despeckle_borders = true;
+};
+
 /// `photo` with each region k (labels(x, y) = k in 1..materials.size(), surface pixels only)
 /// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular, or without `detail`
 /// (null) the plain rendering. Composited with soft weights, each region's indicator blurred by
-/// a Gaussian of sigma `feather_px` (0: hard edges), the photo filling the rest, sky pixels
-/// counting as outside: two regions' border blends their renderings, a region's border with the
-/// photo ramps inside the region. Pixels outside the regions and sky pixels are the photo's,
-/// except (1) the 1-pixel edge of an object beside a region, a mix of the object and its
-/// background whose object share (read from the colour line between them, where they differ by
-/// a third or more) takes the new colour, and (2) with `smooth_feather_px` > `feather_px`, the
+/// a Gaussian of sigma `options.feather_px` (0: hard edges), the photo filling the rest, sky
+/// pixels counting as outside: two regions' border blends their renderings, a region's border
+/// with the photo ramps inside the region. Pixels outside the regions and sky pixels are the
+/// photo's, except (1) the 1-pixel edge of an object beside a region, a mix of the object and
+/// its background whose object share (read from the colour line between them, where they differ
+/// by a third or more) takes the new colour, (2) with `smooth_feather_px` > `feather_px`, the
 /// untouched surface within 2 x smooth_feather_px of a region, which takes the region's
 /// indicator blurred by a Gaussian of that sigma times how plain the photo is that far around
 /// (1 where no step of the blurred log luminance between neighbours exceeds 0.05, 0 from 0.2;
 /// the least over the reach): a border ragged by a pixel or two through a plain surface leaves
-/// no teeth, and nothing crosses the photo's edges. With `despeckle_borders` (and a feather),
-/// last, despeckle_region_borders(). With `detail`, pass floored_shading().
+/// no teeth, and nothing crosses the photo's edges, and (3) the despeckled border band. With
+/// `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
-                      double feather_px = 1.0, double smooth_feather_px = 3.0,
-                      bool despeckle_borders = true);
+                      const CompositeOptions& options = {});
 
 /// What the despeckling of despeckle_region_borders() changed.
 struct DespeckleStats {
