@@ -638,6 +638,10 @@ TEST(MaterialRealPhoto, NoSpeckleAlongRegionEdgesAndThinGaps) {
   }
   for (int x = 90; x < 150; ++x) labels.at(x, 60 + (x % 3 == 0), 0) = 0;  // a wavy seam in 2
   const MaterialTransferResult r = transfer_material(shaded(sample), shaded(target), labels);
+  // The notes say what the border despeckling did (`mr material -v` shows them).
+  EXPECT_TRUE(std::any_of(r.notes.begin(), r.notes.end(), [](const std::string& n) {
+    return n.rfind("region borders despeckled", 0) == 0;
+  }));
   auto deviation = [](const Image& im, int x, int y) {
     double worst = 0;
     for (int c = 0; c < 3; ++c) {

@@ -724,8 +724,9 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     photo::CompositeOptions composite;
     composite.smooth_feather_px = scene_only ? 0.0 : 3.0;
     composite.despeckle_borders = !scene_only;
+    photo::DespeckleStats despeckled;
     result.image = photo::apply_materials(target_rgb, geometry, lighting, shading, region_labels,
-                                          assigned, detail_used, composite);
+                                          assigned, detail_used, composite, &despeckled);
     apply_step.end();
 
     // Style distance of the regions to the sample, before and after (whole composite).
@@ -767,6 +768,11 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
         result.notes.push_back(warning);
       }
     }
+    if (composite.despeckle_borders)
+      result.notes.push_back(format(
+          "region borders despeckled (specks and 1-pixel teeth the composite made where the "
+          "photo has none): %zu changes in %d passes, %zu pixels within %d px of a border",
+          despeckled.changed, despeckled.passes, despeckled.band_pixels, photo::kDespeckleBandPx));
     result.notes.push_back(format(
         "transfer %.1f s: target geometry (%dx%d, sky and sun traced) %.1f s, detail layer %.1f s, "
         "statistics and search %.1f s",

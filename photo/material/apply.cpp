@@ -582,7 +582,7 @@ cv::Mat photo_plainness(const Image& photo) {
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
-                      const CompositeOptions& options) {
+                      const CompositeOptions& options, DespeckleStats* despeckled) {
   const double feather_px = options.feather_px, smooth_feather_px = options.smooth_feather_px;
   require_size(photo, geometry, "photo");
   require_size(region_labels, geometry, "region labels");
@@ -699,8 +699,11 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
             wr / total * accumulated.at<cv::Vec3f>(y, x)[c] + (1 - wr) * photo.at(x, y, c);
     }
   decontaminate_outer_border(photo, geometry, region_labels, regions, out);
-  if (options.despeckle_borders)
-    despeckle_region_borders(photo, geometry, region_labels, regions, out);
+  if (options.despeckle_borders) {
+    const DespeckleStats stats =
+        despeckle_region_borders(photo, geometry, region_labels, regions, out);
+    if (despeckled) *despeckled = stats;
+  }
   return out;
 }
 
