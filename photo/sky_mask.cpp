@@ -901,6 +901,10 @@ CloseUpSky keep_evident_sky(ConstImageView photo, SkyMask& mask, const CloseUpSk
   for (int l = 1; l < m; ++l) {
     const std::size_t k = std::size_t(l);
     if (sky_count[k] == 0 || double(top_run[k]) < o.min_top_fraction * w) continue;
+    if (double(top_run[k]) >= o.keep_open_top_fraction * w) {
+      keep[k] = 1;
+      continue;
+    }
     const cv::Vec3d c = sum[k] * (1.0 / double(sky_count[k]));
     const double mx = std::max({c[0], c[1], c[2]}), mn = std::min({c[0], c[1], c[2]});
     if (!(mx > 1e-6) || !((mx - mn) / mx >= o.min_saturation)) continue;

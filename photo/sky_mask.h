@@ -144,6 +144,9 @@ struct CloseUpSkyOptions {
   double min_top_fraction = 0.15;
   double min_hue_deg = 185, max_hue_deg = 245;
   double min_saturation = 0.2;
+  /// A component that runs along at least this share of the top border is kept whatever its
+  /// colour (an overcast strip of sky across the frame's top). Above 1: never (a close-up).
+  double keep_open_top_fraction = 2.0;
 };
 struct CloseUpSky {
   std::size_t kept_pixels = 0;     ///< sky pixels (alpha >= 0.5) left as sky

@@ -393,6 +393,64 @@ TEST(BoundedScene, AWallTheHorizonCutsAcrossIsNoSky) {
   EXPECT_LE(looks.dense_edges, 2e-4);
 }
 
+// A little pale "sky" between near things is no sky (tuning friends: two dogs leaning out of a
+// window in a white wooden wall; the automatic mask took the window's white curtain, 3.4 % of
+// the frame, for sky). With it the photo was an outdoor scene: everything above the horizon
+// (mid-frame, from the siding's lines) stood on the far billboard 46 m away, and dense fog
+// erased the upper dog. A sky under 5 % of the frame keeps only a clear sky's evidence (blue,
+// along the top border), and without any the scene is bounded.
+TEST(BoundedScene, ALittlePaleSkyBetweenNearThingsIsNoSky) {
+  const Image photo = test::tuning_photo("friends.jpg");
+  EstimateOptions without;
+  without.little_sky_evidence = false;
+  const test::WithAndWithout e = test::estimate_with_and_without(photo, without);
+  const Camera& camera = e.camera;
+  const SceneEstimate &est = e.with, &before = e.without;
+  const double n = double(photo.width()) * photo.height();
+  const int dog_x = 330, dog_y = 380;  // the upper dog's face
+  FogLayers dense;
+  const test::GalleryLooks looks =
+      test::haze_and_dense_looks(photo, camera, est, "friends", &dense);
+  const FogLayers dense_before = test::fog_auto_look(photo, camera, before, 60, 80, 0.3);
+  std::printf(
+      "friends: %s; sky %.2f %% (without the rule %.2f %%), the dog at %.2f m (%.2f m), its "
+      "dense-fog transmittance %.2f (%.2f); created-edge pixels haze %.4f %%, dense %.4f %%\n",
+      est.notes.front().c_str(), 100 * est.geometry.sky_pixels / n,
+      100 * before.geometry.sky_pixels / n, est.geometry.distance_m.at(dog_x, dog_y, 0),
+      before.geometry.distance_m.at(dog_x, dog_y, 0), dense.transmittance.at(dog_x, dog_y, 1),
+      dense_before.transmittance.at(dog_x, dog_y, 1), 100 * looks.haze_edges,
+      100 * looks.dense_edges);
+  ASSERT_GT(double(before.geometry.sky_pixels), 0.01 * n);  // the defect reproduced
+  ASSERT_LT(dense_before.transmittance.at(dog_x, dog_y, 1), 0.2f);
+  EXPECT_EQ(before.geometry.little_sky_dropped_pixels, 0u);
+  EXPECT_GT(double(est.geometry.little_sky_dropped_pixels), 0.01 * n);
+  EXPECT_LT(double(est.geometry.sky_pixels), 0.002 * n);  // a bounded scene's "no sky"
+  const double widest =
+      std::atan(std::hypot(0.5 * photo.width(), 0.5 * photo.height()) / camera.focal_px);
+  EXPECT_LT(est.geometry.distance_m.at(dog_x, dog_y, 0), 8.0 / std::cos(widest) + 0.01);
+  EXPECT_GT(dense.transmittance.at(dog_x, dog_y, 1), 0.6f);
+  EXPECT_LE(looks.haze_edges, 2e-4);
+  EXPECT_LE(looks.dense_edges, 2e-4);
+}
+
+// ... but a little blue sky across the top is sky (tuning scenetext06: a street corner, 4.8 %
+// of the frame a blue sky over the roofs): the rule leaves it, and the scene outdoors.
+TEST(BoundedScene, ALittleBlueSkyAcrossTheTopStaysSky) {
+  const Image photo = test::tuning_photo("scenetext06.jpg");
+  EstimateOptions without;
+  without.little_sky_evidence = false;
+  const test::WithAndWithout e = test::estimate_with_and_without(photo, without);
+  const double n = double(photo.width()) * photo.height();
+  ASSERT_LT(double(e.without.geometry.sky_pixels), 0.05 * n);  // under the rule's bound
+  EXPECT_GT(double(e.without.geometry.sky_pixels), 0.02 * n);
+  EXPECT_EQ(e.with.geometry.little_sky_dropped_pixels, 0u);
+  EXPECT_EQ(e.with.geometry.sky_pixels, e.without.geometry.sky_pixels);
+  const auto with = e.with.geometry.distance_m.pixels(),
+             without_rule = e.without.geometry.distance_m.pixels();
+  ASSERT_EQ(with.size(), without_rule.size());
+  EXPECT_TRUE(std::equal(with.begin(), with.end(), without_rule.begin()));
+}
+
 // Calm water mirroring an overcast sky goes on below the horizon as smoothly as a wall. The
 // tuning photo's top half over its own mirror image (basketball's rows 0-239 flipped below row
 // 240: the photo's lines still put the horizon there, confidence 0.27): its "sky" goes on far

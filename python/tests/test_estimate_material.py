@@ -60,7 +60,8 @@ def test_estimate_backlit_land_switch():
 
 
 def test_estimate_water_mirror_lamps_and_wall_switches():
-    # gallery/tune darkesthour: a lake at blue hour; free: a ceiling lit by its lamps
+    # gallery/tune darkesthour: a lake at blue hour; free: a ceiling lit by its lamps; friends:
+    # a window's white curtain, a little pale "sky"
     lake = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "darkesthour.jpg")
     on = libmr.estimate(lake)
     off = libmr.estimate(lake, water_mirror=False)
@@ -74,6 +75,10 @@ def test_estimate_water_mirror_lamps_and_wall_switches():
     on = libmr.estimate(office)
     off = libmr.estimate(office, wall_not_sky=False)
     assert on.pixels["sky"] < 0.002 * 640 * 480 and off.pixels["sky"] > 0.2 * 640 * 480
+    window = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "friends.jpg")
+    on = libmr.estimate(window)
+    off = libmr.estimate(window, little_sky_evidence=False)
+    assert on.pixels["sky"] == 0 and off.pixels["sky"] > 0.01 * 852 * 1280
 
 
 def test_estimate_errors_and_cancel(tmp_path):

@@ -112,6 +112,14 @@ struct MR_API EstimateOptions {
   /// an overcast sky, with water_mirror), the sky that reaches the horizon is taken out
   /// (GeometryEstimate::wall_not_sky_pixels). false: sky, as the mask says.
   bool wall_not_sky = true;
+  /// Issue 11: a sky mask covering under 5 % of the frame (a white curtain in a window, a
+  /// backdrop's clipped patch between near things) keeps only components with a clear sky's
+  /// evidence: blue (hue 185-245 degrees, saturation >= 0.2) and reaching the top border along
+  /// 15 % of the width, or running along half the top border whatever their colour. Without any
+  /// left the photo is a bounded scene (bounded_scene_depth_m), not an outdoor one whose far
+  /// billboard stands 46 m away (GeometryEstimate::little_sky_dropped_pixels). false: sky, as
+  /// the mask says.
+  bool little_sky_evidence = true;
   /// The sky matte's spill onto a surface beyond a sharp edge trimmed: on the surface side of
   /// the matte (alpha < 0.5), where sky and surface differ plainly in brightness, alpha is at
   /// most the pixel's unmixed share of the sky's colour (issue 11, helper haze11b; photo/sky_matte.h,
@@ -277,6 +285,9 @@ struct MR_API GeometryEstimate {
   /// Issue 11: pixels of "sky" taken out as a wall that goes on below the horizon
   /// (EstimateOptions::wall_not_sky; 0: none).
   std::size_t wall_not_sky_pixels = 0;
+  /// Issue 11: pixels of a little "sky" without a clear sky's evidence taken out
+  /// (EstimateOptions::little_sky_evidence; 0: none).
+  std::size_t little_sky_dropped_pixels = 0;
   /// Issue 11: the roll (degrees) of the horizon the photo's lines gave, when it was rejected as
   /// implausible for a photo (beyond 15 degrees: the lines were not verticals or level ones) and
   /// the level fall-back taken instead; NaN otherwise.
