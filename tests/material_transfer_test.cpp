@@ -842,6 +842,41 @@ TEST(MaterialApply, DetailIsLuminanceAndCarriesNoNoiseOfABarelyRecordedChannel) 
   EXPECT_LT(worst, 0.01f);
 }
 
+TEST(MaterialApply, TheDetailMultipliesTheSpecularLobeToo) {
+  // A dark glossy material (diffuse 0.03, specular 0.6) over photo detail of grains half and
+  // twice the base (3 x 3 checker): the whole rendering, lobe included, is D times the plain
+  // one. Shading only the darker grains' lobe left the sheen flat over every bright grain (2 x
+  // base became 1.03 x: the texture half gone).
+  GroundScene t = untextured_ground();
+  Image detail(160, 120, 3);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x)
+      for (int c = 0; c < 3; ++c) detail.at(x, y, c) = ((x / 3 + y / 3) % 2) ? 2.0f : 0.5f;
+  const Material dark_glossy{{0.03f, 0.03f, 0.03f}, 0.6f, 0.2f};
+  std::vector<std::int32_t> pixels;
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x)
+      if (t.g.surface.at(x, y, 0) > 0) pixels.push_back(y * 160 + x);
+  ASSERT_GT(pixels.size(), 10000u);
+  Image plain(160, 120, 3), textured(160, 120, 3);
+  const Lighting& light = t.s.scene.lighting;
+  photo::render_with_detail(t.g, light, t.shading, nullptr, dark_glossy, pixels, plain);
+  photo::render_with_detail(t.g, light, t.shading, &detail, dark_glossy, pixels, textured);
+  double lobe = 0, diffuse = 0;
+  for (const std::int32_t i : pixels) {
+    const int x = i % 160, y = i / 160;
+    for (int c = 0; c < 3; ++c) {
+      const float e = detail.at(x, y, c) * plain.at(x, y, c);
+      ASSERT_NEAR(textured.at(x, y, c), e, 1e-5f * std::max(1.0f, e)) << x << ", " << y;
+      const double d = dark_glossy.diffuse_albedo[c] * t.shading.at(x, y, c);
+      diffuse += d;
+      lobe += plain.at(x, y, c) - d;
+    }
+  }
+  std::printf("lobe / diffuse light of the dark glossy material: %.2f\n", lobe / diffuse);
+  EXPECT_GT(lobe, diffuse);  // the sheen is what the test is about
+}
+
 TEST(MaterialApply, NoiseFloorKeepsANearBlackSurfaceFromBecomingGrain) {
   // Left half near black (albedo 0.002 with +-60 % noise, as a silhouette in a JPEG), right half
   // a bright wall (albedo 0.8) that sets the exposure. Without the floor D on the left is the
