@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
@@ -431,6 +432,13 @@ TEST(BoundedScene, ALittlePaleSkyBetweenNearThingsIsNoSky) {
   EXPECT_GT(dense.transmittance.at(dog_x, dog_y, 1), 0.6f);
   EXPECT_LE(looks.haze_edges, 2e-4);
   EXPECT_LE(looks.dense_edges, 2e-4);
+  // An annotated horizon (the one the photo's lines give) says the scene is outdoors: the
+  // rule stays out.
+  Annotations outdoors;
+  outdoors.horizon = std::array<PixelPoint, 2>{PixelPoint{0, 597}, PixelPoint{851, 597}};
+  const SceneEstimate annotated = estimate_scene(photo, camera, outdoors);
+  EXPECT_EQ(annotated.geometry.little_sky_dropped_pixels, 0u);
+  EXPECT_GT(double(annotated.geometry.sky_pixels), 0.01 * n);
 }
 
 // ... but a little blue sky across the top is sky (tuning scenetext06: a street corner, 4.8 %

@@ -776,7 +776,8 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   // border along 15 % of the width) or running along half the top border (an overcast strip
   // over a valley); without any left, the scene is bounded (below). Dropping a real sky costs a
   // lighter fog; keeping a curtain as sky veils the subject.
-  if (options.little_sky_evidence && mask.pixels > 0 &&
+  // An annotated horizon says the photo is an outdoor scene with one: the rule stays out.
+  if (options.little_sky_evidence && photo && !annotations.horizon && mask.pixels > 0 &&
       double(mask.pixels) < kLittleSkyFraction * double(mask.sky.size())) {
     photo::CloseUpSkyOptions evidence;
     evidence.keep_open_top_fraction = kLittleSkyOpenTopFraction;

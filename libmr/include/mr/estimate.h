@@ -117,8 +117,8 @@ struct MR_API EstimateOptions {
   /// evidence: blue (hue 185-245 degrees, saturation >= 0.2) and reaching the top border along
   /// 15 % of the width, or running along half the top border whatever their colour. Without any
   /// left the photo is a bounded scene (bounded_scene_depth_m), not an outdoor one whose far
-  /// billboard stands 46 m away (GeometryEstimate::little_sky_dropped_pixels). false: sky, as
-  /// the mask says.
+  /// billboard stands 46 m away (GeometryEstimate::little_sky_dropped_pixels). Not with an
+  /// annotated horizon (an outdoor scene by the user's word). false: sky, as the mask says.
   bool little_sky_evidence = true;
   /// The sky matte's spill onto a surface beyond a sharp edge trimmed: on the surface side of
   /// the matte (alpha < 0.5), where sky and surface differ plainly in brightness, alpha is at
