@@ -270,16 +270,34 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
   // above it is not. (Its colour is not compared with the top sky's: a clear sky pales by far
   // more than its own spread from the zenith to the horizon.) Nor is a piece of a bluish rock
   // face: its roughness (below), on average over the piece, is that of a textured surface.
+  // For a piece at the frame's side, the median: such a piece is a sky cut off from the top by
+  // branches or an eave at the frame's edge, and the roughness window reaches over them; their
+  // fringe alone pushed a clear sky's mean over the limit (sample_photos/building.jpg: mean
+  // 0.0039, median 0.0018; the facade's white panels were then its sky, and once the little-sky
+  // rule dropped those, a street became an 8 m room). Inside the frame the mean stays: the gaps
+  // and lattice openings there have their own tests after the sky's core (below), which keep an
+  // opening whole where this one would then be trimmed by the core test.
   if (!o.detached_needs_top_sky || blue_area > 0) {
     std::vector<double> rough_sum(std::size_t(n), 0.0);
+    std::vector<std::vector<float>> side_rough(static_cast<std::size_t>(n));
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x)
-        if (const int lab = labels.at<int>(y, x); lab > 0)
+        if (const int lab = labels.at<int>(y, x); lab > 0) {
           rough_sum[lab] += roughness.at<float>(y, x);
+          if (side[lab] && is_blue[lab] && !keep[lab])
+            side_rough[lab].push_back(roughness.at<float>(y, x));
+        }
     for (int i = 1; i < n; ++i) {
       const int area = stats.at<int>(i, cv::CC_STAT_AREA);
       if (keep[i] || !is_blue[i] || 2 * dark_count[i] > area) continue;
-      if (o.core_texture_factor > 0 && rough_sum[i] > o.min_core_texture * area) continue;
+      if (o.core_texture_factor > 0) {
+        double typical = rough_sum[i] / area;
+        if (auto& v = side_rough[i]; !v.empty()) {
+          std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+          typical = v[v.size() / 2];
+        }
+        if (typical > o.min_core_texture) continue;
+      }
       if (side[i] || area > 0.002 * w * h) keep[i] = 1, blue_area += area;
     }
   }
