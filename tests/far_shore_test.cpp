@@ -416,3 +416,100 @@ TEST(FarShore, DarkestHoursLakeIsWaterUnderItsWaterline) {
 
 }  // namespace
 }  // namespace mr
+
+// Issue 11 (tuning cold_water: people wading in a sea under an overcast sky, no line cue). The
+// level fall-back put the horizon through the frame's middle, 36 px under the sea line: the
+// sea's far band stood as a wall above the horizon, and the sea under the guess ran to 14-30
+// m where it is kilometres away (dense fog left the far sea and the people along the line
+// plain). A sea line is the horizon: where the sky ends along a straight, level line above a
+// weak guess, the guess is raised to it (EstimateOptions::level_sky_line). A land's skyline
+// (a wooded ridge) is not straight, and stays where the guess puts it.
+namespace mr {
+namespace {
+
+using test::linear;
+
+constexpr int kSeaW = 640, kSeaH = 427, kSeaLine = 170;  // the fall-back's row: 213
+
+// An overcast sky over a sea (or, `ragged`, a wooded ridge whose top wanders by up to 14 px),
+// two dark figures wading in front, their heads over the line: the negative case's photo.
+Image sea_photo(bool ragged) {
+  Image photo(kSeaW, kSeaH, 3);
+  std::mt19937 rng(33);
+  std::uniform_real_distribution<float> ripple(-0.04f, 0.04f);
+  auto top = [&](int x) {
+    return ragged ? kSeaLine - int(std::lround(7 + 5 * std::sin(x / 23.0) + 2 * std::sin(x / 5.0)))
+                  : kSeaLine;
+  };
+  for (int y = 0; y < kSeaH; ++y)
+    for (int x = 0; x < kSeaW; ++x) {
+      std::array<double, 3> c;
+      if (y < top(x)) {  // overcast: pale grey-blue, a little darker up
+        const double t = double(y) / kSeaLine;
+        c = {0.70 + 0.08 * t, 0.73 + 0.08 * t, 0.80 + 0.05 * t};
+      } else if (ragged) {
+        const double k = ripple(rng);
+        c = {0.16 + k, 0.22 + k, 0.12 + k};
+      } else {
+        const double k = ripple(rng) * std::min(1.0, (y - kSeaLine + 2) / 40.0);
+        c = {0.36 + k, 0.40 + k, 0.38 + k};  // a grey-green sea, darker than the sky
+      }
+      // Round figures (no straight edges for a line cue): a head over the line, a body below.
+      auto blob = [&](double cx, double cy, double rx, double ry) {
+        return std::pow((x - cx) / rx, 2) + std::pow((y - cy) / ry, 2) <= 1;
+      };
+      if (blob(170, kSeaLine - 20, 11, 13) || blob(170, kSeaLine + 60, 30, 75) ||
+          blob(450, kSeaLine - 30, 13, 15) || blob(450, kSeaLine + 70, 38, 95))
+        c = {0.08, 0.08, 0.10};
+      for (int k = 0; k < 3; ++k) photo.at(x, y, k) = linear(float(std::clamp(c[k], 0.0, 1.0)));
+    }
+  cv::Mat m(kSeaH, kSeaW, CV_32FC3, photo.data());
+  cv::GaussianBlur(m, m, cv::Size(0, 0), 0.7);  // a lens
+  return photo;
+}
+
+TEST(FarShore, ASeaLineAboveTheLevelGuessIsTheHorizon) {
+  const Image photo = test::tuning_photo("cold_water.jpg");
+  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
+  EstimateOptions off;
+  off.level_sky_line = false;
+  const SceneEstimate before = estimate_scene(photo, camera, Annotations{}, off);
+  const auto& g = est.geometry;
+  const double centre = 0.5 * (photo.width() - 1);
+  auto row_at_centre = [&](const std::array<PixelPoint, 2>& line) {
+    return line[0][1] +
+           (centre - line[0][0]) * (line[1][1] - line[0][1]) / (line[1][0] - line[0][0]);
+  };
+  // The sea line, read off the photo: the sky's last row is 229 and the sea's first 230 in
+  // every clear column (the grey steps from ~190 to ~150 there).
+  const double sea_line = 229.5;
+  const int far_x = 700, far_y = 232;  // clear sea, 2 rows under the line
+  std::printf(
+      "cold_water: %s; horizon at the centre row %.1f (without the rule %.1f), raised %.1f px; "
+      "the sea 2 rows under its line at %.0f m (%.1f m)\n",
+      est.notes.empty() ? "" : est.notes.front().c_str(), row_at_centre(g.horizon),
+      row_at_centre(before.geometry.horizon), g.horizon_raised_px, g.distance_m.at(far_x, far_y, 0),
+      before.geometry.distance_m.at(far_x, far_y, 0));
+  ASSERT_EQ(before.geometry.horizon_source, EstimateSource::fallback);  // no line cue
+  EXPECT_NEAR(row_at_centre(before.geometry.horizon), 0.5 * photo.height(), 1.0);
+  EXPECT_EQ(before.geometry.horizon_raised_px, 0);
+  EXPECT_GT(g.horizon_raised_px, 0);
+  EXPECT_NEAR(row_at_centre(g.horizon), sea_line, 1.5);
+  // The ground plane 2 rows under a horizon 1.6 m up is ~550 m away (the refinement against
+  // the sea's ripples brings it nearer); under the guess the sea there stood at ~15 m.
+  EXPECT_GT(g.distance_m.at(far_x, far_y, 0), 40.0f);
+  EXPECT_LT(before.geometry.distance_m.at(far_x, far_y, 0), 25.0f);
+}
+
+TEST(FarShore, ARaggedSkylineAboveTheLevelGuessIsNoSeaLine) {
+  const Image photo = sea_photo(true);
+  const Camera camera = Camera::from_horizontal_fov(kSeaW, kSeaH, 60);
+  const SceneEstimate est = estimate_scene(photo, camera, Annotations{});
+  std::printf("ridge: %s\n", est.notes.empty() ? "" : est.notes.front().c_str());
+  ASSERT_EQ(est.geometry.horizon_source, EstimateSource::fallback);
+  EXPECT_EQ(est.geometry.horizon_raised_px, 0);
+}
+
+}  // namespace
+}  // namespace mr

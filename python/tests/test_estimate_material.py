@@ -79,6 +79,13 @@ def test_estimate_water_mirror_lamps_and_wall_switches():
     on = libmr.estimate(window)
     off = libmr.estimate(window, little_sky_evidence=False)
     assert on.pixels["sky"] == 0 and off.pixels["sky"] > 0.01 * 852 * 1280
+    # cold_water: a sea line 36 px above the level fall-back is the horizon
+    sea = libmr.read_image(SAMPLES.parent / "gallery" / "tune" / "cold_water.jpg")
+    camera = libmr.Camera(width=800, height=533, focal_px=692.82)  # 60 degrees across
+    on = libmr.estimate(sea, camera=camera)
+    off = libmr.estimate(sea, camera=camera, level_sky_line=False)
+    row = lambda e: 0.5 * (e.horizon[0][1] + e.horizon[1][1])  # noqa: E731
+    assert abs(row(on) - 229.5) < 1.5 and abs(row(off) - 266) < 1
 
 
 def test_estimate_errors_and_cancel(tmp_path):

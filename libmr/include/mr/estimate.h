@@ -151,6 +151,12 @@ struct MR_API EstimateOptions {
   /// it and not as dark as the land (clouds, the glow) is sky (GeometryEstimate::backlit_land).
   /// false: off.
   bool backlit_land = true;
+  /// Issue 11 (a sea, a salt flat, a snowfield): under a weak automatic horizon (the level
+  /// fall-back, or a cue of confidence below 0.2) that the sky ends above, where the sky's lowest
+  /// row lies along one straight line (slope at most 5 degrees; within 2 px in at least half of
+  /// the columns and a tenth in each outer third, RMS at most 1 px) the horizon is raised to it
+  /// (GeometryEstimate::horizon_raised_px): a sea line is the horizon. false: off.
+  bool level_sky_line = true;
   /// Issue 11 item 3: a photo in which the sky mask finds no sky (an interior, a close-up, a
   /// wall, a field seen from above) shows no horizon and no ground running to it, so nothing in
   /// it is known to be far: when the camera height is not annotated (nor derived from a known
@@ -274,6 +280,9 @@ struct MR_API GeometryEstimate {
   /// Issue 11: pixels by which a weak automatic horizon (the level fall-back, or a cue of
   /// confidence below 0.2) was lowered because the sky continued below it (0: not moved).
   double horizon_lowered_px = 0;
+  /// Issue 11: pixels by which a weak automatic horizon was raised to the sky's level line
+  /// (EstimateOptions::level_sky_line; 0: not moved).
+  double horizon_raised_px = 0;
   /// Issue 11: the horizon was lowered to a backlit land's skyline (EstimateOptions::backlit_land).
   bool backlit_land = false;
   /// Issue 11: the horizon was lowered only to calm water's mirror line
