@@ -709,14 +709,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         reach.push_back(row - int(std::floor(guess_y(x))));
       }
     }
-    auto lower = [&](double drop) {
-      const std::array<PixelPoint, 2> lowered{
-          PixelPoint{g.horizon[0][0], g.horizon[0][1] + drop + 1},
-          PixelPoint{g.horizon[1][0], g.horizon[1][1] + drop + 1}};
-      const double height_m = g.pose.position_m.y;
-      g.pose = pose_from_horizon(camera, lowered, height_m);
+    // The guess moved to `line` (same camera height): the pose, the plane's distances and the
+    // sky mask clipped to the new line.
+    auto move_horizon = [&](const std::array<PixelPoint, 2>& line) {
+      g.pose = pose_from_horizon(camera, line, g.pose.position_m.y);
       g.horizon = photo::horizon_of_pose(camera, g.pose);
-      g.horizon_lowered_px = drop + 1;
       map = photo::distance_map(camera, g.pose, annotations);
       g.distance_m = std::move(map.distance_m);
       g.sky_pixels = map.counts[int(photo::Coverage::sky)];
@@ -724,6 +721,11 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       g.plane_pixels = map.counts[int(photo::Coverage::plane)];
       g.hint_pixels = map.counts[int(photo::Coverage::hint)];
       mask = photo::estimate_sky_mask(photo->view(), g.horizon, sky_options);
+    };
+    auto lower = [&](double drop) {
+      move_horizon({PixelPoint{g.horizon[0][0], g.horizon[0][1] + drop + 1},
+                    PixelPoint{g.horizon[1][0], g.horizon[1][1] + drop + 1}});
+      g.horizon_lowered_px = drop + 1;
     };
     if (!reach.empty()) {
       std::nth_element(reach.begin(), reach.begin() + std::ptrdiff_t(reach.size() / 2),
@@ -834,18 +836,9 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // The line is the sky's last row: the horizon lies on its lower edge (+ 1).
       const double centre = 0.5 * (w - 1), raise = guess_y(centre) - (line.a + line.b * centre + 1);
       if (line.found && raise >= kMinHorizonDropFraction * h) {
-        const std::array<PixelPoint, 2> raised{PixelPoint{0, line.a + 1},
-                                               PixelPoint{w - 1.0, line.a + 1 + line.b * (w - 1)}};
-        g.pose = pose_from_horizon(camera, raised, g.pose.position_m.y);
-        g.horizon = photo::horizon_of_pose(camera, g.pose);
+        move_horizon(
+            {PixelPoint{0, line.a + 1}, PixelPoint{w - 1.0, line.a + 1 + line.b * (w - 1)}});
         g.horizon_raised_px = raise;
-        map = photo::distance_map(camera, g.pose, annotations);
-        g.distance_m = std::move(map.distance_m);
-        g.sky_pixels = map.counts[int(photo::Coverage::sky)];
-        g.ground_pixels = map.counts[int(photo::Coverage::ground)];
-        g.plane_pixels = map.counts[int(photo::Coverage::plane)];
-        g.hint_pixels = map.counts[int(photo::Coverage::hint)];
-        mask = photo::estimate_sky_mask(photo->view(), g.horizon, sky_options);
       }
     }
   }
