@@ -224,8 +224,8 @@ constexpr double kAllSkyFraction = 0.9;
 constexpr double kMinSkyCutByTheGuessFraction = kMinSkyAtGuessFraction;
 
 // A level sky line (EstimateOptions::level_sky_line): the sky's lowest row, in the columns
-// where the sky ends above a weak guess, lies within kLevelLineTolerance (px; at least 2, or
-// the height / 250) of one straight line, of slope at most kLevelLineMaxSlope (5 degrees), in
+// where the sky ends above a weak guess, lies within a tolerance (px: 2, or the height / 250
+// where that is more) of one straight line, of slope at most kLevelLineMaxSlope (5 degrees), in
 // at least kLevelLineMinColumns of the columns and kLevelLineMinSideColumns of the columns in
 // each outer third, with an RMS residual of at most half the tolerance; the sky reaches the
 // guess in at most kLevelLineMaxAtGuess of the columns. Tuning half: cold_water's sea line, 78
