@@ -59,4 +59,9 @@ bool detect_faces(const cv::Mat& gray8, const std::string& cascade_path, double 
   return module().detect_faces(gray8, cascade_path, scale_factor, min_neighbors, min_size, faces);
 }
 
+void detect_people(const cv::Mat& image8, double hit_threshold, double scale_factor,
+                   std::vector<cv::Rect>& people, std::vector<double>& weights) {
+  module().detect_people(image8, hit_threshold, scale_factor, people, weights);
+}
+
 }  // namespace mr::photo::contrib

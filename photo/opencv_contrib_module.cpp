@@ -73,6 +73,17 @@ bool detect_faces(const cv::Mat& gray8, const std::string& cascade_path, double 
   return true;
 }
 
+void detect_people(const cv::Mat& image8, double hit_threshold, double scale_factor,
+                   std::vector<cv::Rect>& people, std::vector<double>& weights) {
+  people.clear();
+  weights.clear();
+  // Made per call, as the cascade above: cheap (the detector's weights are compiled in).
+  cv::HOGDescriptor hog;
+  hog.setSVMDetector(cv::HOGDescriptor::getDefaultPeopleDetector());
+  hog.detectMultiScale(image8, people, weights, hit_threshold, cv::Size(8, 8), cv::Size(8, 8),
+                       scale_factor);
+}
+
 const Module kModule{guided_filter,
                      rolling_guidance_filter,
                      fast_global_smoother_filter,
@@ -81,7 +92,8 @@ const Module kModule{guided_filter,
                      delete_net,
                      net_empty,
                      forward,
-                     detect_faces};
+                     detect_faces,
+                     detect_people};
 
 }  // namespace
 

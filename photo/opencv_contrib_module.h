@@ -21,6 +21,8 @@ struct Module {
   cv::Mat (*forward)(void* net, const cv::Mat& blob);
   bool (*detect_faces)(const cv::Mat& gray8, const std::string& cascade_path, double scale_factor,
                        int min_neighbors, int min_size, std::vector<cv::Rect>& faces);
+  void (*detect_people)(const cv::Mat& image8, double hit_threshold, double scale_factor,
+                        std::vector<cv::Rect>& people, std::vector<double>& weights);
 };
 
 }  // namespace mr::photo::contrib

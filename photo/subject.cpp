@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "photo/display.h"
+#include "photo/opencv_random.h"
 #include "photo/sky_mask.h"
 
 namespace mr::photo {
@@ -135,6 +136,7 @@ StandingSubject find_standing_subject(ConstImageView photo,
     bool cut = false;
     if (certain_fg > 0 && fg_side >= kMinSidePixels && bg_side >= kMinSidePixels) {
       cv::Mat bgd, fgd;
+      const ReproducibleRandom reproducible;
       try {
         cv::grabCut(small_display, small_labels, cv::Rect(), bgd, fgd,
                     std::max(1, o.grabcut_iterations), cv::GC_INIT_WITH_MASK);

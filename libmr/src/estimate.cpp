@@ -1004,6 +1004,19 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       (g.horizon[1][1] - g.horizon[0][1]) / std::max(1.0, g.horizon[1][0] - g.horizon[0][0]);
   auto horizon_y = [&](double x) { return g.horizon[0][1] + (x - g.horizon[0][0]) * slope; };
 
+  // The forward distance of the ground at pixel centre column x, row y (a pixel edge), no
+  // farther than the far billboard: a contact just below the horizon is the least certain (a
+  // pixel there spans many metres), and fog should err towards too much. 0: none.
+  const Vec3 camera_position = g.pose.position_m;
+  auto ground_forward = [&](int x, double y) {
+    const auto gp = photo::ground_point(camera, g.pose, {double(x), y});
+    const double fd =
+        gp ? (gp->x - camera_position.x) * fwd.x + (gp->z - camera_position.z) * fwd.z : 0.0;
+    return fd > 0 && std::isfinite(fd) ? std::min(fd, far_forward) : 0.0;
+  };
+  // Row-major, 1 = of the ground's colour below the horizon (photo/sky_mask.h, GroundMask);
+  // empty where the ground's colours were not modelled.
+  std::vector<std::uint8_t> ground_coloured;
   // Per pixel: the forward distance of the structure it is on where it meets the ground (0:
   // none found).
   std::vector<float> contact_forward(n, 0.0f);
@@ -1019,6 +1032,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
     const photo::GroundMask ground =
         photo::estimate_ground_mask(photo->view(), g.horizon, mask.sky);
     if (ground.valid) {
+      ground_coloured = ground.ground;
       // Issue 11 (a person sitting on a beach, her feet out of the frame): a subject standing
       // in the bottom band (photo/subject.h) hides the ground under it, so it stands no farther
       // than the bottom row's ground (as any structure running off the bottom, below). Through
@@ -1032,15 +1046,6 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
       // in the structure: a facade beside a shop front has its contacts through it, and cut
       // off from them went to the far billboard. (Only with a measured horizon, as the bottom
       // row's contact below.)
-      // The forward distance of the ground at pixel centre column x, row y (a pixel edge), no
-      // farther than the far billboard: a contact just below the horizon is the least certain
-      // (a pixel there spans many metres), and fog should err towards too much. 0: none.
-      const Vec3 o = g.pose.position_m;
-      auto ground_forward = [&](int x, double y) {
-        const auto gp = photo::ground_point(camera, g.pose, {double(x), y});
-        const double fd = gp ? (gp->x - o.x) * fwd.x + (gp->z - o.z) * fwd.z : 0.0;
-        return fd > 0 && std::isfinite(fd) ? std::min(fd, far_forward) : 0.0;
-      };
       std::vector<double> subject_forward;
       if (ground.standing_subject && g.horizon_source != EstimateSource::fallback) {
         subject = photo::find_standing_subject(photo->view(), g.horizon, mask.sky, ground).pixels;
@@ -1310,6 +1315,40 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
         pixel_class[i] = kPerson;
         ground_ratio[i] = 0;
       }
+    // Issue 11 (cold_water: people wading with their backs to the camera, their heads at the
+    // horizon's row, ran from their feet's distance up to the far sea's, heads lost in dense
+    // fog): people standing on the ground, found by their figures (photo/people.h), stand where
+    // their feet meet the ground, a plane facing the camera. Needs the ground's colours (the
+    // foot is on them).
+    if (options.standing_people && !ground_coloured.empty()) {
+      std::vector<std::uint8_t> taken(n, 0);
+      for (std::size_t i = 0; i < n; ++i)
+        taken[i] = (!people.pixels.empty() && people.pixels[i]) || (!subject.empty() && subject[i]);
+      const photo::StandingPeople standing = photo::find_standing_people(
+          photo->view(), camera.focal_px, mask.sky, taken, [&](int x, int y) {
+            return y >= 0 && y < h && ground_coloured[std::size_t(y) * w + x]
+                       ? ground_forward(x, y + 0.5)
+                       : 0.0;
+          });
+      for (int y = 0; y < h && !standing.pixels.empty(); ++y)
+        for (int x = 0; x < w; ++x) {
+          const std::size_t i = std::size_t(y) * w + x;
+          const int k = standing.pixels[i];
+          const auto cov = map.coverage[i];
+          if (k == 0 || mask.sky[i] || cov == photo::Coverage::plane ||
+              cov == photo::Coverage::hint)
+            continue;
+          if (kept_distance.empty()) kept_distance.assign(n, 0.0f);
+          const float d = billboard(x, y, standing.persons[std::size_t(k - 1)].forward_m);
+          g.distance_m.at(x, y, 0) = d;
+          kept_distance[i] = d;
+          --counts[pixel_class[i]];
+          ++counts[kPerson];
+          pixel_class[i] = kPerson;
+          ground_ratio[i] = 0;
+        }
+      g.standing_people = standing.persons.size();
+    }
   }
   g.people_pixels = counts[kPerson];
   g.sky_pixels = counts[0];
@@ -2021,9 +2060,9 @@ SceneEstimate estimate_scene(const Image& photo, const Camera& camera,
       (g.sky_from_mask
            ? " (automatic sky mask), " + fmt("%.1f", 100.0 * g.contact_pixels / n) +
                  " % structures standing where they meet the ground, " +
-                 (g.people_pixels
-                      ? fmt("%.1f", 100.0 * g.people_pixels / n) + " % people (by their faces), "
-                      : std::string()) +
+                 (g.people_pixels ? fmt("%.1f", 100.0 * g.people_pixels / n) +
+                                        " % people (by their faces or figures), "
+                                  : std::string()) +
                  (g.frame_border_pixels ? fmt("%.1f", 100.0 * g.frame_border_pixels / n) +
                                               " % the frame's border (as the picture's edge), "
                                         : std::string()) +

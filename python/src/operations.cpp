@@ -660,7 +660,8 @@ void bind_operations(py::module_& m) {
          double billboard_depression_deg, bool ground_contact, double min_rise_ratio,
          bool refine_depth, bool sky_fold, bool vegetation, bool people, bool frame_border,
          bool backlit_land, bool water_mirror, bool lamps_not_sky, bool wall_not_sky,
-         bool little_sky_evidence, bool level_sky_line, mr::CancelToken* cancel) {
+         bool little_sky_evidence, bool level_sky_line, bool standing_people,
+         mr::CancelToken* cancel) {
         const ImageArg photo(image, "image", metadata ? &*metadata : nullptr);
         const mr::Annotations notes_in = annotations_arg(annotations);
         mr::EstimateOptions o;
@@ -680,6 +681,7 @@ void bind_operations(py::module_& m) {
         o.wall_not_sky = wall_not_sky;
         o.little_sky_evidence = little_sky_evidence;
         o.level_sky_line = level_sky_line;
+        o.standing_people = standing_people;
         o.cancel = cancel;
         EstimateResult r;
         mr::SceneEstimate est;
@@ -740,6 +742,7 @@ void bind_operations(py::module_& m) {
       py::arg("wall_not_sky") = mr::EstimateOptions{}.wall_not_sky,
       py::arg("little_sky_evidence") = mr::EstimateOptions{}.little_sky_evidence,
       py::arg("level_sky_line") = mr::EstimateOptions{}.level_sky_line,
+      py::arg("standing_people") = mr::EstimateOptions{}.standing_people,
       py::arg("cancel") = py::none(),
       "Single-photo estimation (as `mr estimate`): camera pose, a metric distance map and the "
       "light from a scene-linear photo (H, W, 3) and optional annotations (a dict, a JSON "

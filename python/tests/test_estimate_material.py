@@ -86,6 +86,12 @@ def test_estimate_water_mirror_lamps_and_wall_switches():
     off = libmr.estimate(sea, camera=camera, level_sky_line=False)
     row = lambda e: 0.5 * (e.horizon[0][1] + e.horizon[1][1])  # noqa: E731
     assert abs(row(on) - 229.5) < 1.5 and abs(row(off) - 266) < 1
+    # and the girl wading at its left edge stands where her feet meet the water
+    alone = libmr.estimate(sea, camera=camera, standing_people=False)
+    head, knee = (238, 25), (305, 25)
+    assert abs(on.distance_m[head][0] - on.distance_m[knee][0]) < 0.02 * on.distance_m[knee][0]
+    assert alone.distance_m[head][0] > 3 * alone.distance_m[knee][0]
+    assert on.pixels["people"] > alone.pixels["people"]
 
 
 def test_estimate_errors_and_cancel(tmp_path):

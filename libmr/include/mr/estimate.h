@@ -140,6 +140,12 @@ struct MR_API EstimateOptions {
   /// them; a scene with less than 5 % of open sky keeps its depth, and a black-and-white photo
   /// has no people. false: off (also when the face cascade is not installed).
   bool people = true;
+  /// Issue 11: people standing on the ground, found by their figures (a HOG people detector)
+  /// where the ground's colours were modelled, stand at the distance of the ground under their
+  /// feet (a plane facing the camera) instead of the ground plane's rising distance up their
+  /// bodies; kept only where the figure is 0.9-2.1 m tall at that distance. Same conditions as
+  /// `people`. false: off.
+  bool standing_people = true;
   /// Issue 11: a frame around the picture (a scanned print's uneven dark edge, a light strip
   /// down a side: at most 3 % of the frame, near neutral, ending in a step to the picture) is
   /// not the scene: the sky is found inside it, and it takes the fog of the picture's edge
@@ -235,8 +241,11 @@ struct MR_API GeometryEstimate {
   std::size_t billboard_pixels = 0;
   /// Pixels on structures standing where they meet the ground (EstimateOptions::ground_contact).
   std::size_t contact_pixels = 0;
-  /// Pixels on people found by their faces (EstimateOptions::people).
+  /// Pixels on people found by their faces or figures (EstimateOptions::people,
+  /// standing_people).
   std::size_t people_pixels = 0;
+  /// People found standing on the ground by their figures (EstimateOptions::standing_people).
+  std::size_t standing_people = 0;
   /// Pixels of a frame around the picture (a scanned print's border; issue 11), not the scene:
   /// each takes the distance, sky matte and confidence of the picture's nearest edge pixel (also
   /// included in the counts above).
