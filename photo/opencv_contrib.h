@@ -54,7 +54,7 @@ bool detect_faces(const cv::Mat& gray8, const std::string& cascade_path, double 
 
 /// cv::HOGDescriptor with getDefaultPeopleDetector() (Dalal and Triggs 2005: upright people, 64 x
 /// 128 windows), detectMultiScale(image8, people, weights, hit_threshold, {8, 8}, {8, 8},
-/// scale_factor) on a CV_8UC1 or CV_8UC3 picture.
+/// scale_factor) on a CV_8UC1 or CV_8UC3 picture; none on a picture smaller than the window.
 void detect_people(const cv::Mat& image8, double hit_threshold, double scale_factor,
                    std::vector<cv::Rect>& people, std::vector<double>& weights);
 

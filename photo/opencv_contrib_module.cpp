@@ -77,6 +77,9 @@ void detect_people(const cv::Mat& image8, double hit_threshold, double scale_fac
                    std::vector<cv::Rect>& people, std::vector<double>& weights) {
   people.clear();
   weights.clear();
+  // OpenCV 4.6's detectMultiScale crashes (SIGSEGV) on a picture smaller than the window.
+  const cv::Size window = cv::HOGDescriptor().winSize;
+  if (image8.cols < window.width || image8.rows < window.height) return;
   // Made per call, as the cascade above: cheap (the detector's weights are compiled in).
   cv::HOGDescriptor hog;
   hog.setSVMDetector(cv::HOGDescriptor::getDefaultPeopleDetector());
