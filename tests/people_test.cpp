@@ -175,8 +175,9 @@ TEST(StandingPeople, AGirlWadingStandsWhereHerFeetMeetTheWater) {
   EXPECT_NEAR(g.distance_m.at(700, 232, 0), before.distance_m.at(700, 232, 0), 0.01);
 }
 
-// The figure detector fires on towers, a pagoda's balcony, windows and rockets in the tuning
-// half; none stands on the ground at a person's height, so no one is found there.
+// The figure detector fires on a pagoda's balcony, a château's towers, a far walker above a
+// guessed horizon, and (searched at other sizes) a rocket, a shop window and a canyon's rim in
+// the tuning half; none stands on the ground at a person's height, so no one is found there.
 TEST(StandingPeople, TowersBalconiesAndRocketsAreNoOne) {
   for (const char* name : {"summer_palace.jpg", "maintenon.jpg", "rocket.jpg", "anne_helene.jpg",
                            "scenetext06.jpg", "canyon_couple.jpg"}) {
