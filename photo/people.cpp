@@ -330,6 +330,11 @@ cv::Mat segment_standing(const cv::Mat& display, const std::vector<std::uint8_t>
   const cv::Rect frame(0, 0, roi.width, roi.height);
   labels(body & frame).setTo(cv::GC_PR_FGD);
   labels(torso & frame).setTo(cv::GC_FGD);
+  // A window at the frame's side has no margin of background there: its outermost column is
+  // (else GrabCut, seeing no background of that colour, took the sea along the frame's edge
+  // beside a girl wading there with her, a block of near sea in the far fog).
+  if (roi.x == 0) labels.col(0).setTo(cv::GC_BGD);
+  if (roi.x + roi.width == w) labels.col(roi.width - 1).setTo(cv::GC_BGD);
   for (int y = 0; y < roi.height && !sky.empty(); ++y)
     for (int x = 0; x < roi.width; ++x)
       if (sky[std::size_t(y + roi.y) * w + x + roi.x]) labels.at<std::uint8_t>(y, x) = cv::GC_BGD;
@@ -343,14 +348,13 @@ cv::Mat segment_standing(const cv::Mat& display, const std::vector<std::uint8_t>
   // A person fills about a third of the window; GrabCut taking most of it, or running along
   // the window's sides, took the background with the person.
   constexpr double kMaxWindowFill = 0.6, kMaxAlongSides = 0.25;
-  // (A side at the frame's edge is the frame's: a person cut by it runs along it.)
-  const int x_left = window.x - roi.x, x_right = window.x + window.width - 1 - roi.x;
+  // (A side at the frame's edge is looked at one column in, its edge being background above.)
+  const int x_left = std::max(window.x, 1) - roi.x;
+  const int x_right = std::min(window.x + window.width - 1, w - 2) - roi.x;
   int along_sides = 0;
   for (int y = 0; y < roi.height; ++y)
     for (const int x : {x_left, x_right})
-      if (x + roi.x > 0 && x + roi.x < w - 1 && x >= 0 && x < roi.width &&
-          person.at<std::uint8_t>(y, x))
-        ++along_sides;
+      if (x >= 0 && x < roi.width && person.at<std::uint8_t>(y, x)) ++along_sides;
   if (cv::countNonZero(person) > kMaxWindowFill * bw * bh || along_sides > kMaxAlongSides * bh)
     person.setTo(0);
   return person;

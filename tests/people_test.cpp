@@ -170,17 +170,21 @@ TEST(StandingPeople, AGirlWadingStandsWhereHerFeetMeetTheWater) {
   EXPECT_NEAR(g.distance_m.at(x, head, 0), at_knee, 0.02 * at_knee);
   EXPECT_NEAR(g.distance_m.at(x, waist, 0), at_knee, 0.02 * at_knee);
   EXPECT_NEAR(at_knee, g.distance_m.at(x, 320, 0), 0.15 * at_knee);
-  // The man in front and the far sea beside her keep theirs.
+  // The man in front and the far sea beside her keep theirs, and so does the sea between her
+  // and the frame's edge (GrabCut took it with her while that edge had no background label:
+  // a block of near sea in the far fog).
   EXPECT_NEAR(g.distance_m.at(460, 330, 0), before.distance_m.at(460, 330, 0), 0.01);
+  EXPECT_NEAR(g.distance_m.at(5, 270, 0), before.distance_m.at(5, 270, 0),
+              0.01 * before.distance_m.at(5, 270, 0));
   EXPECT_NEAR(g.distance_m.at(700, 232, 0), before.distance_m.at(700, 232, 0), 0.01);
 }
 
-// The figure detector fires on a pagoda's balcony, a château's towers, a far walker above a
-// guessed horizon, and (searched at other sizes) a rocket, a shop window and a canyon's rim in
-// the tuning half; none stands on the ground at a person's height, so no one is found there.
-TEST(StandingPeople, TowersBalconiesAndRocketsAreNoOne) {
-  for (const char* name : {"summer_palace.jpg", "maintenon.jpg", "rocket.jpg", "anne_helene.jpg",
-                           "scenetext06.jpg", "canyon_couple.jpg"}) {
+// The figure detector fires on a pagoda's balcony, a château's towers and a far walker above a
+// guessed horizon in the tuning half; none stands on the ground at a person's height, so no one
+// is found there. (Searched at other sizes it fired on a rocket, a shop window and a canyon's
+// rim too; not here, so those photos would test nothing.)
+TEST(StandingPeople, TowersAndBalconiesAreNoOne) {
+  for (const char* name : {"summer_palace.jpg", "maintenon.jpg", "anne_helene.jpg"}) {
     const Image photo = test::tuning_photo(name);
     const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
     EXPECT_EQ(estimate_geometry(photo, camera, Annotations{}).standing_people, 0u) << name;

@@ -1282,6 +1282,16 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
   constexpr double kPeopleMinSkyFraction = 0.05;
   if (options.people && !bounded && double(mask.pixels) >= kPeopleMinSkyFraction * double(n)) {
     const photo::People people = photo::find_people(photo->view(), camera.focal_px, mask.sky);
+    // Pixel i (x, y) is on a person at distance d, which the refinement keeps.
+    auto stand_person = [&](std::size_t i, int x, int y, float d) {
+      if (kept_distance.empty()) kept_distance.assign(n, 0.0f);
+      g.distance_m.at(x, y, 0) = d;
+      kept_distance[i] = d;
+      --counts[pixel_class[i]];
+      ++counts[kPerson];
+      pixel_class[i] = kPerson;
+      ground_ratio[i] = 0;
+    };
     // A person the ground's colour model already found standing in the bottom band (above)
     // keeps that subject's pixels and distance: two outlines of one person would disagree.
     std::vector<std::uint8_t> skip(people.persons.size() + 1, 0);
@@ -1305,15 +1315,9 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           mask.sky[i] = 0, mask.alpha[i] = 0, --mask.pixels;
           ground_ratio[i] = 0;
         }
-        if (kept_distance.empty()) kept_distance.assign(n, 0.0f);
-        const float d =
-            float(people.persons[std::size_t(k - 1)].depth_m * camera.z_to_distance(x, y));
-        g.distance_m.at(x, y, 0) = d;
-        kept_distance[i] = d;
-        --counts[pixel_class[i]];
-        ++counts[kPerson];
-        pixel_class[i] = kPerson;
-        ground_ratio[i] = 0;
+        stand_person(
+            i, x, y,
+            float(people.persons[std::size_t(k - 1)].depth_m * camera.z_to_distance(x, y)));
       }
     // Issue 11 (cold_water: people wading with their backs to the camera, their heads at the
     // horizon's row, ran from their feet's distance up to the far sea's, heads lost in dense
@@ -1338,14 +1342,7 @@ GeometryEstimate geometry(const Image* photo, const Camera& camera, const Annota
           if (k == 0 || mask.sky[i] || cov == photo::Coverage::plane ||
               cov == photo::Coverage::hint)
             continue;
-          if (kept_distance.empty()) kept_distance.assign(n, 0.0f);
-          const float d = billboard(x, y, standing.persons[std::size_t(k - 1)].forward_m);
-          g.distance_m.at(x, y, 0) = d;
-          kept_distance[i] = d;
-          --counts[pixel_class[i]];
-          ++counts[kPerson];
-          pixel_class[i] = kPerson;
-          ground_ratio[i] = 0;
+          stand_person(i, x, y, billboard(x, y, standing.persons[std::size_t(k - 1)].forward_m));
         }
       g.standing_people = standing.persons.size();
     }
