@@ -191,6 +191,26 @@ TEST(StandingPeople, TowersAndBalconiesAreNoOne) {
   }
 }
 
+// GrabCut seeds its colour models from OpenCV's per-thread random generator: before, every
+// earlier call moved it on, and the same photo estimated twice in one process (a batch, a Python
+// session) gave its people different outlines.
+TEST(People, TheSameEstimateTwiceInOneProcess) {
+  const Image photo = test::tuning_photo("cold_water.jpg");
+  const Camera camera = Camera::from_horizontal_fov(photo.width(), photo.height(), 60);
+  const GeometryEstimate first = estimate_geometry(photo, camera, Annotations{});
+  const Image other = read_image(kTune / "canyon_couple.jpg");
+  photo::find_people(other.view(), 700.0, sky_of(other));  // GrabCut in between
+  const GeometryEstimate second = estimate_geometry(photo, camera, Annotations{});
+  EXPECT_GT(first.people_pixels, 0u);
+  EXPECT_EQ(first.people_pixels, second.people_pixels);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < first.distance_m.pixels().size(); ++i) {
+    const float a = first.distance_m.pixels()[i], b = second.distance_m.pixels()[i];
+    differ += !(a == b);
+  }
+  EXPECT_EQ(differ, 0u);
+}
+
 TEST(People, NeverThrowsForAnyImageContent) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float inf = std::numeric_limits<float>::infinity();
