@@ -398,6 +398,8 @@ StandingPeople find_standing_people(ConstImageView photo, double focal_px,
   // Nearest (lowest feet) first: a nearer person's pixels win where two overlap.
   std::sort(windows.begin(), windows.end(),
             [](const cv::Rect& a, const cv::Rect& b) { return a.y + a.height > b.y + b.height; });
+  if (windows.size() > std::size_t(std::max(0, o.max_windows)))
+    windows.resize(std::size_t(std::max(0, o.max_windows)));
   std::vector<std::uint8_t> pixels(n, 0);
   const ReproducibleRandom reproducible;
   for (const cv::Rect& win : windows) {

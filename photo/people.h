@@ -87,6 +87,10 @@ struct StandingOptions {
   /// GrabCut on a copy of at most this many pixels around each person.
   double grabcut_pixels = 0.05e6;
   int grabcut_iterations = 3;
+  /// At most this many of the detector's windows are segmented, nearest (lowest) first: a
+  /// crowd's far people stand where the ground plane puts them (each window costs a GrabCut,
+  /// ~30 ms here).
+  int max_windows = 32;
 };
 
 struct StandingPerson {

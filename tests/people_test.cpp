@@ -179,6 +179,32 @@ TEST(StandingPeople, AGirlWadingStandsWhereHerFeetMeetTheWater) {
   EXPECT_NEAR(g.distance_m.at(700, 232, 0), before.distance_m.at(700, 232, 0), 0.01);
 }
 
+// The figure search alone on cold_water, over a level ground plane 1.6 m under the camera
+// whose horizon is the sea line (row 230): the girl is found, standing 0.9-2.1 m tall; with no
+// window to segment (a crowd's cap at 0), no one.
+TEST(StandingPeople, TheSearchAloneFindsTheGirlAndItsWindowCapHolds) {
+  const Image photo = test::tuning_photo("cold_water.jpg");
+  const double focal_px = Camera::from_horizontal_fov(photo.width(), photo.height(), 60).focal_px;
+  const photo::GroundForward plane = [&](int, int y) {
+    return y + 0.5 > 231 && y < photo.height() ? focal_px * 1.6 / (y + 0.5 - 230) : 0.0;
+  };
+  const photo::StandingPeople found =
+      photo::find_standing_people(photo.view(), focal_px, {}, {}, plane);
+  ASSERT_FALSE(found.persons.empty());
+  bool girl = false;
+  for (const photo::StandingPerson& p : found.persons) {
+    EXPECT_GE(p.height_m, 0.9);
+    EXPECT_LE(p.height_m, 2.1);
+    girl = girl || (p.window[0] < 20 && p.window[0] + p.window[2] > 40);
+  }
+  EXPECT_TRUE(girl);
+  EXPECT_EQ(found.pixels.size(), std::size_t(photo.width()) * std::size_t(photo.height()));
+  photo::StandingOptions none;
+  none.max_windows = 0;
+  EXPECT_TRUE(
+      photo::find_standing_people(photo.view(), focal_px, {}, {}, plane, none).persons.empty());
+}
+
 // The figure detector fires on a pagoda's balcony, a château's towers and a far walker above a
 // guessed horizon in the tuning half; none stands on the ground at a person's height, so no one
 // is found there. (Searched at other sizes it fired on a rocket, a shop window and a canyon's
