@@ -222,6 +222,57 @@ cv::Mat segment_person(const cv::Mat& display, const std::vector<std::uint8_t>& 
   return person;
 }
 
+// The person's pixels in `roi` from the detector's `window` (both in the photo): a body prior
+// drawn in the window (the detector's person is its middle 75 % of rows, about a third of its
+// width), settled by GrabCut, the part joined to the torso, its small holes filled. 1 = the
+// person, at roi's size; all 0 when GrabCut flooded the window (a figure of the background's
+// colours: its straight sides would be seams).
+cv::Mat segment_standing(const cv::Mat& display, const std::vector<std::uint8_t>& sky, int w,
+                         const cv::Rect& window, const cv::Rect& roi, const StandingOptions& o) {
+  const double bw = window.width, bh = window.height;
+  const double cx = window.x + bw / 2 - roi.x, top = window.y - roi.y;
+  cv::Mat labels(roi.size(), CV_8U, cv::Scalar(cv::GC_BGD));
+  labels(window - roi.tl()).setTo(cv::GC_PR_BGD);
+  // The body: the middle 60 % of the window's width from the head's top to the feet, possibly
+  // the person's; the torso's middle certainly.
+  const cv::Rect body(int(std::lround(cx - 0.3 * bw)), int(std::lround(top + 0.08 * bh)),
+                      int(std::lround(0.6 * bw)), int(std::lround(0.86 * bh)));
+  const cv::Rect torso(int(std::lround(cx - 0.06 * bw)), int(std::lround(top + 0.3 * bh)),
+                       std::max(1, int(std::lround(0.12 * bw))),
+                       std::max(1, int(std::lround(0.25 * bh))));
+  const cv::Rect frame(0, 0, roi.width, roi.height);
+  labels(body & frame).setTo(cv::GC_PR_FGD);
+  labels(torso & frame).setTo(cv::GC_FGD);
+  // A window at the frame's side has no margin of background there: its outermost column is
+  // (else GrabCut, seeing no background of that colour, took the sea along the frame's edge
+  // beside a girl wading there with her, a block of near sea in the far fog).
+  if (roi.x == 0) labels.col(0).setTo(cv::GC_BGD);
+  if (roi.x + roi.width == w) labels.col(roi.width - 1).setTo(cv::GC_BGD);
+  for (int y = 0; y < roi.height && !sky.empty(); ++y)
+    for (int x = 0; x < roi.width; ++x)
+      if (sky[std::size_t(y + roi.y) * w + x + roi.x]) labels.at<std::uint8_t>(y, x) = cv::GC_BGD;
+  cv::Mat person = grabcut_foreground(display, roi, labels, o.grabcut_pixels, o.grabcut_iterations);
+  if (person.empty()) return cv::Mat(roi.size(), CV_8U, cv::Scalar(0));
+  person &= labels != cv::GC_BGD;  // GrabCut keeps certain labels; the resize may blur them
+  keep_joined(person, torso & frame);
+  // A body's holes: letters on a shirt, a bag's strap (at most 1 % of the window each).
+  constexpr double kMaxHoleWindow = 0.01;
+  fill_small_holes(person, kMaxHoleWindow * bw * bh);
+  // A person fills about a third of the window; GrabCut taking most of it, or running along
+  // the window's sides, took the background with the person.
+  constexpr double kMaxWindowFill = 0.6, kMaxAlongSides = 0.25;
+  // (A side at the frame's edge is looked at one column in, its edge being background above.)
+  const int x_left = std::max(window.x, 1) - roi.x;
+  const int x_right = std::min(window.x + window.width - 1, w - 2) - roi.x;
+  int along_sides = 0;
+  for (int y = 0; y < roi.height; ++y)
+    for (const int x : {x_left, x_right})
+      if (x >= 0 && x < roi.width && person.at<std::uint8_t>(y, x)) ++along_sides;
+  if (cv::countNonZero(person) > kMaxWindowFill * bw * bh || along_sides > kMaxAlongSides * bh)
+    person.setTo(0);
+  return person;
+}
+
 }  // namespace
 
 People find_people(ConstImageView photo, double focal_px, const std::vector<std::uint8_t>& sky,
@@ -302,65 +353,6 @@ People find_people(ConstImageView photo, double focal_px, const std::vector<std:
   }
   return out;
 }
-
-}  // namespace mr::photo
-
-namespace mr::photo {
-
-namespace {
-
-// The person's pixels in `roi` from the detector's `window` (both in the photo): a body prior
-// drawn in the window (the detector's person is its middle 75 % of rows, about a third of its
-// width), settled by GrabCut, the part joined to the torso, its small holes filled. 1 = the
-// person, at roi's size; all 0 when GrabCut flooded the window (a figure of the background's
-// colours: its straight sides would be seams).
-cv::Mat segment_standing(const cv::Mat& display, const std::vector<std::uint8_t>& sky, int w,
-                         const cv::Rect& window, const cv::Rect& roi, const StandingOptions& o) {
-  const double bw = window.width, bh = window.height;
-  const double cx = window.x + bw / 2 - roi.x, top = window.y - roi.y;
-  cv::Mat labels(roi.size(), CV_8U, cv::Scalar(cv::GC_BGD));
-  labels(window - roi.tl()).setTo(cv::GC_PR_BGD);
-  // The body: the middle 60 % of the window's width from the head's top to the feet, possibly
-  // the person's; the torso's middle certainly.
-  const cv::Rect body(int(std::lround(cx - 0.3 * bw)), int(std::lround(top + 0.08 * bh)),
-                      int(std::lround(0.6 * bw)), int(std::lround(0.86 * bh)));
-  const cv::Rect torso(int(std::lround(cx - 0.06 * bw)), int(std::lround(top + 0.3 * bh)),
-                       std::max(1, int(std::lround(0.12 * bw))),
-                       std::max(1, int(std::lround(0.25 * bh))));
-  const cv::Rect frame(0, 0, roi.width, roi.height);
-  labels(body & frame).setTo(cv::GC_PR_FGD);
-  labels(torso & frame).setTo(cv::GC_FGD);
-  // A window at the frame's side has no margin of background there: its outermost column is
-  // (else GrabCut, seeing no background of that colour, took the sea along the frame's edge
-  // beside a girl wading there with her, a block of near sea in the far fog).
-  if (roi.x == 0) labels.col(0).setTo(cv::GC_BGD);
-  if (roi.x + roi.width == w) labels.col(roi.width - 1).setTo(cv::GC_BGD);
-  for (int y = 0; y < roi.height && !sky.empty(); ++y)
-    for (int x = 0; x < roi.width; ++x)
-      if (sky[std::size_t(y + roi.y) * w + x + roi.x]) labels.at<std::uint8_t>(y, x) = cv::GC_BGD;
-  cv::Mat person = grabcut_foreground(display, roi, labels, o.grabcut_pixels, o.grabcut_iterations);
-  if (person.empty()) return cv::Mat(roi.size(), CV_8U, cv::Scalar(0));
-  person &= labels != cv::GC_BGD;  // GrabCut keeps certain labels; the resize may blur them
-  keep_joined(person, torso & frame);
-  // A body's holes: letters on a shirt, a bag's strap (at most 1 % of the window each).
-  constexpr double kMaxHoleWindow = 0.01;
-  fill_small_holes(person, kMaxHoleWindow * bw * bh);
-  // A person fills about a third of the window; GrabCut taking most of it, or running along
-  // the window's sides, took the background with the person.
-  constexpr double kMaxWindowFill = 0.6, kMaxAlongSides = 0.25;
-  // (A side at the frame's edge is looked at one column in, its edge being background above.)
-  const int x_left = std::max(window.x, 1) - roi.x;
-  const int x_right = std::min(window.x + window.width - 1, w - 2) - roi.x;
-  int along_sides = 0;
-  for (int y = 0; y < roi.height; ++y)
-    for (const int x : {x_left, x_right})
-      if (x >= 0 && x < roi.width && person.at<std::uint8_t>(y, x)) ++along_sides;
-  if (cv::countNonZero(person) > kMaxWindowFill * bw * bh || along_sides > kMaxAlongSides * bh)
-    person.setTo(0);
-  return person;
-}
-
-}  // namespace
 
 StandingPeople find_standing_people(ConstImageView photo, double focal_px,
                                     const std::vector<std::uint8_t>& sky,
