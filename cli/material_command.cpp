@@ -2,6 +2,7 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -186,7 +187,10 @@ CLI::App* add_material_command(CLI::App& app, MaterialCommandOptions& o) {
          "Regions of the target: a mask image (one channel of ids 1..n, 0 = none; or distinct "
          "non-black colours) or an annotations JSON (each plane polygon one region)")
       ->required();
-  cmd->add_option("-o,--output", o.output, "Output image (format from the extension)")->required();
+  cmd->add_option("-o,--output", o.output,
+                  "Output image (format from the extension; 8/16-bit: the changed pixels through "
+                  "the highlight roll-off, the rest as the photo; EXR: scene-linear)")
+      ->required();
   cmd->add_option("--materials-json", o.materials_json,
                   "Write the candidates and the chosen materials here");
   cmd->add_option(
@@ -349,6 +353,32 @@ int run_material_command(const MaterialCommandOptions& o) {
     }
     WriteOptions write;
     write.overwrite = true;  // checked above
+    // Display-referred (integer) outputs through the highlight roll-off, as `mr fog` and
+    // `mr insert` write them (DESIGN.md section 7): a light material on a surface the photo shows
+    // dark and brightly lit (sunlit patches in shaded foliage) comes out above the photo's white
+    // and would clip flat under plain sRGB. Only the pixels the transfer changed are rolled off:
+    // the rest of the photo stays exactly as it was (its own highlights included), unless fog
+    // changed every pixel. Float outputs stay linear and unclipped.
+    std::string out_ext = fs::path(o.output).extension().string();
+    for (char& ch : out_ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+    const ColorConfig color = ColorConfig::from_environment();
+    const bool rolloff = color.display_colorspace() == std::string(colorspace::srgb_rolloff);
+    write.color = &color;
+    if (out_ext != ".exr" && out_ext != ".hdr" && out_ext != ".pfm" && rolloff) {
+      if (sigma > 0 || scene_target) {
+        write.colorspace = colorspace::srgb_rolloff;
+      } else {
+        const Image& photo = target.photo;
+        for (int y = 0; y < out.height(); ++y)
+          for (int x = 0; x < out.width(); ++x) {
+            bool changed = false;
+            for (int c = 0; c < 3; ++c) changed = changed || out.at(x, y, c) != photo.at(x, y, c);
+            if (changed)
+              for (int c = 0; c < 3; ++c)
+                out.at(x, y, c) = float(highlight_rolloff(out.at(x, y, c)));
+          }
+      }
+    }
     write_image(o.output, out, write);
     result.image = Image();
     if (!o.materials_json.empty())

@@ -30,6 +30,11 @@ texture      per region, over its pixels at least TEXTURE_INSET_PX (6) from its 
              region's "texture" is its JPEG blocks and noise, and a result that shows them (as
              grain) scores better than a clean one. The synthetic C++ tests have no floor (no
              noise). Applied to photo and result alike.
+clipped      the share of region pixels with a channel at the 8-bit code 255 in the result where
+             the photo has none there (display-referred images, values in [0, 1]): a light
+             material on a brightly lit surface blown flat. Reported, no bar (`mr material` writes
+             its changed pixels through the highlight roll-off, which reaches 255 only far above
+             white).
 colour change the mean CIELAB Delta E*ab (D65, both images scaled by the same exposure, the photo's
              99th percentile luminance to 1) between photo and result over the regions: shows that
              the transfer changed something (a result equal to the photo passes the other two).
@@ -181,6 +186,19 @@ def _lab(linear):
     f = np.where(xyz > (6 / 29) ** 3, np.cbrt(np.maximum(xyz, 0)), xyz / (3 * (6 / 29) ** 2) + 4 / 29)
     lab = np.stack([116 * f[:, 1] - 16, 500 * (f[:, 0] - f[:, 1]), 200 * (f[:, 1] - f[:, 2])], 1)
     return lab.reshape(linear.shape)
+
+
+def clipped(photo_display, result_display, labels):
+    """Share of the region pixels clipped (a channel at code 255) in the result and not in the photo."""
+    m = labels > 0
+    if not m.any():
+        return 0.0
+    full = 254.5 / 255
+
+    def at_255(img):
+        return np.any(np.asarray(img)[..., :3] >= full, axis=-1)
+
+    return float((at_255(result_display) & ~at_255(photo_display) & m).sum() / m.sum())
 
 
 def colour_change(photo, result, labels):

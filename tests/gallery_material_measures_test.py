@@ -98,6 +98,15 @@ def main():
     check(MM.colour_change(photo, photo, labels) == 0, "colour change of the photo itself is 0")
     check(MM.colour_change(photo, result, labels) > 10, "colour change of a strong re-colouring > 10")
 
+    # Clipped: region pixels at code 255 in the result and not in the photo (display values).
+    shown = np.clip(photo / photo.max(), 0, 1)
+    blown = shown.copy()
+    blown[:30, 20:80, 0] = 1.0  # 30 x 60 of region 1's 120 x 60 pixels, one channel at 255
+    blown[:, :20] = 1.0  # outside the regions: not counted
+    check(abs(MM.clipped(shown, blown, labels) - 30 * 60 / (2 * 60 * H)) < 1e-9,
+          f"clipped share {MM.clipped(shown, blown, labels):.4f} = 1800 / 14400")
+    check(MM.clipped(blown, blown, labels) == 0, "clipped where the photo was clipped already: 0")
+
     # The script end to end on two tuning photos (plant, 500 x 333, its sample rocket; coffee,
     # 600 x 400, its sample cold_water, whose regions' borders sit a few pixels inside the saucer's
     # and the cup's rims: 3.2 % speckle before the borders were despeckled). Both under the
@@ -114,6 +123,7 @@ def main():
                 name = row.get("photo")
                 check(row.get("status") == "ok" and row.get("regions", "0") != "0",
                       f"{name}: status {row.get('status')!r}, {row.get('regions')} regions ({row.get('message', '')})")
+                check(row.get("clipped_pct", "") != "", f"{name}: clipped {row.get('clipped_pct')} % reported")
                 check(row.get("speckle_pct", "") != "" and float(row.get("delta_e") or 0) > 5,
                       f"{name}: measured (speckle {row.get('speckle_pct')} %, colour change {row.get('delta_e')})")
                 check(row.get("speckle_pct", "") != "" and float(row["speckle_pct"]) < 100 * MM.TARGET_SPECKLE,

@@ -4,11 +4,15 @@
 // fog in the same run, and bad input answered with a message and exit code.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <map>
 #include <nlohmann/json.hpp>
 
 #include "mr/annotations.h"
 #include "mr/camera.h"
+#include "mr/color.h"
 #include "mr/io.h"
 #include "test_support.h"
 
@@ -105,6 +109,83 @@ TEST_F(MaterialCli, MaskRegionsWriteImageAndJsonInputsUntouched) {
                                shell_quoted(work / "out.png"));
   EXPECT_EQ(again.exit_code, 2) << again.output;
   EXPECT_NE(again.output.find("--overwrite"), std::string::npos) << again.output;
+}
+
+// Design rule (DESIGN.md section 7): display-referred outputs go through the highlight roll-off,
+// never a hard clip. `mr material` wrote 8-bit outputs with plain sRGB, so a light material on a
+// surface the photo shows dark with sunlit patches clipped flat to white (gallery/tune
+// dragonfly: 7.8 % of its regions' pixels at 255 against the photo's 0.4 %). Here a dark wall
+// with bright patches (left half, the region) takes a light sample's material; the same transfer
+// is written to EXR (scene-linear, unclipped) and to PNG: every pixel the transfer changed is
+// the EXR's value through the roll-off (within one 8-bit code, so none at 255), every other
+// pixel is the photo's exactly.
+TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
+  constexpr int kW = 120, kH = 90;
+  Image target(kW, kH, 3), sample(kW, kH, 3), depth(kW, kH, 1), mask(kW, kH, 1);
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      // A fixed ripple of +-5 % stands in for texture (no random numbers in a test).
+      const float ripple = 1 + 0.05f * std::sin(0.9f * float(x) + 1.7f * float(y));
+      const bool patch = x < 55 && (x - 5) % 12 < 4 && (y - 5) % 12 < 4 && x >= 5 && y >= 5;
+      const float t = x < 60 ? (patch ? 0.6f : 0.02f) : 0.25f;
+      for (int c = 0; c < 3; ++c) {
+        target.at(x, y, c) = t * ripple;
+        sample.at(x, y, c) = 0.6f * ripple;
+      }
+      depth.at(x, y, 0) = 5.0f;
+      mask.at(x, y, 0) = x < 60 ? 1.0f / 255 : 0.0f;
+    }
+  WriteOptions png8;
+  png8.pixel_type = PixelType::uint8;
+  write_image(work / "target.png", target, png8);
+  write_image(work / "sample.png", sample, png8);
+  write_image(work / "target_depth.exr", depth);
+  write_image(work / "sample_depth.exr", depth);
+  WriteOptions raw = png8;
+  raw.colorspace = colorspace::raw;
+  write_image(work / "mask.png", mask, raw);
+  const std::string common = kMr + " material --sample " + shell_quoted(work / "sample.png") +
+                             " --sample-fov 50 --target " + shell_quoted(work / "target.png") +
+                             " --fov 50 --regions " + shell_quoted(work / "mask.png") +
+                             " --seed 3 -q";
+  const auto r_exr = test::run(common + " -o " + shell_quoted(work / "linear.exr"));
+  ASSERT_EQ(r_exr.exit_code, 0) << r_exr.output;
+  const auto r_png = test::run(common + " -o " + shell_quoted(work / "display.png"));
+  ASSERT_EQ(r_png.exit_code, 0) << r_png.output;
+  const Image linear = read_image(work / "linear.exr");
+  const Image display = read_image(work / "display.png");
+  const Image photo = read_image(work / "target.png");
+  ASSERT_EQ(display.width(), linear.width());
+  auto encode = [](double v) {  // sRGB code of a linear value, clamped as the encoder does
+    v = std::clamp(v, 0.0, 1.0);
+    const double e = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;
+    return 255 * e;
+  };
+  int changed = 0, above_white = 0, at_255 = 0, unchanged_differ = 0, off = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < kW; ++x) {
+      bool differs = false;
+      for (int c = 0; c < 3; ++c)
+        differs = differs || std::abs(linear.at(x, y, c) - photo.at(x, y, c)) > 1e-6f;
+      changed += differs;
+      for (int c = 0; c < 3; ++c) {
+        if (!differs) {
+          unchanged_differ += display.at(x, y, c) != photo.at(x, y, c);
+          continue;
+        }
+        const double v = linear.at(x, y, c);
+        above_white += v >= 1;
+        at_255 += display.at(x, y, c) >= 1.0f;
+        off += std::abs(encode(display.at(x, y, c)) - encode(highlight_rolloff(v))) > 1.01;
+      }
+    }
+  std::printf("changed pixels %d: channel values at or above white %d, at code 255 %d\n", changed,
+              above_white, at_255);
+  EXPECT_GT(changed, 40 * kH);      // the region changed
+  EXPECT_GT(above_white, 3 * 100);  // the patches came out above white (the case tested)
+  EXPECT_EQ(at_255, 0);
+  EXPECT_EQ(off, 0);
+  EXPECT_EQ(unchanged_differ, 0);
 }
 
 TEST_F(MaterialCli, AnnotationRegionsAndFogInOneRun) {
