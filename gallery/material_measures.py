@@ -35,6 +35,12 @@ clipped      the share of region pixels with a channel at the 8-bit code 255 in 
              material on a brightly lit surface blown flat. Reported, no bar (`mr material` writes
              its changed pixels through the highlight roll-off, which reaches 255 only far above
              white).
+blockiness   per region (eroded by 2 px; at least 500 pixel pairs), the mean |step| of display luma
+             between neighbours across the 8 x 8 JPEG block grid (x or y = 8k - 1 to 8k) over the
+             mean |step| elsewhere, in the result over the same in the photo; reported as the
+             largest over the regions, no bar. 1: the blocks no plainer than in the photo; a dark
+             region given a light material magnifies its blocks (anne_helene's shirt: 1.3 in the
+             photo, 1.7 in the result).
 colour change the mean CIELAB Delta E*ab (D65, both images scaled by the same exposure, the photo's
              99th percentile luminance to 1) between photo and result over the regions: shows that
              the transfer changed something (a result equal to the photo passes the other two).
@@ -199,6 +205,46 @@ def clipped(photo_display, result_display, labels):
         return np.any(np.asarray(img)[..., :3] >= full, axis=-1)
 
     return float((at_255(result_display) & ~at_255(photo_display) & m).sum() / m.sum())
+
+
+def _block_ratio(luma, mask):
+    dh = np.abs(np.diff(luma, axis=1))
+    dv = np.abs(np.diff(luma, axis=0))
+    mh = mask[:, 1:] & mask[:, :-1]
+    mv = mask[1:, :] & mask[:-1, :]
+    on_h = (np.arange(dh.shape[1]) % 8 == 7)[None, :]
+    on_v = (np.arange(dv.shape[0]) % 8 == 7)[:, None]
+    across = np.concatenate([dh[mh & on_h], dv[mv & on_v]])
+    within = np.concatenate([dh[mh & ~on_h], dv[mv & ~on_v]])
+    if across.size < TEXTURE_MIN_PIXELS // 8 or within.size < TEXTURE_MIN_PIXELS:
+        return None
+    return float(across.mean() / max(within.mean(), 1e-9))
+
+
+def blockiness(photo_display, result_display, labels):
+    """Largest over the regions of the result's block-grid step ratio over the photo's (None: no region)."""
+    def luma(img):
+        img = np.asarray(img, np.float64)
+        return 0.2126 * img[..., 0] + 0.7152 * img[..., 1] + 0.0722 * img[..., 2]
+
+    yp, yr = luma(photo_display), luma(result_display)
+    worst = None
+    for k in np.unique(labels[labels > 0]):
+        m = labels == k
+        h, w = m.shape
+        inner = m.copy()
+        for dy in range(-2, 3):
+            for dx in range(-2, 3):
+                shifted = np.zeros_like(m)
+                shifted[max(0, dy):h + min(0, dy), max(0, dx):w + min(0, dx)] = \
+                    m[max(0, -dy):h - max(0, dy), max(0, -dx):w - max(0, dx)]
+                inner &= shifted
+        bp, br = _block_ratio(yp, inner), _block_ratio(yr, inner)
+        if bp is None or br is None:
+            continue
+        ratio = br / bp
+        worst = ratio if worst is None else max(worst, ratio)
+    return worst
 
 
 def colour_change(photo, result, labels):

@@ -107,6 +107,18 @@ def main():
           f"clipped share {MM.clipped(shown, blown, labels):.4f} = 1800 / 14400")
     check(MM.clipped(blown, blown, labels) == 0, "clipped where the photo was clipped already: 0")
 
+    # Blockiness: a smooth ramp with fine grain (steps everywhere), and the same with 8 x 8
+    # blocks of +-2 % added (the result); the ramp itself as the result.
+    yy, xx = np.mgrid[0:H, 0:W]
+    grain = 0.004 * (((xx * 3 + yy * 7) % 5) - 2)
+    ramp = np.repeat((0.3 + 0.3 * xx / W + grain)[..., None], 3, axis=2)
+    blocks = (((xx // 8) * 7 + (yy // 8) * 5) % 3 - 1)[..., None] * 0.02
+    blocky = np.clip(ramp + blocks, 0, 1)
+    b_same, b_blocky = MM.blockiness(ramp, ramp, labels), MM.blockiness(ramp, blocky, labels)
+    check(b_same is not None and abs(b_same - 1) < 1e-9, f"blockiness of the photo itself {b_same}: 1")
+    check(b_blocky is not None and b_blocky > 1.5, f"blockiness with 2 % blocks added {b_blocky}: > 1.5")
+    check(MM.blockiness(blocky, ramp, labels) < 1, "blocks taken out: below 1")
+
     # The script end to end on two tuning photos (plant, 500 x 333, its sample rocket; coffee,
     # 600 x 400, its sample cold_water, whose regions' borders sit a few pixels inside the saucer's
     # and the cup's rims: 3.2 % speckle before the borders were despeckled). Both under the
@@ -123,7 +135,8 @@ def main():
                 name = row.get("photo")
                 check(row.get("status") == "ok" and row.get("regions", "0") != "0",
                       f"{name}: status {row.get('status')!r}, {row.get('regions')} regions ({row.get('message', '')})")
-                check(row.get("clipped_pct", "") != "", f"{name}: clipped {row.get('clipped_pct')} % reported")
+                check(row.get("clipped_pct", "") != "" and row.get("blockiness", "") != "",
+                      f"{name}: clipped {row.get('clipped_pct')} % and blockiness {row.get('blockiness')} reported")
                 check(row.get("speckle_pct", "") != "" and float(row.get("delta_e") or 0) > 5,
                       f"{name}: measured (speckle {row.get('speckle_pct')} %, colour change {row.get('delta_e')})")
                 check(row.get("speckle_pct", "") != "" and float(row["speckle_pct"]) < 100 * MM.TARGET_SPECKLE,

@@ -765,8 +765,12 @@ TEST(MaterialApply, DetailIsOneOnAnUntexturedSurfaceAndPlainRenderingIsExact) {
       render::surface_geometry_from_depth(s.distance_m, s.camera, s.scene.pose, s.scene.lighting);
   const Image shading = photo::diffuse_shading(g, s.scene.lighting);
   const Image detail = photo::photo_detail(s.photo, shading, g);
+  ASSERT_EQ(detail.channels(), photo::kDetailChannels);
   float worst = 0;
-  for (float v : detail.pixels()) worst = std::max(worst, std::abs(v - 1.0f));
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x)
+      for (int c = 0; c <= photo::kCalmDetailChannel; ++c)  // D and the calmed D
+        worst = std::max(worst, std::abs(detail.at(x, y, c) - 1.0f));
   EXPECT_LT(worst, 0.02f);
   Image labels = s.labels;
   for (float& v : labels.pixels()) v = v > 0 ? 1.0f : 0.0f;
@@ -909,6 +913,85 @@ TEST(MaterialApply, NoiseFloorKeepsANearBlackSurfaceFromBecomingGrain) {
               with);
   EXPECT_GT(without, 0.25);
   EXPECT_LT(with, without / 2);  // a floor about the signal's size halves it
+}
+
+TEST(MaterialApply, ALightMaterialOnADarkSurfaceDoesNotMagnifyItsCodingNoise) {
+  // Left half (region 1) a near-black surface, albedo 0.002 (display code ~17 of the bright
+  // wall's 255), in 8 x 8 blocks each 15 % lighter, darker or the same (JPEG's blocks: a code or
+  // two there), with a real stripe 3 x as light (x 40-47: a 15-code step); right half (region 2)
+  // a bright wall, albedo 0.8, setting the exposure. A white material (0.8, 400 x the dark base)
+  // rendered with the raw D shows every block's 15 % step. With photo_detail's layer the calmed
+  // D (the blocks' steps spread over the bilateral filter's window: a 1-pixel step of a Gaussian
+  // of sigma 2 is a fifth of the whole) keeps a share 17 / 63 of the departure from it at this
+  // code (where a 7 % texture would stand out of 2 codes of noise), and of the rest the render
+  // keeps 400^(-1 / 2.2) = 0.07 (the amplification of display codes undone): the steps fall to
+  // about 0.2 + (0.27 + 0.73 x 0.07) x 0.8 = 0.46 of theirs (0.47 when written; bar: under
+  // half), while the stripe, far beyond the noise, keeps 90 % of its log contrast. A material
+  // darker than the base renders exactly as with the raw D.
+  GroundScene t = untextured_ground();
+  auto block_offset = [](int x, int y) { return ((x / 8) * 7 + (y / 8) * 5) % 3 - 1; };
+  const auto [photo, labels] = painted(
+      t,
+      [&](int x, int y) {
+        if (x >= 80) return grey(0.8f);
+        if (x >= 40 && x < 48) return grey(0.006f);
+        return grey(0.002f * (1 + 0.15f * float(block_offset(x, y))));
+      },
+      [](int x, int) { return x < 80 ? 1.0f : 2.0f; });
+  photo::DetailOptions options;
+  options.region_labels = &labels;
+  options.noise_floor = 0;  // the floor's own calming of near-black D is tested above
+  const Image detail = photo::photo_detail(photo, t.shading, t.g, options);
+  ASSERT_EQ(detail.channels(), photo::kDetailChannels);
+  const Image raw = detail.select_channels(std::array{0, 1, 2});
+  const Image shading = photo::floored_shading(t.shading, t.g);
+  std::vector<std::int32_t> pixels;
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 80; ++x)
+      if (t.g.surface.at(x, y, 0) > 0) pixels.push_back(y * 160 + x);
+  ASSERT_GT(pixels.size(), 5000u);
+  auto render_with = [&](const Image& d, const Material& m) {
+    Image out(160, 120, 3);
+    photo::render_with_detail(t.g, t.s.scene.lighting, shading, &d, m, pixels, out);
+    return out;
+  };
+  const Material white{{0.8f, 0.8f, 0.8f}, 0.0f, 0.8f};
+  const Image calmed = render_with(detail, white), amplified = render_with(raw, white);
+  // Mean |log step| across the block boundaries at x = 8, 16, 24, 32 (rows 40-100), and the
+  // stripe's log contrast against the blocks beside it (the means of columns 44 and 52).
+  auto log_luminance = [](const Image& im, int x, int y) {
+    return std::log(0.2126 * im.at(x, y, 0) + 0.7152 * im.at(x, y, 1) + 0.0722 * im.at(x, y, 2));
+  };
+  auto measures = [&](const Image& im) {
+    double steps = 0, stripe = 0;
+    int n = 0, rows = 0;
+    for (int y = 40; y < 100; ++y) {
+      if (!(t.g.surface.at(0, y, 0) > 0)) continue;
+      for (int x : {8, 16, 24, 32}) {
+        steps += std::abs(log_luminance(im, x, y) - log_luminance(im, x - 1, y));
+        ++n;
+      }
+      stripe += log_luminance(im, 44, y) - log_luminance(im, 52, y);
+      ++rows;
+    }
+    return std::pair{steps / std::max(1, n), stripe / std::max(1, rows)};
+  };
+  const auto [steps_amplified, stripe_amplified] = measures(amplified);
+  const auto [steps_calmed, stripe_calmed] = measures(calmed);
+  std::printf(
+      "white on the dark blocks: mean log step at block borders %.4f (raw D) -> %.4f; "
+      "stripe log contrast %.3f -> %.3f\n",
+      steps_amplified, steps_calmed, stripe_amplified, stripe_calmed);
+  EXPECT_GT(steps_amplified, 0.08);  // the case: the blocks' 15 % steps, two thirds of borders
+  EXPECT_LT(steps_calmed, steps_amplified / 2);
+  EXPECT_GT(stripe_amplified, 0.9);  // ln 3, less the base's pull
+  EXPECT_GT(stripe_calmed, 0.9 * stripe_amplified);
+  // Darker than the base: the raw D exactly.
+  const Material dark{{0.0015f, 0.0015f, 0.0015f}, 0.0f, 0.8f};
+  const Image dark_calmed = render_with(detail, dark), dark_raw = render_with(raw, dark);
+  for (std::int32_t i : pixels)
+    for (int c = 0; c < 3; ++c)
+      ASSERT_EQ(dark_calmed.at(i % 160, i / 160, c), dark_raw.at(i % 160, i / 160, c)) << i;
 }
 
 TEST(MaterialApply, ARegionsAntialiasedBorderPixelsMakeNoRim) {

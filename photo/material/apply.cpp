@@ -172,6 +172,49 @@ void group_mean(const cv::Mat& values, const cv::Mat& group, int g, int radius, 
   });
 }
 
+// The photo's luminance (scene-linear, CV_32F at its size; non-finite values as 0) and, in
+// `calm`, the same with its coding noise filtered out (see DetailOptions::coding_noise_codes;
+// a copy of it when that is 0).
+cv::Mat photo_luminance(const Image& photo, float level, double coding_noise_codes, cv::Mat& calm) {
+  const int w = photo.width(), h = photo.height();
+  cv::Mat lum(h, w, CV_32F);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float l = luminance(photo.pixel(x, y));
+      lum.at<float>(y, x) = std::isfinite(l) ? std::max(l, 0.0f) : 0.0f;
+    }
+  calm = lum.clone();
+  if (!(coding_noise_codes > 0) || !(level > 0)) return lum;
+  // Display codes (gamma 2.2, as photo/display.h encodes for OpenCV), the level at 255: the
+  // coding noise is about even in them.
+  constexpr float kGamma = 2.2f;
+  cv::Mat code(h, w, CV_32F);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      code.at<float>(y, x) =
+          255 * std::pow(std::min(lum.at<float>(y, x) / level, 1.0f), 1 / kGamma);
+  // A range of 2.5 sigma takes in the blocks' steps of a few codes; the 7 x 7 window (spatial
+  // sigma 2) spans the step between two 8 x 8 blocks.
+  cv::Mat filtered;
+  cv::bilateralFilter(code, filtered, 7, 2.5 * coding_noise_codes, 2.0);
+  // Only where the coding noise, relative to the luminance (kGamma x noise / code), outweighs
+  // the faintest texture worth keeping: a pixel keeps the share of its departure from the
+  // filtered value that this texture would have against that noise. At mid-tones a few codes are
+  // a real texture's (grass, plaster, weave); calming them cost the tuning half's texture bars.
+  constexpr float kFaintTexture = 0.07f;  // relative
+  const float full_code = kGamma * float(coding_noise_codes) / kFaintTexture;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float c = code.at<float>(y, x);
+      if (!(c < full_code)) continue;
+      const float raw = std::max(lum.at<float>(y, x), 1e-6f);
+      const float filtered_lum =
+          std::max(level * std::pow(filtered.at<float>(y, x) / 255, kGamma), 1e-6f);
+      calm.at<float>(y, x) = filtered_lum * std::pow(raw / filtered_lum, c / full_code);
+    }
+  return lum;
+}
+
 }  // namespace
 
 Image floored_shading(const Image& shading, const render::SurfaceGeometry& geometry) {
@@ -204,24 +247,29 @@ Image photo_detail(const Image& photo, const Image& shading_in,
     throw Error(ErrorCode::invalid_argument, "photo_detail: the photo needs 3 channels");
   if (!(options.min_detail > 0 && options.max_detail >= options.min_detail))
     throw Error(ErrorCode::invalid_argument, "photo_detail: bad options (min/max detail)");
-  if (!(options.noise_floor >= 0) || options.border_px < 0)
-    throw Error(ErrorCode::invalid_argument, "photo_detail: bad options (noise floor, border)");
+  if (!(options.noise_floor >= 0) || options.border_px < 0 || !(options.coding_noise_codes >= 0))
+    throw Error(ErrorCode::invalid_argument,
+                "photo_detail: bad options (noise floor, border, coding noise)");
   const int w = photo.width(), h = photo.height();
   const Image shading = floored_shading(shading_in, geometry);
   constexpr float kFloorRadiance = 1e-5f;
-  Image detail(w, h, 3);
+  Image detail(w, h, kDetailChannels);
   for (float& v : detail.pixels()) v = 1.0f;
 
   // The noise floor in the photo's units: a share of its bright surfaces' luminance (99th
   // percentile), so that it means the same for a display-referred JPEG and an EXR.
-  const float noise = float(options.noise_floor) * bright_surface_level(photo, geometry);
+  const float level = bright_surface_level(photo, geometry);
+  const float noise = float(options.noise_floor) * level;
+  cv::Mat calm_luminance;
+  const cv::Mat photo_lum =
+      photo_luminance(photo, level, options.coding_noise_codes, calm_luminance);
 
   // Groups whose base is smoothed separately: the regions (label > 0; label 0 is one more
   // group), or all surfaces as one. Smoothing across a region's border would bleed the
   // neighbour's albedo into the base and leave a band of wrong D (a halo, speckle on thin gaps).
   cv::Mat group(h, w, CV_32S, cv::Scalar(-1));
   int groups = 0;
-  cv::Mat log_albedo(h, w, CV_32F, cv::Scalar(0));
+  cv::Mat log_albedo(h, w, CV_32F, cv::Scalar(0)), calm_log_albedo(h, w, CV_32F, cv::Scalar(0));
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       if (!(geometry.surface.at(x, y, 0) > 0)) continue;
@@ -235,9 +283,11 @@ Image photo_detail(const Image& photo, const Image& shading_in,
       groups = std::max(groups, g + 1);
       // Luminance only: a channel the photo barely records (green and blue of a red saucer)
       // holds mostly JPEG and sensor noise, which a new colour would show as coloured grain.
+      const float s = luminance(shading.pixel(x, y));
       log_albedo.at<float>(y, x) =
-          std::log((std::max(luminance(photo.pixel(x, y)), kFloorRadiance) + noise) /
-                   luminance(shading.pixel(x, y)));
+          std::log((std::max(photo_lum.at<float>(y, x), kFloorRadiance) + noise) / s);
+      calm_log_albedo.at<float>(y, x) =
+          std::log((std::max(calm_luminance.at<float>(y, x), kFloorRadiance) + noise) / s);
     }
   const int radius = options.radius_px > 0
                          ? options.radius_px
@@ -290,9 +340,12 @@ Image photo_detail(const Image& photo, const Image& shading_in,
       if (group.at<int>(y, x) < 0) continue;
       const float fade =
           std::min(1.0f, (border_distance.at<float>(y, x) + 1) / float(options.border_px + 1));
-      const float d =
-          std::exp(fade * std::clamp(log_albedo.at<float>(y, x) - base.at<float>(y, x), lo, hi));
+      const float b = base.at<float>(y, x);
+      const float d = std::exp(fade * std::clamp(log_albedo.at<float>(y, x) - b, lo, hi));
       for (int c = 0; c < 3; ++c) detail.at(x, y, c) = d;
+      detail.at(x, y, kCalmDetailChannel) =
+          std::exp(fade * std::clamp(calm_log_albedo.at<float>(y, x) - b, lo, hi));
+      detail.at(x, y, kBaseAlbedoChannel) = std::exp(b);
     }
   });
   return detail;
@@ -304,7 +357,14 @@ void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting&
   require_size(out, geometry, "output");
   require_size(shading, geometry, "shading");
   if (detail) require_size(*detail, geometry, "detail");
+  if (detail && detail->channels() != 3 && detail->channels() != kDetailChannels)
+    throw Error(ErrorCode::invalid_argument,
+                "render_with_detail: the detail needs 3 or 5 channels");
   const int w = geometry.surface.width();
+  // Display codes go as luminance^(1 / kDisplayGamma): a material k times the photo's albedo
+  // amplifies their fluctuations (the coding noise) by k^(1 / kDisplayGamma).
+  constexpr float kDisplayGamma = 2.2f;
+  const float new_albedo = luminance(material.diffuse_albedo.data());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
@@ -323,9 +383,24 @@ void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting&
                         // as bright as its diffuse light, flat over every bright grain: the
                         // texture half gone (tuning fig_plate, grand_canyon: correlation
                         // 0.86 / 0.83 -> 0.99 / 0.99).
-                        const float lobe_detail = detail ? luminance(detail->pixel(x, y)) : 1.0f;
+                        float lobe_detail = detail ? luminance(detail->pixel(x, y)) : 1.0f;
+                        // The share of the photo's coding noise kept: 1 / the amplification
+                        // of display codes, so the new material shows no more of it than the
+                        // old one did.
+                        float calming = 1;
+                        if (detail && detail->channels() == kDetailChannels) {
+                          const float raw = detail->at(x, y, 0);
+                          const float calm = detail->at(x, y, kCalmDetailChannel);
+                          const float ratio =
+                              new_albedo / std::max(detail->at(x, y, kBaseAlbedoChannel), 1e-6f);
+                          if (ratio > 1 && raw > 0 && calm > 0) {
+                            const float kept = std::pow(ratio, -1 / kDisplayGamma);
+                            calming = calm * std::pow(raw / calm, kept) / raw;
+                          }
+                        }
+                        lobe_detail *= calming;
                         for (int c = 0; c < 3; ++c) {
-                          const float d = detail ? detail->at(x, y, c) : 1.0f;
+                          const float d = detail ? calming * detail->at(x, y, c) : 1.0f;
                           // `shading` is terms.diffuse; taking it from the argument keeps the
                           // caller's (possibly exposure-matched) shading authoritative.
                           o[c] = d * material.diffuse_albedo[c] * shading.at(x, y, c) +

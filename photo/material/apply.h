@@ -48,6 +48,15 @@ struct DetailOptions {
   /// percentile luminance (0.003: about code 10 of 255 of an sRGB photo exposed to white), so
   /// that D is not the relative noise of near-black pixels. 0: none.
   double noise_floor = 0.003;
+  /// The photo's coding noise (8-bit quantisation, JPEG's blocks), in display codes of 255 at
+  /// its bright surfaces' level (the noise floor's). The luminance, display encoded (gamma 2.2,
+  /// that level at 255), goes through a bilateral filter (range sigma 2.5 x this, spatial sigma
+  /// 2 px) for the calmed detail (channel kCalmDetailChannel): steps larger than the range (the
+  /// photo's edges, folds) stay in it, the blocks and grain do not. Only where that noise
+  /// outweighs a 7 % texture (below code 2.2 x this / 0.07, 63 for 2 codes): a pixel keeps the
+  /// share code / 63 of its departure from the filtered value, and mid-tones their few codes of
+  /// real texture (grass, plaster). 0: the calmed detail is D.
+  double coding_noise_codes = 2.0;
   /// D fades to 1 over this many pixels at each group's border (the border pixel itself gets
   /// 1 / (border_px + 1) of its log D): border pixels mix the region with its neighbour. 0: none.
   int border_px = 2;
@@ -98,9 +107,17 @@ Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometr
 Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
                             const render::SurfaceGeometry& geometry, int radius_px = 4);
 
+/// Channels of photo_detail's layer: 0-2 D (equal), then D of the luminance with its coding
+/// noise filtered out, then the base albedo (luminance) D is measured against.
+constexpr int kCalmDetailChannel = 3, kBaseAlbedoChannel = 4, kDetailChannels = 5;
+
 /// The detail layer D of `photo` (scene-linear RGB, the geometry's size) given its diffuse
-/// shading S (see the file comment). 3 equal channels; 1 where there is no surface or S is ~0.
-/// Throws mr::Error(size_mismatch) for images of different sizes.
+/// shading S (see the file comment), kDetailChannels channels; D 1 where there is no surface or
+/// S is ~0. render_with_detail keeps of the photo's coding noise (D over the calmed D) the share
+/// 1 / k^(1 / 2.2) where a material's diffuse albedo is k > 1 times the base (the amplification
+/// of display codes): a new material much lighter than a dark surface would show the photo's
+/// coding noise k^(1 / 2.2) times larger than the old one did (a black shirt's 8 x 8 JPEG blocks
+/// in a white one). Throws mr::Error(size_mismatch) for images of different sizes.
 Image photo_detail(const Image& photo, const Image& shading,
                    const render::SurfaceGeometry& geometry, const DetailOptions& options = {});
 
@@ -124,7 +141,8 @@ struct CompositeOptions {
 };
 
 /// `photo` with each region k (labels(x, y) = k in 1..materials.size(), surface pixels only)
-/// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular, or without `detail`
+/// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular (D calmed where the
+/// material is lighter than the photo's, see photo_detail), or without `detail`
 /// (null) the plain rendering. Composited with soft weights, each region's indicator blurred by
 /// a Gaussian of sigma `options.feather_px` (0: hard edges), the photo filling the rest, sky
 /// pixels counting as outside: two regions' border blends their renderings, a region's border
@@ -176,6 +194,7 @@ DespeckleStats despeckle_region_borders(const Image& photo, const render::Surfac
 
 /// Renders what apply_materials puts into region pixels, for one material at the listed pixels
 /// (indices y * width + x) into `out` (3 channels, the geometry's size; other pixels untouched).
+/// `detail`: photo_detail's layer, or 3 channels of D taken as they are.
 void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting& lighting,
                         const Image& shading, const Image* detail, const Material& material,
                         std::span<const std::int32_t> pixels, Image& out);
