@@ -114,7 +114,7 @@ TEST_F(MaterialCli, MaskRegionsWriteImageAndJsonInputsUntouched) {
 // Design rule (DESIGN.md section 7): display-referred outputs go through the highlight roll-off,
 // never a hard clip. `mr material` wrote 8-bit outputs with plain sRGB, so a light material on a
 // surface the photo shows dark with sunlit patches clipped flat to white (gallery/tune
-// dragonfly: 7.8 % of its regions' pixels at 255 against the photo's 0.4 %). Here a dark wall
+// dragonfly: 7.5 % of its regions' pixels at 255 where the photo is not). Here a dark wall
 // with bright patches (left half, the region) takes a light sample's material; the same transfer
 // is written to EXR (scene-linear, unclipped) and to PNG: every pixel the transfer changed is
 // the EXR's value through the roll-off (within one 8-bit code, so none at 255), every other
