@@ -916,18 +916,19 @@ TEST(MaterialApply, NoiseFloorKeepsANearBlackSurfaceFromBecomingGrain) {
 }
 
 TEST(MaterialApply, ALightMaterialOnADarkSurfaceDoesNotMagnifyItsCodingNoise) {
-  // Left half (region 1) a near-black surface, albedo 0.002 (display code ~17 of the bright
-  // wall's 255), in 8 x 8 blocks each 15 % lighter, darker or the same (JPEG's blocks: a code or
-  // two there), with a real stripe 3 x as light (x 40-47: a 15-code step); right half (region 2)
+  // Left half (region 1) a near-black surface, albedo 0.002, in 8 x 8 blocks each 15 % lighter,
+  // darker or the same, stored in 8-bit sRGB codes as a JPEG stores it (about code 13: the blocks
+  // a code apart, 12 % in log), with a real stripe 3 x as light (x 40-47); right half (region 2)
   // a bright wall, albedo 0.8, setting the exposure. A white material (0.8, 400 x the dark base)
-  // rendered with the raw D shows every block's 15 % step. With photo_detail's layer the calmed
-  // D (the blocks' steps spread over the bilateral filter's window: a 1-pixel step of a Gaussian
-  // of sigma 2 is a fifth of the whole) keeps a share 17 / 63 of the departure from it at this
-  // code (where a 7 % texture would stand out of 2 codes of noise), and of the rest the render
-  // keeps 400^(-1 / 2.2) = 0.07 (the amplification of display codes undone): the steps fall to
-  // about 0.2 + (0.27 + 0.73 x 0.07) x 0.8 = 0.46 of theirs (0.47 when written; bar: under
-  // half), while the stripe, far beyond the noise, keeps 90 % of its log contrast. A material
-  // darker than the base renders exactly as with the raw D.
+  // rendered with the raw D shows every block's step. With photo_detail's layer the calmed D
+  // (the steps spread over the bilateral filter's window: a 1-pixel step of a Gaussian of sigma 2
+  // is a fifth of the whole) keeps a share 13 / 63 of the departure from it at this code (where a
+  // 7 % texture would stand out of 2 codes of noise), and of the rest the render keeps
+  // 400^(-1 / 2.2) = 0.07 (the amplification of display codes undone): the steps fall to about
+  // 0.2 + (0.21 + 0.79 x 0.07) x 0.8 = 0.41 of theirs (0.48 when written; bar: under half),
+  // while the stripe, far beyond the noise, keeps 90 % of its log contrast. A material darker
+  // than the base renders exactly as with the raw D, and the same photo in float (a 16-bit or
+  // float original, not on 8-bit codes) has no calmed D.
   GroundScene t = untextured_ground();
   auto block_offset = [](int x, int y) { return ((x / 8) * 7 + (y / 8) * 5) % 3 - 1; };
   const auto [photo, labels] = painted(
@@ -938,10 +939,22 @@ TEST(MaterialApply, ALightMaterialOnADarkSurfaceDoesNotMagnifyItsCodingNoise) {
         return grey(0.002f * (1 + 0.15f * float(block_offset(x, y))));
       },
       [](int x, int) { return x < 80 ? 1.0f : 2.0f; });
+  // Stored as an 8-bit sRGB file stores it (the calming is for such photos only).
+  Image coded = photo;
+  for (float& v : coded.pixels()) {
+    const double e = v <= 0.0031308f ? 12.92 * v : 1.055 * std::pow(double(v), 1 / 2.4) - 0.055;
+    const double code = std::round(std::clamp(e, 0.0, 1.0) * 255) / 255;
+    v = float(code <= 0.04045 ? code / 12.92 : std::pow((code + 0.055) / 1.055, 2.4));
+  }
   photo::DetailOptions options;
   options.region_labels = &labels;
   options.noise_floor = 0;  // the floor's own calming of near-black D is tested above
-  const Image detail = photo::photo_detail(photo, t.shading, t.g, options);
+  // The same photo in float (a 16-bit or float original): nothing to calm, D itself.
+  const Image float_detail = photo::photo_detail(photo, t.shading, t.g, options);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x)
+      ASSERT_EQ(float_detail.at(x, y, photo::kCalmDetailChannel), float_detail.at(x, y, 0));
+  const Image detail = photo::photo_detail(coded, t.shading, t.g, options);
   ASSERT_EQ(detail.channels(), photo::kDetailChannels);
   const Image raw = detail.select_channels(std::array{0, 1, 2});
   const Image shading = photo::floored_shading(t.shading, t.g);
@@ -982,7 +995,7 @@ TEST(MaterialApply, ALightMaterialOnADarkSurfaceDoesNotMagnifyItsCodingNoise) {
       "white on the dark blocks: mean log step at block borders %.4f (raw D) -> %.4f; "
       "stripe log contrast %.3f -> %.3f\n",
       steps_amplified, steps_calmed, stripe_amplified, stripe_calmed);
-  EXPECT_GT(steps_amplified, 0.08);  // the case: the blocks' 15 % steps, two thirds of borders
+  EXPECT_GT(steps_amplified, 0.08);  // the case: the blocks' steps, at two thirds of borders
   EXPECT_LT(steps_calmed, steps_amplified / 2);
   EXPECT_GT(stripe_amplified, 0.9);  // ln 3, less the base's pull
   EXPECT_GT(stripe_calmed, 0.9 * stripe_amplified);

@@ -172,6 +172,25 @@ void group_mean(const cv::Mat& values, const cv::Mat& group, int g, int radius, 
   });
 }
 
+// True when the photo's values are 8-bit sRGB codes (at least 90 % of those sampled on a
+// 7-pixel grid within a fiftieth of a code): a photo decoded from an 8-bit file. A 16-bit or float
+// original, or a resampled one, lands on codes by chance (4 % of values), and has no 8-bit coding
+// noise to calm.
+bool eight_bit_coded(const Image& photo) {
+  std::size_t sampled = 0, on_codes = 0;
+  for (int y = 0; y < photo.height(); y += 7)
+    for (int x = 0; x < photo.width(); x += 7)
+      for (int c = 0; c < 3; ++c) {
+        const float v = photo.at(x, y, c);
+        if (!(v >= 0 && v <= 1)) continue;
+        const float code =
+            255 * (v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1 / 2.4f) - 0.055f);
+        on_codes += std::abs(code - std::round(code)) < 0.02f;
+        ++sampled;
+      }
+  return sampled > 0 && on_codes >= 0.9 * double(sampled);
+}
+
 // The photo's luminance (scene-linear, CV_32F at its size; non-finite values as 0) and, in
 // `calm`, the same with its coding noise filtered out (see DetailOptions::coding_noise_codes;
 // a copy of it when that is 0).
@@ -184,7 +203,7 @@ cv::Mat photo_luminance(const Image& photo, float level, double coding_noise_cod
       lum.at<float>(y, x) = std::isfinite(l) ? std::max(l, 0.0f) : 0.0f;
     }
   calm = lum.clone();
-  if (!(coding_noise_codes > 0) || !(level > 0)) return lum;
+  if (!(coding_noise_codes > 0) || !(level > 0) || !eight_bit_coded(photo)) return lum;
   // Display codes (gamma 2.2, as photo/display.h encodes for OpenCV), the level at 255: the
   // coding noise is about even in them.
   constexpr float kGamma = 2.2f;

@@ -55,7 +55,9 @@ struct DetailOptions {
   /// photo's edges, folds) stay in it, the blocks and grain do not. Only where that noise
   /// outweighs a 7 % texture (below code 2.2 x this / 0.07, 63 for 2 codes): a pixel keeps the
   /// share code / 63 of its departure from the filtered value, and mid-tones their few codes of
-  /// real texture (grass, plaster). 0: the calmed detail is D.
+  /// real texture (grass, plaster). Only for a photo decoded from 8-bit sRGB codes (its values
+  /// on them): a 16-bit or float original has no such noise. 0, or another photo: the calmed
+  /// detail is D.
   double coding_noise_codes = 2.0;
   /// D fades to 1 over this many pixels at each group's border (the border pixel itself gets
   /// 1 / (border_px + 1) of its log D): border pixels mix the region with its neighbour. 0: none.
