@@ -173,6 +173,11 @@ void run_job(const InsertCommandOptions& o, const Job& job) {
     write.color = &color;
     write.colorspace = color.display_colorspace();
   }
+  // A 16-bit photo stays 16-bit where the format can hold it (DESIGN.md section 7), as `mr fog`
+  // writes it; a PNG output would otherwise be 8-bit.
+  if ((out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff") &&
+      probe_image(job.photo).pixel_type == PixelType::uint16)
+    write.pixel_type = PixelType::uint16;
   Image composite = r.composite;
   composite.metadata() = photo.metadata();
   write_image(job.output, composite, write);

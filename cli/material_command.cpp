@@ -364,6 +364,11 @@ int run_material_command(const MaterialCommandOptions& o) {
     const ColorConfig color = ColorConfig::from_environment();
     const bool rolloff = color.display_colorspace() == std::string(colorspace::srgb_rolloff);
     write.color = &color;
+    // A 16-bit photo stays 16-bit where the format can hold it (DESIGN.md section 7), as `mr fog`
+    // writes it; a PNG output would otherwise be 8-bit.
+    if (!scene_target && (out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff") &&
+        probe_image(o.target).pixel_type == PixelType::uint16)
+      write.pixel_type = PixelType::uint16;
     if (out_ext != ".exr" && out_ext != ".hdr" && out_ext != ".pfm" && rolloff) {
       if (sigma > 0 || scene_target) {
         write.colorspace = colorspace::srgb_rolloff;

@@ -625,6 +625,22 @@ TEST_F(CliScene, InsertWritesDisplayOutputsThroughTheRolloff) {
       }
   EXPECT_GT(above_white, 30u);  // the sunlit sphere is above the photo's white
   EXPECT_LT(worst, 1.5);
+  // A 16-bit photo stays 16-bit in a PNG output (as `mr fog` keeps it); an 8-bit one 8-bit.
+  const fs::path in16 = dir / "in16";
+  fs::create_directories(in16);
+  WriteOptions png16;
+  png16.pixel_type = PixelType::uint16;
+  write_image(in16 / "photo.png", read_image(in / "photo.png"), png16);
+  fs::copy_file(in / "photo_depth.exr", in16 / "photo_depth.exr");
+  ASSERT_EQ(test::run(kMr + " insert " + (in16 / "photo.png").string() + " --depth " +
+                      (in16 / "photo_depth.exr").string() +
+                      " -q --quality preview --object primitive:sphere --position 0,-1.5,7"
+                      " --scale 3 -o " +
+                      (dir / "ins16").string())
+                .exit_code,
+            0);
+  EXPECT_EQ(probe_image(dir / "ins16" / "photo_insert.png").pixel_type, PixelType::uint16);
+  EXPECT_EQ(probe_image(dir / "ins" / "photo_insert.png").pixel_type, PixelType::uint8);
 }
 
 TEST_F(CliScene, AovLayersInTheExr) {

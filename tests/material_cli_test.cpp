@@ -186,6 +186,18 @@ TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
   EXPECT_EQ(at_255, 0);
   EXPECT_EQ(off, 0);
   EXPECT_EQ(unchanged_differ, 0);
+  // A 16-bit target stays 16-bit in a PNG output (as `mr fog` keeps it); an 8-bit one 8-bit.
+  WriteOptions png16;
+  png16.pixel_type = PixelType::uint16;
+  write_image(work / "target16.png", target, png16);
+  write_image(work / "target16_depth.exr", depth);
+  const auto r16 = test::run(kMr + " material --sample " + shell_quoted(work / "sample.png") +
+                             " --sample-fov 50 --target " + shell_quoted(work / "target16.png") +
+                             " --fov 50 --regions " + shell_quoted(work / "mask.png") +
+                             " --seed 3 -q -o " + shell_quoted(work / "display16.png"));
+  ASSERT_EQ(r16.exit_code, 0) << r16.output;
+  EXPECT_EQ(probe_image(work / "display16.png").pixel_type, PixelType::uint16);
+  EXPECT_EQ(probe_image(work / "display.png").pixel_type, PixelType::uint8);
 }
 
 TEST_F(MaterialCli, AnnotationRegionsAndFogInOneRun) {
