@@ -7,7 +7,6 @@
 
 #include <CLI/CLI.hpp>
 #include <array>
-#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -165,19 +164,14 @@ void run_job(const InsertCommandOptions& o, const Job& job) {
   // Display-referred (integer) outputs through the highlight roll-off, as `mr fog` writes them
   // (DESIGN.md section 7): a sunlit white object, lit relative to the photo's exposure, comes
   // out at or above the photo's white and would clip flat under plain sRGB. Float outputs stay
-  // linear and unclipped.
-  std::string out_ext = job.output.extension().string();
-  for (char& ch : out_ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+  // linear and unclipped. A 16-bit photo stays 16-bit (a PNG output was 8-bit).
+  const PhotoOutputEncoding encoding = photo_output_encoding(job.output, job.photo);
   const ColorConfig color = ColorConfig::from_environment();
-  if (out_ext != ".exr" && out_ext != ".hdr" && out_ext != ".pfm") {
+  write.pixel_type = encoding.pixel_type;
+  if (encoding.display_referred) {
     write.color = &color;
     write.colorspace = color.display_colorspace();
   }
-  // A 16-bit photo stays 16-bit where the format can hold it (DESIGN.md section 7), as `mr fog`
-  // writes it; a PNG output would otherwise be 8-bit.
-  if ((out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff") &&
-      probe_image(job.photo).pixel_type == PixelType::uint16)
-    write.pixel_type = PixelType::uint16;
   Image composite = r.composite;
   composite.metadata() = photo.metadata();
   write_image(job.output, composite, write);

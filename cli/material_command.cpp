@@ -2,7 +2,6 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
-#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -358,18 +357,15 @@ int run_material_command(const MaterialCommandOptions& o) {
     // dark and brightly lit (sunlit patches in shaded foliage) comes out above the photo's white
     // and would clip flat under plain sRGB. Only the pixels the transfer changed are rolled off:
     // the rest of the photo stays exactly as it was (its own highlights included), unless fog
-    // changed every pixel. Float outputs stay linear and unclipped.
-    std::string out_ext = fs::path(o.output).extension().string();
-    for (char& ch : out_ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+    // changed every pixel. Float outputs stay linear and unclipped. A 16-bit photo stays 16-bit
+    // (a PNG output was 8-bit).
+    const PhotoOutputEncoding encoding =
+        photo_output_encoding(o.output, scene_target ? fs::path() : fs::path(o.target));
     const ColorConfig color = ColorConfig::from_environment();
     const bool rolloff = color.display_colorspace() == std::string(colorspace::srgb_rolloff);
     write.color = &color;
-    // A 16-bit photo stays 16-bit where the format can hold it (DESIGN.md section 7), as `mr fog`
-    // writes it; a PNG output would otherwise be 8-bit.
-    if (!scene_target && (out_ext == ".png" || out_ext == ".tif" || out_ext == ".tiff") &&
-        probe_image(o.target).pixel_type == PixelType::uint16)
-      write.pixel_type = PixelType::uint16;
-    if (out_ext != ".exr" && out_ext != ".hdr" && out_ext != ".pfm" && rolloff) {
+    write.pixel_type = encoding.pixel_type;
+    if (encoding.display_referred && rolloff) {
       if (sigma > 0 || scene_target) {
         write.colorspace = colorspace::srgb_rolloff;
       } else {

@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <map>
@@ -103,6 +104,18 @@ std::vector<fs::path> remove_stale_temporaries(const fs::path& folder) {
     if ((dead || old) && fs::remove(entry.path(), e2)) removed.push_back(entry.path());
   }
   return removed;
+}
+
+PhotoOutputEncoding photo_output_encoding(const std::filesystem::path& output,
+                                          const std::filesystem::path& photo) {
+  std::string ext = output.extension().string();
+  for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+  PhotoOutputEncoding e;
+  e.display_referred = ext != ".exr" && ext != ".hdr" && ext != ".pfm";
+  if ((ext == ".png" || ext == ".tif" || ext == ".tiff") && !photo.empty() &&
+      probe_image(photo).pixel_type == PixelType::uint16)
+    e.pixel_type = PixelType::uint16;
+  return e;
 }
 
 }  // namespace mr::cli

@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "mr/io.h"
+
 namespace mr::cli {
 
 /// The "Software" tag `mr fog` writes into its outputs, and the test for it: a file named like
@@ -33,6 +35,17 @@ std::vector<std::string> check_planned_outputs(
 /// crash, a power cut): names ".<stem>.mr-tmp-<pid>-<n>[.<ext>]" in `folder` whose process is
 /// gone, or that are older than a day (the pid was reused). Returns the names removed.
 std::vector<std::filesystem::path> remove_stale_temporaries(const std::filesystem::path& folder);
+
+/// How `mr insert` and `mr material` encode a photo's output (DESIGN.md section 7), as `mr fog`
+/// does: integer formats display-referred (the config's display colour space: the highlight
+/// roll-off where it has it), 16-bit where the photo is 16-bit and the format holds it (PNG,
+/// TIFF); float formats (EXR, HDR, PFM) scene-linear. `photo` empty: no photo file (8-bit).
+struct PhotoOutputEncoding {
+  bool display_referred = false;
+  PixelType pixel_type = PixelType::automatic;
+};
+PhotoOutputEncoding photo_output_encoding(const std::filesystem::path& output,
+                                          const std::filesystem::path& photo);
 
 /// The most threads -j accepts (more is a usage error: each thread holds a photo in memory).
 inline constexpr int kMaxThreads = 256;
