@@ -208,10 +208,11 @@ cv::Mat photo_luminance(const Image& photo, float level, double coding_noise_cod
   // coding noise is about even in them.
   constexpr float kGamma = 2.2f;
   cv::Mat code(h, w, CV_32F);
-  for (int y = 0; y < h; ++y)
+  tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x)
       code.at<float>(y, x) =
           255 * std::pow(std::min(lum.at<float>(y, x) / level, 1.0f), 1 / kGamma);
+  });
   // A range of 2.5 sigma takes in the blocks' steps of a few codes; the 7 x 7 window (spatial
   // sigma 2) spans the step between two 8 x 8 blocks.
   cv::Mat filtered;
@@ -222,7 +223,7 @@ cv::Mat photo_luminance(const Image& photo, float level, double coding_noise_cod
   // a real texture's (grass, plaster, weave); calming them cost the tuning half's texture bars.
   constexpr float kFaintTexture = 0.07f;  // relative
   const float full_code = kGamma * float(coding_noise_codes) / kFaintTexture;
-  for (int y = 0; y < h; ++y)
+  tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       const float c = code.at<float>(y, x);
       if (!(c < full_code)) continue;
@@ -231,6 +232,7 @@ cv::Mat photo_luminance(const Image& photo, float level, double coding_noise_cod
           std::max(level * std::pow(filtered.at<float>(y, x) / 255, kGamma), 1e-6f);
       calm.at<float>(y, x) = filtered_lum * std::pow(raw / filtered_lum, c / full_code);
     }
+  });
   return lum;
 }
 
