@@ -1064,6 +1064,49 @@ TEST(MaterialApply, RegionBordersSnapToThePhotosEdges) {
     for (int x : {10, 150}) EXPECT_EQ(snapped.at(x, y, 0), labels.at(x, y, 0));
 }
 
+TEST(MaterialApply, AGapBetweenTwoRegionsJoinsThemWhereThePhotoExplainsIt) {
+  // Orange rock (region 1, x < 60) and its shadowed part, blue (region 2, x 72-119), painted as
+  // two regions with the penumbra between them left out (x 60-71: the two colours mixed in
+  // linear light, as a soft shadow mixes them); then a black pole (x 120-125, unlabelled) before
+  // grey (region 3). Too thin for a colour of their own, the penumbra's pixels stayed the photo
+  // (gallery canyon_couple: a purple line between the two new materials). Each now joins one
+  // of the regions, the orange side region 1; the pole, explained by neither, stays.
+  GroundScene t = untextured_ground();
+  const Rgb orange{0.6f, 0.3f, 0.1f}, blue{0.1f, 0.15f, 0.4f};
+  const auto [photo, labels] = painted(
+      t,
+      [&](int x, int) {
+        if (x < 60) return orange;
+        if (x < 72) {
+          const float f = float(x - 59) / 13;
+          return Rgb{(1 - f) * orange[0] + f * blue[0], (1 - f) * orange[1] + f * blue[1],
+                     (1 - f) * orange[2] + f * blue[2]};
+        }
+        if (x < 120) return blue;
+        return x < 126 ? grey(0.01f) : grey(0.5f);
+      },
+      [](int x, int) {
+        return x < 60 ? 1.0f : x < 72 ? 0.0f : x < 120 ? 2.0f : x < 126 ? 0.0f : 3.0f;
+      });
+  const Image snapped = photo::snap_regions_to_edges(labels, photo, t.g);
+  int rows = 0;
+  for (int y = 0; y < 120; ++y) {
+    if (!(t.g.surface.at(0, y, 0) > 0)) continue;
+    ++rows;
+    float previous = 1;
+    for (int x = 60; x < 72; ++x) {
+      const float k = snapped.at(x, y, 0);
+      EXPECT_TRUE(k == 1 || k == 2) << x << ", " << y << ": " << k;
+      EXPECT_GE(k, previous) << x << ", " << y;  // region 1's side, then region 2's
+      previous = k;
+    }
+    EXPECT_EQ(snapped.at(61, y, 0), 1.0f) << y;
+    EXPECT_EQ(snapped.at(70, y, 0), 2.0f) << y;
+    for (int x = 120; x < 126; ++x) EXPECT_EQ(snapped.at(x, y, 0), 0.0f) << x << ", " << y;
+  }
+  EXPECT_GT(rows, 60);
+}
+
 TEST(MaterialApply, TwoRegionsBorderBlendsTheirRenderingsNotThePhoto) {
   // An orange photo, regions 1 | 2 re-rendered grey and blue-grey: the border pixels are a blend
   // of the two renderings, with none of the photo's orange (a ramp into the photo on each side

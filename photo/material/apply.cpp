@@ -573,10 +573,38 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
   cv::Mat trusted_own(h, w, CV_8U, cv::Scalar(0));
   cv::Mat best_distance(h, w, CV_32F, cv::Scalar(INFINITY)), own_distance = best_distance.clone();
   cv::Mat best_class(h, w, CV_32S, cv::Scalar(-1));
+  // Gaps: unlabelled surface pixels that a closing of the regions' union (gaps up to 2 r_gap
+  // wide) would fill. A gap is no surface of its own (the unlabelled class's colour is measured
+  // outside the gaps), so the rule below cannot move its pixels; each keeps the two regions
+  // with the most trusted pixels around it, for the gap test after it.
+  const int gap_radius = 2 * r;
+  cv::Mat gap;
+  {
+    cv::Mat any = (label > 0) / 255, closed;
+    cv::morphologyEx(any, closed, cv::MORPH_CLOSE,
+                     cv::getStructuringElement(cv::MORPH_ELLIPSE,
+                                               cv::Size(2 * gap_radius + 1, 2 * gap_radius + 1)),
+                     cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    gap = closed & (label == 0) / 255;
+  }
+  cv::Mat gap_index(h, w, CV_32S, cv::Scalar(-1));
+  int gap_pixels = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (gap.at<unsigned char>(y, x)) gap_index.at<int>(y, x) = gap_pixels++;
+  struct Neighbour {
+    int k = -1;
+    float count = 0, spread = 0;
+    cv::Vec3f mean;
+  };
+  std::vector<std::array<Neighbour, 2>> gap_neighbours(static_cast<std::size_t>(gap_pixels));
   for (int k = 0; k < classes; ++k) {
     if (box[k].empty()) continue;
     const cv::Rect roi = box[k];
-    const cv::Mat mask = (label(roi) == k) / 255;  // CV_8U 0 / 1
+    // The unlabelled surface's colour only from outside the gaps: a gap between regions is
+    // not a surface of its own, however wide its middle.
+    const cv::Mat mask =
+        k == 0 ? ((label(roi) == 0) & (gap(roi) == 0)) / 255 : (label(roi) == k) / 255;
     cv::Mat trusted, weight, weight3, colour, colour_squared, count, sum, sum_squares;
     cv::erode(mask, trusted, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
     trusted.convertTo(weight, CV_32F);
@@ -587,12 +615,39 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
     cv::boxFilter(colour, sum, -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
     cv::boxFilter(colour_squared, sum_squares, -1, window, cv::Point(-1, -1), false,
                   cv::BORDER_CONSTANT);
+    // The gap test's colours from farther: the middle of a gap 2 r_gap wide is r_gap from either
+    // side, whose trusted pixels start r further in.
+    cv::Mat gap_count, gap_sum, gap_sum_squares;
+    const bool gap_test = k > 0 && gap_pixels > 0 && cv::countNonZero(gap(roi)) > 0;
+    if (gap_test) {
+      const cv::Size gap_window(2 * (reach + gap_radius) + 1, 2 * (reach + gap_radius) + 1);
+      cv::boxFilter(weight, gap_count, -1, gap_window, cv::Point(-1, -1), false,
+                    cv::BORDER_CONSTANT);
+      cv::boxFilter(colour, gap_sum, -1, gap_window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+      cv::boxFilter(colour_squared, gap_sum_squares, -1, gap_window, cv::Point(-1, -1), false,
+                    cv::BORDER_CONSTANT);
+    }
     tbb::parallel_for(0, roi.height, [&](int j) {
       const int y = roi.y + j;
       for (int i = 0; i < roi.width; ++i) {
         const int x = roi.x + i, own = label.at<int>(y, x);
         if (own < 0) continue;
         if (own == k && trusted.at<unsigned char>(j, i)) trusted_own.at<unsigned char>(y, x) = 1;
+        if (const int g = gap_test ? gap_index.at<int>(y, x) : -1; g >= 0) {
+          // At least a full trusted window's worth of the region around the gap pixel.
+          const float n = gap_count.at<float>(j, i);
+          if (n >= float((2 * r + 1) * (2 * r + 1))) {
+            const cv::Vec3f mean = gap_sum.at<cv::Vec3f>(j, i) / n;
+            const cv::Vec3f spread = gap_sum_squares.at<cv::Vec3f>(j, i) / n - mean.mul(mean);
+            auto& two = gap_neighbours[std::size_t(g)];
+            const Neighbour here{k, n, std::max(0.0f, (spread[0] + spread[1] + spread[2]) / 3),
+                                 mean};
+            if (n > two[0].count)
+              two[1] = two[0], two[0] = here;
+            else if (n > two[1].count)
+              two[1] = here;
+          }
+        }
         const float n = count.at<float>(j, i);
         const float min_count =
             min_share * float((std::min(x + reach, w - 1) - std::max(x - reach, 0) + 1) *
@@ -621,6 +676,46 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
       if (std::isfinite(own_d) && best_distance.at<float>(y, x) < kClearlyCloser * own_d)
         out.at(x, y, 0) = float(best);
     }
+  // A gap pixel joins a region when the regions around it explain its colour: it is within the
+  // colour spread of one of them (a strip the mask missed), or a mix of the two (a soft border
+  // between them, e.g. a shadow's penumbra, painted as two regions with the blend left out: kept
+  // as the photo, it would be a line of the old material between the new ones). A thin object
+  // of its own colour (a pole, a seam) is neither, and stays.
+  constexpr float kWithinSpread = 9.0f;  // squared distance over the variance (3 channels: ~3)
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x) {
+      const int g = gap_index.at<int>(y, x);
+      // (A gap pixel beside unlabelled surface outside the gaps, wide enough for a colour of its
+      // own, was judged by the rule above.)
+      if (g < 0 || std::isfinite(own_distance.at<float>(y, x))) continue;
+      const auto& two = gap_neighbours[std::size_t(g)];
+      const cv::Vec3f p = guide.at<cv::Vec3f>(y, x);
+      int join = -1;
+      float nearest = kWithinSpread;
+      for (const Neighbour& c : two)
+        if (c.k > 0) {
+          const cv::Vec3f d = p - c.mean;
+          const float distance = d.dot(d) / (c.spread + kNoiseVariance);
+          if (distance <= nearest) nearest = distance, join = c.k;
+        }
+      if (join < 0 && two[1].k > 0) {
+        const cv::Vec3f e = two[1].mean - two[0].mean, d = p - two[0].mean;
+        const float length_squared = e.dot(e);
+        const float t = length_squared > 0 ? d.dot(e) / length_squared : -1;
+        const cv::Vec3f off = d - t * e;
+        const float variance = (two[0].spread + two[1].spread) / 2 + kNoiseVariance;
+        if (t >= 0 && t <= 1 && off.dot(off) / variance <= kWithinSpread)
+          join = t < 0.5f ? two[0].k : two[1].k;
+        // Off the mix but nearer to one region than half the step between them: a darker or
+        // lighter part of that surface (a shaded fold), not an object of its own.
+        const cv::Vec3f to_second = p - two[1].mean;
+        const float d0 = d.dot(d), d1 = to_second.dot(to_second);
+        if (join < 0 && std::min(d0, d1) <= 0.25f * length_squared)
+          join = d0 <= d1 ? two[0].k : two[1].k;
+      }
+      if (join > 0) out.at(x, y, 0) = float(join);
+    }
+  });
   // A moved pixel with fewer than 3 of its 8 neighbours in its new class is a lone flip (noise,
   // a speck of clutter near the border): it would leave a speck of the other material. Back.
   Image snapped = out;
@@ -638,6 +733,31 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
       if (same < 3) out.at(x, y, 0) = region_labels.at(x, y, 0);
     }
   });
+  // A gap pixel left alone among joined ones (a highlight, a dark grain of the penumbra, or one
+  // that joined the other region and went back above) would be a speck of the old material
+  // inside the new one: with at least 6 of its 8 neighbours in one region, it joins that region.
+  if (gap_pixels > 0) {
+    const Image joined = out;
+    tbb::parallel_for(0, h, [&](int y) {
+      for (int x = 0; x < w; ++x) {
+        if (gap_index.at<int>(y, x) < 0 || joined.at(x, y, 0) != 0.0f) continue;
+        int count[8] = {}, labels[8] = {}, kinds = 0;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int nx = x + dx, ny = y + dy;
+            if (!(dx || dy) || nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+            const int k = label.at<int>(ny, nx) < 0 ? 0 : int(joined.at(nx, ny, 0));
+            if (k <= 0) continue;
+            int i = 0;
+            while (i < kinds && labels[i] != k) ++i;
+            if (i == kinds) labels[kinds++] = k;
+            ++count[i];
+          }
+        for (int i = 0; i < kinds; ++i)
+          if (count[i] >= 6) out.at(x, y, 0) = float(labels[i]);
+      }
+    });
+  }
   return out;
 }
 

@@ -105,6 +105,12 @@ Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometr
 /// the mask's border stays; a moved pixel with fewer than 3 of its 8 neighbours in its new class
 /// (a lone flip: noise, clutter) goes back. Sky pixels keep their label (they stay the photo's
 /// whatever it is).
+/// Gaps: unlabelled surface pixels in a gap between or inside regions up to 4 radius_px wide (a
+/// closing of their union) have no colour of their own (the unlabelled class's is measured
+/// outside the gaps). Such a pixel joins one of the two regions with the most trusted pixels
+/// within 3 radius_px + 2 radius_px when their colours explain its own: within one's spread,
+/// a mix of the two (a penumbra or soft border left out between two painted regions), or
+/// nearer to one than half the step between them. Otherwise (a pole, a seam) it stays.
 /// radius_px 0: unchanged.
 Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
                             const render::SurfaceGeometry& geometry, int radius_px = 4);
