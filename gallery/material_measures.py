@@ -42,6 +42,12 @@ blockiness   per region (eroded by 2 px; at least 500 neighbour pairs within the
              largest over the regions, no bar. 1: the blocks no plainer than in the photo; a dark
              region given a light material magnifies its blocks (anne_helene's black shirt made
              white: 1.30 before 2026-12-07, 1.11 after).
+gaps left    the share of the unlabelled pixels enclosed between region pixels (the same region or
+             two) at most GAP_SPAN_PX (16) apart along a row or a column, sky excluded, that the
+             result leaves within 2 codes of the photo in every channel (display-referred): a
+             line of the old material between new ones, where two regions were painted on either
+             side of a soft border and its blend left out. Reported, no bar (a thin object of
+             its own between regions, a pole or a seam, is right to stay).
 colour change the mean CIELAB Delta E*ab (D65, both images scaled by the same exposure, the photo's
              99th percentile luminance to 1) between photo and result over the regions: shows that
              the transfer changed something (a result equal to the photo passes the other two).
@@ -57,6 +63,7 @@ TEXTURE_WINDOW_PX = 7
 TEXTURE_MIN_PIXELS = 500
 TEXTURE_NOISE_FLOOR = 0.003
 
+GAP_SPAN_PX = 16
 TARGET_SPECKLE = 0.005
 TARGET_TEXTURE_CORRELATION = 0.9
 TARGET_CONTRAST_RATIO = 0.5
@@ -238,6 +245,35 @@ def blockiness(photo_display, result_display, labels):
         ratio = br / bp
         worst = ratio if worst is None else max(worst, ratio)
     return worst
+
+
+def enclosed_gaps(labels):
+    """Unlabelled pixels with a region pixel on both sides within GAP_SPAN_PX along a row or a
+    column (the two region pixels at most GAP_SPAN_PX + 1 apart)."""
+    region = np.asarray(labels) > 0
+    out = np.zeros(region.shape, bool)
+    for r, back in ((region, False), (region.T, True)):
+        w = r.shape[1]
+        index = np.broadcast_to(np.arange(w)[None, :], r.shape)
+        before = np.maximum.accumulate(np.where(r, index, -(10 ** 9)), axis=1)
+        after = np.minimum.accumulate(np.where(r, index, 10 ** 9)[:, ::-1], axis=1)[:, ::-1]
+        gap = ~r & (after - before <= GAP_SPAN_PX + 1)
+        out |= gap.T if back else gap
+    return out
+
+
+def gaps_left(photo_display, result_display, labels, sky=None):
+    """(share, count): the enclosed gap pixels (enclosed_gaps, sky excluded) the result leaves
+    within 2 codes of the photo; (None, 0) when there are none."""
+    gap = enclosed_gaps(labels)
+    if sky is not None:
+        gap &= ~np.asarray(sky, bool)
+    n = int(gap.sum())
+    if n == 0:
+        return None, 0
+    same = np.all(np.abs(np.asarray(result_display, np.float64)[..., :3] -
+                         np.asarray(photo_display, np.float64)[..., :3]) <= 2.5 / 255, axis=-1)
+    return float((same & gap).sum() / n), n
 
 
 def colour_change(photo, result, labels):

@@ -119,6 +119,26 @@ def main():
     check(b_blocky is not None and b_blocky > 1.5, f"blockiness with 2 % blocks added {b_blocky}: > 1.5")
     check(MM.blockiness(blocky, ramp, labels) < 1, "blocks taken out: below 1")
 
+    # Gaps left: regions 1 (x < 30) and 2 (x >= 40) with a 10-pixel gap between them, and an
+    # unlabelled margin 30 pixels wide beyond region 2 that no region closes (not a gap). The
+    # result changes the regions and the gap's left half: half of the gap is left; the rows
+    # marked as sky do not count.
+    g_labels = np.zeros((20, 100), np.int32)
+    g_labels[:, :30], g_labels[:, 40:70] = 1, 2
+    g_photo = np.full((20, 100, 3), 0.5)
+    g_result = g_photo.copy()
+    g_result[:, :35] = 0.2
+    g_result[:, 40:70] = 0.8
+    check(MM.enclosed_gaps(g_labels).sum() == 20 * 10, "enclosed gap: the 10 columns between the regions")
+    share, n = MM.gaps_left(g_photo, g_result, g_labels)
+    check(n == 200 and abs(share - 0.5) < 1e-9, f"gaps left {share} of {n}: half of 200")
+    sky = np.zeros((20, 100), bool)
+    sky[:10] = True
+    share, n = MM.gaps_left(g_photo, g_result, g_labels, sky)
+    check(n == 100 and abs(share - 0.5) < 1e-9, f"gaps left without the sky {share} of {n}: half of 100")
+    check(MM.gaps_left(g_photo, g_photo, np.where(g_labels == 2, 0, g_labels))[0] is None,
+          "one region and open space: no gap")
+
     # The script end to end on two tuning photos (plant, 500 x 333, its sample rocket; coffee,
     # 600 x 400, its sample cold_water, whose regions' borders sit a few pixels inside the saucer's
     # and the cup's rims: 3.2 % speckle before the borders were despeckled). Both under the
