@@ -176,7 +176,8 @@ CLI::App* add_material_command(CLI::App& app, MaterialCommandOptions& o) {
   CLI::App* cmd = app.add_subcommand(
       "material",
       "Give regions of a photo the material look of a sample image: BRDFs fitted to the sample's "
-      "segments, assigned to the regions by Tabu search, re-rendered under the photo's light");
+      "segments, assigned to the regions by a search (every assignment, or Tabu search for many "
+      "regions), re-rendered under the photo's light");
   cmd->add_option("--sample", o.sample, "Sample image with the wanted look")->required();
   cmd->add_option("--target", o.target,
                   "Photo whose regions get the look (without it: --target-depth is a 3D scene's "
@@ -208,7 +209,7 @@ CLI::App* add_material_command(CLI::App& app, MaterialCommandOptions& o) {
   cmd->add_option("--fov", o.target_fov_deg,
                   "Target's horizontal field of view, degrees [default: EXIF, else 60]")
       ->check(CLI::Range(0.0, 180.0));
-  cmd->add_option("--seed", o.seed, "Tabu search seed [default: 1]");
+  cmd->add_option("--seed", o.seed, "Tabu search seed (many regions only) [default: 1]");
   cmd->add_option("--max-candidates", o.max_candidates,
                   "Candidate materials kept from the sample (1..64)")
       ->check(CLI::Range(1, 64))

@@ -579,6 +579,45 @@ TEST(TabuSearch, FindsTheBruteForceOptimumOnRandomInstances) {
   EXPECT_GE(rate, 0.95);
 }
 
+TEST(TabuSearch, MinimiseAssignmentIsExhaustiveUpToItsLimitAndTabuAbove) {
+  // Up to the limit: brute force's assignment and objective, its history shortened to the
+  // improvements (never increasing, ending at the objective). Above it: Tabu search's result
+  // for the same options, bit for bit.
+  std::mt19937 rng(31);
+  for (int k = 0; k < 20; ++k) {
+    const int n = 3 + k % 3, m = 3 + k % 4;
+    const MaterialObjective objective = random_material_objective(n, m, rng);
+    const AssignmentObjective f = [&](std::span<const int> a) { return objective(a); };
+    TabuOptions options;
+    options.seed = 50 + k;
+    const double count = std::pow(m, n);
+    const TabuResult all = minimise_assignment(n, m, f, options, count);
+    const TabuResult brute = brute_force_search(n, m, f);
+    EXPECT_TRUE(all.exhaustive);
+    EXPECT_EQ(all.assignment, brute.assignment);
+    EXPECT_EQ(all.objective, brute.objective);
+    EXPECT_EQ(all.evaluations, brute.evaluations);
+    ASSERT_FALSE(all.best_history.empty());
+    EXPECT_EQ(all.best_history.front(), brute.best_history.front());
+    for (std::size_t i = 1; i < all.best_history.size(); ++i)
+      EXPECT_LT(all.best_history[i], all.best_history[i - 1]);
+    EXPECT_EQ(all.best_history.back(), all.objective);
+    EXPECT_LE(all.best_history.size(), brute.best_history.size());
+
+    const TabuResult above = minimise_assignment(n, m, f, options, count - 1);
+    const TabuResult tabu = tabu_search(n, m, f, options);
+    EXPECT_FALSE(above.exhaustive);
+    EXPECT_EQ(above.assignment, tabu.assignment);
+    EXPECT_EQ(above.objective, tabu.objective);
+    EXPECT_EQ(above.best_history, tabu.best_history);
+  }
+  // The default limit enumerates 8 candidates over 5 regions, not over 6.
+  const AssignmentObjective zero = [](std::span<const int>) { return 0.0; };
+  EXPECT_TRUE(minimise_assignment(5, 8, zero).exhaustive);
+  EXPECT_FALSE(minimise_assignment(6, 8, zero).exhaustive);
+  EXPECT_THROW(minimise_assignment(0, 3, zero), Error);
+}
+
 TEST(TabuSearch, SameSeedSameResult) {
   std::mt19937 rng(5);
   const MaterialObjective objective = random_material_objective(6, 4, rng);

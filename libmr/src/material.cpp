@@ -707,7 +707,7 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     tabu.patience = options.tabu_patience;
     tabu.seed = options.seed;
     Step search_step(options.cancel, "search");
-    const photo::TabuResult search = photo::tabu_search(
+    const photo::TabuResult search = photo::minimise_assignment(
         regions, m, [&](std::span<const int> a) { return objective(a); }, tabu);
     result.assignment = search.assignment;
     result.objective = search.objective;
@@ -737,8 +737,12 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     result.notes = result.candidates.notes;
     result.warnings = result.candidates.warnings;
     result.notes.push_back(
-        format("target: %d regions, %zu candidates; Tabu search: %zu iterations, %ld evaluations",
-               regions, candidates.size(), search.best_history.size(), search.evaluations));
+        search.exhaustive
+            ? format("target: %d regions, %zu candidates; every assignment evaluated (%ld)",
+                     regions, candidates.size(), search.evaluations)
+            : format("target: %d regions, %zu candidates; Tabu search: %zu iterations, %ld "
+                     "evaluations",
+                     regions, candidates.size(), search.best_history.size(), search.evaluations));
     for (int r = 0; r < regions; ++r) {
       std::string line = format("region %d (%zu px): candidate %d", r + 1, region_pixels[r].size(),
                                 result.assignment[r]);

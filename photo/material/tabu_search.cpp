@@ -202,4 +202,19 @@ TabuResult brute_force_search(int variables, int values, const AssignmentObjecti
   return result;
 }
 
+TabuResult minimise_assignment(int variables, int values, const AssignmentObjective& objective,
+                               const TabuOptions& options, double exhaustive_limit) {
+  check_sizes(variables, values, "minimise_assignment");
+  double total = 1;
+  for (int i = 0; i < variables && total <= exhaustive_limit; ++i) total *= values;
+  if (total > exhaustive_limit) return tabu_search(variables, values, objective, options);
+  TabuResult result = brute_force_search(variables, values, objective);
+  std::vector<double> improvements;
+  for (const double v : result.best_history)
+    if (improvements.empty() || v < improvements.back()) improvements.push_back(v);
+  result.best_history = std::move(improvements);
+  result.exhaustive = true;
+  return result;
+}
+
 }  // namespace mr::photo

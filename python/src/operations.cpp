@@ -877,7 +877,8 @@ void bind_operations(py::module_& m) {
       py::arg("cancel") = py::none(),
       "Material style transfer (DESIGN.md section 5, as `mr material`): candidate materials "
       "fitted to the sample (scene-linear (h, w, 3) with its distance map, metres) are "
-      "assigned to the target's regions by Tabu search and re-rendered under the target's "
+      "assigned to the target's regions (every assignment tried, or Tabu search for many regions) "
+      "and re-rendered under the target's "
       "lighting (its scene's pose and lights). target None: a 3D scene given by its distance "
       "map alone. region_labels: (H, W) ids 0 = untouched, 1..n, or a mask / annotations path. "
       "Cameras: None = from the photo's metadata (60 degrees without EXIF). Deterministic for "

@@ -43,6 +43,8 @@ struct MR_API MaterialTransferOptions {
   /// kept instead, with a warning (MaterialCandidates::warnings).
   double max_relative_rms = 0.25;
   double smoothness_weight = 0.1;    ///< weight of the material-gradient term (>= 0)
+  /// Assignment search: with at most 65536 assignments (candidates^regions, e.g. 5 regions of
+  /// 8 candidates) every one is evaluated (the global minimum, milliseconds); above, Tabu search:
   int tabu_max_iterations = 200;     ///< Tabu search: iterations at most
   int tabu_patience = 40;            ///< stop after this many iterations without a new best
   std::uint32_t seed = 1;            ///< equal seeds give identical results
