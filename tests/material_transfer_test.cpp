@@ -1070,13 +1070,16 @@ TEST(MaterialApply, AGapBetweenTwoRegionsJoinsThemWhereThePhotoExplainsIt) {
   // linear light, as a soft shadow mixes them); then a black pole (x 120-125, unlabelled) before
   // grey (region 3). Too thin for a colour of their own, the penumbra's pixels stayed the photo
   // (gallery canyon_couple: a purple line between the two new materials). Each now joins one
-  // of the regions, the orange side region 1; the pole, explained by neither, stays.
+  // of the regions, the orange side region 1; the pole, explained by neither, stays. A white
+  // speck in the penumbra (a highlight), explained by neither either, joins the region around it
+  // rather than stay a speck of the old colour.
   GroundScene t = untextured_ground();
   const Rgb orange{0.6f, 0.3f, 0.1f}, blue{0.1f, 0.15f, 0.4f};
   const auto [photo, labels] = painted(
       t,
-      [&](int x, int) {
+      [&](int x, int y) {
         if (x < 60) return orange;
+        if (x == 62 && y == 60) return grey(1.0f);
         if (x < 72) {
           const float f = float(x - 59) / 13;
           return Rgb{(1 - f) * orange[0] + f * blue[0], (1 - f) * orange[1] + f * blue[1],
@@ -1101,6 +1104,7 @@ TEST(MaterialApply, AGapBetweenTwoRegionsJoinsThemWhereThePhotoExplainsIt) {
       previous = k;
     }
     EXPECT_EQ(snapped.at(61, y, 0), 1.0f) << y;
+    EXPECT_EQ(snapped.at(62, y, 0), 1.0f) << y;  // the speck at y = 60 too
     EXPECT_EQ(snapped.at(70, y, 0), 2.0f) << y;
     for (int x = 120; x < 126; ++x) EXPECT_EQ(snapped.at(x, y, 0), 0.0f) << x << ", " << y;
   }
