@@ -199,6 +199,9 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
     cv::blur(texture, roughness, wide);
     roughness = cv::max(roughness - coherent, 0.0);
   }
+  // The full-resolution gradients are done with: four float images the rest of the mask (its
+  // guided filter and edge tests at full resolution) would otherwise hold beside its own.
+  full_luma.release(), blurred.release(), gx.release(), gy.release();
   const cv::Mat pixel_gradient = texture.clone();  // per working pixel, before the window
   cv::blur(texture, texture, cv::Size(win, win));
 
