@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <string>
 
 #include "core/cv_bridge.h"
@@ -500,6 +501,30 @@ Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometr
   return out;
 }
 
+namespace {
+
+// A class's trusted pixels summed over a square window around each pixel (box filters with a
+// constant zero border): their count, colour sum and sum of squares; mean and spread (the
+// channels' mean variance, at least 0) where count is n.
+struct WindowSums {
+  cv::Mat count, sum, sum_squares;
+  WindowSums(const cv::Mat& weight, const cv::Mat& colour, const cv::Mat& colour_squared,
+             int half_width) {
+    const cv::Size window(2 * half_width + 1, 2 * half_width + 1);
+    cv::boxFilter(weight, count, -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    cv::boxFilter(colour, sum, -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    cv::boxFilter(colour_squared, sum_squares, -1, window, cv::Point(-1, -1), false,
+                  cv::BORDER_CONSTANT);
+  }
+  cv::Vec3f mean(int j, int i, float n) const { return sum.at<cv::Vec3f>(j, i) / n; }
+  float spread(int j, int i, float n, const cv::Vec3f& m) const {
+    const cv::Vec3f v = sum_squares.at<cv::Vec3f>(j, i) / n - m.mul(m);
+    return std::max(0.0f, (v[0] + v[1] + v[2]) / 3);
+  }
+};
+
+}  // namespace
+
 Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
                             const render::SurfaceGeometry& geometry, int radius_px) {
   require_size(region_labels, geometry, "region labels");
@@ -547,7 +572,6 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
   // whose spread covers both) the mask's own border stays.
   const int r = radius_px, reach = 3 * radius_px;
   const cv::Mat square = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1));
-  const cv::Size window(2 * reach + 1, 2 * reach + 1);
   constexpr float kClearlyCloser = 0.25f;
   constexpr float kNoiseVariance = 0.02f * 0.02f;
   // At least a full trusted window's worth of the search window (its part inside the image): a
@@ -605,28 +629,20 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
     // not a surface of its own, however wide its middle.
     const cv::Mat mask =
         k == 0 ? ((label(roi) == 0) & (gap(roi) == 0)) / 255 : (label(roi) == k) / 255;
-    cv::Mat trusted, weight, weight3, colour, colour_squared, count, sum, sum_squares;
+    cv::Mat trusted, weight, weight3, colour, colour_squared;
     cv::erode(mask, trusted, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
     trusted.convertTo(weight, CV_32F);
     cv::cvtColor(weight, weight3, cv::COLOR_GRAY2BGR);
     cv::multiply(weight3, guide(roi), colour);
     cv::multiply(colour, guide(roi), colour_squared);
-    cv::boxFilter(weight, count, -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-    cv::boxFilter(colour, sum, -1, window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-    cv::boxFilter(colour_squared, sum_squares, -1, window, cv::Point(-1, -1), false,
-                  cv::BORDER_CONSTANT);
+    const WindowSums near(weight, colour, colour_squared, reach);
     // The gap test's colours from farther: the middle of a gap 2 r_gap wide is r_gap from either
     // side, whose trusted pixels start r further in.
-    cv::Mat gap_count, gap_sum, gap_sum_squares;
     const bool gap_test = k > 0 && gap_pixels > 0 && cv::countNonZero(gap(roi)) > 0;
-    if (gap_test) {
-      const cv::Size gap_window(2 * (reach + gap_radius) + 1, 2 * (reach + gap_radius) + 1);
-      cv::boxFilter(weight, gap_count, -1, gap_window, cv::Point(-1, -1), false,
-                    cv::BORDER_CONSTANT);
-      cv::boxFilter(colour, gap_sum, -1, gap_window, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-      cv::boxFilter(colour_squared, gap_sum_squares, -1, gap_window, cv::Point(-1, -1), false,
-                    cv::BORDER_CONSTANT);
-    }
+    const std::optional<WindowSums> far =
+        gap_test ? std::optional<WindowSums>(std::in_place, weight, colour, colour_squared,
+                                             reach + gap_radius)
+                 : std::nullopt;
     tbb::parallel_for(0, roi.height, [&](int j) {
       const int y = roi.y + j;
       for (int i = 0; i < roi.width; ++i) {
@@ -635,29 +651,25 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
         if (own == k && trusted.at<unsigned char>(j, i)) trusted_own.at<unsigned char>(y, x) = 1;
         if (const int g = gap_test ? gap_index.at<int>(y, x) : -1; g >= 0) {
           // At least a full trusted window's worth of the region around the gap pixel.
-          const float n = gap_count.at<float>(j, i);
+          const float n = far->count.at<float>(j, i);
           if (n >= float((2 * r + 1) * (2 * r + 1))) {
-            const cv::Vec3f mean = gap_sum.at<cv::Vec3f>(j, i) / n;
-            const cv::Vec3f spread = gap_sum_squares.at<cv::Vec3f>(j, i) / n - mean.mul(mean);
+            const cv::Vec3f mean = far->mean(j, i, n);
             auto& two = gap_neighbours[std::size_t(g)];
-            const Neighbour here{k, n, std::max(0.0f, (spread[0] + spread[1] + spread[2]) / 3),
-                                 mean};
+            const Neighbour here{k, n, far->spread(j, i, n, mean), mean};
             if (n > two[0].count)
               two[1] = two[0], two[0] = here;
             else if (n > two[1].count)
               two[1] = here;
           }
         }
-        const float n = count.at<float>(j, i);
+        const float n = near.count.at<float>(j, i);
         const float min_count =
             min_share * float((std::min(x + reach, w - 1) - std::max(x - reach, 0) + 1) *
                               (std::min(y + reach, h - 1) - std::max(y - reach, 0) + 1));
         if (!(n >= min_count)) continue;
-        const cv::Vec3f mean = sum.at<cv::Vec3f>(j, i) / n;
-        const cv::Vec3f spread = sum_squares.at<cv::Vec3f>(j, i) / n - mean.mul(mean);
+        const cv::Vec3f mean = near.mean(j, i, n);
         const cv::Vec3f d = guide.at<cv::Vec3f>(y, x) - mean;
-        const float distance =
-            d.dot(d) / (std::max(0.0f, (spread[0] + spread[1] + spread[2]) / 3) + kNoiseVariance);
+        const float distance = d.dot(d) / (near.spread(j, i, n, mean) + kNoiseVariance);
         if (own == k) own_distance.at<float>(y, x) = distance;
         if (distance < best_distance.at<float>(y, x)) {
           best_distance.at<float>(y, x) = distance;
