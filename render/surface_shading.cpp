@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "mr/error.h"
+#include "render/depth_downsample.h"
 #include "render/embree_scene.h"
 #include "render/math.h"
 #include "render/occluder_mesh.h"
@@ -257,6 +258,209 @@ SpecularAlbedo ggx_directional_albedo(float n_dot_v, float roughness) {
           lerp2(s00.bias, s01.bias, s10.bias, s11.bias)};
 }
 
+namespace {
+
+// What one pixel's rays see: of the sun's `sun_rays` rays those above its tangent plane and
+// those of them escaping the occluders; the sky's closed form (1 + n.y) / 2 and the share of its
+// upward cosine-distributed rays escaping (traced false: none traced, the share is 1).
+struct PixelRays {
+  int sun_above = 0, sun_escaped = 0;
+  float sky_closed = 0, sky_escape = 1;
+  bool sky_traced = false;
+};
+
+class VisibilityRays {
+ public:
+  VisibilityRays(const Lighting& lighting, const SurfaceGeometryOptions& options)
+      : sky_rays_(options.sky_rays) {
+    if (lighting.sun) {
+      sun_dir_ = unit(to_f(lighting.sun->direction_to_sun));
+      if (dot(*sun_dir_, *sun_dir_) == 0)
+        throw Error(ErrorCode::invalid_argument, "lighting.sun.direction_to_sun is zero");
+      frame(*sun_dir_, sun_u_, sun_v_);
+      sun_tan_radius_ = float(std::tan(lighting.sun->angular_radius_deg * kPiD / 180));
+    }
+    sun_rays_ = sun_tan_radius_ > 0 ? options.sun_rays : 1;
+  }
+  int sun_rays() const { return sun_rays_; }
+
+  // The rays of the surface point p (distance d from the eye, unit normal n) at pixel (x, y),
+  // traced against `occluders` where given (else only counted).
+  PixelRays trace(const Vec3f& n, const Vec3f& p, float d, int x, int y,
+                  const OccluderScene* occluders) const {
+    PixelRays out;
+    Vec3f dirs[256];
+    // Off the surface along its normal, as the scattering core does, so the pixel's own
+    // (and its neighbours') triangles do not shadow it.
+    const float offset = 1e-3f + 1e-3f * d;
+    const Vec3f origin = {p[0] + offset * n[0], p[1] + offset * n[1], p[2] + offset * n[2]};
+    const std::uint32_t seed = hash32(std::uint32_t(y) * 73856093u ^ std::uint32_t(x));
+    const float rotation = float(seed >> 8) * (1.0f / 16777216.0f);
+    if (sun_dir_ && dot(n, *sun_dir_) > 0) {
+      int count = 0;
+      for (int i = 0; i < sun_rays_; ++i) {
+        Vec3f s = *sun_dir_;
+        if (sun_rays_ > 1) {
+          // Stratified in radius, golden-angle spiral in azimuth, rotated per pixel.
+          const float r = sun_tan_radius_ * std::sqrt((i + 0.5f) / sun_rays_);
+          const float phi = 2.39996323f * i + 2 * kPi * rotation;
+          s = unit(Vec3f{s[0] + r * (std::cos(phi) * sun_u_[0] + std::sin(phi) * sun_v_[0]),
+                         s[1] + r * (std::cos(phi) * sun_u_[1] + std::sin(phi) * sun_v_[1]),
+                         s[2] + r * (std::cos(phi) * sun_u_[2] + std::sin(phi) * sun_v_[2])});
+        }
+        if (dot(n, s) > 0) dirs[count++] = s;
+      }
+      out.sun_above = count;
+      out.sun_escaped = occluders ? count_escaping(*occluders, origin, dirs, count) : count;
+    }
+    out.sky_closed = 0.5f * (1 + n[1]);
+    if (occluders && sky_rays_ > 0 && out.sky_closed > 0) {
+      // Cosine-distributed directions around n (stratified: Hammersley with a per-pixel
+      // Cranley-Patterson rotation); only the upward ones can reach the sky, and the
+      // closed form already accounts for the downward share.
+      Vec3f t, b;
+      frame(n, t, b);
+      int up = 0;
+      for (int i = 0; i < sky_rays_; ++i) {
+        const float u1 = (i + 0.5f) / sky_rays_;
+        float u2 = float(radical_inverse_base2(std::uint32_t(i))) + rotation;
+        u2 -= std::floor(u2);
+        const float rad = std::sqrt(u1), phi = 2 * kPi * u2;
+        const float a = rad * std::cos(phi), c = rad * std::sin(phi),
+                    z = std::sqrt(std::max(0.0f, 1 - u1));
+        const Vec3f dir = {a * t[0] + c * b[0] + z * n[0], a * t[1] + c * b[1] + z * n[1],
+                           a * t[2] + c * b[2] + z * n[2]};
+        if (dir[1] > 0) dirs[up++] = dir;
+      }
+      // One fixed count for every pixel: refining only where a first estimate came out
+      // partial biases the result upward (open-looking pixels keep 1); a test caught it.
+      if (up > 0) {
+        out.sky_escape = float(count_escaping(*occluders, origin, dirs, up)) / float(up);
+        out.sky_traced = true;
+      }
+    }
+    return out;
+  }
+
+ private:
+  int sky_rays_ = 0, sun_rays_ = 1;
+  std::optional<Vec3f> sun_dir_;
+  Vec3f sun_u_{}, sun_v_{};
+  float sun_tan_radius_ = 0;
+};
+
+std::optional<OccluderScene> occluder_scene(const Image& distance_m, const Camera& camera,
+                                            const CameraPose& pose) {
+  TriangleMesh mesh = reconstruct_occluder_mesh(distance_m.view(), camera, pose);
+  // Robust traversal: a shadow ray slipping through the shared edge of two triangles would
+  // light one pixel inside a shadow (seen in tests), and here every pixel's visibility is
+  // one sample that nothing averages out. It measured no slower (embree_scene.h).
+  OccluderSceneOptions scene_options;
+  scene_options.robust = true;
+  std::optional<OccluderScene> scene;
+  if (mesh.triangle_count() > 0) scene.emplace(std::move(mesh), scene_options);
+  return scene;
+}
+
+// The surface point of pixel (x, y): false where there is none (sky, or no usable normal).
+bool surface_at(const Image& distance_m, const Image& normal, const Camera& camera,
+                const CameraPose& pose, int x, int y, Vec3f& n, Vec3f& p, Vec3f& ray, float& d) {
+  d = distance_m.at(x, y, 0);
+  n = {normal.at(x, y, 0), normal.at(x, y, 1), normal.at(x, y, 2)};
+  if (!(std::isfinite(d) && d > 0) || dot(n, n) < 0.5f) return false;
+  ray = to_f(pose.ray_direction(camera, x, y));
+  const Vec3f eye = to_f(pose.position_m);
+  p = {eye[0] + d * ray[0], eye[1] + d * ray[1], eye[2] + d * ray[2]};
+  return true;
+}
+
+// The escape shares of a coarser trace (SurfaceGeometryOptions::traced_pixel_budget): per coarse
+// pixel, the share of the sun's rays above its tangent plane and of the sky's upward rays that
+// escape the occluders, -1 where it has none (sky, facing away).
+struct CoarseEscapes {
+  int factor = 1;
+  Image distance_m, sun, sky;
+};
+
+// A coarse pixel's weight for a pixel falls with the difference of their distances, to 0 at this
+// share of the pixel's (a biweight): a depth edge of the photo is far more, a slanted ground's
+// step between coarse pixels less. Compact, so another surface adds nothing.
+constexpr float kCoarseDepthTolerance = 0.1f;
+
+// A fine pixel's escape share from the coarse grid: the bilinear neighbours of its centre,
+// weighted by how near their distance is to its own `d`, those without a share left out; else
+// the share of the coarse pixel nearest in distance among the 3 x 3 around it; else 1.
+float coarse_share(const CoarseEscapes& coarse, const Image& share, int x, int y, float d) {
+  const int cw = share.width(), ch = share.height(), f = coarse.factor;
+  const float cx = (x + 0.5f) / f - 0.5f, cy = (y + 0.5f) / f - 0.5f;
+  const int x0 = int(std::floor(cx)), y0 = int(std::floor(cy));
+  const float fx = cx - x0, fy = cy - y0;
+  double sum = 0, weight = 0;
+  for (int j = 0; j < 2; ++j)
+    for (int i = 0; i < 2; ++i) {
+      const int xi = std::clamp(x0 + i, 0, cw - 1), yj = std::clamp(y0 + j, 0, ch - 1);
+      const float v = share.at(xi, yj, 0);
+      if (v < 0) continue;
+      const float relative = (coarse.distance_m.at(xi, yj, 0) - d) / (kCoarseDepthTolerance * d);
+      if (!(std::fabs(relative) < 1)) continue;
+      const float biweight = (1 - relative * relative) * (1 - relative * relative);
+      const double w = double(i ? fx : 1 - fx) * (j ? fy : 1 - fy) * biweight;
+      sum += w * v;
+      weight += w;
+    }
+  if (weight > 1e-6) return float(sum / weight);
+  const int nx = std::clamp(int(std::lround(cx)), 0, cw - 1),
+            ny = std::clamp(int(std::lround(cy)), 0, ch - 1);
+  float best = 1, nearest = std::numeric_limits<float>::infinity();
+  for (int j = std::max(ny - 1, 0); j <= std::min(ny + 1, ch - 1); ++j)
+    for (int i = std::max(nx - 1, 0); i <= std::min(nx + 1, cw - 1); ++i) {
+      const float v = share.at(i, j, 0);
+      const float gap = std::fabs(coarse.distance_m.at(i, j, 0) - d);
+      if (v >= 0 && gap < nearest) {
+        nearest = gap;
+        best = v;
+      }
+    }
+  return best;
+}
+
+CoarseEscapes trace_coarse(const Image& distance_m, const Camera& camera, const CameraPose& pose,
+                           const VisibilityRays& rays, int factor) {
+  CoarseEscapes out;
+  out.factor = factor;
+  DownsampledDistance coarse = downsample_distance_nearest(distance_m.view(), camera, factor);
+  const int w = coarse.camera.width, h = coarse.camera.height;
+  const Image normal = estimate_normals(coarse.distance_m.view(), coarse.camera, pose);
+  const std::optional<OccluderScene> occluders =
+      occluder_scene(coarse.distance_m, coarse.camera, pose);
+  out.sun = Image(w, h, 1);
+  out.sky = Image(w, h, 1);
+  tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y != rows.end(); ++y)
+      for (int x = 0; x < w; ++x) {
+        Vec3f n, p, ray;
+        float d;
+        out.sun.at(x, y, 0) = out.sky.at(x, y, 0) = -1;
+        if (!surface_at(coarse.distance_m, normal, coarse.camera, pose, x, y, n, p, ray, d))
+          continue;
+        const PixelRays r = rays.trace(n, p, d, x, y, occluders ? &*occluders : nullptr);
+        if (r.sun_above > 0) out.sun.at(x, y, 0) = float(r.sun_escaped) / float(r.sun_above);
+        if (r.sky_traced) out.sky.at(x, y, 0) = r.sky_escape;
+      }
+  });
+  out.distance_m = std::move(coarse.distance_m);
+  return out;
+}
+
+}  // namespace
+
+int traced_visibility_factor(int width, int height, std::size_t traced_pixel_budget) {
+  const double pixels = double(width) * height;
+  if (traced_pixel_budget == 0 || !(pixels > double(traced_pixel_budget))) return 1;
+  // At most the map's narrower side, so the coarse map keeps a pixel across.
+  return std::min({int(std::ceil(std::sqrt(pixels / double(traced_pixel_budget)))), width, height});
+}
+
 SurfaceGeometry surface_geometry_from_depth(const Image& distance_m, const Camera& camera,
                                             const CameraPose& pose, const Lighting& lighting,
                                             const SurfaceGeometryOptions& options) {
@@ -280,100 +484,43 @@ SurfaceGeometry surface_geometry_from_depth(const Image& distance_m, const Camer
     g.sun_visibility = Image(w, h, 1);
     g.sky_visibility = Image(w, h, 1);
     g.surface = Image(w, h, 1);
-
+    const VisibilityRays rays(lighting, options);
+    const int factor =
+        options.shadows ? traced_visibility_factor(w, h, options.traced_pixel_budget) : 1;
     std::optional<OccluderScene> occluders;
-    if (options.shadows) {
-      TriangleMesh mesh = reconstruct_occluder_mesh(distance_m.view(), camera, pose);
-      // Robust traversal: a shadow ray slipping through the shared edge of two triangles would
-      // light one pixel inside a shadow (seen in tests), and here every pixel's visibility is
-      // one sample that nothing averages out. It measured no slower (embree_scene.h).
-      OccluderSceneOptions scene_options;
-      scene_options.robust = true;
-      if (mesh.triangle_count() > 0) occluders.emplace(std::move(mesh), scene_options);
-    }
-    std::optional<Vec3f> sun_dir;
-    Vec3f sun_u{}, sun_v{};
-    float sun_tan_radius = 0;
-    if (lighting.sun) {
-      sun_dir = unit(to_f(lighting.sun->direction_to_sun));
-      if (dot(*sun_dir, *sun_dir) == 0)
-        throw Error(ErrorCode::invalid_argument, "lighting.sun.direction_to_sun is zero");
-      frame(*sun_dir, sun_u, sun_v);
-      sun_tan_radius = float(std::tan(lighting.sun->angular_radius_deg * kPiD / 180));
-    }
-    const int sun_rays = sun_tan_radius > 0 ? options.sun_rays : 1;
-    const Vec3f eye = to_f(pose.position_m);
+    CoarseEscapes coarse;
+    if (factor > 1)
+      coarse = trace_coarse(distance_m, camera, pose, rays, factor);
+    else if (options.shadows)
+      occluders = occluder_scene(distance_m, camera, pose);
 
     tbb::parallel_for(tbb::blocked_range<int>(0, h), [&](const tbb::blocked_range<int>& rows) {
-      Vec3f dirs[256];
       for (int y = rows.begin(); y != rows.end(); ++y)
         for (int x = 0; x < w; ++x) {
-          const float d = distance_m.at(x, y, 0);
-          const Vec3f n = {g.normal.at(x, y, 0), g.normal.at(x, y, 1), g.normal.at(x, y, 2)};
-          if (!(std::isfinite(d) && d > 0) || dot(n, n) < 0.5f) {
+          Vec3f n, p, ray;
+          float d;
+          if (!surface_at(distance_m, g.normal, camera, pose, x, y, n, p, ray, d)) {
             for (int c = 0; c < 3; ++c) g.normal.at(x, y, c) = 0;
             continue;
           }
-          const Vec3f ray = to_f(pose.ray_direction(camera, x, y));
-          const Vec3f p = {eye[0] + d * ray[0], eye[1] + d * ray[1], eye[2] + d * ray[2]};
           for (int c = 0; c < 3; ++c) {
             g.position_m.at(x, y, c) = p[c];
             g.view.at(x, y, c) = -ray[c];
           }
           g.surface.at(x, y, 0) = 1;
-          // Off the surface along its normal, as the scattering core does, so the pixel's own
-          // (and its neighbours') triangles do not shadow it.
-          const float offset = 1e-3f + 1e-3f * d;
-          const Vec3f origin = {p[0] + offset * n[0], p[1] + offset * n[1], p[2] + offset * n[2]};
-          const std::uint32_t seed = hash32(std::uint32_t(y) * 73856093u ^ std::uint32_t(x));
-          const float rotation = float(seed >> 8) * (1.0f / 16777216.0f);
-
-          if (sun_dir && dot(n, *sun_dir) > 0) {
-            int count = 0;
-            for (int i = 0; i < sun_rays; ++i) {
-              Vec3f s = *sun_dir;
-              if (sun_rays > 1) {
-                // Stratified in radius, golden-angle spiral in azimuth, rotated per pixel.
-                const float r = sun_tan_radius * std::sqrt((i + 0.5f) / sun_rays);
-                const float phi = 2.39996323f * i + 2 * kPi * rotation;
-                s = unit(Vec3f{s[0] + r * (std::cos(phi) * sun_u[0] + std::sin(phi) * sun_v[0]),
-                               s[1] + r * (std::cos(phi) * sun_u[1] + std::sin(phi) * sun_v[1]),
-                               s[2] + r * (std::cos(phi) * sun_u[2] + std::sin(phi) * sun_v[2])});
-              }
-              if (dot(n, s) > 0) dirs[count++] = s;
-            }
-            const int seen = occluders ? count_escaping(*occluders, origin, dirs, count) : count;
-            g.sun_visibility.at(x, y, 0) = float(seen) / float(sun_rays);
+          const PixelRays r = rays.trace(n, p, d, x, y, occluders ? &*occluders : nullptr);
+          if (factor > 1) {
+            // The tangent plane per pixel, the occluders from the coarse trace.
+            g.sun_visibility.at(x, y, 0) = r.sun_above > 0
+                                               ? float(r.sun_above) / float(rays.sun_rays()) *
+                                                     coarse_share(coarse, coarse.sun, x, y, d)
+                                               : 0.0f;
+            g.sky_visibility.at(x, y, 0) =
+                r.sky_closed > 0 ? r.sky_closed * coarse_share(coarse, coarse.sky, x, y, d) : 0.0f;
+          } else {
+            g.sun_visibility.at(x, y, 0) = float(r.sun_escaped) / float(rays.sun_rays());
+            g.sky_visibility.at(x, y, 0) = r.sky_closed * r.sky_escape;
           }
-
-          float sky = 0.5f * (1 + n[1]);
-          if (occluders && options.sky_rays > 0 && sky > 0) {
-            // Cosine-distributed directions around n (stratified: Hammersley with a per-pixel
-            // Cranley-Patterson rotation); only the upward ones can reach the sky, and the
-            // closed form already accounts for the downward share.
-            Vec3f t, b;
-            frame(n, t, b);
-            auto escaping_share = [&](int rays) {
-              int up = 0;
-              for (int i = 0; i < rays; ++i) {
-                const float u1 = (i + 0.5f) / rays;
-                float u2 = float(radical_inverse_base2(std::uint32_t(i))) + rotation;
-                u2 -= std::floor(u2);
-                const float rad = std::sqrt(u1), phi = 2 * kPi * u2;
-                const float a = rad * std::cos(phi), c = rad * std::sin(phi),
-                            z = std::sqrt(std::max(0.0f, 1 - u1));
-                const Vec3f dir = {a * t[0] + c * b[0] + z * n[0], a * t[1] + c * b[1] + z * n[1],
-                                   a * t[2] + c * b[2] + z * n[2]};
-                if (dir[1] > 0) dirs[up++] = dir;
-              }
-              if (up == 0) return 1.0f;
-              return float(count_escaping(*occluders, origin, dirs, up)) / float(up);
-            };
-            // One fixed count for every pixel: refining only where a first estimate came out
-            // partial biases the result upward (open-looking pixels keep 1); a test caught it.
-            sky *= escaping_share(options.sky_rays);
-          }
-          g.sky_visibility.at(x, y, 0) = sky;
         }
     });
   });

@@ -5,6 +5,7 @@
 // rendering. One place for the BRDF: everything that evaluates it calls these functions.
 #pragma once
 #include <array>
+#include <cstddef>
 #include <span>
 #include "mr/camera.h"
 #include "mr/image.h"
@@ -62,7 +63,19 @@ struct SurfaceGeometryOptions {
   int threads = 0;      ///< 0: all cores
   int sky_rays = 16;    ///< rays per pixel for the sky's occlusion (with shadows; 0..256)
   int sun_rays = 8;     ///< rays per pixel over the sun's disk (1 when its radius is 0; 1..64)
+  /// With shadows, at most this many pixels are traced (0: every pixel). A larger map's
+  /// occluders (mesh, BVH) and rays are made at a factor f = ceil(sqrt(pixels / budget))
+  /// coarser (the nearest surface of each f x f block, render/depth_downsample.h): each pixel
+  /// keeps its own normal, tangent-plane test and sky closed form, and takes the share of its
+  /// sun and sky rays that escape the occluders from the coarse pixels around it at its own
+  /// distance. Shadow edges soften over about f pixels: for callers that smooth the visibility
+  /// wider than that anyway (a photo target of material transfer).
+  std::size_t traced_pixel_budget = 0;
 };
+
+/// The factor by which a w x h map's visibility is traced coarser under `traced_pixel_budget`
+/// (SurfaceGeometryOptions; 1: every pixel).
+int traced_visibility_factor(int width, int height, std::size_t traced_pixel_budget);
 
 /// Builds SurfaceGeometry from a distance map (normals from render::estimate_normals; with
 /// shadows, the occluder mesh of reconstruct_occluder_mesh in an Embree scene, shadow and sky

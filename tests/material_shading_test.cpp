@@ -440,9 +440,13 @@ TEST(MaterialShading, SkyVisibilityOfAConvexSphereIsTheClosedForm) {
   EXPECT_GT(checked, 3000);
 }
 
-TEST(MaterialShading, OccluderCastsSunShadowAndShadowedPixelsGetOnlySky) {
-  // A 2 m x 2 m wall at z = 6 standing on the ground; the sun in front of the camera to the
-  // right (azimuth 45, elevation 30) throws the wall's shadow toward the camera's left.
+// A 2 m x 2 m wall at z = 6 standing on the ground; the sun in front of the camera to the
+// right (azimuth 45, elevation 30) throws the wall's shadow toward the camera's left. The ground's
+// sun visibility is checked against the shadow's outline (exact 0 or 1 at least 0.1 m from it
+// and, with `edge_px`, that many pixels from any pixel lit otherwise or not checked) and its sky
+// visibility against a quadrature of the wall's form factor, with the visibility traced on at
+// most `traced_pixels` pixels (SurfaceGeometryOptions::traced_pixel_budget).
+void check_wall_shadow(std::size_t traced_pixels, int edge_px) {
   SceneSpec spec;
   spec.ground_label = 1;
   spec.wall = true;
@@ -453,13 +457,14 @@ TEST(MaterialShading, OccluderCastsSunShadowAndShadowedPixelsGetOnlySky) {
   light.sky_radiance = Rgb{0.3f, 0.35f, 0.45f};
   Lighting sky_only = light;
   sky_only.sun.reset();
+  render::SurfaceGeometryOptions options;
+  options.traced_pixel_budget = traced_pixels;
   const render::SurfaceGeometry g =
-      render::surface_geometry_from_depth(s.distance_m, s.camera, s.pose, light);
+      render::surface_geometry_from_depth(s.distance_m, s.camera, s.pose, light, options);
   const Material m{{0.5f, 0.5f, 0.5f}, 0.04f, 0.5f};
   const V3 sun = unit(to_v3(light.sun->direction_to_sun)), eye = to_v3(s.pose.position_m);
-  int shadowed = 0, lit = 0;
-  double sky_traced = 0, sky_expected = 0;
-  int sky_checked = 0;
+  // Per pixel: 1 in the wall's shadow, 0 lit, -1 not checked.
+  std::vector<int> state(std::size_t(spec.width) * spec.height, -1);
   for (int y = 0; y < spec.height; ++y)
     for (int x = 0; x < spec.width; ++x) {
       if (s.labels.at(x, y, 0) != 1) continue;
@@ -479,6 +484,28 @@ TEST(MaterialShading, OccluderCastsSunShadowAndShadowedPixelsGetOnlySky) {
       // Skip shadow edges, and the ground at and behind the wall's foot, where the mesh joins
       // the wall to the ground beside it (their distances are continuous there).
       if (margin < 0.1 || p[2] > spec.wall_z - 0.2) continue;
+      state[std::size_t(y) * spec.width + x] = in_shadow ? 1 : 0;
+    }
+  int shadowed = 0, lit = 0;
+  double sky_traced = 0, sky_expected = 0;
+  int sky_checked = 0;
+  for (int y = 0; y < spec.height; ++y)
+    for (int x = 0; x < spec.width; ++x) {
+      const int here = state[std::size_t(y) * spec.width + x];
+      if (here < 0) continue;
+      bool near_other = false;
+      for (int dy = -edge_px; dy <= edge_px && !near_other; ++dy)
+        for (int dx = -edge_px; dx <= edge_px; ++dx) {
+          const int nx = x + dx, ny = y + dy;
+          if (nx >= 0 && ny >= 0 && nx < spec.width && ny < spec.height &&
+              state[std::size_t(ny) * spec.width + nx] != here)
+            near_other = true;
+        }
+      if (near_other) continue;
+      const V3 d = to_v3(s.pose.ray_direction(s.camera, x, y));
+      const double t = s.distance_m.at(x, y, 0);
+      const V3 p = {eye[0] + t * d[0], 0.0, eye[2] + t * d[2]};
+      const bool in_shadow = here == 1;
       if (in_shadow) {
         EXPECT_EQ(g.sun_visibility.at(x, y, 0), 0.0f) << x << "," << y;
         const Rgb got = render::shade_pixel(m, g, light, x, y);
@@ -518,6 +545,94 @@ TEST(MaterialShading, OccluderCastsSunShadowAndShadowedPixelsGetOnlySky) {
               sky_checked, sky_traced / sky_checked, sky_expected / sky_checked);
   EXPECT_GT(lit, 2000);
   std::printf("wall shadow: %d shadowed and %d lit ground pixels checked\n", shadowed, lit);
+}
+
+TEST(MaterialShading, OccluderCastsSunShadowAndShadowedPixelsGetOnlySky) {
+  check_wall_shadow(0, 0);
+}
+
+// The same scene traced 3 x coarser (400 x 240 pixels, a budget of a ninth of them): two coarse
+// pixels away from the shadow's outline (the reach of a pixel's bilinear neighbours, and the
+// coarse surface's own outline, up to a coarse pixel off) the sun visibility is the same 0 or 1,
+// and the sky's the quadrature's.
+TEST(MaterialShading, CoarseTraceKeepsShadowsAndSkyAwayFromShadowEdges) {
+  constexpr std::size_t kBudget = 400 * 240 / 9 + 1;
+  ASSERT_EQ(render::traced_visibility_factor(400, 240, kBudget), 3);
+  check_wall_shadow(kBudget, 2 * 3);
+}
+
+TEST(MaterialShading, CoarseTraceFactor) {
+  EXPECT_EQ(render::traced_visibility_factor(4000, 2675, 2000000), 3);  // 10.7 MP
+  EXPECT_EQ(render::traced_visibility_factor(1280, 960, 2000000), 1);
+  EXPECT_EQ(render::traced_visibility_factor(2000, 1000, 2000000), 1);  // at the budget
+  EXPECT_EQ(render::traced_visibility_factor(2001, 1000, 2000000), 2);
+  EXPECT_EQ(render::traced_visibility_factor(4000, 2675, 0), 1);  // no budget
+  EXPECT_EQ(render::traced_visibility_factor(2, 5000000, 2000000),
+            2);  // a strip: not below a pixel
+  EXPECT_EQ(render::traced_visibility_factor(1, 5000000, 2000000), 1);
+}
+
+// Per pixel, the coarse trace changes only the occluders' share: the surface, normals, view and
+// positions are the full trace's bit for bit, the tangent plane's cut-off per pixel (a pixel
+// facing away from the sun has none), and each surface's mean visibility the full trace's.
+TEST(MaterialShading, CoarseTraceChangesOnlyTheOccludersShare) {
+  SceneSpec spec;
+  spec.ground_label = 1;
+  spec.wall = true;
+  spec.wall_label = 2;
+  spec.spheres = {{{-1.2, 0.5, 4.5}, 0.5, 3}};
+  const SyntheticScene s = make_scene(spec);
+  Lighting light;
+  light.sun = make_sun(45, 30, {3.0f, 3.0f, 3.0f});
+  light.sky_radiance = Rgb{0.3f, 0.35f, 0.45f};
+  render::SurfaceGeometryOptions options;
+  const render::SurfaceGeometry full =
+      render::surface_geometry_from_depth(s.distance_m, s.camera, s.pose, light, options);
+  options.traced_pixel_budget = 400 * 240 / 9 + 1;
+  const render::SurfaceGeometry coarse =
+      render::surface_geometry_from_depth(s.distance_m, s.camera, s.pose, light, options);
+  auto same = [](const Image& a, const Image& b) {
+    return std::equal(a.pixels().begin(), a.pixels().end(), b.pixels().begin(), b.pixels().end());
+  };
+  EXPECT_TRUE(same(full.surface, coarse.surface));
+  EXPECT_TRUE(same(full.normal, coarse.normal));
+  EXPECT_TRUE(same(full.view, coarse.view));
+  EXPECT_TRUE(same(full.position_m, coarse.position_m));
+  const V3 sun = unit(to_v3(light.sun->direction_to_sun));
+  for (int label = 1; label <= 3; ++label) {
+    double sun_full = 0, sun_coarse = 0, sky_full = 0, sky_coarse = 0, sun_differs = 0;
+    int n = 0, n_sun = 0;
+    for (int y = 0; y < spec.height; ++y)
+      for (int x = 0; x < spec.width; ++x) {
+        if (s.labels.at(x, y, 0) != float(label) || !(full.surface.at(x, y, 0) > 0)) continue;
+        const V3 normal = {full.normal.at(x, y, 0), full.normal.at(x, y, 1),
+                           full.normal.at(x, y, 2)};
+        if (dot3(normal, sun) <= -0.01) {
+          EXPECT_EQ(coarse.sun_visibility.at(x, y, 0), 0.0f);
+        }
+        sky_full += full.sky_visibility.at(x, y, 0);
+        sky_coarse += coarse.sky_visibility.at(x, y, 0);
+        ++n;
+        // (Grazing the sun, the full trace's rays clip the pixel's neighbouring triangles: the
+        // sphere's terminator is darker traced per pixel than from coarser pixels facing it.)
+        if (std::abs(dot3(normal, sun)) < 0.1) continue;
+        sun_full += full.sun_visibility.at(x, y, 0);
+        sun_coarse += coarse.sun_visibility.at(x, y, 0);
+        sun_differs +=
+            std::abs(full.sun_visibility.at(x, y, 0) - coarse.sun_visibility.at(x, y, 0));
+        ++n_sun;
+      }
+    ASSERT_GT(n_sun, 1000) << "label " << label;
+    std::printf(
+        "label %d, %d px (%d off the terminator): mean sun visibility full %.4f coarse "
+        "%.4f (mean |difference| %.4f), sky full %.4f coarse %.4f\n",
+        label, n, n_sun, sun_full / n_sun, sun_coarse / n_sun, sun_differs / n_sun, sky_full / n,
+        sky_coarse / n);
+    EXPECT_NEAR(sun_coarse / n_sun, sun_full / n_sun, 0.01) << "label " << label;
+    EXPECT_NEAR(sky_coarse / n, sky_full / n, 0.01) << "label " << label;
+    // Only the outlines of the shadows differ.
+    EXPECT_LT(sun_differs / n_sun, 0.03) << "label " << label;
+  }
 }
 
 TEST(MaterialShading, ShadeRegionsChecksItsInputs) {

@@ -49,6 +49,12 @@ constexpr std::size_t kMaxStatisticsPixels = 200000;
 // there, a quarter of the tracing (most of the geometry's time).
 constexpr int kSceneSkyRays = 64;
 constexpr int kPhotoSkyRays = 16;
+// A photo target's visibility is traced on at most this many pixels (a larger photo's occluder
+// mesh coarser by an integer factor; render::SurfaceGeometryOptions::traced_pixel_budget): its
+// geometry is then averaged over 2-24 px in each region (smooth_geometry_in_regions), wider
+// than the coarse pixels (3 px for a 12 MP photo), and its mesh, BVH and rays were most of a
+// large photo's time and memory. A 3D scene's visibility is exact and traced on every pixel.
+constexpr std::size_t kPhotoTracedPixels = 2000000;
 // At most this many segments per wanted candidate are fitted, each on this many pixels (a
 // deterministic stride over the segment; five parameters, so 1000 pixels are plenty: the fits
 // are most of the extraction's time, and 2000 gave the same candidates on the synthetic tests
@@ -101,8 +107,9 @@ void validate_options(const MaterialTransferOptions& o) {
   if (o.threads < 0) bad("threads must be >= 0 (0: all cores)");
 }
 
-// Checks a ShadedPhoto and returns its RGB (first three channels) as an owned image.
-Image checked_rgb(const ShadedPhoto& p, const char* what) {
+// Checks a ShadedPhoto and returns its RGB (first three channels): the photo itself when it has
+// three (a 12 MP photo is 144 MB of floats), else a copy of them held in `owned`.
+const Image& checked_rgb(const ShadedPhoto& p, const char* what, Image& owned) {
   if (!p.photo || !p.distance_m)
     throw Error(ErrorCode::invalid_argument,
                 std::string(what) + ": photo and distance map are required");
@@ -125,14 +132,16 @@ Image checked_rgb(const ShadedPhoto& p, const char* what) {
     throw Error(ErrorCode::invalid_argument,
                 std::string(what) + ": the scene has no light (no sun, sky or lamp)");
   if (photo.channels() == 3) return photo;
-  return photo.select_channels(std::array{0, 1, 2});
+  owned = photo.select_channels(std::array{0, 1, 2});
+  return owned;
 }
 
 render::SurfaceGeometry geometry_of(const ShadedPhoto& p, const MaterialTransferOptions& o,
-                                    int sky_rays) {
+                                    int sky_rays, std::size_t traced_pixels = 0) {
   render::SurfaceGeometryOptions g;
   g.threads = o.threads;
   g.sky_rays = sky_rays;
+  g.traced_pixel_budget = traced_pixels;
   return render::surface_geometry_from_depth(*p.distance_m, p.camera, p.scene.pose,
                                              p.scene.lighting, g);
 }
@@ -244,7 +253,8 @@ MaterialCandidates extract(const ShadedPhoto& sample, const MaterialTransferOpti
                            double* light_level_out = nullptr) {
   const auto start = std::chrono::steady_clock::now();
   Step geometry_step(options.cancel, "sample geometry");
-  const Image full_rgb = checked_rgb(sample, "sample");
+  Image owned_rgb;
+  const Image& full_rgb = checked_rgb(sample, "sample", owned_rgb);
   const int full_w = full_rgb.width(), full_h = full_rgb.height();
   const ReducedSample reduced = reduce_sample(full_rgb, sample);
   ShadedPhoto working = sample;
@@ -592,15 +602,19 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
   }
   ShadedPhoto target_checked = target;
   if (scene_only) target_checked.photo = &blank;
-  const Image target_rgb = checked_rgb(target_checked, "target");
+  Image owned_target_rgb;
+  const Image& target_rgb = checked_rgb(target_checked, "target", owned_target_rgb);
   const int w = target_rgb.width(), h = target_rgb.height();
   const int regions = checked_region_count(region_labels_in, w, h);
   return in_arena(options.threads, [&] {
     const auto start = std::chrono::steady_clock::now();
     Step target_step(options.cancel, "target geometry");
-    const render::SurfaceGeometry traced =
-        geometry_of(target, options, scene_only ? kSceneSkyRays : kPhotoSkyRays);
+    render::SurfaceGeometry traced =
+        scene_only ? geometry_of(target, options, kSceneSkyRays)
+                   : geometry_of(target, options, kPhotoSkyRays, kPhotoTracedPixels);
     const double target_geometry_s = seconds_since(start);
+    const int traced_factor =
+        scene_only ? 1 : render::traced_visibility_factor(w, h, kPhotoTracedPixels);
     target_step.end();
     const Lighting& lighting = target.scene.lighting;
     // Thin unlabelled seams between or inside regions (masks from depth or painted by hand)
@@ -614,7 +628,8 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     // A photo's geometry is estimated: its pixel-scale junk would show as lines in the new
     // material's shading (photo/material/apply.h); a 3D scene's is exact and kept.
     const render::SurfaceGeometry geometry =
-        scene_only ? traced : photo::smooth_geometry_in_regions(traced, region_labels);
+        scene_only ? std::move(traced) : photo::smooth_geometry_in_regions(traced, region_labels);
+    traced = {};  // not read again: a large photo's peak memory is set from here on
     std::vector<std::vector<std::int32_t>> region_pixels(regions);
     std::vector<std::size_t> sky_in_region(regions, 0);
     for (int y = 0; y < h; ++y)
@@ -640,7 +655,8 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     const int m = int(candidates.size());
 
     // The sample's look: its used segments, normalised by its light (light_level).
-    const Image sample_rgb = checked_rgb(sample, "sample");
+    Image owned_sample_rgb;
+    const Image& sample_rgb = checked_rgb(sample, "sample", owned_sample_rgb);
     std::vector<std::int32_t> sample_pixels;
     for (std::size_t i = 0; i < sample_rgb.pixel_count(); ++i)
       if (result.candidates.segment_labels.data()[i] >= 0) sample_pixels.push_back(std::int32_t(i));
@@ -778,9 +794,11 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
           "photo has none): %zu changes in %d passes, %zu pixels within %d px of a border",
           despeckled.changed, despeckled.passes, despeckled.band_pixels, photo::kDespeckleBandPx));
     result.notes.push_back(format(
-        "transfer %.1f s: target geometry (%dx%d, sky and sun traced) %.1f s, detail layer %.1f s, "
-        "statistics and search %.1f s",
-        seconds_since(start), w, h, target_geometry_s, detail_s, search_s));
+        "transfer %.1f s: target geometry (%dx%d, sky and sun traced%s) %.1f s, detail layer %.1f "
+        "s, statistics and search %.1f s",
+        seconds_since(start), w, h,
+        traced_factor > 1 ? format(" at 1/%d resolution", traced_factor).c_str() : "",
+        target_geometry_s, detail_s, search_s));
     return result;
   });
 }

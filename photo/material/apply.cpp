@@ -6,7 +6,6 @@
 #include <array>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
-#include <optional>
 #include <string>
 
 #include "core/cv_bridge.h"
@@ -629,39 +628,49 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
     // not a surface of its own, however wide its middle.
     const cv::Mat mask =
         k == 0 ? ((label(roi) == 0) & (gap(roi) == 0)) / 255 : (label(roi) == k) / 255;
-    cv::Mat trusted, weight, weight3, colour, colour_squared;
+    cv::Mat trusted, weight, colour, colour_squared;
     cv::erode(mask, trusted, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
     trusted.convertTo(weight, CV_32F);
-    cv::cvtColor(weight, weight3, cv::COLOR_GRAY2BGR);
-    cv::multiply(weight3, guide(roi), colour);
+    {
+      cv::Mat weight3;
+      cv::cvtColor(weight, weight3, cv::COLOR_GRAY2BGR);
+      cv::multiply(weight3, guide(roi), colour);
+    }
     cv::multiply(colour, guide(roi), colour_squared);
-    const WindowSums near(weight, colour, colour_squared, reach);
     // The gap test's colours from farther: the middle of a gap 2 r_gap wide is r_gap from either
-    // side, whose trusted pixels start r further in.
-    const bool gap_test = k > 0 && gap_pixels > 0 && cv::countNonZero(gap(roi)) > 0;
-    const std::optional<WindowSums> far =
-        gap_test ? std::optional<WindowSums>(std::in_place, weight, colour, colour_squared,
-                                             reach + gap_radius)
-                 : std::nullopt;
-    tbb::parallel_for(0, roi.height, [&](int j) {
-      const int y = roi.y + j;
-      for (int i = 0; i < roi.width; ++i) {
-        const int x = roi.x + i, own = label.at<int>(y, x);
-        if (own < 0) continue;
-        if (own == k && trusted.at<unsigned char>(j, i)) trusted_own.at<unsigned char>(y, x) = 1;
-        if (const int g = gap_test ? gap_index.at<int>(y, x) : -1; g >= 0) {
+    // side, whose trusted pixels start r further in. Made and used first, then released: each
+    // window's sums are 7 floats a pixel of the class's box (the whole frame for a large
+    // region), so the two are never held together.
+    if (k > 0 && gap_pixels > 0 && cv::countNonZero(gap(roi)) > 0) {
+      const WindowSums far(weight, colour, colour_squared, reach + gap_radius);
+      tbb::parallel_for(0, roi.height, [&](int j) {
+        const int y = roi.y + j;
+        for (int i = 0; i < roi.width; ++i) {
+          const int x = roi.x + i, g = gap_index.at<int>(y, x);
+          if (g < 0) continue;
           // At least a full trusted window's worth of the region around the gap pixel.
-          const float n = far->count.at<float>(j, i);
+          const float n = far.count.at<float>(j, i);
           if (n >= float((2 * r + 1) * (2 * r + 1))) {
-            const cv::Vec3f mean = far->mean(j, i, n);
+            const cv::Vec3f mean = far.mean(j, i, n);
             auto& two = gap_neighbours[std::size_t(g)];
-            const Neighbour here{k, n, far->spread(j, i, n, mean), mean};
+            const Neighbour here{k, n, far.spread(j, i, n, mean), mean};
             if (n > two[0].count)
               two[1] = two[0], two[0] = here;
             else if (n > two[1].count)
               two[1] = here;
           }
         }
+      });
+    }
+    const WindowSums near(weight, colour, colour_squared, reach);
+    colour.release();
+    colour_squared.release();
+    tbb::parallel_for(0, roi.height, [&](int j) {
+      const int y = roi.y + j;
+      for (int i = 0; i < roi.width; ++i) {
+        const int x = roi.x + i, own = label.at<int>(y, x);
+        if (own < 0) continue;
+        if (own == k && trusted.at<unsigned char>(j, i)) trusted_own.at<unsigned char>(y, x) = 1;
         const float n = near.count.at<float>(j, i);
         const float min_count =
             min_share * float((std::min(x + reach, w - 1) - std::max(x - reach, 0) + 1) *
