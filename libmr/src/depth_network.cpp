@@ -15,9 +15,9 @@
 #include <vector>
 
 #include "core/oiio_module.h"
+#include "core/srgb_encode.h"
 #include "mr/error.h"
 #include "photo/opencv_contrib.h"
-#include "srgb_encode.h"
 
 namespace mr {
 

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <string>
 
+#include "core/srgb_encode.h"
 #include "mr/cancel.h"
 #include "mr/color.h"
 #include "mr/depth.h"
@@ -20,7 +21,6 @@
 #include "photo/lamps.h"
 #include "photo/sky_matte.h"
 #include "render/backend.h"
-#include "srgb_encode.h"
 
 namespace mr {
 

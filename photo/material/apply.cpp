@@ -9,6 +9,7 @@
 #include <string>
 
 #include "core/cv_bridge.h"
+#include "core/srgb_encode.h"
 #include "mr/error.h"
 
 namespace mr::photo {
@@ -183,8 +184,7 @@ bool eight_bit_coded(const Image& photo) {
       for (int c = 0; c < 3; ++c) {
         const float v = photo.at(x, y, c);
         if (!(v >= 0 && v <= 1)) continue;
-        const float code =
-            255 * (v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1 / 2.4f) - 0.055f);
+        const float code = 255 * mr::detail::srgb_encode(v);
         on_codes += std::abs(code - std::round(code)) < 0.02f;
         ++sampled;
       }

@@ -1,6 +1,7 @@
 // Private to libmr: the IEC 61966-2-1 sRGB encoding of one scene-linear value (clamped to
 // [0, 1]), for the few places that need the display value without an OCIO processor (the depth
-// network's input, the seam softening's view of the displayed fog).
+// network's input, the seam softening's view of the displayed fog, the 8-bit codes a photo was
+// decoded from).
 #pragma once
 
 #include <algorithm>
