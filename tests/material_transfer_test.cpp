@@ -621,6 +621,51 @@ TEST(MaterialRealPhoto, StrongTextureIsKept) {
   EXPECT_GT(contrast_ratio, 0.5);  // not flattened (a sheen over it would lower the ratio)
 }
 
+// A photo target over the traced-pixel budget (0.5 MP; libmr/src/material.cpp) has its sun and
+// sky visibility traced coarser (render::SurfaceGeometryOptions::traced_pixel_budget): the
+// textured ground of StrongTextureIsKept at 880 x 660, with a ball casting its shadow onto it.
+// The note names the coarser trace and the texture is kept by the same bar. (The coarse trace's
+// own accuracy: MaterialShading.CoarseTrace* in material_shading_test.cpp.)
+TEST(MaterialRealPhoto, ALargerPhotoIsTracedCoarserAndKeepsItsTexture) {
+  const int w = 880, h = 660;
+  Synthetic target = make_geometry(w, h, -40, true, {0.6, 0.45, 3.2}, 0.45, true);
+  target.scene.lighting.sun->direction_to_sun = direction_from_azimuth_elevation(100, 30);
+  render(target, {kMatte, kMatte, kMatte});
+  const Image t = strong_texture(w, h, 1.0, 21);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) target.photo.at(x, y, c) *= t.at(x, y, 0);
+  // The ground's halves are the regions; the ball stays as it is.
+  for (float& v : target.labels.pixels()) v = v > 1 ? v - 1 : 0;
+  MaterialTransferOptions options;
+  options.seed = 7;
+  const MaterialTransferResult r =
+      transfer_material(shaded(glossy_sphere()), shaded(target), target.labels, options);
+  EXPECT_TRUE(std::any_of(r.notes.begin(), r.notes.end(), [](const std::string& n) {
+    return n.find("sky and sun traced at 1/2 resolution") != std::string::npos;
+  }));
+  std::vector<std::pair<double, double>> pairs;
+  for (int y = 8; y < h - 8; ++y)
+    for (int x = 8; x < w - 8; ++x) {
+      bool inside = true;  // 8 px from any other label: no feather, no snapped border
+      for (int dy = -8; dy <= 8 && inside; dy += 4)
+        for (int dx = -8; dx <= 8; dx += 4)
+          inside &= target.labels.at(x + dx, y + dy, 0) == target.labels.at(x, y, 0);
+      if (inside && target.labels.at(x, y, 0) == 1)
+        pairs.emplace_back(high_pass(target.photo, x, y), high_pass(r.image, x, y));
+    }
+  double ma = 0, mb = 0;
+  for (auto [a, b] : pairs) ma += a, mb += b;
+  ma /= double(pairs.size()), mb /= double(pairs.size());
+  double num = 0, va = 0, vb = 0;
+  for (auto [a, b] : pairs) num += (a - ma) * (b - mb), va += (a - ma) * (a - ma), vb += (b - mb) * (b - mb);
+  const double correlation = num / std::sqrt(va * vb), contrast_ratio = std::sqrt(vb / va);
+  std::printf("%zu px: high-pass correlation photo/result %.4f, contrast ratio %.3f\n",
+              pairs.size(), correlation, contrast_ratio);
+  EXPECT_GE(correlation, 0.9);
+  EXPECT_GT(contrast_ratio, 0.5);
+}
+
 TEST(MaterialRealPhoto, NoSpeckleAlongRegionEdgesAndThinGaps) {
   // A region mask like one drawn from depth: 1- and 2-pixel unlabelled seams (a line between
   // the two regions, lines inside region 1, a wavy line inside region 2). (A mask's own outer

@@ -49,12 +49,22 @@ constexpr std::size_t kMaxStatisticsPixels = 200000;
 // there, a quarter of the tracing (most of the geometry's time).
 constexpr int kSceneSkyRays = 64;
 constexpr int kPhotoSkyRays = 16;
-// A photo target's visibility is traced on at most this many pixels (a larger photo's occluder
+// A photo target's visibility is traced on about this many pixels (a larger photo's occluder
 // mesh coarser by an integer factor; render::SurfaceGeometryOptions::traced_pixel_budget): its
-// geometry is then averaged over 2-24 px in each region (smooth_geometry_in_regions), wider
-// than the coarse pixels (3 px for a 12 MP photo), and its mesh, BVH and rays were most of a
-// large photo's time and memory. A 3D scene's visibility is exact and traced on every pixel.
-constexpr std::size_t kPhotoTracedPixels = 2000000;
+// geometry is then averaged over 2-24 px in each region (smooth_geometry_in_regions), and the
+// coarse pixels stay at most a third of that (2 px for the gallery's 1 MP photos, 5 for 12 MP,
+// 8 from 50 MP on). The mesh, BVH and rays were most of a photo's time and memory (a 10.7 MP
+// photo: 15 of 28 s, 3.2 GB; tuning dragonfly's slivered depth: 11 of 19 s at 1280 px), and
+// the gallery's transfers meet the same bars with 0.5 MP (gallery/results/material37_tune.md).
+// A 3D scene's visibility is exact and traced on every pixel.
+constexpr std::size_t kPhotoTracedPixels = 500000;
+
+std::size_t photo_traced_pixels(int width, int height) {
+  const int max_factor = std::max(1, photo::region_smoothing_radius(width, height) / 3);
+  const double pixels = double(width) * height;
+  return std::max(kPhotoTracedPixels,
+                  std::size_t(std::ceil(pixels / double(max_factor * max_factor))));
+}
 // At most this many segments per wanted candidate are fitted, each on this many pixels (a
 // deterministic stride over the segment; five parameters, so 1000 pixels are plenty: the fits
 // are most of the extraction's time, and 2000 gave the same candidates on the synthetic tests
@@ -611,10 +621,10 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     Step target_step(options.cancel, "target geometry");
     render::SurfaceGeometry traced =
         scene_only ? geometry_of(target, options, kSceneSkyRays)
-                   : geometry_of(target, options, kPhotoSkyRays, kPhotoTracedPixels);
+                   : geometry_of(target, options, kPhotoSkyRays, photo_traced_pixels(w, h));
     const double target_geometry_s = seconds_since(start);
     const int traced_factor =
-        scene_only ? 1 : render::traced_visibility_factor(w, h, kPhotoTracedPixels);
+        scene_only ? 1 : render::traced_visibility_factor(w, h, photo_traced_pixels(w, h));
     target_step.end();
     const Lighting& lighting = target.scene.lighting;
     // Thin unlabelled seams between or inside regions (masks from depth or painted by hand)

@@ -432,12 +432,16 @@ void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting&
                     });
 }
 
+int region_smoothing_radius(int width, int height) {
+  return std::clamp(int(std::lround(0.03 * std::min(width, height))), 2, 24);
+}
+
 render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry& geometry,
                                                    const Image& region_labels, int radius_px) {
   require_size(region_labels, geometry, "region labels");
   const int w = region_labels.width(), h = region_labels.height();
   const int radius =
-      radius_px > 0 ? radius_px : std::clamp(int(std::lround(0.03 * std::min(w, h))), 2, 24);
+      radius_px > 0 ? radius_px : region_smoothing_radius(w, h);
   cv::Mat group(h, w, CV_32S, cv::Scalar(-1));
   cv::Mat normal(h, w, CV_32FC3, cv::Scalar::all(0)), sun(h, w, CV_32F, cv::Scalar(0)),
       sky(h, w, CV_32F, cv::Scalar(0));

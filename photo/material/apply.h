@@ -85,6 +85,9 @@ Image floored_shading(const Image& shading, const render::SurfaceGeometry& geome
 /// is exact.
 render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry& geometry,
                                                    const Image& region_labels, int radius_px = 0);
+/// smooth_geometry_in_regions' default radius for a width x height photo: 3 % of the short
+/// side, 2..24 px.
+int region_smoothing_radius(int width, int height);
 
 /// Region labels with thin gaps closed: label-0 surface pixels in gaps up to 2 x gap_px wide
 /// between or inside regions (a morphological closing of their union) join the nearest region.
