@@ -478,6 +478,18 @@ double high_pass(const Image& im, int x, int y) {
   return log_luminance(im, x, y) - mean / 49;
 }
 
+// Correlation and contrast ratio (result's spread over the photo's) of (photo, result) pairs.
+std::pair<double, double> correlation_and_contrast(
+    const std::vector<std::pair<double, double>>& pairs) {
+  double ma = 0, mb = 0;
+  for (auto [a, b] : pairs) ma += a, mb += b;
+  ma /= double(pairs.size()), mb /= double(pairs.size());
+  double num = 0, va = 0, vb = 0;
+  for (auto [a, b] : pairs)
+    num += (a - ma) * (b - mb), va += (a - ma) * (a - ma), vb += (b - mb) * (b - mb);
+  return {num / std::sqrt(va * vb), std::sqrt(vb / va)};
+}
+
 TEST(MaterialRealPhoto, LooseFitsAreKeptWithAWarningInsteadOfFailing) {
   // A sample no BRDF explains closely: the glossy sphere with a strong per-pixel texture
   // (log-normal, sigma 0.6: relative RMS about 0.6 for any fit). Every segment exceeds
@@ -608,13 +620,7 @@ TEST(MaterialRealPhoto, StrongTextureIsKept) {
   std::vector<std::pair<double, double>> pairs;
   for (int y = 16; y < 114; ++y)
     for (int x = 6; x < 74; ++x) pairs.emplace_back(high_pass(target.photo, x, y), high_pass(r.image, x, y));
-  double ma = 0, mb = 0;
-  for (auto [a, b] : pairs) ma += a, mb += b;
-  ma /= double(pairs.size()), mb /= double(pairs.size());
-  double num = 0, va = 0, vb = 0;
-  for (auto [a, b] : pairs) num += (a - ma) * (b - mb), va += (a - ma) * (a - ma), vb += (b - mb) * (b - mb);
-  const double correlation = num / std::sqrt(va * vb);
-  const double contrast_ratio = std::sqrt(vb / va);
+  const auto [correlation, contrast_ratio] = correlation_and_contrast(pairs);
   std::printf("high-pass correlation photo/result %.4f, contrast ratio %.3f\n", correlation,
               contrast_ratio);
   EXPECT_GE(correlation, 0.9);
@@ -654,12 +660,7 @@ TEST(MaterialRealPhoto, ALargerPhotoIsTracedCoarserAndKeepsItsTexture) {
       if (inside && target.labels.at(x, y, 0) == 1)
         pairs.emplace_back(high_pass(target.photo, x, y), high_pass(r.image, x, y));
     }
-  double ma = 0, mb = 0;
-  for (auto [a, b] : pairs) ma += a, mb += b;
-  ma /= double(pairs.size()), mb /= double(pairs.size());
-  double num = 0, va = 0, vb = 0;
-  for (auto [a, b] : pairs) num += (a - ma) * (b - mb), va += (a - ma) * (a - ma), vb += (b - mb) * (b - mb);
-  const double correlation = num / std::sqrt(va * vb), contrast_ratio = std::sqrt(vb / va);
+  const auto [correlation, contrast_ratio] = correlation_and_contrast(pairs);
   std::printf("%zu px: high-pass correlation photo/result %.4f, contrast ratio %.3f\n",
               pairs.size(), correlation, contrast_ratio);
   EXPECT_GE(correlation, 0.9);

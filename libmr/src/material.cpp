@@ -53,7 +53,7 @@ constexpr int kPhotoSkyRays = 16;
 // mesh coarser by an integer factor; render::SurfaceGeometryOptions::traced_pixel_budget): its
 // geometry is then averaged over 2-24 px in each region (smooth_geometry_in_regions), and the
 // coarse pixels stay at most a third of that (2 px for the gallery's 1 MP photos, 5 for 12 MP,
-// 8 from 50 MP on). The mesh, BVH and rays were most of a photo's time and memory (a 10.7 MP
+// 8 from 32 MP on). The mesh, BVH and rays were most of a photo's time and memory (a 10.7 MP
 // photo: 15 of 28 s, 3.2 GB; tuning dragonfly's slivered depth: 11 of 19 s at 1280 px), and
 // the gallery's transfers meet the same bars with 0.5 MP (gallery/results/material37_tune.md).
 // A 3D scene's visibility is exact and traced on every pixel.

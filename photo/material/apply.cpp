@@ -440,8 +440,7 @@ render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry
                                                    const Image& region_labels, int radius_px) {
   require_size(region_labels, geometry, "region labels");
   const int w = region_labels.width(), h = region_labels.height();
-  const int radius =
-      radius_px > 0 ? radius_px : region_smoothing_radius(w, h);
+  const int radius = radius_px > 0 ? radius_px : region_smoothing_radius(w, h);
   cv::Mat group(h, w, CV_32S, cv::Scalar(-1));
   cv::Mat normal(h, w, CV_32FC3, cv::Scalar::all(0)), sun(h, w, CV_32F, cv::Scalar(0)),
       sky(h, w, CV_32F, cv::Scalar(0));
