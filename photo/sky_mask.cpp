@@ -738,14 +738,28 @@ SkyMask sky_mask_of_picture(ConstImageView photo, const std::array<PixelPoint, 2
   sky.convertTo(soft, CV_32F);
   if (s < 1) cv::resize(soft, soft, cv::Size(photo.width, photo.height), 0, 0, cv::INTER_LINEAR);
   const int radius = std::max(2, int(std::lround(0.004 * std::hypot(photo.width, photo.height))));
-  cv::Mat refined, binary, grown, shrunk;
-  contrib::guided_filter(full, soft, refined, radius, 1e-3);
+  cv::Mat binary, grown, shrunk;
   // Only within `radius` of the mask's edges does the filter decide; elsewhere the mask stands.
   binary = soft >= 0.5f;
   const cv::Mat disk =
       cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * radius + 1, 2 * radius + 1));
   cv::dilate(binary, grown, disk);
   cv::erode(binary, shrunk, disk);
+  // The filter in strips of rows, only where they hold some of that band: its value at a pixel
+  // depends on the rows within 2 radius of it (a box of radius r over coefficients that are
+  // boxes of radius r), so each strip is filtered with that margin and its own rows kept. With
+  // a 3-channel guide the whole-frame filter held about 20 float images of the photo's size
+  // (2 GB at 24 MP, the estimate's peak); a strip's are of its size.
+  cv::Mat refined(soft.size(), CV_32F, cv::Scalar(0));
+  const int margin = 2 * radius + 2, strip = std::max(256, 8 * radius);
+  for (int y0 = 0; y0 < photo.height; y0 += strip) {
+    const int y1 = std::min(photo.height, y0 + strip);
+    if (cv::countNonZero(grown.rowRange(y0, y1) != shrunk.rowRange(y0, y1)) == 0) continue;
+    const int a = std::max(0, y0 - margin), b = std::min(photo.height, y1 + margin);
+    cv::Mat part;
+    contrib::guided_filter(full.rowRange(a, b), soft.rowRange(a, b), part, radius, 1e-3);
+    part.rowRange(y0 - a, y1 - a).copyTo(refined.rowRange(y0, y1));
+  }
   // Issue 11 item 4: in that band the matte is how much of the sky each pixel shows. The mask
   // stops short of the sky's edge or overshoots it by a pixel or two (its texture test looks
   // at a window), and the guided filter can only blur such a misplaced edge: a ramp several
