@@ -619,12 +619,11 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
   return in_arena(options.threads, [&] {
     const auto start = std::chrono::steady_clock::now();
     Step target_step(options.cancel, "target geometry");
+    const std::size_t traced_pixels = scene_only ? 0 : photo_traced_pixels(w, h);
     render::SurfaceGeometry traced =
-        scene_only ? geometry_of(target, options, kSceneSkyRays)
-                   : geometry_of(target, options, kPhotoSkyRays, photo_traced_pixels(w, h));
+        geometry_of(target, options, scene_only ? kSceneSkyRays : kPhotoSkyRays, traced_pixels);
     const double target_geometry_s = seconds_since(start);
-    const int traced_factor =
-        scene_only ? 1 : render::traced_visibility_factor(w, h, photo_traced_pixels(w, h));
+    const int traced_factor = render::traced_visibility_factor(w, h, traced_pixels);
     target_step.end();
     const Lighting& lighting = target.scene.lighting;
     // Thin unlabelled seams between or inside regions (masks from depth or painted by hand)
