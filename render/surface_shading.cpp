@@ -479,8 +479,9 @@ SurfaceGeometry surface_geometry_from_depth(const Image& distance_m, const Camer
     // Throws for a wrong channel count or size (the message names both sizes).
     g.normal = estimate_normals(distance_m.view(), camera, pose);
     const int w = camera.width, h = camera.height;
-    g.view = Image(w, h, 3);
-    g.position_m = Image(w, h, 3, {"P.x", "P.y", "P.z"});
+    g.distance_m = distance_m;
+    g.camera = camera;
+    g.pose = pose;
     g.sun_visibility = Image(w, h, 1);
     g.sky_visibility = Image(w, h, 1);
     g.surface = Image(w, h, 1);
@@ -502,10 +503,6 @@ SurfaceGeometry surface_geometry_from_depth(const Image& distance_m, const Camer
           if (!surface_at(distance_m, g.normal, camera, pose, x, y, n, p, ray, d)) {
             for (int c = 0; c < 3; ++c) g.normal.at(x, y, c) = 0;
             continue;
-          }
-          for (int c = 0; c < 3; ++c) {
-            g.position_m.at(x, y, c) = p[c];
-            g.view.at(x, y, c) = -ray[c];
           }
           g.surface.at(x, y, 0) = 1;
           const PixelRays r = rays.trace(n, p, d, x, y, occluders ? &*occluders : nullptr);
@@ -531,10 +528,14 @@ SurfacePoint surface_point(const SurfaceGeometry& geometry, int x, int y) {
   SurfacePoint p;
   p.surface = geometry.surface.at(x, y, 0) > 0;
   if (!p.surface) return p;
+  // As surface_at computed them when the geometry was made (the same floats).
+  const float d = geometry.distance_m.at(x, y, 0);
+  const Vec3f ray = to_f(geometry.pose.ray_direction(geometry.camera, x, y));
+  const Vec3f eye = to_f(geometry.pose.position_m);
   for (int c = 0; c < 3; ++c) {
     p.normal[c] = geometry.normal.at(x, y, c);
-    p.view[c] = geometry.view.at(x, y, c);
-    p.position_m[c] = geometry.position_m.at(x, y, c);
+    p.view[c] = -ray[c];
+    p.position_m[c] = eye[c] + d * ray[c];
   }
   p.sun_visibility = geometry.sun_visibility.at(x, y, 0);
   p.sky_visibility = geometry.sky_visibility.at(x, y, 0);

@@ -42,9 +42,13 @@ SpecularAlbedo ggx_directional_albedo(float n_dot_v, float roughness);
 /// Per-pixel geometry and light, computed once per photo and reused for every material.
 /// Images are the camera's size; pixels without a surface (sky) have surface(x, y) = 0.
 struct SurfaceGeometry {
-  Image normal;      ///< 3 channels: unit world normal facing the camera
-  Image view;        ///< 3 channels: unit world direction from the surface to the camera
-  Image position_m;  ///< 3 channels: world position
+  Image normal;  ///< 3 channels: unit world normal facing the camera
+  /// 1 channel: metres along each pixel's ray, as given. With the camera and pose it gives a
+  /// surface pixel's world position and its unit direction to the camera (surface_point),
+  /// which are not stored: 24 bytes a pixel less on a large photo.
+  Image distance_m;
+  Camera camera;
+  CameraPose pose;
   /// 1 channel in [0, 1]: the fraction of the sun's disk seen from the surface (above its
   /// tangent plane and past the occluder mesh); 0 with no sun or facing away from it.
   Image sun_visibility;

@@ -637,8 +637,8 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     // A photo's geometry is estimated: its pixel-scale junk would show as lines in the new
     // material's shading (photo/material/apply.h); a 3D scene's is exact and kept.
     const render::SurfaceGeometry geometry =
-        scene_only ? std::move(traced) : photo::smooth_geometry_in_regions(traced, region_labels);
-    traced = {};  // not read again: a large photo's peak memory is set from here on
+        scene_only ? std::move(traced)
+                   : photo::smooth_geometry_in_regions(std::move(traced), region_labels);
     std::vector<std::vector<std::int32_t>> region_pixels(regions);
     std::vector<std::size_t> sky_in_region(regions, 0);
     for (int y = 0; y < h; ++y)
@@ -689,9 +689,8 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     }
     // With detail, D x the floored shading reproduces the photo where the model's shading is
     // untrustworthy (photo_detail); without, the plain rendering.
-    const Image shading =
-        detail_used ? photo::floored_shading(model_shading, geometry) : std::move(model_shading);
-    model_shading = Image();  // not read again: 12 bytes a pixel off the peak (apply's)
+    const Image shading = detail_used ? photo::floored_shading(std::move(model_shading), geometry)
+                                      : std::move(model_shading);
     const double detail_s = seconds_since(detail_start);
     const auto search_start = std::chrono::steady_clock::now();
     if (!(target_reference > 0))

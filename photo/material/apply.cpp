@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <string>
 
@@ -238,7 +239,11 @@ cv::Mat photo_luminance(const Image& photo, float level, double coding_noise_cod
 
 }  // namespace
 
-Image floored_shading(const Image& shading, const render::SurfaceGeometry& geometry) {
+namespace {
+
+// floored_shading's floor: kShadingFloor x the mean shading over the surfaces; -infinity (no
+// floor: std::max(v, it) is v) where there is no surface or no light.
+float shading_floor(const Image& shading, const render::SurfaceGeometry& geometry) {
   require_size(shading, geometry, "shading");
   const int w = shading.width(), h = shading.height();
   double mean_shading = 0;
@@ -249,14 +254,22 @@ Image floored_shading(const Image& shading, const render::SurfaceGeometry& geome
         mean_shading += (shading.at(x, y, 0) + shading.at(x, y, 1) + shading.at(x, y, 2)) / 3.0;
         ++n;
       }
-  Image out = shading;
-  if (n == 0 || !(mean_shading > 0)) return out;
-  const float floor_value = float(kShadingFloor * mean_shading / double(n));
+  if (n == 0 || !(mean_shading > 0)) return -std::numeric_limits<float>::infinity();
+  return float(kShadingFloor * mean_shading / double(n));
+}
+
+}  // namespace
+
+Image floored_shading(Image shading, const render::SurfaceGeometry& geometry) {
+  const float floor_value = shading_floor(shading, geometry);
+  if (floor_value == -std::numeric_limits<float>::infinity()) return shading;
+  const int w = shading.width(), h = shading.height();
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
       if (geometry.surface.at(x, y, 0) > 0)
-        for (int c = 0; c < 3; ++c) out.at(x, y, c) = std::max(out.at(x, y, c), floor_value);
-  return out;
+        for (int c = 0; c < 3; ++c)
+          shading.at(x, y, c) = std::max(shading.at(x, y, c), floor_value);
+  return shading;
 }
 
 Image photo_detail(const Image& photo, const Image& shading_in,
@@ -272,18 +285,16 @@ Image photo_detail(const Image& photo, const Image& shading_in,
     throw Error(ErrorCode::invalid_argument,
                 "photo_detail: bad options (noise floor, border, coding noise)");
   const int w = photo.width(), h = photo.height();
-  const Image shading = floored_shading(shading_in, geometry);
+  // The floored shading's values are taken pixel by pixel, not held as an image.
+  const float shading_floor_value = shading_floor(shading_in, geometry);
   constexpr float kFloorRadiance = 1e-5f;
-  Image detail(w, h, kDetailChannels);
-  for (float& v : detail.pixels()) v = 1.0f;
 
   // The noise floor in the photo's units: a share of its bright surfaces' luminance (99th
   // percentile), so that it means the same for a display-referred JPEG and an EXR.
   const float level = bright_surface_level(photo, geometry);
   const float noise = float(options.noise_floor) * level;
   cv::Mat calm_luminance;
-  const cv::Mat photo_lum =
-      photo_luminance(photo, level, options.coding_noise_codes, calm_luminance);
+  cv::Mat photo_lum = photo_luminance(photo, level, options.coding_noise_codes, calm_luminance);
 
   // Groups whose base is smoothed separately: the regions (label > 0; label 0 is one more
   // group), or all surfaces as one. Smoothing across a region's border would bleed the
@@ -295,7 +306,11 @@ Image photo_detail(const Image& photo, const Image& shading_in,
     for (int x = 0; x < w; ++x) {
       if (!(geometry.surface.at(x, y, 0) > 0)) continue;
       bool ok = true;
-      for (int c = 0; c < 3; ++c) ok = ok && shading.at(x, y, c) > 0 && std::isfinite(photo.at(x, y, c));
+      float floored[3];
+      for (int c = 0; c < 3; ++c) {
+        floored[c] = std::max(shading_in.at(x, y, c), shading_floor_value);
+        ok = ok && floored[c] > 0 && std::isfinite(photo.at(x, y, c));
+      }
       if (!ok) continue;
       const int g = options.region_labels
                         ? std::max(0, int(options.region_labels->at(x, y, 0)))
@@ -304,12 +319,15 @@ Image photo_detail(const Image& photo, const Image& shading_in,
       groups = std::max(groups, g + 1);
       // Luminance only: a channel the photo barely records (green and blue of a red saucer)
       // holds mostly JPEG and sensor noise, which a new colour would show as coloured grain.
-      const float s = luminance(shading.pixel(x, y));
+      const float s = luminance(floored);
       log_albedo.at<float>(y, x) =
           std::log((std::max(photo_lum.at<float>(y, x), kFloorRadiance) + noise) / s);
       calm_log_albedo.at<float>(y, x) =
           std::log((std::max(calm_luminance.at<float>(y, x), kFloorRadiance) + noise) / s);
     }
+  // Each temporary is released once read for the last time: a large photo's peak is here.
+  photo_lum.release();
+  calm_luminance.release();
   const int radius = options.radius_px > 0
                          ? options.radius_px
                          : std::clamp(int(std::lround(0.08 * std::min(w, h))), 8, 256);
@@ -342,6 +360,7 @@ Image photo_detail(const Image& photo, const Image& shading_in,
   // region's base, a bright or dark rim in the new material. D fades to 1 over the border's
   // pixels (distance to the nearest pixel of another group, the sky and unusable pixels
   // included), the feather in apply_materials blending them with the photo instead.
+  robust_weight.release();
   cv::Mat inside(h, w, CV_8U, cv::Scalar(0)), border_distance;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -356,6 +375,9 @@ Image photo_detail(const Image& photo, const Image& shading_in,
       inside.at<unsigned char>(y, x) = same ? 255 : 0;
     }
   cv::distanceTransform(inside, border_distance, cv::DIST_L2, 3);
+  inside.release();
+  Image detail(w, h, kDetailChannels);
+  for (float& v : detail.pixels()) v = 1.0f;
   tbb::parallel_for(0, h, [&](int y) {
     for (int x = 0; x < w; ++x) {
       if (group.at<int>(y, x) < 0) continue;
@@ -372,10 +394,13 @@ Image photo_detail(const Image& photo, const Image& shading_in,
   return detail;
 }
 
-void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting& lighting,
-                        const Image& shading, const Image* detail, const Material& material,
-                        std::span<const std::int32_t> pixels, Image& out) {
-  require_size(out, geometry, "output");
+namespace {
+
+// render_with_detail's pixels; `output(i, x, y)` gives where the i-th listed pixel's RGB goes.
+template <class Output>
+void render_pixels_with_detail(const render::SurfaceGeometry& geometry, const Lighting& lighting,
+                               const Image& shading, const Image* detail, const Material& material,
+                               std::span<const std::int32_t> pixels, Output&& output) {
   require_size(shading, geometry, "shading");
   if (detail) require_size(*detail, geometry, "detail");
   if (detail && detail->channels() != 3 && detail->channels() != kDetailChannels)
@@ -394,7 +419,7 @@ void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting&
                         if (!point.surface) continue;
                         const render::ShadingTerms terms =
                             render::shading_terms(point, lighting, material.roughness);
-                        float* o = out.pixel(x, y);
+                        float* o = output(i, x, y);
                         // The photo's detail multiplies the specular lobe as it does the
                         // diffuse light: D is the photo's radiance over its local base, and the
                         // estimate cannot tell a brighter albedo from relief catching more light
@@ -432,18 +457,36 @@ void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting&
                     });
 }
 
+}  // namespace
+
+void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting& lighting,
+                        const Image& shading, const Image* detail, const Material& material,
+                        std::span<const std::int32_t> pixels, Image& out) {
+  require_size(out, geometry, "output");
+  render_pixels_with_detail(geometry, lighting, shading, detail, material, pixels,
+                            [&](std::size_t, int x, int y) { return out.pixel(x, y); });
+}
+
+void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting& lighting,
+                        const Image& shading, const Image* detail, const Material& material,
+                        std::span<const std::int32_t> pixels, std::span<float> rgb) {
+  if (rgb.size() != 3 * pixels.size())
+    throw Error(ErrorCode::invalid_argument,
+                "render_with_detail: the output needs 3 floats per listed pixel");
+  render_pixels_with_detail(geometry, lighting, shading, detail, material, pixels,
+                            [&](std::size_t i, int, int) { return rgb.data() + 3 * i; });
+}
+
 int region_smoothing_radius(int width, int height) {
   return std::clamp(int(std::lround(0.03 * std::min(width, height))), 2, 24);
 }
 
-render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry& geometry,
+render::SurfaceGeometry smooth_geometry_in_regions(render::SurfaceGeometry geometry,
                                                    const Image& region_labels, int radius_px) {
   require_size(region_labels, geometry, "region labels");
   const int w = region_labels.width(), h = region_labels.height();
   const int radius = radius_px > 0 ? radius_px : region_smoothing_radius(w, h);
   cv::Mat group(h, w, CV_32S, cv::Scalar(-1));
-  cv::Mat normal(h, w, CV_32FC3, cv::Scalar::all(0)), sun(h, w, CV_32F, cv::Scalar(0)),
-      sky(h, w, CV_32F, cv::Scalar(0));
   int groups = 0;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -451,23 +494,29 @@ render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry
       if (k <= 0 || !(geometry.surface.at(x, y, 0) > 0)) continue;
       group.at<int>(y, x) = k;
       groups = std::max(groups, k + 1);
-      for (int c = 0; c < 3; ++c) normal.at<cv::Vec3f>(y, x)[c] = geometry.normal.at(x, y, c);
-      sun.at<float>(y, x) = geometry.sun_visibility.at(x, y, 0);
-      sky.at<float>(y, x) = geometry.sky_visibility.at(x, y, 0);
     }
-  render::SurfaceGeometry out = geometry;
-  for (int g = 1; g < groups; ++g) {
-    group_mean(normal, group, g, radius, [&](int x, int y, const float* n) {
-      const float length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-      if (!(length > 1e-3f)) return;
-      for (int c = 0; c < 3; ++c) out.normal.at(x, y, c) = n[c] / length;
-    });
-    group_mean(sun, group, g, radius,
-               [&](int x, int y, const float* v) { out.sun_visibility.at(x, y, 0) = v[0]; });
-    group_mean(sky, group, g, radius,
-               [&](int x, int y, const float* v) { out.sky_visibility.at(x, y, 0) = v[0]; });
-  }
-  return out;
+  // Smoothed in place, one quantity at a time: each is read from its own copy of the input
+  // values, so the geometry is held once (a large photo's peak memory is set here).
+  const auto smooth = [&](Image& image, int channels, auto&& write) {
+    cv::Mat values(h, w, channels == 3 ? CV_32FC3 : CV_32F, cv::Scalar::all(0));
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (group.at<int>(y, x) < 0) continue;
+        float* v = values.ptr<float>(y) + std::size_t(x) * channels;
+        for (int c = 0; c < channels; ++c) v[c] = image.at(x, y, c);
+      }
+    for (int g = 1; g < groups; ++g) group_mean(values, group, g, radius, write);
+  };
+  smooth(geometry.normal, 3, [&](int x, int y, const float* n) {
+    const float length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(length > 1e-3f)) return;
+    for (int c = 0; c < 3; ++c) geometry.normal.at(x, y, c) = n[c] / length;
+  });
+  smooth(geometry.sun_visibility, 1,
+         [&](int x, int y, const float* v) { geometry.sun_visibility.at(x, y, 0) = v[0]; });
+  smooth(geometry.sky_visibility, 1,
+         [&](int x, int y, const float* v) { geometry.sky_visibility.at(x, y, 0) = v[0]; });
+  return geometry;
 }
 
 Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometry& geometry,
@@ -624,71 +673,88 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
     cv::Vec3f mean;
   };
   std::vector<std::array<Neighbour, 2>> gap_neighbours(static_cast<std::size_t>(gap_pixels));
+  // Each class's window sums are made in strips of its box's rows, each with the rows its
+  // windows and the trusted test reach (the sums at a strip's rows are the same, every row
+  // being within the image's or the box's own border as before): the temporaries are 7 floats
+  // a pixel of a strip, not of the whole box (the frame, for the unlabelled class).
+  constexpr int kStripRows = 256;
   for (int k = 0; k < classes; ++k) {
     if (box[k].empty()) continue;
     const cv::Rect roi = box[k];
-    // The unlabelled surface's colour only from outside the gaps: a gap between regions is
-    // not a surface of its own, however wide its middle.
-    const cv::Mat mask =
-        k == 0 ? ((label(roi) == 0) & (gap(roi) == 0)) / 255 : (label(roi) == k) / 255;
-    cv::Mat trusted, weight, colour, colour_squared;
-    cv::erode(mask, trusted, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
-    trusted.convertTo(weight, CV_32F);
-    {
-      cv::Mat weight3;
-      cv::cvtColor(weight, weight3, cv::COLOR_GRAY2BGR);
-      cv::multiply(weight3, guide(roi), colour);
-    }
-    cv::multiply(colour, guide(roi), colour_squared);
-    // The gap test's colours from farther: the middle of a gap 2 r_gap wide is r_gap from either
-    // side, whose trusted pixels start r further in. Made and used first, then released: each
-    // window's sums are 7 floats a pixel of the class's box (the whole frame for a large
-    // region), so the two are never held together.
-    if (k > 0 && gap_pixels > 0 && cv::countNonZero(gap(roi)) > 0) {
-      const WindowSums far(weight, colour, colour_squared, reach + gap_radius);
-      tbb::parallel_for(0, roi.height, [&](int j) {
+    const bool gap_test = k > 0 && gap_pixels > 0 && cv::countNonZero(gap(roi)) > 0;
+    const int far_reach = reach + gap_radius;
+    const int sums_reach = gap_test ? far_reach : reach;
+    for (int s0 = 0; s0 < roi.height; s0 += kStripRows) {
+      const int s1 = std::min(roi.height, s0 + kStripRows);
+      // Rows of the trusted weight the sums read, and of the class mask its erosion reads.
+      const int t0 = std::max(0, s0 - sums_reach), t1 = std::min(roi.height, s1 + sums_reach);
+      const int m0 = std::max(0, t0 - r), m1 = std::min(roi.height, t1 + r);
+      const cv::Rect mask_rows(roi.x, roi.y + m0, roi.width, m1 - m0);
+      const cv::Rect rows(roi.x, roi.y + t0, roi.width, t1 - t0);
+      // The unlabelled surface's colour only from outside the gaps: a gap between regions is
+      // not a surface of its own, however wide its middle.
+      const cv::Mat mask = k == 0 ? ((label(mask_rows) == 0) & (gap(mask_rows) == 0)) / 255
+                                  : (label(mask_rows) == k) / 255;
+      cv::Mat eroded, weight, colour, colour_squared;
+      cv::erode(mask, eroded, square, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+      const cv::Mat trusted = eroded.rowRange(t0 - m0, t1 - m0);
+      trusted.convertTo(weight, CV_32F);
+      {
+        cv::Mat weight3;
+        cv::cvtColor(weight, weight3, cv::COLOR_GRAY2BGR);
+        cv::multiply(weight3, guide(rows), colour);
+      }
+      cv::multiply(colour, guide(rows), colour_squared);
+      // The gap test's colours from farther: the middle of a gap 2 r_gap wide is r_gap from
+      // either side, whose trusted pixels start r further in. Made and used first, then
+      // released, so the two sums are never held together.
+      if (gap_test) {
+        const WindowSums far(weight, colour, colour_squared, far_reach);
+        tbb::parallel_for(s0, s1, [&](int j) {
+          const int y = roi.y + j;
+          for (int i = 0; i < roi.width; ++i) {
+            const int x = roi.x + i, g = gap_index.at<int>(y, x);
+            if (g < 0) continue;
+            // At least a full trusted window's worth of the region around the gap pixel.
+            const float n = far.count.at<float>(j - t0, i);
+            if (n >= float((2 * r + 1) * (2 * r + 1))) {
+              const cv::Vec3f mean = far.mean(j - t0, i, n);
+              auto& two = gap_neighbours[std::size_t(g)];
+              const Neighbour here{k, n, far.spread(j - t0, i, n, mean), mean};
+              if (n > two[0].count)
+                two[1] = two[0], two[0] = here;
+              else if (n > two[1].count)
+                two[1] = here;
+            }
+          }
+        });
+      }
+      const WindowSums near(weight, colour, colour_squared, reach);
+      colour.release();
+      colour_squared.release();
+      tbb::parallel_for(s0, s1, [&](int j) {
         const int y = roi.y + j;
         for (int i = 0; i < roi.width; ++i) {
-          const int x = roi.x + i, g = gap_index.at<int>(y, x);
-          if (g < 0) continue;
-          // At least a full trusted window's worth of the region around the gap pixel.
-          const float n = far.count.at<float>(j, i);
-          if (n >= float((2 * r + 1) * (2 * r + 1))) {
-            const cv::Vec3f mean = far.mean(j, i, n);
-            auto& two = gap_neighbours[std::size_t(g)];
-            const Neighbour here{k, n, far.spread(j, i, n, mean), mean};
-            if (n > two[0].count)
-              two[1] = two[0], two[0] = here;
-            else if (n > two[1].count)
-              two[1] = here;
+          const int x = roi.x + i, own = label.at<int>(y, x);
+          if (own < 0) continue;
+          if (own == k && trusted.at<unsigned char>(j - t0, i))
+            trusted_own.at<unsigned char>(y, x) = 1;
+          const float n = near.count.at<float>(j - t0, i);
+          const float min_count =
+              min_share * float((std::min(x + reach, w - 1) - std::max(x - reach, 0) + 1) *
+                                (std::min(y + reach, h - 1) - std::max(y - reach, 0) + 1));
+          if (!(n >= min_count)) continue;
+          const cv::Vec3f mean = near.mean(j - t0, i, n);
+          const cv::Vec3f d = guide.at<cv::Vec3f>(y, x) - mean;
+          const float distance = d.dot(d) / (near.spread(j - t0, i, n, mean) + kNoiseVariance);
+          if (own == k) own_distance.at<float>(y, x) = distance;
+          if (distance < best_distance.at<float>(y, x)) {
+            best_distance.at<float>(y, x) = distance;
+            best_class.at<int>(y, x) = k;
           }
         }
       });
     }
-    const WindowSums near(weight, colour, colour_squared, reach);
-    colour.release();
-    colour_squared.release();
-    tbb::parallel_for(0, roi.height, [&](int j) {
-      const int y = roi.y + j;
-      for (int i = 0; i < roi.width; ++i) {
-        const int x = roi.x + i, own = label.at<int>(y, x);
-        if (own < 0) continue;
-        if (own == k && trusted.at<unsigned char>(j, i)) trusted_own.at<unsigned char>(y, x) = 1;
-        const float n = near.count.at<float>(j, i);
-        const float min_count =
-            min_share * float((std::min(x + reach, w - 1) - std::max(x - reach, 0) + 1) *
-                              (std::min(y + reach, h - 1) - std::max(y - reach, 0) + 1));
-        if (!(n >= min_count)) continue;
-        const cv::Vec3f mean = near.mean(j, i, n);
-        const cv::Vec3f d = guide.at<cv::Vec3f>(y, x) - mean;
-        const float distance = d.dot(d) / (near.spread(j, i, n, mean) + kNoiseVariance);
-        if (own == k) own_distance.at<float>(y, x) = distance;
-        if (distance < best_distance.at<float>(y, x)) {
-          best_distance.at<float>(y, x) = distance;
-          best_class.at<int>(y, x) = k;
-        }
-      }
-    });
   }
   Image out = region_labels;
   for (int y = 0; y < h; ++y)
@@ -881,10 +947,11 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
     const float v = region_labels.at(x, y, 0);
     return v >= 1 && v <= float(regions) && is_surface(x, y);
   };
-  cv::Mat accumulated(h, w, CV_32FC3, cv::Scalar::all(0)),
-      region_weight(h, w, CV_32F, cv::Scalar(0));
-  Image rendered(w, h, 3);
+  // The regions' weighted renderings are summed into `out` itself (a pixel's photo value
+  // replaced by 0 at its first weight), the photo blended back in at the end.
+  cv::Mat region_weight(h, w, CV_32F, cv::Scalar(0));
   std::vector<std::int32_t> band;
+  std::vector<float> rendered;  // the band's, 3 floats a pixel
   indicator.setTo(0);
   for (int k = 1; k <= regions; ++k) {
     if (pixels[k - 1].empty()) continue;
@@ -919,12 +986,16 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
         if (weight.at<float>(y - roi.y, x - roi.x) > 1e-4f && is_surface(x, y) &&
             (is_region(x, y) || !plain.empty()))
           band.push_back(y * w + x);
+    rendered.resize(3 * band.size());
     render_with_detail(geometry, lighting, shading, detail, materials[k - 1], band, rendered);
-    for (std::int32_t index : band) {
-      const int x = index % w, y = index / w;
+    for (std::size_t i = 0; i < band.size(); ++i) {
+      const int x = band[i] % w, y = band[i] / w;
       const float wk = weight.at<float>(y - roi.y, x - roi.x);
+      float* sum = out.pixel(x, y);
+      if (region_weight.at<float>(y, x) == 0)
+        for (int c = 0; c < 3; ++c) sum[c] = 0;
       region_weight.at<float>(y, x) += wk;
-      for (int c = 0; c < 3; ++c) accumulated.at<cv::Vec3f>(y, x)[c] += wk * rendered.at(x, y, c);
+      for (int c = 0; c < 3; ++c) sum[c] += wk * rendered[3 * i + c];
     }
   }
   // Sky pixels stay the photo's, and so do those outside the regions but where the wide feather
@@ -936,8 +1007,7 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
       if (!(total > 0) || !is_surface(x, y)) continue;
       const float wr = std::min(1.0f, total);
       for (int c = 0; c < 3; ++c)
-        out.at(x, y, c) =
-            wr / total * accumulated.at<cv::Vec3f>(y, x)[c] + (1 - wr) * photo.at(x, y, c);
+        out.at(x, y, c) = wr / total * out.at(x, y, c) + (1 - wr) * photo.at(x, y, c);
     }
   decontaminate_outer_border(photo, geometry, region_labels, regions, out);
   if (options.despeckle_borders) {

@@ -73,7 +73,8 @@ Image diffuse_shading(const render::SurfaceGeometry& geometry, const Lighting& l
 /// shadow in the model: at depth edges of an estimated geometry mostly wrong). photo_detail
 /// divides by it, so D x floored shading is the photo's radiance over the base everywhere; the
 /// rendering with detail must use it too.
-Image floored_shading(const Image& shading, const render::SurfaceGeometry& geometry);
+/// Taken by value and floored in place: pass it moved when it is not needed again.
+Image floored_shading(Image shading, const render::SurfaceGeometry& geometry);
 
 /// The geometry with normals (renormalised), sun and sky visibility averaged over each region's
 /// own surface pixels (label > 0) with a tent of radius `radius_px` (0: 3 % of the short side,
@@ -83,7 +84,9 @@ Image floored_shading(const Image& shading, const render::SurfaceGeometry& geome
 /// (At 1 %, the gallery's tuning half kept the photo's texture, correlation >= 0.9, in 20 of 35
 /// transfers; at 3 %, 25, none worse.) Used for photo targets only; a 3D-scene target's geometry
 /// is exact.
-render::SurfaceGeometry smooth_geometry_in_regions(const render::SurfaceGeometry& geometry,
+/// The geometry is taken by value and smoothed in place: pass it moved when it is not needed
+/// again (a large photo's peak memory).
+render::SurfaceGeometry smooth_geometry_in_regions(render::SurfaceGeometry geometry,
                                                    const Image& region_labels, int radius_px = 0);
 /// smooth_geometry_in_regions' default radius for a width x height photo: 3 % of the short
 /// side, 2..24 px.
@@ -209,5 +212,10 @@ DespeckleStats despeckle_region_borders(const Image& photo, const render::Surfac
 void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting& lighting,
                         const Image& shading, const Image* detail, const Material& material,
                         std::span<const std::int32_t> pixels, Image& out);
+/// The same, into `rgb` (3 floats per listed pixel, in their order; its size 3 x pixels): a
+/// band's rendering without a frame-sized image.
+void render_with_detail(const render::SurfaceGeometry& geometry, const Lighting& lighting,
+                        const Image& shading, const Image* detail, const Material& material,
+                        std::span<const std::int32_t> pixels, std::span<float> rgb);
 
 }  // namespace mr::photo
