@@ -71,6 +71,18 @@ def main():
     photo_lined[:, 80] *= 0.3
     frac, _, _ = MM.speckle(photo_lined, np.where((labels > 0)[..., None], lined, photo_lined), labels)
     check(frac < 0.05, f"a line the photo has: speckle {100 * frac:.2f} % (only the specks)")
+    # Near black, a step of a code or two is the 8-bit coding's (invisible), not a speck: the same
+    # specks 3 x the level of a dark result (sRGB codes 1 -> 3) are not counted, 3 x a mid-grey
+    # one's are.
+    for level, counted in ((0.0003, False), (0.05, True)):
+        dark = np.full_like(photo, level)
+        specked = dark.copy()
+        for y in range(0, H, 4):
+            specked[y, 139] *= 3.0
+        _, _, spk = MM.speckle(dark, specked, labels)
+        found = int(spk[::4, 139].sum())
+        check(found == (H // 4 if counted else 0),
+              f"{H // 4} specks 3 x a region of level {level}: {found} counted ({'all' if counted else 'none'} expected)")
     # Texture: kept exactly (a colour gain) gives correlation 1 and ratio 1 (within 1 %: the noise
     # floor, 0.003, is not scaled by the gain; the photo's level is ~0.2); flattened halves the
     # ratio; replaced by another texture drops the correlation.

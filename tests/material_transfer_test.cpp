@@ -1340,6 +1340,50 @@ TEST(MaterialApply, DespecklingTakesOutTheBordersSpecks) {
       }
 }
 
+TEST(MaterialApply, DespecklingLooksThroughNearBlackCodingSteps) {
+  // A photo: a near-black left half (region 1, x < 40; linear 0.0003, about sRGB code 1) beside
+  // a white right half (1.0: the bright surfaces' level, so the noise floor is 0.003). At (38, 10)
+  // the photo has a grain one code up (0.0006): a factor of 2, invisible. (1) The composite
+  // renders the region a light grey with a dark speck at (38, 10): with the noise floor the
+  // photo's grain is calm (log 0.09 < kPhotoCalm), so the speck goes. (2) The composite leaves
+  // the region near black with 1-code grains of its own at (37, 45) and (39, 45): no specks
+  // (log 0.09 < kSpeckJump), they stay. Without the floor (log 0.69 either way) the speck was
+  // kept as "the photo's own" and the invisible grains were changed.
+  constexpr int w = 80, h = 60;
+  constexpr float kBlack = 0.0003f, kGrain = 0.0006f, kGrey = 0.25f;
+  render::SurfaceGeometry g;
+  g.surface = Image(w, h, 1);
+  for (float& v : g.surface.pixels()) v = 1.0f;
+  Image photo(w, h, 3), labels(w, h, 1), grey(w, h, 3), dark(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool region = x < 40;
+      for (int c = 0; c < 3; ++c) {
+        photo.at(x, y, c) = region ? (x == 38 && y == 10 ? kGrain : kBlack) : 1.0f;
+        grey.at(x, y, c) = region ? kGrey : photo.at(x, y, c);
+        dark.at(x, y, c) = region ? kBlack : photo.at(x, y, c);
+      }
+      labels.at(x, y, 0) = region ? 1.0f : 0.0f;
+    }
+  for (int c = 0; c < 3; ++c) {
+    grey.at(38, 10, c) = 0.3f * kGrey;  // the speck
+    dark.at(37, 45, c) = dark.at(39, 45, c) = kGrain;
+  }
+  for (Image* out : {&grey, &dark}) {
+    const Image before = *out;
+    photo::despeckle_region_borders(photo, g, labels, 1, *out);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (out == &grey && x == 38 && y == 10) {
+          for (int c = 0; c < 3; ++c) EXPECT_NEAR(out->at(x, y, c), kGrey, 0.05f * kGrey);
+          continue;
+        }
+        for (int c = 0; c < 3; ++c)
+          ASSERT_EQ(out->at(x, y, c), before.at(x, y, c)) << x << ", " << y;
+      }
+  }
+}
+
 TEST(MaterialApply, AnObjectsEdgePixelOutsideTheRegionTakesTheNewColour) {
   // A dark object (albedo 0.05, region 1, x < 80) on a light background (0.8); column x = 80,
   // outside the region, is the object's antialiased edge (half and half). Re-coloured light grey,

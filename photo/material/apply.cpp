@@ -1020,20 +1020,22 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
 
 namespace {
 
-float log_value(float v) {
-  return std::log(std::max(v, 1e-6f));
+// log(v + floor): steps of a code or two near black (the 8-bit coding's, invisible) are not
+// specks, in the photo or in the composite (kSpeckNoiseFloor).
+float log_value(float v, float floor) {
+  return std::log(std::max(std::max(v, 0.0f) + floor, 1e-6f));
 }
 
 // How far, at most over the channels, the log value at (x, y) lies beyond both its neighbours
 // along the axis (dx, dy) (0 when between them); edges replicated.
-float axis_extremum(const Image& image, int x, int y, int dx, int dy) {
+float axis_extremum(const Image& image, int x, int y, int dx, int dy, float floor) {
   const int w = image.width(), h = image.height();
   const int ax = std::clamp(x + dx, 0, w - 1), ay = std::clamp(y + dy, 0, h - 1);
   const int bx = std::clamp(x - dx, 0, w - 1), by = std::clamp(y - dy, 0, h - 1);
   float worst = 0;
   for (int c = 0; c < 3; ++c) {
-    const float v = log_value(image.at(x, y, c)), a = log_value(image.at(ax, ay, c)),
-                b = log_value(image.at(bx, by, c));
+    const float v = log_value(image.at(x, y, c), floor), a = log_value(image.at(ax, ay, c), floor),
+                b = log_value(image.at(bx, by, c), floor);
     worst = std::max({worst, std::min(v - a, v - b), std::min(a - v, b - v)});
   }
   return worst;
@@ -1041,7 +1043,7 @@ float axis_extremum(const Image& image, int x, int y, int dx, int dy) {
 
 // The largest over the channels of |log value - the median of the 3 x 3 log values| at (x, y)
 // (edges replicated); `median` gets the medians (linear: the log is monotonic).
-float median_deviation(const Image& image, int x, int y, float median[3]) {
+float median_deviation(const Image& image, int x, int y, float floor, float median[3]) {
   const int w = image.width(), h = image.height();
   float worst = 0;
   for (int c = 0; c < 3; ++c) {
@@ -1052,7 +1054,8 @@ float median_deviation(const Image& image, int x, int y, float median[3]) {
         values[n++] = image.at(std::clamp(x + dx, 0, w - 1), std::clamp(y + dy, 0, h - 1), c);
     std::nth_element(values, values + 4, values + 9);
     median[c] = values[4];
-    worst = std::max(worst, std::abs(log_value(image.at(x, y, c)) - log_value(values[4])));
+    worst = std::max(worst,
+                     std::abs(log_value(image.at(x, y, c), floor) - log_value(values[4], floor)));
   }
   return worst;
 }
@@ -1100,13 +1103,15 @@ DespeckleStats despeckle_region_borders(const Image& photo, const render::Surfac
   DespeckleStats stats;
   stats.band_pixels = band.size();
   if (band.empty()) return stats;
+  const float floor = kSpeckNoiseFloor * bright_surface_level(photo, geometry);
   // The photo's own shape at each band pixel: specks it shows are detail, never touched.
   std::vector<float> photo_axis(band.size()), photo_median(band.size());
   tbb::parallel_for(std::size_t(0), band.size(), [&](std::size_t i) {
     const int x = band[i] % w, y = band[i] / w;
     float unused[3];
-    photo_axis[i] = std::max(axis_extremum(photo, x, y, 1, 0), axis_extremum(photo, x, y, 0, 1));
-    photo_median[i] = median_deviation(photo, x, y, unused);
+    photo_axis[i] =
+        std::max(axis_extremum(photo, x, y, 1, 0, floor), axis_extremum(photo, x, y, 0, 1, floor));
+    photo_median[i] = median_deviation(photo, x, y, floor, unused);
   });
   constexpr int kMaxPasses = 10;
   std::vector<std::array<float, 3>> replacement(band.size());
@@ -1118,8 +1123,8 @@ DespeckleStats despeckle_region_borders(const Image& photo, const render::Surfac
     tbb::parallel_for(std::size_t(0), band.size(), [&](std::size_t i) {
       replace[i] = kKeep;
       const int x = band[i] % w, y = band[i] / w;
-      const float horizontal = axis_extremum(out, x, y, 1, 0),
-                  vertical = axis_extremum(out, x, y, 0, 1);
+      const float horizontal = axis_extremum(out, x, y, 1, 0, floor),
+                  vertical = axis_extremum(out, x, y, 0, 1, floor);
       float* value = replacement[i].data();
       if (std::max(horizontal, vertical) > kSpeckJump && photo_axis[i] < kPhotoCalm) {
         const int dx = horizontal >= vertical ? 1 : 0, dy = 1 - dx;
@@ -1133,7 +1138,8 @@ DespeckleStats despeckle_region_borders(const Image& photo, const render::Surfac
         const float t = dd > 1e-12 ? float(std::clamp(pd / dd, 0.0, 1.0)) : 0.5f;
         for (int c = 0; c < 3; ++c) value[c] = (1 - t) * out.at(ax, ay, c) + t * out.at(bx, by, c);
         replace[i] = kMixed;
-      } else if (photo_median[i] < kPhotoCalm && median_deviation(out, x, y, value) > kSpeckJump) {
+      } else if (photo_median[i] < kPhotoCalm &&
+                 median_deviation(out, x, y, floor, value) > kSpeckJump) {
         replace[i] = kMedian;
       }
     });

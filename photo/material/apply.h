@@ -182,6 +182,12 @@ constexpr int kDespeckleBandPx = 3;
 /// own jumps under log 0.1 (its noise, JPEG ringing) are calm.
 constexpr float kSpeckJump = 0.15f;
 constexpr float kPhotoCalm = 0.1f;
+/// Log values are of value + this share of the photo's bright surfaces' level (as the detail
+/// layer's noise floor, DetailOptions::noise_floor; about sRGB code 10 of 255 for a photo
+/// exposed to white): near black, a step of a code or two is the 8-bit coding's, invisible.
+/// Without it the photo's near-black grain hid, as "the photo's own specks", the visible
+/// specks a light material left along a dark region's border (gallery/tune astronaut).
+constexpr float kSpeckNoiseFloor = 0.003f;
 
 /// Takes out, in `out` (the composite of `photo`, 3 channels, the photo's size), the 1-pixel
 /// specks, lines and teeth that the compositing makes along the regions' borders where the photo
