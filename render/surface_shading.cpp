@@ -363,14 +363,21 @@ std::optional<OccluderScene> occluder_scene(const Image& distance_m, const Camer
 }
 
 // The surface point of pixel (x, y): false where there is none (sky, or no usable normal).
+// The unit ray through pixel (x, y) and the point `d` metres along it: one place, so that
+// surface_point gives the floats the geometry was made with.
+void ray_and_point(const Camera& camera, const CameraPose& pose, int x, int y, float d, Vec3f& ray,
+                   Vec3f& p) {
+  ray = to_f(pose.ray_direction(camera, x, y));
+  const Vec3f eye = to_f(pose.position_m);
+  p = {eye[0] + d * ray[0], eye[1] + d * ray[1], eye[2] + d * ray[2]};
+}
+
 bool surface_at(const Image& distance_m, const Image& normal, const Camera& camera,
                 const CameraPose& pose, int x, int y, Vec3f& n, Vec3f& p, Vec3f& ray, float& d) {
   d = distance_m.at(x, y, 0);
   n = {normal.at(x, y, 0), normal.at(x, y, 1), normal.at(x, y, 2)};
   if (!(std::isfinite(d) && d > 0) || dot(n, n) < 0.5f) return false;
-  ray = to_f(pose.ray_direction(camera, x, y));
-  const Vec3f eye = to_f(pose.position_m);
-  p = {eye[0] + d * ray[0], eye[1] + d * ray[1], eye[2] + d * ray[2]};
+  ray_and_point(camera, pose, x, y, d, ray, p);
   return true;
 }
 
@@ -528,14 +535,12 @@ SurfacePoint surface_point(const SurfaceGeometry& geometry, int x, int y) {
   SurfacePoint p;
   p.surface = geometry.surface.at(x, y, 0) > 0;
   if (!p.surface) return p;
-  // As surface_at computed them when the geometry was made (the same floats).
-  const float d = geometry.distance_m.at(x, y, 0);
-  const Vec3f ray = to_f(geometry.pose.ray_direction(geometry.camera, x, y));
-  const Vec3f eye = to_f(geometry.pose.position_m);
+  Vec3f ray;
+  ray_and_point(geometry.camera, geometry.pose, x, y, geometry.distance_m.at(x, y, 0), ray,
+                p.position_m);
   for (int c = 0; c < 3; ++c) {
     p.normal[c] = geometry.normal.at(x, y, c);
     p.view[c] = -ray[c];
-    p.position_m[c] = eye[c] + d * ray[c];
   }
   p.sun_visibility = geometry.sun_visibility.at(x, y, 0);
   p.sky_visibility = geometry.sky_visibility.at(x, y, 0);

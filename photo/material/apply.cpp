@@ -673,10 +673,10 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
     cv::Vec3f mean;
   };
   std::vector<std::array<Neighbour, 2>> gap_neighbours(static_cast<std::size_t>(gap_pixels));
-  // Each class's window sums are made in strips of its box's rows, each with the rows its
-  // windows and the trusted test reach (the sums at a strip's rows are the same, every row
-  // being within the image's or the box's own border as before): the temporaries are 7 floats
-  // a pixel of a strip, not of the whole box (the frame, for the unlabelled class).
+  // Each class's window sums are made in strips of its box's rows, each strip with the rows its
+  // windows and the trusted-pixel erosion read beyond it (so its sums are the whole box's: a
+  // strip's cut edge lies farther than any window reaches): the temporaries are 7 floats a
+  // pixel of a strip, not of the whole box (the frame, for the unlabelled class).
   constexpr int kStripRows = 256;
   for (int k = 0; k < classes; ++k) {
     if (box[k].empty()) continue;
