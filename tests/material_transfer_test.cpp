@@ -1110,6 +1110,65 @@ TEST(MaterialApply, RegionBordersSnapToThePhotosEdges) {
     for (int x : {10, 150}) EXPECT_EQ(snapped.at(x, y, 0), labels.at(x, y, 0));
 }
 
+TEST(MaterialApply, SnappingInStripsGivesTheWholeFramesLabels) {
+  // A 160 x 700 photo (textured, deterministic noise of +-10 %) of orange (region 1), its
+  // penumbra into blue left out (unlabelled: the gap test), blue (region 2, down to row 400),
+  // a black pole (unlabelled) and grey (region 3), under a strip of sky (rows 0-19); the
+  // mask's borders ragged by a few pixels, holes in region 3. Snapped with the window sums in
+  // strips of 37 rows (strips cut through every border, the gap and the sky's edge) and in one
+  // strip of the whole box: the same labels, pixel for pixel, and the snap moved some.
+  constexpr int w = 160, h = 700;
+  render::SurfaceGeometry g;
+  g.surface = Image(w, h, 1);
+  Image photo(w, h, 3), labels(w, h, 1);
+  const Rgb orange{0.6f, 0.3f, 0.1f}, blue{0.1f, 0.15f, 0.4f};
+  std::uint32_t state = 12345;
+  auto noise = [&state] {
+    state = state * 1664525u + 1013904223u;
+    return 0.9f + 0.2f * float(state >> 8) / float(1u << 24);
+  };
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool sky = y < 20;
+      g.surface.at(x, y, 0) = sky ? 0.0f : 1.0f;
+      Rgb c = grey(0.5f);
+      if (sky)
+        c = Rgb{0.5f, 0.7f, 1.0f};
+      else if (x < 60)
+        c = orange;
+      else if (x < 72) {
+        const float f = float(x - 59) / 13;
+        for (int k = 0; k < 3; ++k) c[k] = (1 - f) * orange[k] + f * blue[k];
+      } else if (x < 120 && y < 400)
+        c = blue;
+      else if (x >= 120 && x < 126)
+        c = grey(0.01f);
+      const float n = noise();
+      for (int k = 0; k < 3; ++k) photo.at(x, y, k) = c[k] * n;
+      const int jitter = (y * 7) % 5 - 2;  // the brush's ragged border
+      // Holes in region 3 (6 x 6, unlabelled, the photo plain there) every 23 rows: strips cut
+      // through some of them and their trusted windows.
+      const bool hole = x >= 140 && x < 146 && y >= 20 && (y - 20) % 23 < 6;
+      labels.at(x, y, 0) = sky                             ? 0.0f
+                           : x < 60 + jitter               ? 1.0f
+                           : x < 72                        ? 0.0f
+                           : x < 120 && y < 400 + jitter   ? 2.0f
+                           : (x >= 120 && x < 126) || hole ? 0.0f
+                                                           : 3.0f;
+    }
+  const Image strips = photo::snap_regions_to_edges(labels, photo, g, 4, 37);
+  const Image whole = photo::snap_regions_to_edges(labels, photo, g, 4, 1 << 20);
+  int moved = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      ASSERT_EQ(strips.at(x, y, 0), whole.at(x, y, 0)) << x << ", " << y;
+      moved += whole.at(x, y, 0) != labels.at(x, y, 0);
+    }
+  std::printf("snapped: %d of %d pixels moved, the same in strips of 37 rows\n", moved, w * h);
+  EXPECT_GT(moved, 1000);
+  EXPECT_THROW(photo::snap_regions_to_edges(labels, photo, g, 4, 0), Error);
+}
+
 TEST(MaterialApply, AGapBetweenTwoRegionsJoinsThemWhereThePhotoExplainsIt) {
   // Orange rock (region 1, x < 60) and its shadowed part, blue (region 2, x 72-119), painted as
   // two regions with the penumbra between them left out (x 60-71: the two colours mixed in

@@ -577,13 +577,18 @@ struct WindowSums {
 }  // namespace
 
 Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
-                            const render::SurfaceGeometry& geometry, int radius_px) {
+                            const render::SurfaceGeometry& geometry, int radius_px,
+                            int strip_rows) {
   require_size(region_labels, geometry, "region labels");
   require_size(photo, geometry, "photo");
   if (region_labels.channels() != 1)
     throw Error(ErrorCode::invalid_argument, "region labels must have 1 channel");
   if (photo.channels() < 3)
     throw Error(ErrorCode::invalid_argument, "snap_regions_to_edges: the photo needs 3 channels");
+  if (strip_rows < 1)
+    throw Error(
+        ErrorCode::invalid_argument,
+        "snap_regions_to_edges: strip_rows must be >= 1, got " + std::to_string(strip_rows));
   if (radius_px <= 0) return region_labels;
   const int w = photo.width(), h = photo.height();
   // Colours compared display-encoded (gamma 1/2.2 of the value over the bright surfaces'
@@ -677,15 +682,14 @@ Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
   // windows and the trusted-pixel erosion read beyond it (so its sums are the whole box's: a
   // strip's cut edge lies farther than any window reaches): the temporaries are 7 floats a
   // pixel of a strip, not of the whole box (the frame, for the unlabelled class).
-  constexpr int kStripRows = 256;
   for (int k = 0; k < classes; ++k) {
     if (box[k].empty()) continue;
     const cv::Rect roi = box[k];
     const bool gap_test = k > 0 && gap_pixels > 0 && cv::countNonZero(gap(roi)) > 0;
     const int far_reach = reach + gap_radius;
     const int sums_reach = gap_test ? far_reach : reach;
-    for (int s0 = 0; s0 < roi.height; s0 += kStripRows) {
-      const int s1 = std::min(roi.height, s0 + kStripRows);
+    for (int s0 = 0; s0 < roi.height; s0 += strip_rows) {
+      const int s1 = s0 + std::min(strip_rows, roi.height - s0);  // (no overflow)
       // Rows of the trusted weight the sums read, and of the class mask its erosion reads.
       const int t0 = std::max(0, s0 - sums_reach), t1 = std::min(roi.height, s1 + sums_reach);
       const int m0 = std::max(0, t0 - r), m1 = std::min(roi.height, t1 + r);

@@ -117,9 +117,11 @@ Image close_region_gaps(const Image& region_labels, const render::SurfaceGeometr
 /// within 3 radius_px + 2 radius_px when their colours explain its own: within one's spread,
 /// a mix of the two (a penumbra or soft border left out between two painted regions), or
 /// nearer to one than half the step between them. Otherwise (a pole, a seam) it stays.
-/// radius_px 0: unchanged.
+/// radius_px 0: unchanged. Each class's window sums are made in strips of `strip_rows` rows of
+/// its box (a large photo's memory; the result does not depend on it, >= 1).
 Image snap_regions_to_edges(const Image& region_labels, const Image& photo,
-                            const render::SurfaceGeometry& geometry, int radius_px = 4);
+                            const render::SurfaceGeometry& geometry, int radius_px = 4,
+                            int strip_rows = 256);
 
 /// Channels of photo_detail's layer: 0-2 D (equal), then D of the luminance with its coding
 /// noise filtered out, then the base albedo (luminance) D is measured against.
