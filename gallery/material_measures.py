@@ -22,9 +22,9 @@ speckle      a pixel within SPECKLE_BAND_PX (2) of a label change (a 5 x 5 windo
              0.67 %). Reported as the fraction of those band pixels; bar TARGET_SPECKLE (0.5 %).
 median speckle the C++ test's definition (MaterialRealPhoto.NoSpeckleAlongRegionEdgesAndThinGaps:
              log RGB more than 0.3 from the median of the 3 x 3 neighbourhood, less than 0.1 in
-             the photo; the same noise floor), in the same band. It also counts step pixels
-             where a ragged border's corner makes the 3 x 3 median the other side's. Reported,
-             no bar.
+             the photo), here with the same noise floor (the synthetic test has no noise and no
+             floor), in the same band. It also counts step pixels where a ragged border's corner
+             makes the 3 x 3 median the other side's. Reported, no bar.
 texture      per region, over its pixels at least TEXTURE_INSET_PX (6) from its border: the
              correlation of the high-pass of log(luminance + TEXTURE_NOISE_FLOOR) (value - 7 x 7
              box mean) between the photo and the result (bar >= TARGET_TEXTURE_CORRELATION, 0.9), and the ratio of their
