@@ -362,7 +362,6 @@ std::optional<OccluderScene> occluder_scene(const Image& distance_m, const Camer
   return scene;
 }
 
-// The surface point of pixel (x, y): false where there is none (sky, or no usable normal).
 // The unit ray through pixel (x, y) and the point `d` metres along it: one place, so that
 // surface_point gives the floats the geometry was made with.
 void ray_and_point(const Camera& camera, const CameraPose& pose, int x, int y, float d, Vec3f& ray,
@@ -372,6 +371,7 @@ void ray_and_point(const Camera& camera, const CameraPose& pose, int x, int y, f
   p = {eye[0] + d * ray[0], eye[1] + d * ray[1], eye[2] + d * ray[2]};
 }
 
+// The surface point of pixel (x, y): false where there is none (sky, or no usable normal).
 bool surface_at(const Image& distance_m, const Image& normal, const Camera& camera,
                 const CameraPose& pose, int x, int y, Vec3f& n, Vec3f& p, Vec3f& ray, float& d) {
   d = distance_m.at(x, y, 0);
