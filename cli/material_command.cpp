@@ -220,6 +220,10 @@ CLI::App* add_material_command(CLI::App& app, MaterialCommandOptions& o) {
       ->capture_default_str();
   cmd->add_flag("--no-detail", o.no_detail,
                 "Do not carry the photo's fine texture into the new material");
+  cmd->add_flag("--physical-exposure", o.physical_exposure,
+                "Render each region at the photo's own exposure even where the new material "
+                "goes beyond the photo's white (default: such a region is exposed down as a "
+                "whole until 99 % of it is within, keeping its texture)");
   cmd->add_option("--visibility", o.visibility,
                   "Also fog the result: meteorological visibility, e.g. 150m");
   cmd->add_option("-j,--threads", o.threads, "Worker threads [default: all cores]")
@@ -322,6 +326,7 @@ int run_material_command(const MaterialCommandOptions& o) {
   options.max_candidates = o.max_candidates;
   options.smoothness_weight = o.smoothness;
   options.keep_detail = !o.no_detail;
+  options.fit_photo_range = !o.physical_exposure;
   options.threads = o.threads;
   if (o.seed) options.seed = *o.seed;
   options.cancel = progress.token();

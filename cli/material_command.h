@@ -25,6 +25,7 @@ struct MaterialCommandOptions {
   int max_candidates = 8;
   double smoothness = 0.1;
   bool no_detail = false;
+  bool physical_exposure = false;
   std::string visibility;  ///< fog the result: "150m"; empty: no fog
   int threads = 0;
   bool overwrite = false;

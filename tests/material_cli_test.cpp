@@ -116,9 +116,11 @@ TEST_F(MaterialCli, MaskRegionsWriteImageAndJsonInputsUntouched) {
 // surface the photo shows dark with sunlit patches clipped flat to white (gallery/tune
 // dragonfly: 7.5 % of its regions' pixels at 255 where the photo is not). Here a dark wall
 // with bright patches (left half, the region) takes a light sample's material; the same transfer
-// is written to EXR (scene-linear, unclipped) and to PNG: every pixel the transfer changed is
-// the EXR's value through the roll-off (within one 8-bit code, so none at 255), every other
-// pixel is the photo's exactly.
+// is written to EXR (scene-linear, unclipped) and to PNG at the photo's own exposure
+// (--physical-exposure): every pixel the transfer changed is the EXR's value through the roll-off
+// (within one 8-bit code, so none at 255), every other pixel is the photo's exactly. By default
+// the region is exposed down as a whole instead (mr::MaterialTransferOptions::fit_photo_range):
+// its interior is one factor times the physical rendering and at most 1 % of it beyond white.
 TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
   constexpr int kW = 120, kH = 90;
   Image target(kW, kH, 3), sample(kW, kH, 3), depth(kW, kH, 1), mask(kW, kH, 1);
@@ -147,7 +149,7 @@ TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
   const std::string common = kMr + " material --sample " + shell_quoted(work / "sample.png") +
                              " --sample-fov 50 --target " + shell_quoted(work / "target.png") +
                              " --fov 50 --regions " + shell_quoted(work / "mask.png") +
-                             " --seed 3 -q";
+                             " --seed 3 -q --physical-exposure";
   const auto r_exr = test::run(common + " -o " + shell_quoted(work / "linear.exr"));
   ASSERT_EQ(r_exr.exit_code, 0) << r_exr.output;
   const auto r_png = test::run(common + " -o " + shell_quoted(work / "display.png"));
@@ -186,6 +188,37 @@ TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
   EXPECT_EQ(at_255, 0);
   EXPECT_EQ(off, 0);
   EXPECT_EQ(unchanged_differ, 0);
+  // The default: exposed down to the photo's white, and the notes say by how much.
+  const std::string fit_command =
+      common.substr(0, common.size() - std::string(" -q --physical-exposure").size());
+  const auto r_fit = test::run(fit_command + " -o " + shell_quoted(work / "fitted.exr"));
+  ASSERT_EQ(r_fit.exit_code, 0) << r_fit.output;
+  EXPECT_NE(r_fit.output.find("stops to stay within the photo's white"), std::string::npos)
+      << r_fit.output;
+  const Image fitted = read_image(work / "fitted.exr");
+  // The factor over the region's interior (beyond the feather's reach); the share beyond white
+  // over all its pixels (what the percentile counts; a feathered border pixel mixes the rendering
+  // with the photo, below white, so it is beyond only where the rendering is).
+  std::vector<double> ratios;
+  int region = 0, fitted_beyond = 0;
+  for (int y = 0; y < kH; ++y)
+    for (int x = 0; x < 60; ++x) {
+      ++region;
+      fitted_beyond += std::max({fitted.at(x, y, 0), fitted.at(x, y, 1), fitted.at(x, y, 2)}) > 1;
+      if (x >= 4 && x < 56 && y >= 4 && y < kH - 4)
+        for (int c = 0; c < 3; ++c)
+          ratios.push_back(double(fitted.at(x, y, c)) / linear.at(x, y, c));
+    }
+  std::sort(ratios.begin(), ratios.end());
+  const double factor = ratios[ratios.size() / 2];
+  std::printf(
+      "default: exposed down by %.4f (ratios %.6f to %.6f), %d of %d region pixels "
+      "beyond white\n",
+      factor, ratios.front(), ratios.back(), fitted_beyond, region);
+  EXPECT_LT(factor, 0.5);
+  EXPECT_NEAR(ratios.front(), factor, 1e-5 * factor);
+  EXPECT_NEAR(ratios.back(), factor, 1e-5 * factor);
+  EXPECT_LE(fitted_beyond, region / 100);
   // A 16-bit target stays 16-bit in a PNG output (as `mr fog` keeps it); an 8-bit one 8-bit.
   WriteOptions png16;
   png16.pixel_type = PixelType::uint16;

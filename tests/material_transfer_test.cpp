@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <random>
@@ -1441,6 +1442,120 @@ TEST(MaterialApply, DespecklingLooksThroughNearBlackCodingSteps) {
           ASSERT_EQ(out->at(x, y, c), before.at(x, y, c)) << x << ", " << y;
       }
   }
+}
+
+TEST(MaterialApply, RangeFitIsWhiteOverTheRegionsPercentile) {
+  // Brightest channels 0.01, 0.02, ..., 10.00: the 99th percentile is the value at index
+  // floor(0.99 x 999) = 989, 9.90; brought to white 1 by 1 / 9.90, to white 2 by 2 / 9.90.
+  std::vector<float> values(1000);
+  for (int i = 0; i < 1000; ++i) values[std::size_t(i)] = 0.01f * float(i + 1);
+  std::vector<float> v = values;
+  EXPECT_FLOAT_EQ(photo::region_range_fit(v, 1.0f), 1.0f / 9.90f);
+  v = values;
+  EXPECT_FLOAT_EQ(photo::region_range_fit(v, 2.0f), 2.0f / 9.90f);
+  v = values;
+  EXPECT_EQ(photo::region_range_fit(v, 10.0f), 1.0f);  // within white: untouched
+  v = values;
+  EXPECT_EQ(photo::region_range_fit(v, 0.0f), 1.0f);  // no white level: the photo's exposure
+  EXPECT_EQ(photo::region_range_fit({}, 1.0f), 1.0f);
+  // The photo's white: 1 for a photo within [0, 1] (an 8-bit file's), else the 99.9th
+  // percentile of its brightest channels, non-finite values left out.
+  Image display(40, 25, 3), bright(40, 25, 3);
+  for (int i = 0; i < 1000; ++i)
+    for (int c = 0; c < 3; ++c) {
+      display.data()[3 * i + c] = c == 1 ? 0.001f * float(i) : 0.0f;
+      bright.data()[3 * i + c] = c == 2 ? 0.01f * float(i + 1) : 0.5f;
+    }
+  EXPECT_EQ(photo::photo_white_level(display), 1.0f);
+  EXPECT_FLOAT_EQ(photo::photo_white_level(bright), 9.99f);  // index floor(0.999 x 999) = 998
+  bright.at(0, 0, 2) = std::numeric_limits<float>::quiet_NaN();
+  bright.at(0, 0, 0) = bright.at(0, 0, 1) = std::numeric_limits<float>::infinity();
+  EXPECT_FLOAT_EQ(photo::photo_white_level(bright), 9.99f);  // 999 values: index 997
+}
+
+TEST(MaterialApply, ARegionBeyondThePhotosWhiteIsExposedDownAsAWhole) {
+  // Region 1 (x < 80): a dark surface (albedo 0.02, +-20 % ripple) with sunlit-looking patches 25
+  // x as bright, 1 in 9 of its pixels; a white material over its detail renders the patches far
+  // beyond white. Region 2: a mid grey taking a mid grey, within white. At the photo's exposure
+  // (white_level 0) over 5 % of region 1 is beyond white, which an 8-bit file's roll-off
+  // flattens. With white_level 1 region 1 is scaled by one factor, the one region_range_fit
+  // gives for its rendering, so its interior is that factor times the physical rendering
+  // (texture and contrast are ratios: kept) and at most 1 % of it is beyond white; region 2 is
+  // untouched, bit for bit.
+  GroundScene t = untextured_ground();
+  const auto [photo, labels] = painted(
+      t,
+      [](int x, int y) {
+        if (x >= 80) return grey(0.3f);
+        const bool patch = x % 9 < 3 && y % 9 < 3;
+        return grey(0.02f * (1 + 0.2f * std::sin(0.7f * float(x) + 1.3f * float(y))) *
+                    (patch ? 25.0f : 1.0f));
+      },
+      [](int x, int) { return x < 80 ? 1.0f : 2.0f; });
+  photo::DetailOptions detail_options;
+  detail_options.region_labels = &labels;
+  const Image detail = photo::photo_detail(photo, t.shading, t.g, detail_options);
+  const Image shading = photo::floored_shading(t.shading, t.g);
+  const std::vector<Material> materials = {Material{{0.9f, 0.9f, 0.9f}, 0.0f, 0.8f},
+                                           Material{{0.3f, 0.3f, 0.3f}, 0.0f, 0.8f}};
+  const Lighting& light = t.s.scene.lighting;
+  photo::CompositeOptions physical;
+  std::vector<float> unfitted, exposures;
+  const Image at_photo = photo::apply_materials(photo, t.g, light, shading, labels, materials,
+                                                &detail, physical, nullptr, &unfitted);
+  photo::CompositeOptions fitted_options;
+  fitted_options.white_level = 1.0f;
+  const Image fitted = photo::apply_materials(photo, t.g, light, shading, labels, materials,
+                                              &detail, fitted_options, nullptr, &exposures);
+  EXPECT_EQ(unfitted, (std::vector<float>{1.0f, 1.0f}));
+  ASSERT_EQ(exposures.size(), 2u);
+  EXPECT_EQ(exposures[1], 1.0f);
+  // The factor is region_range_fit over region 1's own rendering.
+  std::vector<std::int32_t> region1;
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 80; ++x)
+      if (t.g.surface.at(x, y, 0) > 0) region1.push_back(y * 160 + x);
+  ASSERT_GT(region1.size(), 5000u);
+  Image plain(160, 120, 3);
+  photo::render_with_detail(t.g, light, shading, &detail, materials[0], region1, plain);
+  std::vector<float> brightest;
+  for (const std::int32_t i : region1) {
+    const float* p = plain.pixel(i % 160, i / 160);
+    brightest.push_back(std::max({p[0], p[1], p[2]}));
+  }
+  EXPECT_FLOAT_EQ(exposures[0], photo::region_range_fit(brightest, 1.0f));
+  EXPECT_LT(exposures[0], 0.5f);
+  auto beyond_white = [&](const Image& im) {
+    int n = 0, total = 0;
+    for (const std::int32_t i : region1) {
+      const float* p = im.pixel(i % 160, i / 160);
+      n += std::max({p[0], p[1], p[2]}) > 1.0f;
+      ++total;
+    }
+    return double(n) / total;
+  };
+  std::printf(
+      "region 1 beyond white: at the photo's exposure %.1f %%, exposed down by %.3f: "
+      "%.2f %%\n",
+      100 * beyond_white(at_photo), exposures[0], 100 * beyond_white(fitted));
+  EXPECT_GT(beyond_white(at_photo), 0.05);  // the case tested
+  EXPECT_LE(beyond_white(fitted), 0.01);
+  int interior = 0;
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      if (!(t.g.surface.at(x, y, 0) > 0)) continue;
+      if (x >= 84) {  // region 2 beyond the feather's and the despeckling's reach
+        for (int c = 0; c < 3; ++c)
+          ASSERT_EQ(fitted.at(x, y, c), at_photo.at(x, y, c)) << x << ", " << y;
+      } else if (x < 76) {
+        ++interior;
+        for (int c = 0; c < 3; ++c) {
+          const float e = exposures[0] * at_photo.at(x, y, c);
+          ASSERT_NEAR(fitted.at(x, y, c), e, 1e-6f * std::max(1.0f, e)) << x << ", " << y;
+        }
+      }
+    }
+  EXPECT_GT(interior, 5000);
 }
 
 TEST(MaterialApply, AnObjectsEdgePixelOutsideTheRegionTakesTheNewColour) {

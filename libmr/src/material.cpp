@@ -708,6 +708,10 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
       all_stats_pixels.insert(all_stats_pixels.end(), p.begin(), p.end());
     std::vector<std::vector<photo::StyleStatistics>> region_stats(
         regions, std::vector<photo::StyleStatistics>(m));
+    // The statistics are of what will be shown: a candidate exposed down to the photo's white
+    // (photo::region_range_fit over its statistics pixels) is judged so.
+    const float white_level =
+        scene_only || !options.fit_photo_range ? 0.0f : photo::photo_white_level(target_rgb);
     {
       Image rendered(w, h, 3);
       throw_if_cancelled(options.cancel, "material");
@@ -717,7 +721,17 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
         photo::render_with_detail(geometry, lighting, shading, detail_used, candidates[c].material,
                                   all_stats_pixels, rendered);
         tbb::parallel_for(0, regions, [&](int r) {
-          region_stats[r][c] = photo::style_statistics(rendered, stats_pixels[r], target_reference);
+          std::vector<float> brightest;
+          if (white_level > 0)
+            for (const std::int32_t p : stats_pixels[r]) {
+              const float* px = rendered.pixel(p % w, p / w);
+              const float v = std::max({px[0], px[1], px[2]});
+              if (std::isfinite(v)) brightest.push_back(v);
+            }
+          // Scaling the pixels by the exposure is dividing the reference by it.
+          region_stats[r][c] = photo::style_statistics(
+              rendered, stats_pixels[r],
+              target_reference / photo::region_range_fit(brightest, white_level));
         });
         report_progress(options.cancel, "statistics", std::size_t(c) + 1, std::size_t(m));
       }
@@ -749,9 +763,12 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     photo::CompositeOptions composite;
     composite.smooth_feather_px = scene_only ? 0.0 : 3.0;
     composite.despeckle_borders = !scene_only;
+    composite.white_level = white_level;
     photo::DespeckleStats despeckled;
-    result.image = photo::apply_materials(target_rgb, geometry, lighting, shading, region_labels,
-                                          assigned, detail_used, composite, &despeckled);
+    std::vector<float> exposures;
+    result.image =
+        photo::apply_materials(target_rgb, geometry, lighting, shading, region_labels, assigned,
+                               detail_used, composite, &despeckled, &exposures);
     apply_step.end();
 
     // Style distance of the regions to the sample, before and after (whole composite).
@@ -772,6 +789,9 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
       std::string line = format("region %d (%zu px): candidate %d", r + 1, region_pixels[r].size(),
                                 result.assignment[r]);
       if (sky_in_region[r]) line += format(" (%zu sky pixels left as they are)", sky_in_region[r]);
+      if (exposures[std::size_t(r)] < 1)
+        line += format("; exposed down %.1f stops to stay within the photo's white",
+                       -std::log2(double(exposures[std::size_t(r)])));
       result.notes.push_back(line);
     }
     if (scene_only)

@@ -890,10 +890,58 @@ cv::Mat photo_plainness(const Image& photo) {
 
 }  // namespace
 
+float photo_white_level(const Image& photo) {
+  std::vector<float> brightest;
+  brightest.reserve(photo.pixel_count());
+  const int channels = std::min(photo.channels(), 3);
+  for (std::size_t i = 0; i < photo.pixel_count(); ++i) {
+    const float* p = photo.data() + i * std::size_t(photo.channels());
+    float m = -std::numeric_limits<float>::infinity();
+    for (int c = 0; c < channels; ++c)
+      if (std::isfinite(p[c])) m = std::max(m, p[c]);
+    if (std::isfinite(m)) brightest.push_back(m);
+  }
+  if (brightest.empty()) return 1.0f;
+  const auto nth = brightest.begin() + std::ptrdiff_t(0.999 * double(brightest.size() - 1));
+  std::nth_element(brightest.begin(), nth, brightest.end());
+  return std::max(1.0f, *nth);
+}
+
+float region_range_fit(std::span<float> brightest, float white_level) {
+  if (brightest.empty() || !(white_level > 0)) return 1.0f;
+  const auto nth =
+      brightest.begin() + std::ptrdiff_t(kRangeFitPercentile / 100 * double(brightest.size() - 1));
+  std::nth_element(brightest.begin(), nth, brightest.end());
+  return *nth > white_level ? white_level / *nth : 1.0f;
+}
+
+namespace {
+
+// Scales `rgb` (3 floats a pixel, pixel i at index i) by the region_range_fit of the pixels
+// for which in_region(i) holds; returns the factor.
+template <class InRegion>
+float fit_to_range(std::span<float> rgb, float white_level, InRegion&& in_region,
+                   std::vector<float>& brightest) {
+  if (!(white_level > 0)) return 1.0f;
+  brightest.clear();
+  for (std::size_t i = 0; 3 * i < rgb.size(); ++i)
+    if (in_region(i)) {
+      const float m = std::max({rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]});
+      if (std::isfinite(m)) brightest.push_back(m);
+    }
+  const float s = region_range_fit(brightest, white_level);
+  if (s < 1)
+    for (float& v : rgb) v *= s;
+  return s;
+}
+
+}  // namespace
+
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
-                      const CompositeOptions& options, DespeckleStats* despeckled) {
+                      const CompositeOptions& options, DespeckleStats* despeckled,
+                      std::vector<float>* exposures) {
   const double feather_px = options.feather_px, smooth_feather_px = options.smooth_feather_px;
   require_size(photo, geometry, "photo");
   require_size(region_labels, geometry, "region labels");
@@ -912,10 +960,20 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
       if (k == 0 || !(geometry.surface.at(x, y, 0) > 0)) continue;
       pixels[k - 1].push_back(y * w + x);
     }
+  if (exposures) exposures->assign(std::size_t(regions), 1.0f);
+  std::vector<float> rendered;  // a region's rendering (its band's), 3 floats a pixel
+  std::vector<float> brightest;
   Image out = photo;
   if (!(feather_px > 0)) {
-    for (int k = 0; k < regions; ++k)
-      render_with_detail(geometry, lighting, shading, detail, materials[k], pixels[k], out);
+    for (int k = 0; k < regions; ++k) {
+      rendered.resize(3 * pixels[k].size());
+      render_with_detail(geometry, lighting, shading, detail, materials[k], pixels[k], rendered);
+      const float s = fit_to_range(
+          rendered, options.white_level, [](std::size_t) { return true; }, brightest);
+      if (exposures) (*exposures)[std::size_t(k)] = s;
+      for (std::size_t i = 0; i < pixels[k].size(); ++i)
+        std::copy_n(&rendered[3 * i], 3, out.pixel(pixels[k][i] % w, pixels[k][i] / w));
+    }
     return out;
   }
   // Soft edges: each region's weight is its indicator blurred by a Gaussian of sigma feather_px,
@@ -955,7 +1013,6 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
   // replaced by 0 at its first weight), the photo blended back in at the end.
   cv::Mat region_weight(h, w, CV_32F, cv::Scalar(0));
   std::vector<std::int32_t> band;
-  std::vector<float> rendered;  // the band's, 3 floats a pixel
   indicator.setTo(0);
   for (int k = 1; k <= regions; ++k) {
     if (pixels[k - 1].empty()) continue;
@@ -992,6 +1049,15 @@ Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometr
           band.push_back(y * w + x);
     rendered.resize(3 * band.size());
     render_with_detail(geometry, lighting, shading, detail, materials[k - 1], band, rendered);
+    // The exposure is the region's own pixels', not its feather's.
+    const float s = fit_to_range(
+        rendered, options.white_level,
+        [&](std::size_t i) {
+          const int x = band[i] % w, y = band[i] / w;
+          return is_region(x, y) && int(region_labels.at(x, y, 0)) == k;
+        },
+        brightest);
+    if (exposures) (*exposures)[std::size_t(k - 1)] = s;
     for (std::size_t i = 0; i < band.size(); ++i) {
       const int x = band[i] % w, y = band[i] / w;
       const float wk = weight.at<float>(y - roi.y, x - roi.x);

@@ -27,6 +27,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <vector>
 #include "mr/image.h"
 #include "mr/material_model.h"
 #include "mr/scene.h"
@@ -154,7 +155,31 @@ struct CompositeOptions {
   double smooth_feather_px = 3.0;
   /// Last, despeckle_region_borders().
   bool despeckle_borders = true;
+  /// Above 0, the photo's white (photo_white_level): a region whose rendering would reach
+  /// beyond it is exposed down as a whole (region_range_fit). 0: every region at the photo's
+  /// own exposure, however far beyond white (a 3D scene; `mr material --physical-exposure`).
+  float white_level = 0;
 };
+
+/// The most a re-materialled region may reach, in the photo's units: 1, an 8-bit photo's white,
+/// or for a photo that records brighter values (a float original) the 99.9th percentile of its
+/// pixels' brightest channel (finite values).
+float photo_white_level(const Image& photo);
+
+/// Percentile of a region's brightest channels that region_range_fit brings to white: 1 % of a
+/// region may be sheen or glints beyond it, left to the output's highlight roll-off.
+constexpr double kRangeFitPercentile = 99;
+
+/// The exposure, in (0, 1], that brings a region's rendering within the photo's range:
+/// white_level over the kRangeFitPercentile-th percentile of `brightest` (each pixel's
+/// brightest channel) where that lies above white_level, else 1 (also for no pixels or a
+/// white_level of 0). Why: a light material on a dark surface in strong light renders many
+/// times beyond the photo's white, and the roll-off of an 8-bit file then flattens its texture
+/// (tuning scenetext01's trees: 29 % of a region above white, its 99th percentile 15 x white).
+/// The sample's albedo is known only up to its guessed exposure, and a camera exposing for the
+/// new material would record it so. One factor for the whole region keeps the texture and
+/// contrast, which are ratios. `brightest` is reordered.
+float region_range_fit(std::span<float> brightest, float white_level);
 
 /// `photo` with each region k (labels(x, y) = k in 1..materials.size(), surface pixels only)
 /// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular (D calmed where the
@@ -171,11 +196,14 @@ struct CompositeOptions {
 /// (1 where no step of the blurred log luminance between neighbours exceeds 0.05, 0 from 0.2;
 /// the least over the reach): a border ragged by a pixel or two through a plain surface leaves
 /// no teeth, and nothing crosses the photo's edges, and (3) the despeckled border band (what
-/// it changed into `*despeckled` when given). With `detail`, pass floored_shading().
+/// it changed into `*despeckled` when given). With `options.white_level`, each region's
+/// rendering is first scaled by its region_range_fit over the region's own pixels (the factors
+/// into `*exposures` when given, one per region). With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
-                      const CompositeOptions& options = {}, DespeckleStats* despeckled = nullptr);
+                      const CompositeOptions& options = {}, DespeckleStats* despeckled = nullptr,
+                      std::vector<float>* exposures = nullptr);
 
 /// Pixels within this distance of a region's border (a 7 x 7 window holding another label, and
 /// a region pixel) are despeckled: the narrow feather's reach.

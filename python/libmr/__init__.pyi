@@ -460,5 +460,5 @@ def transfer_material(sample: _Image, sample_depth: _Image, target: Optional[_Im
                       superpixel_size_px: float = 0.0, max_relative_rms: float = 0.25,
                       smoothness_weight: float = 0.1, tabu_max_iterations: int = 200,
                       tabu_patience: int = 40, seed: int = 1, keep_detail: bool = True,
-                      threads: int = 0,
+                      fit_photo_range: bool = True, threads: int = 0,
                       cancel: Optional[CancelToken] = None) -> MaterialTransferResult: ...

@@ -805,7 +805,7 @@ void bind_operations(py::module_& m) {
          const mr::FogScene* target_scene, std::optional<mr::Camera> sample_camera,
          std::optional<mr::Camera> target_camera, int max_candidates, double superpixel_size_px,
          double max_relative_rms, double smoothness_weight, int tabu_max_iterations,
-         int tabu_patience, std::uint32_t seed, bool keep_detail, int threads,
+         int tabu_patience, std::uint32_t seed, bool keep_detail, bool fit_photo_range, int threads,
          mr::CancelToken* cancel) {
         const ImageArg s_photo(sample, "sample");
         const ImageArg s_depth(sample_depth, "sample_depth");
@@ -843,6 +843,7 @@ void bind_operations(py::module_& m) {
         o.tabu_patience = tabu_patience;
         o.seed = seed;
         o.keep_detail = keep_detail;
+        o.fit_photo_range = fit_photo_range;
         o.threads = threads;
         o.cancel = cancel;
         mr::MaterialTransferResult res;
@@ -873,8 +874,9 @@ void bind_operations(py::module_& m) {
       py::arg("tabu_max_iterations") = mr::MaterialTransferOptions{}.tabu_max_iterations,
       py::arg("tabu_patience") = mr::MaterialTransferOptions{}.tabu_patience,
       py::arg("seed") = mr::MaterialTransferOptions{}.seed,
-      py::arg("keep_detail") = mr::MaterialTransferOptions{}.keep_detail, py::arg("threads") = 0,
-      py::arg("cancel") = py::none(),
+      py::arg("keep_detail") = mr::MaterialTransferOptions{}.keep_detail,
+      py::arg("fit_photo_range") = mr::MaterialTransferOptions{}.fit_photo_range,
+      py::arg("threads") = 0, py::arg("cancel") = py::none(),
       "Material style transfer (DESIGN.md section 5, as `mr material`): candidate materials "
       "fitted to the sample (scene-linear (h, w, 3) with its distance map, metres) are "
       "assigned to the target's regions (every assignment tried, or Tabu search for many regions) "
@@ -882,7 +884,8 @@ void bind_operations(py::module_& m) {
       "lighting (its scene's pose and lights). target None: a 3D scene given by its distance "
       "map alone. region_labels: (H, W) ids 0 = untouched, 1..n, or a mask / annotations path. "
       "Cameras: None = from the photo's metadata (60 degrees without EXIF). Deterministic for "
-      "a seed. Releases the GIL.");
+      "a seed. fit_photo_range: a region that would render beyond the photo's white is "
+      "exposed down as a whole (False: the photo's own exposure). Releases the GIL.");
 }
 
 }  // namespace mrpy

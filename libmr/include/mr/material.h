@@ -49,6 +49,13 @@ struct MR_API MaterialTransferOptions {
   int tabu_patience = 40;            ///< stop after this many iterations without a new best
   std::uint32_t seed = 1;            ///< equal seeds give identical results
   bool keep_detail = true;           ///< carry the photo's fine texture into the new material
+  /// A region whose new material would render beyond the photo's white (1, or a float photo's
+  /// 99.9th percentile) is exposed down as a whole until 99 % of it is within, as a camera
+  /// exposing for it would record it: its texture and contrast kept, its lightness not (the
+  /// sample's albedo is known only up to its guessed exposure). The search judges the
+  /// candidates so exposed. false: the photo's own exposure, the excess left to the output's
+  /// highlight roll-off. Ignored for a 3D scene (no photo).
+  bool fit_photo_range = true;
   int threads = 0;                   ///< 0: all cores
   /// Optional, caller-owned (mr/cancel.h): requested, the call stops at its next step (or
   /// segment fit) with mr::Error(cancelled). Its progress callback hears, in order,
