@@ -131,12 +131,14 @@ def test_transfer_material_equals_mr_material(tmp_path):
     mask[140:180, 40:200] = 1 / 255  # the street
     mask[30:120, 2:35] = 2 / 255  # the left house's wall
     libmr.write_image(tmp_path / "mask.png", mask, pixel_type="8", colorspace="raw")
-    subprocess.run([MR, "material", "--sample", str(sample_png), "--sample-depth", str(sample_depth),
-                    "--sample-scene", str(tmp_path / "scene.json"), "--sample-fov", "50",
-                    "--target", str(target_png), "--target-depth", str(target_depth),
-                    "--target-scene", str(tmp_path / "scene.json"), "--fov", "60",
-                    "--regions", str(tmp_path / "mask.png"), "-o", str(tmp_path / "cli.exr"),
-                    "--materials-json", str(tmp_path / "m.json"), "-q"], check=True)
+    cli = [MR, "material", "--sample", str(sample_png), "--sample-depth", str(sample_depth),
+           "--sample-scene", str(tmp_path / "scene.json"), "--sample-fov", "50",
+           "--target", str(target_png), "--target-depth", str(target_depth),
+           "--target-scene", str(tmp_path / "scene.json"), "--fov", "60",
+           "--regions", str(tmp_path / "mask.png"), "-q"]
+    subprocess.run(cli + ["-o", str(tmp_path / "cli.exr"), "--materials-json", str(tmp_path / "m.json")],
+                   check=True)
+    subprocess.run(cli + ["-o", str(tmp_path / "physical.exr"), "--physical-exposure"], check=True)
 
     sample = libmr.read_image(sample_png)
     target = libmr.read_image(target_png)
@@ -156,6 +158,16 @@ def test_transfer_material_equals_mr_material(tmp_path):
     timing = re.compile(r"[0-9.]+ s\b")
     assert [timing.sub("T", n) for n in py_doc.pop("notes")] == [timing.sub("T", n) for n in cli_doc.pop("notes")]
     assert py_doc == cli_doc
+    # fit_photo_range=False is `mr material --physical-exposure`; it differs from the default
+    # exactly where a region was exposed down to the photo's white.
+    physical = libmr.transfer_material(
+        sample, libmr.read_depth(sample_depth, s_cam).distance_m,
+        target, libmr.read_depth(target_depth, t_cam).distance_m, labels,
+        sample_scene=scene, target_scene=scene, sample_camera=s_cam, target_camera=t_cam,
+        fit_photo_range=False)
+    np.testing.assert_array_equal(physical.image, libmr.read_image(tmp_path / "physical.exr"))
+    exposed = any("exposed down" in n for n in result.notes)
+    assert exposed == (not np.array_equal(physical.image, result.image))
     with pytest.raises(libmr.SizeMismatchError):
         libmr.transfer_material(sample, libmr.read_depth(sample_depth, s_cam).distance_m, target,
                                 libmr.read_depth(target_depth, t_cam).distance_m, labels[:-1],
