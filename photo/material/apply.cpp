@@ -891,10 +891,15 @@ cv::Mat photo_plainness(const Image& photo) {
 }  // namespace
 
 float photo_white_level(const Image& photo) {
+  // Every pixel up to 2^20 of them, else an even subsample as many (4 MB, not 4 bytes a pixel
+  // held beside a large photo's detail layer).
+  constexpr std::size_t kSamples = std::size_t(1) << 20;
+  const std::size_t stride =
+      std::max<std::size_t>(1, (photo.pixel_count() + kSamples - 1) / kSamples);
   std::vector<float> brightest;
-  brightest.reserve(photo.pixel_count());
+  brightest.reserve(photo.pixel_count() / stride + 1);
   const int channels = std::min(photo.channels(), 3);
-  for (std::size_t i = 0; i < photo.pixel_count(); ++i) {
+  for (std::size_t i = 0; i < photo.pixel_count(); i += stride) {
     const float* p = photo.data() + i * std::size_t(photo.channels());
     float m = -std::numeric_limits<float>::infinity();
     for (int c = 0; c < channels; ++c)

@@ -163,7 +163,8 @@ struct CompositeOptions {
 
 /// The most a re-materialled region may reach, in the photo's units: 1, an 8-bit photo's white,
 /// or for a photo that records brighter values (a float original) the 99.9th percentile of its
-/// pixels' brightest channel (finite values).
+/// pixels' brightest channel (finite values; over an even subsample of 2^20 pixels for a larger
+/// photo).
 float photo_white_level(const Image& photo);
 
 /// Percentile of a region's brightest channels that region_range_fit brings to white: 1 % of a
