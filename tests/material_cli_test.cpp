@@ -191,7 +191,8 @@ TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
   // The default: exposed down to the photo's white, and the notes say by how much.
   const std::string fit_command =
       common.substr(0, common.size() - std::string(" -q --physical-exposure").size());
-  const auto r_fit = test::run(fit_command + " -o " + shell_quoted(work / "fitted.exr"));
+  const auto r_fit = test::run(fit_command + " -o " + shell_quoted(work / "fitted.exr") +
+                               " --materials-json " + shell_quoted(work / "fitted.json"));
   ASSERT_EQ(r_fit.exit_code, 0) << r_fit.output;
   EXPECT_NE(r_fit.output.find("stops to stay within the photo's white"), std::string::npos)
       << r_fit.output;
@@ -219,6 +220,9 @@ TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
   EXPECT_NEAR(ratios.front(), factor, 1e-5 * factor);
   EXPECT_NEAR(ratios.back(), factor, 1e-5 * factor);
   EXPECT_LE(fitted_beyond, region / 100);
+  // The JSON gives the factor the image shows (float rendering: a relative 1e-5).
+  const auto doc = nlohmann::json::parse(test::read_bytes(work / "fitted.json"));
+  EXPECT_NEAR(doc["regions"][0]["exposure"].get<double>(), factor, 1e-5 * factor);
   // A 16-bit target stays 16-bit in a PNG output (as `mr fog` keeps it); an 8-bit one 8-bit.
   WriteOptions png16;
   png16.pixel_type = PixelType::uint16;

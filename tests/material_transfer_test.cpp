@@ -785,6 +785,7 @@ TEST(MaterialJson, DocumentHoldsCandidatesAssignmentAndObjective) {
   r.candidates.candidates = {c, c};
   r.candidates.candidates[1].material = kMatte;
   r.assignment = {1, 0, 1};
+  r.exposures = {1.0, 0.25, 1.0};
   r.objective = 0.25;
   r.best_objective_history = {1.0, 0.5, 0.25};
   const nlohmann::json doc = nlohmann::json::parse(material_result_to_json(r));
@@ -797,6 +798,8 @@ TEST(MaterialJson, DocumentHoldsCandidatesAssignmentAndObjective) {
   EXPECT_EQ(doc["regions"][0]["region"], 1);
   EXPECT_EQ(doc["regions"][0]["candidate"], 1);
   EXPECT_NEAR(doc["regions"][0]["material"]["diffuse_albedo"][1].get<double>(), 0.45, 1e-6);
+  EXPECT_DOUBLE_EQ(doc["regions"][0]["exposure"].get<double>(), 1.0);
+  EXPECT_DOUBLE_EQ(doc["regions"][1]["exposure"].get<double>(), 0.25);
   EXPECT_DOUBLE_EQ(doc["objective"].get<double>(), 0.25);
 }
 

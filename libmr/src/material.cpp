@@ -769,6 +769,7 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
     result.image =
         photo::apply_materials(target_rgb, geometry, lighting, shading, region_labels, assigned,
                                detail_used, composite, &despeckled, &exposures);
+    result.exposures.assign(exposures.begin(), exposures.end());
     apply_step.end();
 
     // Style distance of the regions to the sample, before and after (whole composite).
@@ -929,6 +930,7 @@ std::string material_result_to_json(const MaterialTransferResult& result) {
     ordered_json entry{{"region", r + 1}, {"candidate", c}};
     if (c >= 0 && std::size_t(c) < result.candidates.candidates.size())
       entry["material"] = material_json(result.candidates.candidates[c].material);
+    if (r < result.exposures.size()) entry["exposure"] = result.exposures[r];
     regions.push_back(entry);
   }
   doc["regions"] = regions;

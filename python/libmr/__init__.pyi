@@ -445,6 +445,7 @@ class MaterialTransferResult:
     segment_labels: Optional[_Image]
     candidates: List[MaterialCandidate]
     assignment: List[int]
+    exposures: List[float]
     objective: float
     best_objective_history: List[float]
     notes: List[str]

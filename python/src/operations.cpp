@@ -68,6 +68,7 @@ struct MaterialResult {
   py::object image, segment_labels;
   std::vector<mr::MaterialCandidate> candidates;
   std::vector<int> assignment;
+  std::vector<double> exposures;
   double objective = 0;
   std::vector<double> best_objective_history;
   std::vector<std::string> notes, warnings;
@@ -777,6 +778,9 @@ void bind_operations(py::module_& m) {
       .def_readonly("candidates", &MaterialResult::candidates)
       .def_readonly("assignment", &MaterialResult::assignment,
                     "candidate index per region (region r = label r + 1)")
+      .def_readonly("exposures", &MaterialResult::exposures,
+                    "per region: the factor its rendering was scaled by to stay within the "
+                    "photo's white (1: the photo's own exposure)")
       .def_readonly("objective", &MaterialResult::objective)
       .def_readonly("best_objective_history", &MaterialResult::best_objective_history)
       .def_readonly("notes", &MaterialResult::notes)
@@ -859,6 +863,7 @@ void bind_operations(py::module_& m) {
         r.assignment = res.assignment;
         r.objective = res.objective;
         r.best_objective_history = res.best_objective_history;
+        r.exposures = res.exposures;
         r.notes = res.notes;
         r.warnings = res.warnings;
         return r;

@@ -168,6 +168,8 @@ def test_transfer_material_equals_mr_material(tmp_path):
     np.testing.assert_array_equal(physical.image, libmr.read_image(tmp_path / "physical.exr"))
     exposed = any("exposed down" in n for n in result.notes)
     assert exposed == (not np.array_equal(physical.image, result.image))
+    assert len(result.exposures) == 2 and exposed == (min(result.exposures) < 1)
+    assert physical.exposures == [1.0, 1.0]
     with pytest.raises(libmr.SizeMismatchError):
         libmr.transfer_material(sample, libmr.read_depth(sample_depth, s_cam).distance_m, target,
                                 libmr.read_depth(target_depth, t_cam).distance_m, labels[:-1],

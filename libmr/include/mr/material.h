@@ -91,6 +91,9 @@ struct MR_API MaterialTransferResult {
   Image image;  ///< the target photo with its regions re-materialed, scene-linear RGB
   MaterialCandidates candidates;
   std::vector<int> assignment;  ///< candidate index per region (region r = label r + 1)
+  /// Per region: the factor its rendering was scaled by to stay within the photo's white
+  /// (MaterialTransferOptions::fit_photo_range; 1: the photo's own exposure).
+  std::vector<double> exposures;
   double objective = 0;         ///< the style objective of the assignment (lower is better)
   std::vector<double> best_objective_history;  ///< best-so-far per Tabu iteration
   std::vector<std::string> notes;
