@@ -146,10 +146,11 @@ TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
   WriteOptions raw = png8;
   raw.colorspace = colorspace::raw;
   write_image(work / "mask.png", mask, raw);
-  const std::string common = kMr + " material --sample " + shell_quoted(work / "sample.png") +
-                             " --sample-fov 50 --target " + shell_quoted(work / "target.png") +
-                             " --fov 50 --regions " + shell_quoted(work / "mask.png") +
-                             " --seed 3 -q --physical-exposure";
+  const std::string transfer = kMr + " material --sample " + shell_quoted(work / "sample.png") +
+                               " --sample-fov 50 --target " + shell_quoted(work / "target.png") +
+                               " --fov 50 --regions " + shell_quoted(work / "mask.png") +
+                               " --seed 3";
+  const std::string common = transfer + " -q --physical-exposure";
   const auto r_exr = test::run(common + " -o " + shell_quoted(work / "linear.exr"));
   ASSERT_EQ(r_exr.exit_code, 0) << r_exr.output;
   const auto r_png = test::run(common + " -o " + shell_quoted(work / "display.png"));
@@ -188,10 +189,8 @@ TEST_F(MaterialCli, ChangedPixelsRollOffAndTheRestIsThePhoto) {
   EXPECT_EQ(at_255, 0);
   EXPECT_EQ(off, 0);
   EXPECT_EQ(unchanged_differ, 0);
-  // The default: exposed down to the photo's white, and the notes say by how much.
-  const std::string fit_command =
-      common.substr(0, common.size() - std::string(" -q --physical-exposure").size());
-  const auto r_fit = test::run(fit_command + " -o " + shell_quoted(work / "fitted.exr") +
+  // The default: exposed down to the photo's white, and the notes (not quiet) say by how much.
+  const auto r_fit = test::run(transfer + " -o " + shell_quoted(work / "fitted.exr") +
                                " --materials-json " + shell_quoted(work / "fitted.json"));
   ASSERT_EQ(r_fit.exit_code, 0) << r_fit.output;
   EXPECT_NE(r_fit.output.find("stops to stay within the photo's white"), std::string::npos)
