@@ -198,8 +198,9 @@ float region_range_fit(std::span<float> brightest, float white_level);
 /// the least over the reach): a border ragged by a pixel or two through a plain surface leaves
 /// no teeth, and nothing crosses the photo's edges, and (3) the despeckled border band (what
 /// it changed into `*despeckled` when given). With `options.white_level`, each region's
-/// rendering is first scaled by its region_range_fit over the region's own pixels (the factors
-/// into `*exposures` when given, one per region). With `detail`, pass floored_shading().
+/// rendering is first scaled by its region_range_fit over the region's own pixels (an even
+/// subsample of 2^20 of a larger region; the factors into `*exposures` when given, one per
+/// region). With `detail`, pass floored_shading().
 Image apply_materials(const Image& photo, const render::SurfaceGeometry& geometry,
                       const Lighting& lighting, const Image& shading, const Image& region_labels,
                       std::span<const Material> materials, const Image* detail,
