@@ -721,17 +721,10 @@ MaterialTransferResult transfer_material(const ShadedPhoto& sample, const Shaded
         photo::render_with_detail(geometry, lighting, shading, detail_used, candidates[c].material,
                                   all_stats_pixels, rendered);
         tbb::parallel_for(0, regions, [&](int r) {
-          std::vector<float> brightest;
-          if (white_level > 0)
-            for (const std::int32_t p : stats_pixels[r]) {
-              const float* px = rendered.pixel(p % w, p / w);
-              const float v = std::max({px[0], px[1], px[2]});
-              if (std::isfinite(v)) brightest.push_back(v);
-            }
           // Scaling the pixels by the exposure is dividing the reference by it.
           region_stats[r][c] = photo::style_statistics(
               rendered, stats_pixels[r],
-              target_reference / photo::region_range_fit(brightest, white_level));
+              target_reference / photo::region_range_fit(rendered, stats_pixels[r], white_level));
         });
         report_progress(options.cancel, "statistics", std::size_t(c) + 1, std::size_t(m));
       }

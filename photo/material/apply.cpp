@@ -890,56 +890,80 @@ cv::Mat photo_plainness(const Image& photo) {
 
 }  // namespace
 
+namespace {
+
+// At most this many values (an even subsample of more) give the photo's white and a region's
+// percentile: 4 MB, not 4 bytes a pixel of a camera-size photo or region.
+constexpr std::size_t kPercentileSamples = std::size_t(1) << 20;
+
+std::size_t sample_stride(std::size_t count) {
+  return std::max<std::size_t>(1, (count + kPercentileSamples - 1) / kPercentileSamples);
+}
+
+// The value at index floor(fraction x (n - 1)) of `values` in order (reordered); values non-empty.
+float percentile_of(std::span<float> values, double fraction) {
+  const auto nth = values.begin() + std::ptrdiff_t(fraction * double(values.size() - 1));
+  std::nth_element(values.begin(), nth, values.end());
+  return *nth;
+}
+
+// The largest of a rendered pixel's three channels (NaN when one is).
+float brightest_channel(const float* rgb) {
+  return std::max({rgb[0], rgb[1], rgb[2]});
+}
+
+}  // namespace
+
 float photo_white_level(const Image& photo) {
-  // Every pixel up to 2^20 of them, else an even subsample as many (4 MB, not 4 bytes a pixel
-  // held beside a large photo's detail layer).
-  constexpr std::size_t kSamples = std::size_t(1) << 20;
-  const std::size_t stride =
-      std::max<std::size_t>(1, (photo.pixel_count() + kSamples - 1) / kSamples);
+  const std::size_t stride = sample_stride(photo.pixel_count());
   std::vector<float> brightest;
   brightest.reserve(photo.pixel_count() / stride + 1);
   const int channels = std::min(photo.channels(), 3);
   for (std::size_t i = 0; i < photo.pixel_count(); i += stride) {
     const float* p = photo.data() + i * std::size_t(photo.channels());
+    // A photo's pixel may have one channel NaN: its other channels still count.
     float m = -std::numeric_limits<float>::infinity();
     for (int c = 0; c < channels; ++c)
       if (std::isfinite(p[c])) m = std::max(m, p[c]);
     if (std::isfinite(m)) brightest.push_back(m);
   }
   if (brightest.empty()) return 1.0f;
-  const auto nth = brightest.begin() + std::ptrdiff_t(0.999 * double(brightest.size() - 1));
-  std::nth_element(brightest.begin(), nth, brightest.end());
-  return std::max(1.0f, *nth);
+  return std::max(1.0f, percentile_of(brightest, 0.999));
 }
 
 float region_range_fit(std::span<float> brightest, float white_level) {
   if (brightest.empty() || !(white_level > 0)) return 1.0f;
-  const auto nth =
-      brightest.begin() + std::ptrdiff_t(kRangeFitPercentile / 100 * double(brightest.size() - 1));
-  std::nth_element(brightest.begin(), nth, brightest.end());
-  return *nth > white_level ? white_level / *nth : 1.0f;
+  const float level = percentile_of(brightest, kRangeFitPercentile / 100);
+  return level > white_level ? white_level / level : 1.0f;
+}
+
+float region_range_fit(const Image& rendered, std::span<const std::int32_t> pixels,
+                       float white_level) {
+  if (!(white_level > 0)) return 1.0f;
+  const int w = rendered.width();
+  std::vector<float> brightest;
+  for (const std::int32_t p : pixels) {
+    const float m = brightest_channel(rendered.pixel(p % w, p / w));
+    if (std::isfinite(m)) brightest.push_back(m);
+  }
+  return region_range_fit(brightest, white_level);
 }
 
 namespace {
 
-// At most this many of a region's pixels (an even subsample of a larger region) give its
-// percentile: 4 MB, not 4 bytes a pixel of a camera-size region.
-constexpr std::size_t kRangeFitSamples = std::size_t(1) << 20;
-
 // Scales `rgb` (3 floats a pixel, pixel i at index i) by the region_range_fit of the pixels
 // for which in_region(i) holds (`region_pixels` of them; every stride-th one taken where they
-// are more than kRangeFitSamples); returns the factor.
+// are more than kPercentileSamples); returns the factor.
 template <class InRegion>
 float fit_to_range(std::span<float> rgb, float white_level, std::size_t region_pixels,
                    InRegion&& in_region, std::vector<float>& brightest) {
   if (!(white_level > 0)) return 1.0f;
-  const std::size_t stride =
-      std::max<std::size_t>(1, (region_pixels + kRangeFitSamples - 1) / kRangeFitSamples);
+  const std::size_t stride = sample_stride(region_pixels);
   brightest.clear();
   std::size_t seen = 0;
   for (std::size_t i = 0; 3 * i < rgb.size(); ++i)
     if (in_region(i) && seen++ % stride == 0) {
-      const float m = std::max({rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]});
+      const float m = brightest_channel(&rgb[3 * i]);
       if (std::isfinite(m)) brightest.push_back(m);
     }
   const float s = region_range_fit(brightest, white_level);

@@ -181,6 +181,10 @@ constexpr double kRangeFitPercentile = 99;
 /// new material would record it so. One factor for the whole region keeps the texture and
 /// contrast, which are ratios. `brightest` is reordered.
 float region_range_fit(std::span<float> brightest, float white_level);
+/// The same over the listed pixels of a rendering (RGB; non-finite pixels left out): the factor
+/// the assignment search judges a candidate's region by.
+float region_range_fit(const Image& rendered, std::span<const std::int32_t> pixels,
+                       float white_level);
 
 /// `photo` with each region k (labels(x, y) = k in 1..materials.size(), surface pixels only)
 /// re-rendered with materials[k - 1]: D * diffuse_albedo * S + specular (D calmed where the
