@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -65,6 +66,16 @@ struct OccluderSceneOptions {
   /// render's CPU rose 8 % idle (1645 -> 1785 ms), 27 % at load 4 (medians of four pairs; the
   /// fresh wall even, a reused BVH's render slower; README, issue 12).
   bool surface_grids = false;
+  /// Issue 12 item 4: the camera and pose the mesh was made for, to trace its surface in the
+  /// image over a depth pyramid (render/shadow_traversal/depth_image_surface.h) instead of in
+  /// an Embree BVH, where the mesh carries its pixel layout (MeshOptions::pixel_layout) and
+  /// its surface triangles come first; the triangles after them (extrusions, blockers) stay in
+  /// Embree. The same answers (both watertight); no BVH to build over the surface.
+  struct DepthImageView {
+    Camera camera;
+    CameraPose pose;
+  };
+  std::optional<DepthImageView> depth_image;
 };
 
 /// Issue 12 item 4: one RTCGrid of the surface: pixels x_begin .. x_end - 1 of rows 2 * band
@@ -87,6 +98,8 @@ std::vector<SurfaceGridRun> surface_grid_runs(const SurfacePixelLayout& layout);
 /// destruction; movable, not copyable). All query methods are const and safe to call from many
 /// threads at once (Embree queries are). Coordinates are world metres (mr/scene.h). A moved-from
 /// scene may only be destroyed or assigned to.
+class DepthImageSurface;  // render/shadow_traversal/depth_image_surface.h
+
 class OccluderScene {
  public:
   /// Builds the scene (see OccluderSceneOptions for the build quality). Takes the mesh by value
@@ -151,6 +164,7 @@ class OccluderScene {
   std::shared_ptr<const ShadowQuery> shadow_query_;
   std::unique_ptr<SurfaceGrids> grids_;  // buffers Embree reads the grids and other quads from
   std::size_t surface_quads_ = 0;
+  std::unique_ptr<DepthImageSurface> image_surface_;  // set: the surface is traced in the image
 };
 
 /// One shadow ray for occluded_rays: from `origin` along `direction` (need not be unit length),
