@@ -164,11 +164,11 @@ bool grids_wanted() {
   return grids && *grids == '1';
 }
 
-// MR_BENCH_SURFACE=image: BM_Stages traces the surface in the image (OccluderSceneOptions::
-// depth_image) instead of Embree's BVH.
+// BM_Stages traces the surface in the image (OccluderSceneOptions::depth_image) as the core
+// does for a fresh photo; MR_BENCH_SURFACE=bvh: in Embree's BVH (what a reused scene gets).
 bool image_surface_wanted() {
   const char* v = std::getenv("MR_BENCH_SURFACE");
-  return v && std::string(v) == "image";
+  return !(v && std::string(v) == "bvh");
 }
 
 // The CPU core's stages as libmr/src/scattering.cpp runs them on a fresh photo (CPU backend,

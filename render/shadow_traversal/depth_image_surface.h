@@ -41,8 +41,13 @@ class DepthImageSurface {
   /// its pixel layout (MeshOptions::pixel_layout; no planar merge) and have been made for
   /// `camera` and `pose`. Keeps a pointer to the mesh's positions and indices: the mesh must
   /// outlive this and not change. Parallel (TBB). Throws mr::Error(invalid_argument) when the
-  /// mesh has no layout or the layout's size is not the camera's.
+  /// mesh has no layout, the layout's size is not the camera's, or the camera is not supported.
   DepthImageSurface(const TriangleMesh& mesh, const Camera& camera, const CameraPose& pose);
+
+  /// Whether a camera's size is within what the walk handles (2^15 px a side).
+  static bool supports(const Camera& camera) {
+    return camera.width > 0 && camera.height > 0 && camera.width <= 32768 && camera.height <= 32768;
+  }
 
   /// Whether a surface triangle lies on origin + t * direction, t_near < t <= t_far (the
   /// semantics of render/shadow_query.h).
@@ -94,6 +99,8 @@ class DepthImageSurface {
     double x0, y0, x1, y1, w0, w1;
   };
   struct Walk;
+  /// occluded8 where the CPU has AVX2: the eight rays walk the pyramid together.
+  void occluded8_walk(const RayPacket8& rays, bool occluded_out[8]) const;
   bool image_segment(const float* origin, const float* direction, float t_near, float t_far,
                      Segment& seg) const;
   /// Whether the ray hits one of pixel (x, y)'s triangles; with t_best, lowers *t_best to the

@@ -11,19 +11,9 @@
 #include <utility>
 
 #include "mr/error.h"
+#include "render/shadow_traversal/simd8.h"
 #include "render/shadow_traversal/triangle_test.h"
 
-#if defined(__x86_64__) && defined(__GNUC__)
-#include <immintrin.h>
-// The packet traversal is compiled for AVX2 (8 floats per register; GCC lowers 8-wide vector
-// comparisons lane by lane with scalar code on plain x86-64) and runs where the CPU has it;
-// elsewhere occluded8 answers ray by ray. AVX2 does not include FMA: no fused operations.
-#define MR_PACKET_TARGET __attribute__((target("avx2")))
-#define MR_PACKET_ISA_PRESENT() __builtin_cpu_supports("avx2")
-#else
-#define MR_PACKET_TARGET
-#define MR_PACKET_ISA_PRESENT() true
-#endif
 
 namespace mr::render::shadow {
 
@@ -896,42 +886,13 @@ bool KdTree::occluded_multi_index(const Ray& ray, bool predict_occluded,
 
 namespace {
 
-// GCC/Clang vector extensions: one AVX2 op per 8 lanes (MR_PACKET_TARGET). The operations
-// below are the scalar traversal's, lane by lane, in the same order and rounding (kd_tree.cpp is
-// compiled with -ffp-contract=off: no fused multiply-adds on either side), so each lane's answer
-// is the single-ray answer bit for bit.
-using F8 = float __attribute__((vector_size(32)));
-using I8 = std::int32_t __attribute__((vector_size(32)));
-
-MR_PACKET_TARGET inline unsigned bits(const I8& m) {
-#if defined(__x86_64__) && defined(__GNUC__)
-  return unsigned(_mm256_movemask_ps(reinterpret_cast<__m256>(m)));
-#else
-  unsigned r = 0;
-  for (int k = 0; k < 8; ++k) r |= unsigned(m[k] < 0) << k;
-  return r;
-#endif
-}
-
-// Lane-wise choices as bit operations (and a vector ?: is lowered lane by lane with branches
-// wherever the vectors are wider than the target's).
-MR_PACKET_TARGET inline void blend(const I8& m, const F8& a, const F8& b, F8& out) {  // m ? a : b
-  out = reinterpret_cast<F8>((m & reinterpret_cast<I8>(a)) | (~m & reinterpret_cast<I8>(b)));
-}
-MR_PACKET_TARGET inline void blend(const I8& m, const I8& a, const I8& b, I8& out) {
-  out = (m & a) | (~m & b);
-}
+// The 8-wide helpers (F8, I8, bits, blend, vmax, vmin) are render/shadow_traversal/simd8.h's.
+// The operations below are the scalar traversal's, lane by lane, in the same order and
+// rounding (kd_tree.cpp is compiled with -ffp-contract=off: no fused multiply-adds on either
+// side), so each lane's answer is the single-ray answer bit for bit.
 MR_PACKET_TARGET inline void vabs(const F8& a, F8& out) {  // std::fabs
   out = reinterpret_cast<F8>(reinterpret_cast<I8>(a) & 0x7fffffff);
 }
-// std::max(a, b) and std::min(a, b) lane by lane, NaNs included.
-MR_PACKET_TARGET inline void vmax(const F8& a, const F8& b, F8& out) {
-  blend(a < b, b, a, out);
-}
-MR_PACKET_TARGET inline void vmin(const F8& a, const F8& b, F8& out) {
-  blend(b < a, b, a, out);
-}
-
 // a[k] for k given per lane by the masks (k == 0: is0, k == 1: is1, else k == 2).
 MR_PACKET_TARGET inline void select3(const I8& is0, const I8& is1, const F8& a0, const F8& a1,
                                      const F8& a2, F8& out) {
