@@ -164,13 +164,6 @@ bool grids_wanted() {
   return grids && *grids == '1';
 }
 
-// BM_Stages traces the surface in the image (OccluderSceneOptions::depth_image) as the core
-// does for a fresh photo; MR_BENCH_SURFACE=bvh: in Embree's BVH (what a reused scene gets).
-bool image_surface_wanted() {
-  const char* v = std::getenv("MR_BENCH_SURFACE");
-  return !(v && std::string(v) == "bvh");
-}
-
 // The CPU core's stages as libmr/src/scattering.cpp runs them on a fresh photo (CPU backend,
 // full-resolution mesh, decimated when `merge` is 1 as the core does, the blockers' completion
 // on), each timed.
@@ -216,7 +209,7 @@ void BM_Stages(benchmark::State& state) {
     normals_s = since(t);
     t = Clock::now();
     mr::render::MeshOptions mesh_options;
-    mesh_options.pixel_layout = grids_wanted() || image_surface_wanted();
+    mesh_options.pixel_layout = grids_wanted();
     if (state.range(3) != 0)
       mesh_options.planar_merge_tolerance = mr::render::kCpuPlanarMergeTolerance;
     mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
@@ -230,8 +223,6 @@ void BM_Stages(benchmark::State& state) {
     t = Clock::now();
     mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS=1: grids
     scene_options.surface_grids = grids_wanted();
-    if (image_surface_wanted())
-      scene_options.depth_image = mr::render::OccluderSceneOptions::DepthImageView{in.camera, s.pose};
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     bvh_s = since(t);
     grid_pixels = occluders.grid_pixel_count();
@@ -338,7 +329,7 @@ void BM_Geometry(benchmark::State& state) {
     const mr::Image normals = mr::render::estimate_normals(in.depth.view(), in.camera, s.pose);
     lap();
     mr::render::MeshOptions mesh_options;
-    mesh_options.pixel_layout = grids_wanted() || image_surface_wanted();
+    mesh_options.pixel_layout = grids_wanted();
     mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
         in.depth.view(), in.camera, s.pose, mesh_options, normals.view());
     lap();
@@ -348,8 +339,6 @@ void BM_Geometry(benchmark::State& state) {
     triangles = mesh.triangle_count();
     mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS as in BM_Stages
     scene_options.surface_grids = grids_wanted();
-    if (image_surface_wanted())
-      scene_options.depth_image = mr::render::OccluderSceneOptions::DepthImageView{in.camera, s.pose};
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     lap();
     benchmark::DoNotOptimize(occluders.triangle_count());

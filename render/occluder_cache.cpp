@@ -115,15 +115,6 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
     }
     if (entry && matches(*entry, r)) {
       t.reused = true;
-      // Reused (a slider render of the same photo): from now on worth Embree's BVH over the
-      // surface, which traces faster than the image's walk (OccluderScene::build_surface_bvh).
-      // (Not where the multi-index tree answers the shadow packets: it was asked for.)
-      if (entry->shadow_traversal == ShadowTraversal::embree && entry->geometry->occluders &&
-          entry->geometry->occluders->traces_surface_in_image()) {
-        const auto start = Clock::now();
-        entry->geometry->occluders->build_surface_bvh();
-        t.bvh_s = seconds_since(start);
-      }
       if (timings) *timings = t;
       return entry->geometry;
     }
@@ -139,23 +130,15 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   geometry->normals = estimate_normals(r.distance_m, *r.camera, *r.pose);
   throw_if_cancelled(r.cancel, what);
   TriangleMesh mesh;
-  // A fresh render traces the surface in the image (no BVH to build, render/shadow_traversal/
-  // depth_image_surface.h): the mesh keeps its pixel layout for it, and the scene is told the
-  // camera the mesh was made for.
-  MeshOptions mesh_options = r.mesh_options;
-  mesh_options.pixel_layout = true;
-  OccluderSceneOptions scene_options;
   if (r.mesh_step > 1) {
     const DownsampledDistance coarse =
         downsample_distance_nearest(r.distance_m, *r.camera, r.mesh_step);
     mesh =
-        reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, *r.pose, mesh_options);
-    scene_options.depth_image = OccluderSceneOptions::DepthImageView{coarse.camera, *r.pose};
+        reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, *r.pose, r.mesh_options);
   } else {
-    scene_options.depth_image = OccluderSceneOptions::DepthImageView{*r.camera, *r.pose};
     // Normals as estimate_normals computed them above (the same discontinuity ratio).
     mesh = reconstruct_occluder_mesh(
-        r.distance_m, *r.camera, *r.pose, mesh_options,
+        r.distance_m, *r.camera, *r.pose, r.mesh_options,
         r.mesh_options.discontinuity_ratio == MeshOptions{}.discontinuity_ratio
             ? ConstImageView(geometry->normals.view())
             : ConstImageView{});
@@ -166,7 +149,7 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   t.mesh_s = seconds_since(start);
   throw_if_cancelled(r.cancel, what);
   start = Clock::now();
-  if (mesh.triangle_count() > 0) geometry->occluders.emplace(std::move(mesh), scene_options);
+  if (mesh.triangle_count() > 0) geometry->occluders.emplace(std::move(mesh));
   if (geometry->occluders && r.shadow_traversal == ShadowTraversal::multi_index)
     geometry->occluders->set_shadow_query(
         std::make_shared<MultiIndexShadowQuery>(geometry->occluders->mesh()));

@@ -255,7 +255,6 @@ inline bool continuous(const Sample& p, const Plane& pp, const Sample& q, const 
 constexpr std::uint8_t kValid = 1, kRightContinuous = 2, kDownContinuous = 4, kFan = 8;
 constexpr std::uint8_t kGridEligible = SurfacePixelLayout::kGridEligible;
 static_assert(kValid == SurfacePixelLayout::kSurface);
-static_assert(kFan == SurfacePixelLayout::kFanned);
 static_assert((kGridEligible & (kValid | kRightContinuous | kDownContinuous | kFan)) == 0);
 
 /// How the up-to-four pixels around a corner share it. Slots: 0 = top-left, 1 = top-right,

@@ -33,9 +33,8 @@ struct SurfacePixelLayout {
   /// pixel[] bits: the pixel has a surface (its two triangles are the surface's next pair, see
   /// TriangleMesh), and it is grid-eligible: it has a surface, is not fanned, and each of its
   /// four corners has exactly one vertex (no discontinuity splits it), so its triangles are
-  /// (c00, c11, c01), (c00, c10, c11) over corner_vertex[] of its corners; fanned: it has a
-  /// surface and four triangles (MeshOptions::centre_tolerance). Other bits: private.
-  static constexpr std::uint8_t kSurface = 1, kFanned = 8, kGridEligible = 16;
+  /// (c00, c11, c01), (c00, c10, c11) over corner_vertex[] of its corners. Other bits: private.
+  static constexpr std::uint8_t kSurface = 1, kGridEligible = 16;
   SurfacePixelLayout(int width_px, int height_px, HugePageArray<std::uint8_t> pixels,
                      HugePageArray<std::uint32_t> corners)
       : width(width_px),
