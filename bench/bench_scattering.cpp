@@ -26,6 +26,8 @@
 // steps (the reference for the acceleration's error: MR_BENCH_EXACT=1 MR_BENCH_STEPS=128).
 // MR_BENCH_GRIDS=1 (BM_Stages, BM_Geometry): the surface's regular pixels as Embree grids
 // (OccluderSceneOptions::surface_grids; the Mgrid_px counter says how many pixels).
+// MR_BENCH_COMPACT=1 (BM_Stages, BM_Geometry): Embree's compact BVH (OccluderSceneOptions::
+// compact), to weigh its smaller build memory against its dearer leaves.
 //
 // BM_Geometry runs the geometry stages alone (normals, mesh, blockers, BVH), with each one's
 // CPU time and minor page faults: `perf record` it to profile them.
@@ -223,6 +225,7 @@ void BM_Stages(benchmark::State& state) {
     t = Clock::now();
     mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS=1: grids
     scene_options.surface_grids = grids_wanted();
+    if (const char* compact = std::getenv("MR_BENCH_COMPACT")) scene_options.compact = *compact == '1';
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     bvh_s = since(t);
     grid_pixels = occluders.grid_pixel_count();
@@ -339,6 +342,7 @@ void BM_Geometry(benchmark::State& state) {
     triangles = mesh.triangle_count();
     mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS as in BM_Stages
     scene_options.surface_grids = grids_wanted();
+    if (const char* compact = std::getenv("MR_BENCH_COMPACT")) scene_options.compact = *compact == '1';
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     lap();
     benchmark::DoNotOptimize(occluders.triangle_count());
