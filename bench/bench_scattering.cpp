@@ -28,6 +28,8 @@
 // (OccluderSceneOptions::surface_grids; the Mgrid_px counter says how many pixels).
 // MR_BENCH_COMPACT=1 (BM_Stages, BM_Geometry): Embree's compact BVH (OccluderSceneOptions::
 // compact), to weigh its smaller build memory against its dearer leaves.
+// MR_BENCH_QUALITY=low|medium|high (BM_Stages): Embree's build quality
+// (OccluderSceneOptions::build_quality; medium is the core's).
 //
 // BM_Geometry runs the geometry stages alone (normals, mesh, blockers, BVH), with each one's
 // CPU time and minor page faults: `perf record` it to profile them.
@@ -226,6 +228,10 @@ void BM_Stages(benchmark::State& state) {
     mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS=1: grids
     scene_options.surface_grids = grids_wanted();
     if (const char* compact = std::getenv("MR_BENCH_COMPACT")) scene_options.compact = *compact == '1';
+    if (const char* q = std::getenv("MR_BENCH_QUALITY"))
+      scene_options.build_quality = std::string(q) == "low" ? mr::render::BuildQuality::low
+                                    : std::string(q) == "high" ? mr::render::BuildQuality::high
+                                                               : mr::render::BuildQuality::medium;
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     bvh_s = since(t);
     grid_pixels = occluders.grid_pixel_count();
