@@ -227,9 +227,10 @@ void BM_Stages(benchmark::State& state) {
     t = Clock::now();
     mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS=1: grids
     scene_options.surface_grids = grids_wanted();
-    if (const char* compact = std::getenv("MR_BENCH_COMPACT")) scene_options.compact = *compact == '1';
+    if (const char* compact = std::getenv("MR_BENCH_COMPACT"))
+      scene_options.compact = *compact == '1';
     if (const char* q = std::getenv("MR_BENCH_QUALITY"))
-      scene_options.build_quality = std::string(q) == "low" ? mr::render::BuildQuality::low
+      scene_options.build_quality = std::string(q) == "low"    ? mr::render::BuildQuality::low
                                     : std::string(q) == "high" ? mr::render::BuildQuality::high
                                                                : mr::render::BuildQuality::medium;
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
@@ -348,7 +349,8 @@ void BM_Geometry(benchmark::State& state) {
     triangles = mesh.triangle_count();
     mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS as in BM_Stages
     scene_options.surface_grids = grids_wanted();
-    if (const char* compact = std::getenv("MR_BENCH_COMPACT")) scene_options.compact = *compact == '1';
+    if (const char* compact = std::getenv("MR_BENCH_COMPACT"))
+      scene_options.compact = *compact == '1';
     const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
     lap();
     benchmark::DoNotOptimize(occluders.triangle_count());
