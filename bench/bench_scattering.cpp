@@ -28,7 +28,7 @@
 // (OccluderSceneOptions::surface_grids; the Mgrid_px counter says how many pixels).
 // MR_BENCH_COMPACT=1 (BM_Stages, BM_Geometry): Embree's compact BVH (OccluderSceneOptions::
 // compact), to weigh its smaller build memory against its dearer leaves.
-// MR_BENCH_QUALITY=low|medium|high (BM_Stages): Embree's build quality
+// MR_BENCH_QUALITY=low|medium|high (BM_Stages, BM_Geometry): Embree's build quality
 // (OccluderSceneOptions::build_quality; medium is the core's).
 //
 // BM_Geometry runs the geometry stages alone (normals, mesh, blockers, BVH), with each one's
@@ -168,6 +168,19 @@ bool grids_wanted() {
   return grids && *grids == '1';
 }
 
+// The occluder scene's options as BM_Stages and BM_Geometry build it: the core's defaults, or
+// what MR_BENCH_GRIDS, MR_BENCH_COMPACT and MR_BENCH_QUALITY ask for.
+mr::render::OccluderSceneOptions scene_options_wanted() {
+  mr::render::OccluderSceneOptions options;
+  options.surface_grids = grids_wanted();
+  if (const char* compact = std::getenv("MR_BENCH_COMPACT")) options.compact = *compact == '1';
+  if (const char* q = std::getenv("MR_BENCH_QUALITY"))
+    options.build_quality = std::string(q) == "low"    ? mr::render::BuildQuality::low
+                            : std::string(q) == "high" ? mr::render::BuildQuality::high
+                                                       : mr::render::BuildQuality::medium;
+  return options;
+}
+
 // The CPU core's stages as libmr/src/scattering.cpp runs them on a fresh photo (CPU backend,
 // full-resolution mesh, decimated when `merge` is 1 as the core does, the blockers' completion
 // on), each timed.
@@ -225,15 +238,7 @@ void BM_Stages(benchmark::State& state) {
     blockers_s = since(t);
     triangles = mesh.triangle_count();
     t = Clock::now();
-    mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS=1: grids
-    scene_options.surface_grids = grids_wanted();
-    if (const char* compact = std::getenv("MR_BENCH_COMPACT"))
-      scene_options.compact = *compact == '1';
-    if (const char* q = std::getenv("MR_BENCH_QUALITY"))
-      scene_options.build_quality = std::string(q) == "low"    ? mr::render::BuildQuality::low
-                                    : std::string(q) == "high" ? mr::render::BuildQuality::high
-                                                               : mr::render::BuildQuality::medium;
-    const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
+    const mr::render::OccluderScene occluders(std::move(mesh), scene_options_wanted());
     bvh_s = since(t);
     grid_pixels = occluders.grid_pixel_count();
     const double cpu1 = process_cpu_s();
@@ -347,11 +352,7 @@ void BM_Geometry(benchmark::State& state) {
                                 s.blockers);
     lap();
     triangles = mesh.triangle_count();
-    mr::render::OccluderSceneOptions scene_options;  // MR_BENCH_GRIDS as in BM_Stages
-    scene_options.surface_grids = grids_wanted();
-    if (const char* compact = std::getenv("MR_BENCH_COMPACT"))
-      scene_options.compact = *compact == '1';
-    const mr::render::OccluderScene occluders(std::move(mesh), scene_options);
+    const mr::render::OccluderScene occluders(std::move(mesh), scene_options_wanted());
     lap();
     benchmark::DoNotOptimize(occluders.triangle_count());
     // MR_BENCH_DUMP=<prefix>: the normals and the mesh (<prefix>.normals.f32, .positions.f32,
