@@ -137,7 +137,7 @@ struct OccluderScene::SurfaceGrids {
 OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& options)
     : mesh_(std::move(mesh)), errors_(std::make_unique<ErrorSink>()) {
   validate_mesh(mesh_);
-  device_ = rtcNewDevice(nullptr);
+  device_ = rtcNewDevice(embree_device_config());
   if (!device_)
     throw Error(ErrorCode::internal, "Embree could not create a device (error " +
                                          std::to_string(int(rtcGetDeviceError(nullptr))) + ")");

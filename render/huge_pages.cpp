@@ -1,12 +1,16 @@
 #include "render/huge_pages.h"
 
 #include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <mutex>
 #include <new>
 #include <vector>
 
 #if defined(__linux__)
 #include <sys/mman.h>
+#include <sys/prctl.h>
 #endif
 
 namespace mr::render {
@@ -61,9 +65,48 @@ Pool& pool() {
 
 }  // namespace
 
+bool balloon_reports_free_pages(const std::string& virtio_balloon_driver) {
+  constexpr std::size_t kReportingBit = 5;  // VIRTIO_BALLOON_F_REPORTING
+  std::error_code error;
+  for (std::filesystem::directory_iterator it(virtio_balloon_driver, error), end;
+       !error && it != end; it.increment(error)) {
+    // The driver's directory lists its bound devices as links named virtio<N>.
+    if (it->path().filename().string().rfind("virtio", 0) != 0) continue;
+    std::ifstream features(it->path() / "features");
+    std::string bits;
+    if (features >> bits && bits.size() > kReportingBit && bits[kReportingBit] == '1') return true;
+  }
+  return false;
+}
+
+bool huge_pages_wanted() {
+  static const bool wanted = [] {
+#if defined(__linux__)
+    bool want = !balloon_reports_free_pages("/sys/bus/virtio/drivers/virtio_balloon");
+    if (const char* v = std::getenv("MR_HUGE_PAGES")) {
+      const std::string value = v;
+      if (value == "on") want = true;
+      if (value == "off") want = false;
+    }
+    // Embree advises huge pages for its own blocks whatever its configuration says (its
+    // os_malloc), and its BVH is most of a fresh render's new memory: only the process-wide
+    // switch keeps those on 4 KiB pages too.
+    if (!want) prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0);
+    return want;
+#else
+    return false;
+#endif
+  }();
+  return wanted;
+}
+
+const char* embree_device_config() {
+  return huge_pages_wanted() ? nullptr : "hugepages=0";
+}
+
 void advise_huge_pages(const void* data, std::size_t bytes) {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
-  if (!data || bytes < 2 * kHuge) return;
+  if (!data || bytes < 2 * kHuge || !huge_pages_wanted()) return;
   // The whole huge pages inside the range only: the ends may share a page with other
   // allocations, whose backing this must not change.
   const auto begin = (reinterpret_cast<std::uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);

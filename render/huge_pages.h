@@ -12,16 +12,44 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdlib>
+#include <string>
 #include <type_traits>
 #include <utility>
 
 namespace mr::render {
 
+/// Whether this process asks for transparent huge pages (decided once, on first use).
+///
+/// Not on a virtual machine whose balloon device takes back free memory (virtio's free page
+/// reporting, as Firecracker and cloud sandboxes run): the guest reports free blocks of 2 MiB
+/// and more to the hypervisor, which drops their backing, and a huge page is exactly such a
+/// block, so its first touch faults in the host as well. On the 2-core development VM of
+/// 2026-12-07 (Linux 6.18, Firecracker, reporting on) touching 640 MB of fresh memory took
+/// 2.1-2.3 s on huge pages after a few idle seconds and 0.26-0.33 s on 4 KiB pages; a fresh
+/// 1080p normal render (BM_Stages) took 2.0-2.45 s with them and 1.66-1.85 s without (system
+/// CPU 0.76-0.93 s against 0.19-0.29 s; render CPU unchanged). Elsewhere
+/// huge pages stay: on the VM of earlier sessions a 4 KiB fault cost ~12 us and huge pages made
+/// the geometry's faults ~50x cheaper.
+///
+/// Where the answer is no, the process's transparent huge pages are switched off as a whole
+/// (Linux prctl(PR_SET_THP_DISABLE); children and exec'd programs inherit it), because Embree
+/// advises them for its BVH whatever its configuration says. The environment variable
+/// MR_HUGE_PAGES=on|off overrides the decision (benchmarks, machines this rule misjudges).
+bool huge_pages_wanted();
+/// Whether a virtio balloon device bound to its driver under `virtio_balloon_driver` (normally
+/// /sys/bus/virtio/drivers/virtio_balloon) negotiated free page reporting (feature bit 5 of
+/// its `features` file, which lists bits 0, 1, ... as '0' / '1'). False when nothing is there
+/// or readable.
+bool balloon_reports_free_pages(const std::string& virtio_balloon_driver);
+/// The configuration for rtcNewDevice matching huge_pages_wanted(): Embree's defaults (huge
+/// pages on Linux) or "hugepages=0".
+const char* embree_device_config();
+
 /// Asks the kernel to back the whole 2 MiB pages inside [data, data + bytes) with transparent
-/// huge pages when they are first touched (Linux madvise(MADV_HUGEPAGE); elsewhere, or for
-/// ranges under 4 MiB, nothing). Call it before the range is first written: pages already
-/// present stay as they are. Changes no contents and no addresses; failures are ignored (the
-/// memory then stays on ordinary pages).
+/// huge pages when they are first touched (Linux madvise(MADV_HUGEPAGE); elsewhere, for
+/// ranges under 4 MiB, or where huge_pages_wanted() says no, nothing). Call it before the range is
+/// first written: pages already present stay as they are. Changes no contents and no addresses;
+/// failures are ignored (the memory then stays on ordinary pages).
 void advise_huge_pages(const void* data, std::size_t bytes);
 
 /// A block of `bytes` (rounded up to whole 2 MiB pages), 2 MiB-aligned, advised for huge pages

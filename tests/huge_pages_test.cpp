@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
+#include <filesystem>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -15,6 +17,11 @@
 #include "render/embree_scene.h"
 #include "render/huge_pages.h"
 #include "render/occluder_mesh.h"
+#include "test_support.h"
+
+#if defined(__linux__)
+#include <sys/prctl.h>
+#endif
 
 namespace mr::render {
 namespace {
@@ -89,6 +96,53 @@ TEST(HugePages, AdviceKeepsContents) {
   advise_huge_pages(v.data(), 100);
   advise_huge_pages(nullptr, 1 << 30);
   EXPECT_EQ(v, before);
+}
+
+// Free page reporting is read from the balloon driver's bound devices (a fake sysfs tree
+// here): bit 5 of a device's `features`, where the file lists bits 0, 1, ... as characters.
+TEST(HugePages, BalloonFreePageReportingIsReadFromSysfs) {
+  const test::ScratchDir dir;
+  const std::filesystem::path driver = dir / "virtio_balloon";
+  EXPECT_FALSE(balloon_reports_free_pages(driver.string()));  // no balloon driver at all
+  std::filesystem::create_directories(driver / "virtio0");
+  std::filesystem::create_directories(driver / "module");  // not a device
+  test::write_bytes(driver / "module" / "features", "11111111\n");
+  EXPECT_FALSE(balloon_reports_free_pages(driver.string()));  // a device without features
+  test::write_bytes(driver / "virtio0" / "features", "0110000100000000\n");  // stats, OOM deflate
+  EXPECT_FALSE(balloon_reports_free_pages(driver.string()));
+  test::write_bytes(driver / "virtio0" / "features", "0110\n");  // too short to say
+  EXPECT_FALSE(balloon_reports_free_pages(driver.string()));
+  // The development VM's device (2026-12-07): stats, OOM deflate, reporting.
+  test::write_bytes(driver / "virtio0" / "features",
+                    "0110010100000000000000000000000010000000000000000000000000000000\n");
+  EXPECT_TRUE(balloon_reports_free_pages(driver.string()));
+}
+
+// The process's decision: MR_HUGE_PAGES forces it (ctest runs this test with on and off too),
+// Embree gets the matching configuration, and "no" switches the process's huge pages off.
+TEST(HugePages, DecisionFollowsTheOverrideAndReachesEmbree) {
+  const bool wanted = huge_pages_wanted();
+  if (const char* v = std::getenv("MR_HUGE_PAGES")) {
+    if (std::string(v) == "on") {
+      EXPECT_TRUE(wanted);
+    } else if (std::string(v) == "off") {
+      EXPECT_FALSE(wanted);
+    }
+  }
+  EXPECT_EQ(embree_device_config() == nullptr, wanted);
+#if defined(__linux__)
+  if (!wanted) {
+    EXPECT_EQ(prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0), 1);
+  }
+#endif
+  // Scenes still build and answer either way.
+  TriangleMesh mesh;
+  mesh.positions = {-1, -1, 5, 1, -1, 5, 0, 1, 5};
+  mesh.indices = {0, 1, 2};
+  const OccluderScene scene(std::move(mesh));
+  EXPECT_TRUE(scene.occluded({0, 0, 0}, {0, 0, 1}, 0.0f, 10.0f));
+  EXPECT_FALSE(scene.occluded({0, 0, 0}, {0, 0, -1}, 0.0f, 10.0f));
+  EXPECT_FALSE(scene.occluded({0, 0, 0}, {0, 0, 1}, 0.0f, 4.0f));
 }
 
 // The mesh check runs in parallel over chunks of 65536 values; it still names the FIRST bad

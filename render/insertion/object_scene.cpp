@@ -6,6 +6,7 @@
 #include <string>
 
 #include "mr/error.h"
+#include "render/huge_pages.h"
 
 namespace mr::render::insertion {
 
@@ -403,7 +404,7 @@ Vec3f normal_mapped(const WorldObjects& world, std::uint32_t prim, float u, floa
 ObjectScene::ObjectScene(const WorldObjects& world, bool fast_build, bool refittable)
     : world_(world) {
   if (world.triangle_count() == 0) return;
-  device_ = rtcNewDevice(nullptr);
+  device_ = rtcNewDevice(embree_device_config());
   if (!device_) throw Error(ErrorCode::internal, "Embree: cannot create a device for the objects");
   rtcSetDeviceErrorFunction(device_, &embree_error, nullptr);
   scene_ = rtcNewScene(device_);
