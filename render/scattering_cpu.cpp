@@ -34,8 +34,14 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // (relative) is refined. Measured at 1080p normal on bench/bench_scattering.cpp's scene (mean
 // relative error of R against the final preset without acceleration: 0.1647 % with the plain
 // grid, 16.4 M shadow rays), before the AO test below: factor 2 at tolerance 1e-2 8.6 M rays,
-// 0.1685 %; 5e-3 10.0 M rays, 0.1681 %; factor 4 at 1e-2 7.3 M rays, 0.1754 %.
-constexpr std::size_t kCoarseFactor = 2;
+// 0.1685 %; 5e-3 10.0 M rays, 0.1681 %; factor 4 at 1e-2 7.3 M rays, 0.1754 %. Again on
+// 2026-12-07, with everything since (against 128 unaccelerated steps; the exact 32-step march
+// itself 0.1517 %): factor 2 6.73 M rays, 0.1652 %; 3 5.45 M, 0.1674 %; 4 5.39 M, 0.1711 %; 4 at
+// 5e-3 8.03 M, 0.1728 % (more exact samples carry more of the march's jitter noise). Factor 3:
+// the tests' Monte Carlo and closed-form errors equal or lower, the forest of
+// bench/bench_forest_shafts.cpp (an edge in nearly every cell) 0.4966 -> 0.5013 % at the same
+// rays; the 1080p slider render 11-18 % faster (README, issue 12).
+constexpr std::size_t kCoarseFactor = 3;
 constexpr double kRefineTolerance = 1e-2;
 // ...and one whose corners' ambient occlusion differs by more than kRefineAo (two of normal's
 // 8 rays): AO is noisy and steps at walls' feet, and T's surface term reads it (without this,
