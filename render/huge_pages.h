@@ -1,5 +1,5 @@
-// Private to libmr: the occluder geometry's large buffers on transparent huge pages (issue 12
-// item 4).
+// Private to libmr: the occluder geometry's large buffers on transparent huge pages where they
+// pay (issue 12 item 4; huge_pages_wanted below).
 //
 // Building the 1080p occluder geometry touches ~200 MB of fresh memory (per-pixel samples,
 // planes, corner tables, the mesh's vertex and index buffers). Every 4 KiB page of it costs a
@@ -27,9 +27,9 @@ namespace mr::render {
 /// 2026-12-07 (Linux 6.18, Firecracker, reporting on) touching 640 MB of fresh memory took
 /// 2.1-2.3 s on huge pages after a few idle seconds and 0.26-0.33 s on 4 KiB pages; a fresh
 /// 1080p normal render (BM_Stages) took 2.0-2.45 s with them and 1.66-1.85 s without (system
-/// CPU 0.76-0.93 s against 0.19-0.29 s; render CPU unchanged). Elsewhere
-/// huge pages stay: on the VM of earlier sessions a 4 KiB fault cost ~12 us and huge pages made
-/// the geometry's faults ~50x cheaper.
+/// CPU 0.76-0.93 s against 0.19-0.29 s; render CPU unchanged). Elsewhere huge pages stay: on
+/// the VM of earlier sessions a 4 KiB fault cost ~12 us and huge pages made the geometry's
+/// faults ~50x cheaper (the note at the top of this file).
 ///
 /// Where the answer is no, the process's transparent huge pages are switched off as a whole
 /// (Linux prctl(PR_SET_THP_DISABLE); children and exec'd programs inherit it), because Embree
