@@ -13,7 +13,10 @@
 //
 // BM_Scattering renders through the public API. Its `reuse` argument: 0 = every render builds
 // the occluder geometry afresh (the cache of render/occluder_cache.h cleared first), 1 = the
-// geometry of the previous render of the same photo is reused (mr-studio slider changes).
+// geometry of the previous render of the same photo is reused (mr-studio slider changes) for the
+// same scene again, 2 = the same with the fog's density changed by 1 % for every render (a fog
+// slider: the surface's AO and sun-disk answers are reused too, render/surface_query_cache.h),
+// 3 = with the sun turned by 0.5 degrees of azimuth for every render (a sun slider: the AO is).
 // BM_Stages runs the CPU core's stages one by one (private headers) and reports each one's wall
 // time, the render's process CPU time (user + system, all threads: compare it when other work
 // shares the machine) and the occluder triangle count:
@@ -110,19 +113,28 @@ void BM_Scattering(benchmark::State& state) {
   const auto quality = mr::Quality(state.range(2));
   const bool accelerate = state.range(3) != 0;
   const int threads = int(state.range(4));
-  const bool reuse = state.range(5) != 0;
+  const int reuse = int(state.range(5));
   const Inputs& in = inputs(width, height);
   mr::FogScene s = scene(quality, accelerate);
   s.render.threads = threads;
   s.render.backend = mr::Backend::cpu;
   mr::ScatteringLayers::Timings t;
+  const mr::FogScene first = s;
   if (reuse) mr::render_scattering(in.photo, in.depth, in.camera, s);  // builds the geometry
+  int renders = 0;
   for (auto _ : state) {
     if (!reuse) {
       state.PauseTiming();
       mr::render::clear_occluder_geometry_cache();
       state.ResumeTiming();
     }
+    ++renders;
+    if (reuse == 2)
+      for (int c = 0; c < 3; ++c)
+        s.medium.sigma_t_per_m[c] = first.medium.sigma_t_per_m[c] * float(1 + 0.01 * renders);
+    if (reuse == 3)
+      s.lighting.sun->direction_to_sun = mr::direction_from_azimuth_elevation(
+          mr::bench::kLeuvenSunAzimuthDeg + 0.5 * renders, mr::bench::kLeuvenSunElevationDeg);
     const auto out = mr::render_scattering(in.photo, in.depth, in.camera, s);
     t = out.timings;
     benchmark::DoNotOptimize(out.inscatter.data());
@@ -145,6 +157,8 @@ BENCHMARK(BM_Scattering)
     ->Args({1920, 1080, 0, 1, 0, 0})
     ->Args({1920, 1080, 1, 1, 0, 0})
     ->Args({1920, 1080, 1, 1, 0, 1})
+    ->Args({1920, 1080, 1, 1, 0, 2})
+    ->Args({1920, 1080, 1, 1, 0, 3})
     ->Args({1920, 1080, 1, 0, 0, 0})
     ->Args({1920, 1080, 2, 1, 0, 0})
     ->Args({1920, 1080, 1, 1, 1, 0})

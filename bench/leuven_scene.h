@@ -56,6 +56,8 @@ inline const Inputs& leuven_inputs(int width, int height) {
   return cache[key] = std::move(in);
 }
 
+inline constexpr double kLeuvenSunAzimuthDeg = -70, kLeuvenSunElevationDeg = 18;
+
 /// The fog bank with a low sun (see the file comment) at a quality preset.
 inline FogScene leuven_sun_scene(Quality quality) {
   FogScene s;
@@ -66,7 +68,10 @@ inline FogScene leuven_sun_scene(Quality quality) {
   s.medium.layer_bottom_m = 0;  // a fog bank 15 m deep: sunlight enters through its top
   s.medium.layer_top_m = 15;
   s.pose.pitch_deg = 7.05;
-  s.lighting.sun = Sun{direction_from_azimuth_elevation(-70, 18), {4, 3.8f, 3.4f}, 0.27};
+  s.lighting.sun =
+      Sun{direction_from_azimuth_elevation(kLeuvenSunAzimuthDeg, kLeuvenSunElevationDeg),
+          {4, 3.8f, 3.4f},
+          0.27};
   s.render.quality = quality;
   return s;
 }

@@ -27,6 +27,7 @@
 namespace mr::render {
 
 class OccluderScene;
+class SurfaceQueryCache;
 struct OccluderGeometry;
 
 /// March steps and grid spacing of a quality preset (RenderSettings overrides applied).
@@ -61,6 +62,9 @@ struct CoreInputs {
   /// The CPU backend's form of the occluders (a BVH); nullptr: nothing casts shadows. The Vulkan
   /// backend takes the mesh itself (Occluders::mesh) and ignores this.
   const OccluderScene* occluders = nullptr;
+  /// The CPU backend's kept answers of the surface's shadow queries for these occluders, or
+  /// nullptr (render/surface_query_cache.h: read and completed by the render).
+  SurfaceQueryCache* surface_queries = nullptr;
   std::array<float, 3> sky_radiance{};
   /// Checked between rows of every pass (a relaxed load per row); requested: the core throws
   /// mr::Error(cancelled) and the outputs hold a partial render the caller must drop.

@@ -1,6 +1,7 @@
 #include "render/cpu_backend.h"
 
 #include <chrono>
+#include <memory>
 #include <optional>
 
 #include "mr/cancel.h"
@@ -51,8 +52,14 @@ void CpuBackend::render(const CoreInputs& in, Occluders& occluders, CoreOutputs&
   CoreInputs inputs = in;
   std::optional<OccluderScene> built;
   auto t = Clock::now();
+  std::unique_ptr<SurfaceQueryCache> surface_queries;
   if (occluders.cached) {
     inputs.occluders = occluders.cached->occluders ? &*occluders.cached->occluders : nullptr;
+    // Given back even when the render throws (cancelled): every answer in it is complete.
+    if (inputs.occluders)
+      surface_queries =
+          occluders.cached->surface_queries.take(in.distance_m.width, in.distance_m.height);
+    inputs.surface_queries = surface_queries.get();
   } else {
     if (occluders.mesh.triangle_count() > 0) built.emplace(std::move(occluders.mesh));
     timings.bvh_s = seconds_since(t);
@@ -61,6 +68,13 @@ void CpuBackend::render(const CoreInputs& in, Occluders& occluders, CoreOutputs&
     inputs.occluders = built ? &*built : nullptr;
     t = Clock::now();
   }
+  struct GiveBack {
+    const Occluders& occluders;
+    std::unique_ptr<SurfaceQueryCache>& cache;
+    ~GiveBack() {
+      if (cache) occluders.cached->surface_queries.give_back(std::move(cache));
+    }
+  } give_back{occluders, surface_queries};
   render_scattering_cpu(inputs, out);
   timings.scatter_s = seconds_since(t);
 }

@@ -17,6 +17,7 @@
 #include "mr/scene.h"
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
+#include "render/surface_query_cache.h"
 
 namespace mr::render {
 
@@ -24,6 +25,9 @@ struct OccluderGeometry {
   Image normals;                           ///< estimate_normals of the full-resolution map
   std::optional<OccluderScene> occluders;  ///< nullopt: no triangles (nothing casts shadows)
   std::vector<CompletedBlocker> completed_blockers;  ///< what append_blockers continued
+  /// The surface's AO and sun-disk answers of the latest render with this geometry, for the
+  /// next (render/surface_query_cache.h).
+  SurfaceQuerySlot surface_queries;
 };
 
 struct OccluderGeometryRequest {

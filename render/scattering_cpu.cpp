@@ -20,6 +20,7 @@
 #include "render/photo_fallback.h"
 #include "render/physics/resolve.h"
 #include "render/physics/scattering.h"
+#include "render/surface_query_cache.h"
 #include "shaders/scattering_params.h"  // kEdgeBisections, kShaftRefinement (shared with the GPU)
 
 namespace mr::render {
@@ -208,6 +209,17 @@ class Core {
     up_ = vec(up);
     constant_source_ =
         !scene_.lighting.sun && scene_.lighting.lamps.empty() && scene_.medium.noise.amplitude <= 0;
+    if (in.surface_queries) {
+      // Everything the surface's answers depend on beyond the cached geometry.
+      SurfaceQuerySettings settings;
+      settings.mesh_step = plan.mesh_step;
+      settings.ao_rays = plan.ao_rays;
+      settings.ao_partial_rays = plan.ao_partial_rays;
+      settings.seed = scene_.render.seed;
+      settings.camera_forward = forward_;
+      settings.sun_disk_directions = disk_dirs_;
+      in.surface_queries->use(settings);
+    }
   }
 
   std::size_t shadow_rays() const { return rays_.combine(std::plus<>()); }
@@ -660,6 +672,9 @@ class Core {
     if (!std::isfinite(distance)) return 1.0;
     const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
     if (dot(n, n) < 0.5) return 1.0;
+    SurfaceQueryCache* const kept = in_.surface_queries;
+    if (kept)
+      if (const std::optional<float> ao = kept->ambient_occlusion(x, y)) return *ao;
     const Vec3d x0 = shadow_origin(x, y, distance, n);
     // One ray set for the whole render, in a frame that turns with the normal (occlusion.h):
     // neighbouring samples agree where the geometry does, so interpolating them stays smooth;
@@ -669,6 +684,7 @@ class Core {
                                        float(std::max(1.0, 0.25 * distance)), scene_.render.seed,
                                        f3(-forward_), plan_.ao_partial_rays, &traced);
     rays_.local() += std::size_t(traced);
+    if (kept) kept->set_ambient_occlusion(x, y, ao);
     return ao;
   }
 
@@ -681,8 +697,11 @@ class Core {
     const Vec3d n = {in_.normals.at(x, y, 0), in_.normals.at(x, y, 1), in_.normals.at(x, y, 2)};
     if (dot(n, n) < 0.5 || dot(n, sun_dir_) <= 0) return -1;
     if (!in_.occluders) return 1;
-    const Vec3d xo = shadow_origin(x, y, distance, n);
     const int count = int(disk_dirs_.size());
+    SurfaceQueryCache* const kept = in_.surface_queries;
+    if (kept)
+      if (const std::optional<int> seen = kept->sun_disk_seen(x, y)) return double(*seen) / count;
+    const Vec3d xo = shadow_origin(x, y, distance, n);
     rays_.local() += std::size_t(count);
     int seen = 0;
     occluded_rays(
@@ -694,6 +713,7 @@ class Core {
                            0.0f};
         },
         [&](std::size_t, bool blocked) { seen += !blocked; });
+    if (kept) kept->set_sun_disk_seen(x, y, seen);
     return double(seen) / count;
   }
 

@@ -2,13 +2,16 @@
 // issue 12 item 4): a render whose fog and sun changed but whose depth map, camera, pose and
 // blockers did not reuses the normals, mesh and BVH (mr::ScatteringLayers::Timings reports no
 // mesh or BVH time then), and gives output identical, bit for bit, to a fresh render; any change
-// of the geometry's inputs builds afresh.
+// of the geometry's inputs builds afresh. The surface's AO and sun-disk answers kept with the
+// geometry (render/surface_query_cache.h) save a slider's render their rays, with output still
+// identical to a fresh render's.
 #include <gtest/gtest.h>
 
 #include <cstring>
 
 #include "mr/mr.h"
 #include "render/occluder_cache.h"
+#include "render/surface_query_cache.h"
 #include "scattering_scenes.h"
 
 namespace mr {
@@ -99,6 +102,134 @@ TEST(OccluderCache, AnyChangeOfTheGeometrysInputsBuildsAfresh) {
   const ScatteringLayers fresh = f.render(quality, f.depth);
   EXPECT_TRUE(identical(reused.inscatter, fresh.inscatter));
   EXPECT_TRUE(identical(reused.transmittance, fresh.transmittance));
+}
+
+void expect_identical(const ScatteringLayers& a, const ScatteringLayers& b) {
+  EXPECT_TRUE(identical(a.transmittance, b.transmittance));
+  EXPECT_TRUE(identical(a.inscatter, b.inscatter));
+  EXPECT_TRUE(identical(a.sun_visibility, b.sun_visibility));
+  EXPECT_TRUE(identical(a.optical_depth, b.optical_depth));
+}
+
+// The render of `scene` after `before` (same photo: geometry and kept answers reused) against a
+// fresh render of `scene`; returns the reused render's shadow rays over the fresh one's.
+double reused_over_fresh_rays(const Fixture& f, const FogScene& before, const FogScene& scene) {
+  render::clear_occluder_geometry_cache();
+  f.render(before, f.depth);
+  const ScatteringLayers reused = f.render(scene, f.depth);
+  EXPECT_EQ(reused.timings.mesh_s, 0.0);
+  render::clear_occluder_geometry_cache();
+  const ScatteringLayers fresh = f.render(scene, f.depth);
+  expect_identical(reused, fresh);
+  EXPECT_GT(fresh.timings.shadow_rays, 0u);
+  return double(reused.timings.shadow_rays) / double(fresh.timings.shadow_rays);
+}
+
+TEST(OccluderCache, KeptSurfaceAnswersSaveRaysWithIdenticalOutput) {
+  const Fixture f;
+  // A fog slider: every AO and sun-disk answer is kept; only the march traces.
+  FogScene fog = f.scene;
+  fog.medium.sigma_t_per_m = {0.05f, 0.05f, 0.05f};
+  fog.medium.albedo = {0.7f, 0.8f, 0.9f};
+  const double fog_rays = reused_over_fresh_rays(f, f.scene, fog);
+  EXPECT_LT(fog_rays, 0.95);
+  // A sun slider: the AO is kept, the sun disk traced again.
+  FogScene sun = f.scene;
+  sun.lighting.sun->direction_to_sun = direction_from_azimuth_elevation(-40, 30);
+  const double sun_rays = reused_over_fresh_rays(f, f.scene, sun);
+  EXPECT_LT(sun_rays, 1.0);
+  EXPECT_GT(sun_rays, fog_rays);
+  FogScene disk = f.scene;  // the sun's size alone
+  disk.lighting.sun->angular_radius_deg = 0.5;
+  EXPECT_LT(reused_over_fresh_rays(f, f.scene, disk), 1.0);
+  // Settings the answers depend on: nothing kept is used, and nothing is saved.
+  FogScene seed = f.scene;
+  seed.render.seed = 7;
+  EXPECT_GE(reused_over_fresh_rays(f, f.scene, seed), 1.0);
+  FogScene final_quality = f.scene;  // more AO and sun-disk rays, the same mesh
+  final_quality.render.quality = Quality::final;
+  EXPECT_GE(reused_over_fresh_rays(f, f.scene, final_quality), 1.0);
+  // And back to normal after final: the answers were replaced, and are right again.
+  EXPECT_GE(reused_over_fresh_rays(f, final_quality, f.scene), 1.0);
+}
+
+TEST(OccluderCache, KeptSurfaceAnswersFollowTheMeshStep) {
+  // Below 16 mesh rows draft keeps the full-resolution mesh (render/cpu_backend.cpp), so draft
+  // and normal share one geometry while their rays start differently (shadow_origin).
+  Fixture f;
+  f.camera = Camera::from_horizontal_fov(30, 24, 70);
+  f.depth = test::street_depth(f.camera, f.scene.pose);
+  f.photo = Image(f.camera.width, f.camera.height, 3);
+  for (float& v : f.photo.pixels()) v = 0.3f;
+  FogScene draft = f.scene;  // the same AO rays as normal's
+  draft.render.quality = Quality::draft;
+  const FogScene& normal = f.scene;
+  EXPECT_GE(reused_over_fresh_rays(f, draft, normal), 1.0);
+  EXPECT_GE(reused_over_fresh_rays(f, normal, draft), 1.0);
+}
+
+TEST(SurfaceQueryCache, KeepsEachAnswerUnderItsOwnSettings) {
+  render::SurfaceQueryCache cache(5, 4);
+  render::SurfaceQuerySettings settings;
+  settings.ao_rays = 8;
+  settings.ao_partial_rays = 32;
+  settings.sun_disk_directions = {{0, 1, 0}, {0.01, 1, 0}};
+  EXPECT_FALSE(cache.ambient_occlusion(0, 0));  // nothing before use()
+  cache.use(settings);
+  EXPECT_FALSE(cache.ambient_occlusion(4, 3));
+  EXPECT_FALSE(cache.sun_disk_seen(4, 3));
+  cache.set_ambient_occlusion(4, 3, 0.0f);  // every float value, exactly
+  cache.set_ambient_occlusion(0, 0, 1.0f);
+  cache.set_ambient_occlusion(1, 0, 0.3f);
+  cache.set_sun_disk_seen(4, 3, 0);
+  cache.set_sun_disk_seen(1, 0, 2);
+  cache.set_sun_disk_seen(2, 0, 3);  // more than there are rays: not kept
+  EXPECT_EQ(cache.ambient_occlusion(4, 3), 0.0f);
+  EXPECT_EQ(cache.ambient_occlusion(0, 0), 1.0f);
+  EXPECT_EQ(cache.ambient_occlusion(1, 0), 0.3f);
+  EXPECT_EQ(cache.sun_disk_seen(4, 3), 0);
+  EXPECT_EQ(cache.sun_disk_seen(1, 0), 2);
+  EXPECT_FALSE(cache.sun_disk_seen(2, 0));
+  EXPECT_FALSE(cache.ambient_occlusion(3, 3));
+
+  cache.use(settings);  // the same settings: everything stays
+  EXPECT_EQ(cache.ambient_occlusion(1, 0), 0.3f);
+  EXPECT_EQ(cache.sun_disk_seen(1, 0), 2);
+  settings.sun_disk_directions[1][0] = 0.02;  // the sun moved: AO stays, the disk goes
+  cache.use(settings);
+  EXPECT_EQ(cache.ambient_occlusion(1, 0), 0.3f);
+  EXPECT_FALSE(cache.sun_disk_seen(1, 0));
+  cache.set_sun_disk_seen(1, 0, 1);
+  for (auto change : {+[](render::SurfaceQuerySettings& s) { s.mesh_step = 2; },
+                      +[](render::SurfaceQuerySettings& s) { s.ao_rays = 32; },
+                      +[](render::SurfaceQuerySettings& s) { s.ao_partial_rays = 64; },
+                      +[](render::SurfaceQuerySettings& s) { s.seed = 9; },
+                      +[](render::SurfaceQuerySettings& s) {
+                        s.camera_forward = {0, 0, -1};
+                      }}) {
+    change(settings);  // any AO setting: both go
+    cache.use(settings);
+    EXPECT_FALSE(cache.ambient_occlusion(1, 0));
+    EXPECT_FALSE(cache.sun_disk_seen(1, 0));
+    cache.set_ambient_occlusion(1, 0, 0.5f);
+    cache.set_sun_disk_seen(1, 0, 1);
+  }
+  EXPECT_THROW(render::SurfaceQueryCache(0, 4), Error);
+
+  // The slot hands its cache to one render at a time, and a new one for another size.
+  render::SurfaceQuerySlot slot;
+  auto taken = slot.take(5, 4);
+  taken->use(settings);
+  taken->set_ambient_occlusion(2, 2, 0.25f);
+  const render::SurfaceQueryCache* kept = taken.get();
+  EXPECT_NE(slot.take(5, 4).get(), kept);  // taken: a second render starts empty
+  slot.give_back(std::move(taken));
+  auto again = slot.take(5, 4);
+  EXPECT_EQ(again.get(), kept);
+  again->use(settings);
+  EXPECT_EQ(again->ambient_occlusion(2, 2), 0.25f);
+  slot.give_back(std::move(again));
+  EXPECT_NE(slot.take(6, 4).get(), kept);
 }
 
 }  // namespace
