@@ -97,8 +97,9 @@ bool PhotoFallback::shows_sunlit(int x, int y, double ao, const float* sun_disk)
   const double amb = std::numbers::pi * luminance(sky_radiance_.data()) * ao;
   const double k = amb > 0 ? std::min(100.0, (e + amb) / amb) : 100.0;
   if (k < 1.25) return false;
-  const Vec3d xp = point(x, y, distance);
   const double here = luminance(photo_.pixel(x, y));
+  if (!(here > 0)) return false;  // what every path below ends in
+  const Vec3d xp = point(x, y, distance);
   const double root_k = std::sqrt(k);
   // The tests below compare `here` with the median (element count / 2 of the sorted values) of
   // each level. Both comparisons are monotone in the level (rounded products and quotients by a
@@ -108,8 +109,20 @@ bool PhotoFallback::shows_sunlit(int x, int y, double ao, const float* sun_disk)
   constexpr int kRadius = 3;
   const int w = distance_m_.width, h = distance_m_.height;
   const Vec3d* points = points_ ? points_->data() : nullptr;
-  for (int j = std::max(0, y - kRadius); j <= std::min(h - 1, y + kRadius); ++j)
-    for (int i = std::max(0, x - kRadius); i <= std::min(w - 1, x + kRadius); ++i) {
+  const int i0 = std::max(0, x - kRadius), i1 = std::min(w - 1, x + kRadius);
+  const int j0 = std::max(0, y - kRadius), j1 = std::min(h - 1, y + kRadius);
+  // A level already counted 3 times fails for good when, even if every neighbour not yet seen
+  // (at most `unseen`) joined it and passed, fewer than half of it would pass: the answer is
+  // false then, whatever the rest (deep inside a shadow, after about half of the window; the
+  // bound grows with `unseen`, so the largest is the one to test).
+  auto fails_for_good = [](int count, int pass, int unseen) {
+    return count >= 3 && pass + unseen < (count + unseen) / 2 + 1;
+  };
+  for (int j = j0; j <= j1; ++j) {
+    const int unseen = (j1 - j + 1) * (i1 - i0 + 1);  // rows j..j1
+    if (fails_for_good(n_dark, dark_pass, unseen) || fails_for_good(n_lit, lit_pass, unseen))
+      return false;
+    for (int i = i0; i <= i1; ++i) {
       if (i == x && j == y) continue;
       const float v = sun_disk[std::size_t(j) * w + i];
       if (v != 1.0f && v != 0.0f) continue;
@@ -128,10 +141,11 @@ bool PhotoFallback::shows_sunlit(int x, int y, double ao, const float* sun_disk)
         dark_pass += here >= root_k * level;
       }
     }
+  }
   if (n_lit < 3 && n_dark < 3) return false;
   if (n_dark >= 3 && dark_pass < n_dark / 2 + 1) return false;
   if (n_lit >= 3 && lit_pass < n_lit / 2 + 1) return false;
-  return here > 0;
+  return true;
 }
 
 }  // namespace mr::render
