@@ -16,7 +16,10 @@
 // geometry of the previous render of the same photo is reused (mr-studio slider changes) for the
 // same scene again, 2 = the same with the fog's density changed by 1 % for every render (a fog
 // slider: the surface's AO and sun-disk answers are reused too, render/surface_query_cache.h),
-// 3 = with the sun turned by 0.5 degrees of azimuth for every render (a sun slider: the AO is).
+// 3 = with the sun turned by 0.5 degrees of azimuth for every render (a sun slider: the AO is),
+// 4 = as 2 with a draft render of the photo at half the size before each (untimed), as
+// mr-studio renders every edit: a small draft pass, then the view's size (both geometries
+// stay cached, render/occluder_cache.h).
 // BM_Stages runs the CPU core's stages one by one (private headers) and reports each one's wall
 // time, the render's process CPU time (user + system, all threads: compare it when other work
 // shares the machine) and the occluder triangle count:
@@ -120,6 +123,11 @@ void BM_Scattering(benchmark::State& state) {
   s.render.backend = mr::Backend::cpu;
   mr::ScatteringLayers::Timings t;
   const mr::FogScene first = s;
+  // mr-studio's draft pass (reuse 4): half the size, draft quality.
+  const Inputs* half = reuse == 4 ? &inputs(width / 2, height / 2) : nullptr;
+  mr::FogScene draft = s;
+  draft.render.quality = mr::Quality::draft;
+  if (half) mr::render_scattering(half->photo, half->depth, half->camera, draft);
   if (reuse) mr::render_scattering(in.photo, in.depth, in.camera, s);  // builds the geometry
   int renders = 0;
   for (auto _ : state) {
@@ -129,7 +137,12 @@ void BM_Scattering(benchmark::State& state) {
       state.ResumeTiming();
     }
     ++renders;
-    if (reuse == 2)
+    if (reuse == 4) {
+      state.PauseTiming();
+      mr::render_scattering(half->photo, half->depth, half->camera, draft);
+      state.ResumeTiming();
+    }
+    if (reuse == 2 || reuse == 4)
       for (int c = 0; c < 3; ++c)
         s.medium.sigma_t_per_m[c] = first.medium.sigma_t_per_m[c] * float(1 + 0.01 * renders);
     if (reuse == 3)
@@ -159,6 +172,7 @@ BENCHMARK(BM_Scattering)
     ->Args({1920, 1080, 1, 1, 0, 1})
     ->Args({1920, 1080, 1, 1, 0, 2})
     ->Args({1920, 1080, 1, 1, 0, 3})
+    ->Args({1920, 1080, 1, 1, 0, 4})
     ->Args({1920, 1080, 1, 0, 0, 0})
     ->Args({1920, 1080, 2, 1, 0, 0})
     ->Args({1920, 1080, 1, 1, 1, 0})

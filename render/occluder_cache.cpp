@@ -1,5 +1,6 @@
 #include "render/occluder_cache.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <memory>
@@ -77,8 +78,24 @@ struct Entry {
   std::shared_ptr<const OccluderGeometry> geometry;
 };
 
+// Memory an entry holds, roughly (bytes; only compared with other entries'): per pixel of the
+// distance map its copy and the normals, per pixel of the mesh (mesh_step x mesh_step pixels)
+// about two triangles with their vertices and Embree's BVH (~75 bytes a quad, README issue 12).
+double entry_weight(int width, int height, int mesh_step) {
+  const double pixels = double(width) * height;
+  return 16.0 * pixels + 150.0 * pixels / (double(mesh_step) * mesh_step);
+}
+
+// The entries, most recently used first (guarded by cache_mutex). mr-studio renders every edit
+// twice, a small draft and then the view's size: two distance maps of one photo, each with its
+// geometry. So an entry stays beside a new one when it is small against it (kKeptShare of the
+// new one's weight, all kept entries together, at most kMaxEntries): the draft's geometry stays
+// while the view's is built. A photo of similar or larger size (the next photo of a batch)
+// drops it first, as before, so that two large geometries are never held for one render.
+constexpr std::size_t kMaxEntries = 3;
+constexpr double kKeptShare = 0.25;
 std::mutex cache_mutex;
-std::shared_ptr<const Entry> cache_entry;  // guarded by cache_mutex
+std::vector<std::shared_ptr<const Entry>> cache_entries;
 
 bool matches(const Entry& e, const OccluderGeometryRequest& r) {
   const ConstImageView& d = r.distance_m;
@@ -108,21 +125,37 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
                                                           OccluderGeometryTimings* timings) {
   OccluderGeometryTimings t;
   {
-    std::shared_ptr<const Entry> entry;
+    std::vector<std::shared_ptr<const Entry>> entries;
     {
       const std::lock_guard lock(cache_mutex);
-      entry = cache_entry;
+      entries = cache_entries;
     }
-    if (entry && matches(*entry, r)) {
-      t.reused = true;
-      if (timings) *timings = t;
-      return entry->geometry;
-    }
+    for (const auto& entry : entries)
+      if (matches(*entry, r)) {
+        {
+          const std::lock_guard lock(cache_mutex);
+          const auto at = std::find(cache_entries.begin(), cache_entries.end(), entry);
+          if (at != cache_entries.end()) std::rotate(cache_entries.begin(), at, at + 1);
+        }
+        t.reused = true;
+        if (timings) *timings = t;
+        return entry->geometry;
+      }
   }
   {
-    // Another photo: drop the old geometry first, so that two are never held for one render.
+    // Drop what is not small against the geometry about to be built (see kKeptShare) before
+    // building it: the least recently used first.
+    const double budget =
+        kKeptShare * entry_weight(r.distance_m.width, r.distance_m.height, r.mesh_step);
     const std::lock_guard lock(cache_mutex);
-    cache_entry.reset();
+    double kept = 0;
+    std::size_t keep = 0;
+    for (; keep < cache_entries.size() && keep + 1 < kMaxEntries; ++keep) {
+      const Entry& e = *cache_entries[keep];
+      kept += entry_weight(e.width, e.height, e.mesh_step);
+      if (kept > budget) break;
+    }
+    cache_entries.resize(keep);
   }
   const char* what = "render_scattering";
   auto start = Clock::now();
@@ -175,7 +208,8 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   entry->geometry = geometry;
   {
     const std::lock_guard lock(cache_mutex);
-    cache_entry = entry;
+    cache_entries.insert(cache_entries.begin(), entry);
+    if (cache_entries.size() > kMaxEntries) cache_entries.resize(kMaxEntries);
   }
   if (timings) *timings = t;
   return geometry;
@@ -184,7 +218,7 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
 void clear_occluder_geometry_cache() {
   {
     const std::lock_guard lock(cache_mutex);
-    cache_entry.reset();
+    cache_entries.clear();
   }
   // And the scratch blocks kept for the next render (render/huge_pages.h).
   trim_huge_page_pool();

@@ -1,9 +1,11 @@
 // Private to libmr: the CPU backend's occluder geometry (normals, occluder mesh, its Embree
 // BVH) of the latest render, reused by the next render of the same depth map, camera, pose and
 // blockers (issue 12 item 4: mr-studio re-renders one photo for every fog or sun slider change,
-// and the geometry depends on neither). One entry, process-wide: a render of another photo
-// replaces it (the old one is dropped before the new one is built, so peak memory does not
-// grow), and a render still using an entry keeps it alive (shared ownership).
+// and the geometry depends on neither). Process-wide, up to three entries: a new geometry is
+// built only after every entry that is not small against it (a quarter of its memory, all kept
+// entries together) is dropped, so the next photo of a batch replaces the last (peak memory
+// does not grow) while mr-studio's small draft geometry stays beside its view-sized one (each
+// edit renders both). A render still using an entry keeps it alive (shared ownership).
 #pragma once
 
 #include <cstddef>
@@ -53,12 +55,12 @@ struct OccluderGeometryTimings {
 /// The geometry for `request`: the cached one when its inputs are identical (depth values
 /// compared bit for bit, camera, pose, blockers, mesh step and options), else built (normals,
 /// mesh at mesh_step with the blockers appended, Embree scene) and cached. Thread-safe; two
-/// renders missing at once both build (the later one is kept). Throws what the builders throw,
-/// and mr::Error(cancelled) when the token is requested between stages.
+/// renders missing at once both build (both are kept, the later one first). Throws what the
+/// builders throw, and mr::Error(cancelled) when the token is requested between stages.
 std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometryRequest& request,
                                                           OccluderGeometryTimings* timings);
 
-/// Drops the cached entry and unmaps the render scratch kept for reuse (trim_huge_page_pool;
+/// Drops the cached entries and unmaps the render scratch kept for reuse (trim_huge_page_pool;
 /// tests, memory, and "fresh geometry" benchmarks).
 void clear_occluder_geometry_cache();
 

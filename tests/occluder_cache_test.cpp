@@ -125,6 +125,41 @@ double reused_over_fresh_rays(const Fixture& f, const FogScene& before, const Fo
   return double(reused.timings.shadow_rays) / double(fresh.timings.shadow_rays);
 }
 
+TEST(OccluderCache, TheDraftsGeometryStaysBesideTheViews) {
+  // mr-studio renders every edit twice: a small draft, then the view's size (two distance maps
+  // of one photo). After one such pair both geometries are reused.
+  const Fixture f;
+  Fixture draft;
+  draft.camera = Camera::from_horizontal_fov(48, 32, 70);
+  draft.depth = test::street_depth(draft.camera, draft.scene.pose);
+  draft.photo = Image(48, 32, 3);
+  for (float& v : draft.photo.pixels()) v = 0.3f;
+  draft.scene.render.quality = Quality::draft;
+  render::clear_occluder_geometry_cache();
+  EXPECT_GT(draft.render(draft.scene, draft.depth).timings.mesh_s, 0.0);
+  EXPECT_GT(f.render(f.scene, f.depth).timings.mesh_s, 0.0);
+  for (int edit = 0; edit < 2; ++edit) {
+    FogScene fog = f.scene;
+    fog.medium.sigma_t_per_m = {0.04f + 0.01f * edit, 0.04f, 0.04f};
+    FogScene draft_fog = fog;
+    draft_fog.render.quality = Quality::draft;
+    const ScatteringLayers small = draft.render(draft_fog, draft.depth);
+    const ScatteringLayers view = f.render(fog, f.depth);
+    EXPECT_EQ(small.timings.mesh_s + small.timings.bvh_s, 0.0);  // both reused
+    EXPECT_EQ(view.timings.mesh_s + view.timings.bvh_s, 0.0);
+    render::clear_occluder_geometry_cache();  // and the same as fresh renders
+    expect_identical(view, f.render(fog, f.depth));
+    expect_identical(small, draft.render(draft_fog, draft.depth));
+    f.render(fog, f.depth);  // (both back in the cache, the view's last)
+  }
+  // Another photo of the view's size (a batch's next) drops both before it is built.
+  Image other = f.depth;
+  other.at(10, 50, 0) *= 1.1f;
+  EXPECT_GT(f.render(f.scene, other).timings.mesh_s, 0.0);
+  EXPECT_GT(draft.render(draft.scene, draft.depth).timings.mesh_s, 0.0);
+  EXPECT_GT(f.render(f.scene, f.depth).timings.mesh_s, 0.0);
+}
+
 TEST(OccluderCache, KeptSurfaceAnswersSaveRaysWithIdenticalOutput) {
   const Fixture f;
   // A fog slider: every AO and sun-disk answer is kept; only the march traces.
