@@ -153,25 +153,28 @@ int main(int argc, char** argv) {
     QSlider* slider = w.fogPanel()->visibilitySlider();
     const int base = slider->value();
     const mr::FogScene default_scene = w.fogPanel()->scene();
+    // Sets the slider from inside the event loop (as a user's drag is delivered, so the slider's
+    // slots count towards the gap) and waits for that edit's normal pass.
+    auto change_and_settle = [&](int value) {
+      bool changed = false;
+      QTimer::singleShot(0, [&] {
+        first_ms = normal_ms = -1;
+        max_gap_ms = 0;
+        since_change.start();
+        target_generation = w.generation() + 1;
+        slider->setValue(value);
+        changed = true;
+      });
+      if (!wait_for([&] { return changed && normal_ms >= 0 && settled(w); }, 300000))
+        throw mr::Error(mr::ErrorCode::io, "no normal pass within 300 s");
+    };
     auto slider_changes = [&](const char* scene_name) {
       std::vector<double> first, gaps, normal;
       std::printf("%s:\n%-8s %12s %20s %14s %14s %12s\n", scene_name, "change", "first pass",
                   "(job, fog alone)", "longest gap", "normal pass", "sizes");
       for (int i = 0; i < changes; ++i) {
-        // Let the heartbeat run a little first, then change the slider from inside the event loop
-        // (as a user's drag is delivered), so the slider's slots count towards the gap.
-        wait_for([] { return false; }, 50);
-        bool changed = false;
-        QTimer::singleShot(0, [&] {
-          first_ms = normal_ms = -1;
-          max_gap_ms = 0;
-          since_change.start();
-          target_generation = w.generation() + 1;
-          slider->setValue(base + (i % 2 ? -1 : -2) * slider->pageStep() - i);
-          changed = true;
-        });
-        if (!wait_for([&] { return changed && normal_ms >= 0 && settled(w); }, 300000))
-          throw mr::Error(mr::ErrorCode::io, "no normal pass within 300 s");
+        wait_for([] { return false; }, 50);  // let the heartbeat run a little first
+        change_and_settle(base + (i % 2 ? -1 : -2) * slider->pageStep() - i);
         if (w.generation() != target_generation)
           throw mr::Error(mr::ErrorCode::io, "unexpected extra edit");
         first.push_back(first_ms);
@@ -225,17 +228,7 @@ int main(int argc, char** argv) {
             throw mr::Error(mr::ErrorCode::io, "no draft within 300 s");
           wait_for([] { return false; }, 100);
           if (settled(w)) throw mr::Error(mr::ErrorCode::io, "normal pass done within 100 ms");
-          bool changed = false;
-          QTimer::singleShot(0, [&] {
-            first_ms = normal_ms = -1;
-            max_gap_ms = 0;
-            since_change.start();
-            target_generation = w.generation() + 1;
-            slider->setValue(base - 3 - i);
-            changed = true;
-          });
-          if (!wait_for([&] { return changed && normal_ms >= 0 && settled(w); }, 300000))
-            throw mr::Error(mr::ErrorCode::io, "no normal pass within 300 s");
+          change_and_settle(base - 3 - i);
           firsts.push_back(first_ms);
           gaps_during.push_back(max_gap_ms);
           jobs.push_back(first_job_ms);
