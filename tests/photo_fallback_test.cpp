@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -90,7 +91,7 @@ bool reference_shows_sunlit(const Maps& m, const std::array<float, 3>& sky, int 
   const double cos_i = render::dot(n, sun);
   if (!std::isfinite(distance) || cos_i <= 0) return false;
   const double e = luminance(m.scene.lighting.sun->irradiance.data()) * cos_i;
-  const double amb = M_PI * luminance(sky.data()) * m.ao[std::size_t(y) * w + x];
+  const double amb = std::numbers::pi * luminance(sky.data()) * m.ao[std::size_t(y) * w + x];
   const double k = amb > 0 ? std::min(100.0, (e + amb) / amb) : 100.0;
   if (k < 1.25) return false;
   const auto [forward, right, up] = m.scene.pose.axes();
