@@ -7,6 +7,7 @@
 // identical to a fresh render's.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cstring>
 
 #include "mr/mr.h"
@@ -186,6 +187,37 @@ TEST(OccluderCache, KeptSurfaceAnswersSaveRaysWithIdenticalOutput) {
   EXPECT_GE(reused_over_fresh_rays(f, f.scene, final_quality), 1.0);
   // And back to normal after final: the answers were replaced, and are right again.
   EXPECT_GE(reused_over_fresh_rays(f, final_quality, f.scene), 1.0);
+}
+
+TEST(OccluderCache, ACancelledRendersAnswersServeTheNext) {
+  // A render cancelled halfway (mr-studio cancels a stale pass) gives its answers back: each one
+  // complete, so the next render of the photo uses them and still equals a fresh render.
+  const Fixture f;
+  render::clear_occluder_geometry_cache();
+  CancelToken token;
+  token.set_progress(
+      [&](const Progress& p) {
+        if (p.stage == "render" && p.fraction() >= 0.4) token.request();
+      },
+      std::chrono::milliseconds(0));
+  EXPECT_THROW(
+      {
+        try {
+          render_scattering(f.photo, f.depth, f.camera, f.scene, &token);
+        } catch (const Error& e) {
+          EXPECT_EQ(e.code(), ErrorCode::cancelled);
+          throw;
+        }
+      },
+      Error);
+  FogScene fog = f.scene;
+  fog.medium.sigma_t_per_m = {0.05f, 0.05f, 0.05f};
+  const ScatteringLayers reused = f.render(fog, f.depth);
+  EXPECT_EQ(reused.timings.mesh_s, 0.0);
+  render::clear_occluder_geometry_cache();
+  const ScatteringLayers fresh = f.render(fog, f.depth);
+  expect_identical(reused, fresh);
+  EXPECT_LT(reused.timings.shadow_rays, fresh.timings.shadow_rays);  // some answers were kept
 }
 
 TEST(OccluderCache, KeptSurfaceAnswersFollowTheMeshStep) {
