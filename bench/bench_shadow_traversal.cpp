@@ -46,6 +46,7 @@
 #include "render/embree_scene.h"
 #include "render/occluder_mesh.h"
 #include "render/scattering_cpu.h"
+#include "render/shadow_traversal/depth_image_surface.h"
 #include "render/shadow_traversal/kd_tree.h"
 #include "render/shadow_traversal/multi_index_query.h"
 #include "shadow_scenes.h"
@@ -207,6 +208,107 @@ std::vector<Ray> load_rays(const std::string& path, std::uint64_t& total) {
     std::exit(1);
   }
   return rays;
+}
+
+// Issue 12 item 4: leuven's recorded rays against Embree (the whole mesh, as the core traces
+// it) and against the depth-image traversal of the surface (render/shadow_traversal/
+// depth_image_surface.h) plus Embree for the triangles after the surface (blockers): build
+// times, answers compared ray by ray, tracing CPU time in packets of 8 (one thread).
+void depth_image_comparison(const std::vector<Ray>& rays, int reps) {
+  const mr::bench::Inputs& in = mr::bench::leuven_inputs(1920, 1080);
+  const mr::FogScene s = leuven_scene_for_rays(in);
+  mr::Image normals = mr::render::estimate_normals(in.depth.view(), in.camera, s.pose);
+  mr::render::MeshOptions options;
+  options.pixel_layout = true;
+  mr::render::TriangleMesh mesh = mr::render::reconstruct_occluder_mesh(
+      in.depth.view(), in.camera, s.pose, options, normals.view());
+  mr::render::append_blockers(mesh, in.depth.view(), normals.view(), in.camera, s.pose, s.blockers);
+  mr::render::TriangleMesh extras;
+  extras.positions = mesh.positions;
+  extras.indices.assign(mesh.indices.begin() + 3 * std::ptrdiff_t(mesh.surface_triangle_count),
+                        mesh.indices.end());
+  double t = now_s();
+  double c = process_cpu_s();
+  const mr::render::OccluderScene embree{mr::render::TriangleMesh(mesh)};
+  std::printf("Embree BVH (whole mesh, %zu triangles): %.0f ms wall, %.0f ms CPU\n",
+              mesh.triangle_count(), 1e3 * (now_s() - t), 1e3 * (process_cpu_s() - c));
+  t = now_s();
+  c = process_cpu_s();
+  mr::render::DepthImageSurface surface(mesh, in.camera, s.pose);
+  std::printf("depth-image pyramid (%zu surface triangles): %.0f ms wall, %.0f ms CPU\n",
+              mesh.surface_triangle_count, 1e3 * (now_s() - t), 1e3 * (process_cpu_s() - c));
+  t = now_s();
+  const mr::render::OccluderScene extra_scene{std::move(extras)};
+  std::printf("Embree BVH of the %zu triangles after the surface: %.0f ms wall\n",
+              extra_scene.triangle_count(), 1e3 * (now_s() - t));
+  const std::size_t n = rays.size();
+  std::vector<char> a(n), b(n);
+  auto pack = [&](std::size_t first, mr::render::RayPacket8& p) {
+    for (int k = 0; k < 8; ++k) {
+      const std::size_t i = first + std::size_t(k);
+      p.valid[k] = i < n ? -1 : 0;
+      if (i >= n) continue;
+      const Ray& r = rays[i];
+      p.origin_x[k] = r.origin[0];
+      p.origin_y[k] = r.origin[1];
+      p.origin_z[k] = r.origin[2];
+      p.direction_x[k] = r.direction[0];
+      p.direction_y[k] = r.direction[1];
+      p.direction_z[k] = r.direction[2];
+      p.t_near[k] = r.t_near;
+      p.t_far[k] = r.t_far;
+    }
+  };
+  std::vector<double> embree_s, image_s;
+  for (int rep = 0; rep < reps; ++rep) {
+    c = thread_cpu_s();
+    for (std::size_t first = 0; first < n; first += 8) {
+      mr::render::RayPacket8 p;
+      pack(first, p);
+      bool hit[8];
+      embree.occluded8(p, hit);
+      for (int k = 0; k < 8 && first + k < n; ++k) a[first + k] = hit[k];
+    }
+    embree_s.push_back(thread_cpu_s() - c);
+    surface.count_work(rep == 0);
+    const auto counters0 = mr::render::DepthImageSurface::thread_counters();
+    c = thread_cpu_s();
+    for (std::size_t first = 0; first < n; first += 8) {
+      mr::render::RayPacket8 p;
+      pack(first, p);
+      bool hit[8], extra_hit[8];
+      surface.occluded8(p, hit);
+      bool any_missed = false;
+      for (int k = 0; k < 8; ++k) {
+        if (hit[k]) p.valid[k] = 0;
+        any_missed = any_missed || p.valid[k] != 0;
+      }
+      if (any_missed) {
+        extra_scene.occluded8(p, extra_hit);
+        for (int k = 0; k < 8; ++k) hit[k] = hit[k] || extra_hit[k];
+      }
+      for (int k = 0; k < 8 && first + k < n; ++k) b[first + k] = hit[k];
+    }
+    image_s.push_back(thread_cpu_s() - c);
+    const auto counters1 = mr::render::DepthImageSurface::thread_counters();
+    if (rep == 0)
+      std::printf("depth image: %.1f nodes and %.2f triangle tests per ray\n",
+                  double(counters1[0] - counters0[0]) / double(n),
+                  double(counters1[1] - counters0[1]) / double(n));
+  }
+  std::size_t differ = 0, occluded = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    differ += a[i] != b[i];
+    occluded += a[i] != 0;
+  }
+  std::sort(embree_s.begin(), embree_s.end());
+  std::sort(image_s.begin(), image_s.end());
+  std::printf("%zu rays (%zu occluded by Embree), %zu answers differ\n", n, occluded, differ);
+  std::printf(
+      "CPU time, one thread, median of %d: Embree %.0f ms (%.2f Mrays/s), depth image "
+      "%.0f ms (%.2f Mrays/s)\n",
+      reps, 1e3 * embree_s[embree_s.size() / 2], 1e-6 * double(n) / embree_s[embree_s.size() / 2],
+      1e3 * image_s[image_s.size() / 2], 1e-6 * double(n) / image_s[image_s.size() / 2]);
 }
 
 // ----------------------------------------------------------------------------------------------
@@ -627,6 +729,7 @@ void explain(const std::string& name, const mr::render::TriangleMesh& mesh,
 int main(int argc, char** argv) {
   int size = 1024, reps = 3, record_every = 8;
   bool record = false, only_build = false, only_explain = false;
+  bool depth_image = false;
   std::size_t max_rays = 0;  // 0: all
   std::string scenes = "atrium,bedroom,forest,leuven";
   std::string rays_file = "shadow_rays_leuven_1080p.bin";
@@ -641,6 +744,8 @@ int main(int argc, char** argv) {
       scenes = next();
     else if (a == "--rays-file")
       rays_file = next();
+    else if (a == "--depth-image")
+      depth_image = true;
     else if (a == "--record")
       record = true;
     else if (a == "--record-every")
@@ -718,6 +823,11 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (record) record_leuven(rays_file, record_every);
+  if (depth_image) {
+    std::uint64_t total = 0;
+    depth_image_comparison(load_rays(rays_file, total), reps);
+    return 0;
+  }
   std::printf(
       "Counts are exact; times are medians of %d runs on a shared machine (CPU time is the "
       "steadier measure). Per-ray prediction of the multi-index tree: the previous ray's "

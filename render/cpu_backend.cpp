@@ -39,6 +39,7 @@ void CpuBackend::prepare_occluders(const CoreInputs& in, Occluders& occluders,
   // 8.1 s, mesh + BVH CPU 2.9 -> 3.5 s), fresh or reused (issue 12 item 4).
   request.cancel = in.cancel;
   request.shadow_traversal = scene.render.shadow_traversal;  // issue 17
+  request.surface_traversal = surface_traversal_from_environment();  // issue 12
   OccluderGeometryTimings gt;
   occluders.cached = occluder_geometry(request, &gt);
   timings.mesh_s = gt.mesh_s;

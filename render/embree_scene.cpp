@@ -17,6 +17,7 @@
 #include "mr/error.h"
 #include "render/huge_pages.h"
 #include "render/physics/occlusion.h"
+#include "render/shadow_traversal/depth_image_surface.h"
 #include "render/triangle_pairs.h"
 
 namespace mr::render {
@@ -181,6 +182,10 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
         mesh_.surface_triangle_count > 0 && mesh_.surface_triangle_count < triangles
             ? mesh_.surface_triangle_count
             : triangles;
+    // Issue 12 item 4: the surface traced in the image instead of a BVH built over it.
+    const bool image_surface = options.depth_image && mesh_.layout && surface > 0 &&
+                               split == surface &&
+                               DepthImageSurface::supports(options.depth_image->camera);
     if (triangles > 0) {
       // Embree reads vertices with 16-byte loads: the last one needs a float of padding.
       mesh_.positions.push_back(0.0f);
@@ -198,11 +203,17 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
       const bool grids =
           options.surface_grids && surface_quads && split == surface && mesh_.layout &&
           rtcGetDeviceProperty(device_, RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) == 0;
-      if (grids)
+      if (image_surface) {
+        // The surface goes to the depth-image traversal below; scene_ stays empty until
+        // build_surface_bvh (if ever).
+        surface_bvh_quads_ = surface_quads;
+        surface_bvh_quality_ = quality;
+      } else if (grids) {
         attach_surface_grids(surface, quality);
-      else
+      } else {
         attach(scene_, 0, split);
-      surface_quads_ = grids ? surface_quads_ : surface_quads ? surface / 2 : 0;
+      }
+      surface_quads_ = image_surface ? 0 : grids ? surface_quads_ : surface_quads ? surface / 2 : 0;
       if (split < triangles) {
         extra_scene_ = rtcNewScene(device_);
         errors_->throw_if_failed();
@@ -216,6 +227,9 @@ OccluderScene::OccluderScene(TriangleMesh mesh, const OccluderSceneOptions& opti
     }
     rtcCommitScene(scene_);
     errors_->throw_if_failed();
+    if (image_surface)
+      image_surface_ = std::make_unique<DepthImageSurface>(mesh_, options.depth_image->camera,
+                                                           options.depth_image->pose);
     // Only the build needed the pixel layout (10 MB at 1080p): back to the scratch pool.
     mesh_.layout.reset();
   } catch (...) {
@@ -379,6 +393,29 @@ void OccluderScene::attach_indexed(RTCScene target, RTCGeometryType type,
   errors_->throw_if_failed();
 }
 
+bool OccluderScene::tracing_image() const {
+  return image_surface_ && !surface_bvh_ready_->load(std::memory_order_acquire);
+}
+
+void OccluderScene::build_surface_bvh() const {
+  if (!image_surface_ || surface_bvh_ready_->load(std::memory_order_acquire)) return;
+  const std::lock_guard lock(*surface_bvh_mutex_);
+  if (surface_bvh_ready_->load(std::memory_order_relaxed)) return;
+  // scene_ is empty and no query reads it until the flag says it is built (tracing_image).
+  const std::size_t surface = mesh_.surface_triangle_count;
+  auto* self = const_cast<OccluderScene*>(this);
+  if (surface_bvh_quads_)
+    self->attach_indexed(scene_, RTC_GEOMETRY_TYPE_QUAD, mesh_.indices.data(),
+                         quad_index_offset_bytes(0), kQuadIndexStrideBytes, surface / 2,
+                         surface_bvh_quality_);
+  else
+    self->attach_indexed(scene_, RTC_GEOMETRY_TYPE_TRIANGLE, mesh_.indices.data(), 0,
+                         3 * sizeof(std::uint32_t), surface, surface_bvh_quality_);
+  rtcCommitScene(scene_);
+  errors_->throw_if_failed();
+  surface_bvh_ready_->store(true, std::memory_order_release);
+}
+
 std::size_t OccluderScene::grid_pixel_count() const {
   return grids_ ? grids_->grid_pixels : 0;
 }
@@ -409,7 +446,12 @@ OccluderScene::OccluderScene(OccluderScene&& other) noexcept
       native_ray8_(other.native_ray8_),
       shadow_query_(std::move(other.shadow_query_)),
       grids_(std::move(other.grids_)),
-      surface_quads_(other.surface_quads_) {}
+      surface_quads_(other.surface_quads_),
+      image_surface_(std::move(other.image_surface_)),
+      surface_bvh_ready_(std::move(other.surface_bvh_ready_)),
+      surface_bvh_mutex_(std::move(other.surface_bvh_mutex_)),
+      surface_bvh_quads_(other.surface_bvh_quads_),
+      surface_bvh_quality_(other.surface_bvh_quality_) {}
 
 OccluderScene& OccluderScene::operator=(OccluderScene&& other) noexcept {
   if (this != &other) {
@@ -423,6 +465,11 @@ OccluderScene& OccluderScene::operator=(OccluderScene&& other) noexcept {
     shadow_query_ = std::move(other.shadow_query_);
     grids_ = std::move(other.grids_);
     surface_quads_ = other.surface_quads_;
+    image_surface_ = std::move(other.image_surface_);
+    surface_bvh_ready_ = std::move(other.surface_bvh_ready_);
+    surface_bvh_mutex_ = std::move(other.surface_bvh_mutex_);
+    surface_bvh_quads_ = other.surface_bvh_quads_;
+    surface_bvh_quality_ = other.surface_bvh_quality_;
   }
   return *this;
 }
@@ -450,6 +497,7 @@ bool OccluderScene::occluded(const std::array<float, 3>& origin,
     rtcOccluded1(extra_scene_, &context, &ray);
     if (ray.tfar < 0.0f) return true;
   }
+  if (tracing_image()) return image_surface_->occluded(origin, direction, t_near, t_far);
   rtcOccluded1(scene_, &context, &ray);
   return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
 }
@@ -463,6 +511,7 @@ void OccluderScene::occluded8(const RayPacket8& rays, bool occluded_out[8]) cons
                                  rays.t_near[k], rays.t_far[k]);
     return;
   }
+  const bool image = tracing_image();
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   alignas(32) int valid[8];
@@ -489,9 +538,18 @@ void OccluderScene::occluded8(const RayPacket8& rays, bool occluded_out[8]) cons
       if (packet.tfar[k] < 0.0f) valid[k] = 0;  // stopped by a blocker: done
       any_open = any_open || valid[k] != 0;
     }
-    if (any_open) rtcOccluded8(valid, scene_, &context, &packet);
-  } else {
+    if (any_open && !image) rtcOccluded8(valid, scene_, &context, &packet);
+  } else if (!image) {
     rtcOccluded8(valid, scene_, &context, &packet);
+  }
+  if (image) {
+    RayPacket8 open = rays;
+    for (int k = 0; k < 8; ++k) open.valid[k] = valid[k] != 0 && packet.tfar[k] >= 0.0f;
+    bool surface_hit[8];
+    image_surface_->occluded8(open, surface_hit);
+    for (int k = 0; k < 8; ++k)
+      occluded_out[k] = rays.valid[k] != 0 && (packet.tfar[k] < 0.0f || surface_hit[k]);
+    return;
   }
   for (int k = 0; k < 8; ++k) occluded_out[k] = rays.valid[k] != 0 && packet.tfar[k] < 0.0f;
 }
@@ -516,10 +574,25 @@ float OccluderScene::intersect_distance(const std::array<float, 3>& origin,
   hit.ray.flags = 0;
   hit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   hit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(scene_, &context, &hit);
+  // The surface's nearest hit from the image's walk whenever the scene has it, also once the
+  // BVH is built (build_surface_bvh), so that a scene answers the same before and after, bit
+  // for bit (and the render's output with it). Embree's quad test rounds t differently, and
+  // misses rays that run exactly through the shared diagonal of a pixel's two triangles, as the
+  // camera rays through the fine pixels' centres do on a mesh of half the resolution (a coarse
+  // pixel's diagonal passes through two of its four fine pixels' centres); the watertight test
+  // hits them. (intersect_distance serves camera rays: a single pixel of the walk.)
+  bool surface_hit = false;
+  if (image_surface_) {
+    const float t = image_surface_->intersect_distance(origin, direction, t_near, t_far);
+    surface_hit = t < kInfF;
+    if (surface_hit) hit.ray.tfar = t;
+  } else {
+    rtcIntersect1(scene_, &context, &hit);
+    surface_hit = hit.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+  }
   // Then the extrusions and blockers, no farther than the surface's hit (tfar is now its t).
   if (extra_scene_) rtcIntersect1(extra_scene_, &context, &hit);
-  return hit.hit.geomID != RTC_INVALID_GEOMETRY_ID ? hit.ray.tfar : kInfF;
+  return surface_hit || hit.hit.geomID != RTC_INVALID_GEOMETRY_ID ? hit.ray.tfar : kInfF;
 }
 
 float ambient_occlusion(const OccluderScene& scene, const std::array<float, 3>& point,

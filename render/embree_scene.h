@@ -5,10 +5,13 @@
 #include <embree3/rtcore.h>
 
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <mutex>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -65,6 +68,16 @@ struct OccluderSceneOptions {
   /// render's CPU rose 8 % idle (1645 -> 1785 ms), 27 % at load 4 (medians of four pairs; the
   /// fresh wall even, a reused BVH's render slower; README, issue 12).
   bool surface_grids = false;
+  /// Issue 12 item 4: the camera and pose the mesh was made for, to trace its surface in the
+  /// image over a depth pyramid (render/shadow_traversal/depth_image_surface.h) instead of in
+  /// an Embree BVH, where the mesh carries its pixel layout (MeshOptions::pixel_layout) and
+  /// its surface triangles come first; the triangles after them (extrusions, blockers) stay in
+  /// Embree. The same answers (both watertight); no BVH to build over the surface.
+  struct DepthImageView {
+    Camera camera;
+    CameraPose pose;
+  };
+  std::optional<DepthImageView> depth_image;
 };
 
 /// Issue 12 item 4: one RTCGrid of the surface: pixels x_begin .. x_end - 1 of rows 2 * band
@@ -87,6 +100,8 @@ std::vector<SurfaceGridRun> surface_grid_runs(const SurfacePixelLayout& layout);
 /// destruction; movable, not copyable). All query methods are const and safe to call from many
 /// threads at once (Embree queries are). Coordinates are world metres (mr/scene.h). A moved-from
 /// scene may only be destroyed or assigned to.
+class DepthImageSurface;  // render/shadow_traversal/depth_image_surface.h
+
 class OccluderScene {
  public:
   /// Builds the scene (see OccluderSceneOptions for the build quality). Takes the mesh by value
@@ -111,8 +126,9 @@ class OccluderScene {
   /// lanes get false.
   void occluded8(const RayPacket8& rays, bool occluded_out[8]) const;
   /// Distance t (in units of |direction|) to the nearest triangle on the ray within
-  /// [t_near, t_far], or +infinity if there is none (rtcIntersect1). For tests, and to check
-  /// whether a point (e.g. a lamp) is enclosed by geometry.
+  /// [t_near, t_far], or +infinity if there is none (rtcIntersect1; the surface's from the
+  /// image's walk where the scene has one, see OccluderSceneOptions::depth_image). For tests, and
+  /// to check whether a point (e.g. a lamp) is enclosed by geometry.
   float intersect_distance(const std::array<float, 3>& origin,
                            const std::array<float, 3>& direction, float t_near, float t_far) const;
 
@@ -123,6 +139,15 @@ class OccluderScene {
   /// how many surface quads it holds as quads (the other pixels' and the fanned pixels' pairs).
   std::size_t grid_pixel_count() const;
   std::size_t surface_quad_count() const;
+  /// Issue 12 item 4: where the surface is traced in the image (OccluderSceneOptions::
+  /// depth_image), builds Embree's BVH over it as well, and queries use that from then on (the
+  /// same answers). The occluder cache does not call it: it chooses once per geometry, by the
+  /// surface's slivers (render/occluder_cache.cpp), and keeps the choice for every render. For
+  /// a caller that learns later that the BVH pays. Safe while other threads query the scene
+  /// (they switch once it is built); a no-op when it has nothing to build.
+  void build_surface_bvh() const;
+  /// Whether the surface is traced in the image (no BVH over it built yet).
+  bool traces_surface_in_image() const { return tracing_image(); }
   /// Whether occluded8 uses Embree's native 8-wide packet kernel.
   bool native_packets() const { return native_ray8_; }
   /// Issue 17: another traversal of the same mesh (render/shadow_query.h) that occluded_rays
@@ -151,6 +176,14 @@ class OccluderScene {
   std::shared_ptr<const ShadowQuery> shadow_query_;
   std::unique_ptr<SurfaceGrids> grids_;  // buffers Embree reads the grids and other quads from
   std::size_t surface_quads_ = 0;
+  std::unique_ptr<DepthImageSurface> image_surface_;  // set: the surface is traced in the image
+  // build_surface_bvh: once built (the flag set), queries trace the surface in scene_ again.
+  std::unique_ptr<std::atomic<bool>> surface_bvh_ready_ =
+      std::make_unique<std::atomic<bool>>(false);
+  std::unique_ptr<std::mutex> surface_bvh_mutex_ = std::make_unique<std::mutex>();
+  bool surface_bvh_quads_ = false;
+  RTCBuildQuality surface_bvh_quality_ = RTC_BUILD_QUALITY_MEDIUM;
+  bool tracing_image() const;
 };
 
 /// One shadow ray for occluded_rays: from `origin` along `direction` (need not be unit length),

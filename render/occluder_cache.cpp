@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -75,6 +77,7 @@ struct Entry {
   int mesh_step = 1;
   MeshOptions mesh_options;
   ShadowTraversal shadow_traversal = ShadowTraversal::embree;
+  SurfaceTraversal surface_traversal = SurfaceTraversal::automatic;
   std::shared_ptr<const OccluderGeometry> geometry;
 };
 
@@ -109,7 +112,8 @@ bool matches(const Entry& e, const OccluderGeometryRequest& r) {
       pa.pitch_deg != pb.pitch_deg || pa.roll_deg != pb.roll_deg)
     return false;
   if (e.mesh_step != r.mesh_step || !same(e.mesh_options, r.mesh_options) ||
-      !same(e.blockers, *r.blockers) || e.shadow_traversal != r.shadow_traversal)
+      !same(e.blockers, *r.blockers) || e.shadow_traversal != r.shadow_traversal ||
+      e.surface_traversal != r.surface_traversal)
     return false;
   // Bit for bit (memcmp: +inf sky compares equal to itself, as it should).
   for (int y = 0; y < d.height; ++y)
@@ -119,7 +123,40 @@ bool matches(const Entry& e, const OccluderGeometryRequest& r) {
   return true;
 }
 
+// Whether the render traces the mesh's surface in the image (a walk over a depth pyramid, no
+// BVH to build) instead of through Embree's BVH. Both give the same answers (but for rays that
+// graze a vertex or an edge, where each test's rounding decides). Embree's BVH is the faster on
+// a smooth surface (the bench's street at 1080p: its build included, ~15 % less wall); on
+// jagged estimated depth, a fur of slivers along the view rays, a shadow ray crosses tens of
+// the slivers' boxes before its hit while its walk in the image stays short (gallery sun bank,
+// README issue 12: dragonfly 45 -> 16 s, bridge 14 -> 9 s). Chosen by the share of slivers
+// (surface_sliver_share), for the geometry's every render: the tuning photos put the break-even
+// between 5 % (the street: the BVH faster) and 9 % (valendas: the walk faster). Small surfaces
+// keep the BVH: it builds fast, and the choice hardly matters there.
+constexpr double kImageSliverShare = 0.07;
+constexpr std::size_t kImageMinTriangles = 100000;
+
+bool trace_surface_in_image(const OccluderGeometryRequest& r, const TriangleMesh& mesh) {
+  if (r.shadow_traversal != ShadowTraversal::embree || !mesh.layout) return false;
+  if (r.surface_traversal != SurfaceTraversal::automatic)
+    return r.surface_traversal == SurfaceTraversal::image;
+  if (mesh.surface_triangle_count < kImageMinTriangles) return false;
+  const double pixel_angle_rad = double(r.mesh_step) / r.camera->focal_px;
+  return surface_sliver_share(mesh, r.pose->position_m, pixel_angle_rad) >= kImageSliverShare;
+}
+
 }  // namespace
+
+SurfaceTraversal surface_traversal_from_environment() {
+  static const SurfaceTraversal chosen = [] {
+    const char* v = std::getenv("MR_SURFACE_TRAVERSAL");
+    const std::string value = v ? v : "";
+    return value == "bvh"     ? SurfaceTraversal::bvh
+           : value == "image" ? SurfaceTraversal::image
+                              : SurfaceTraversal::automatic;
+  }();
+  return chosen;
+}
 
 std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometryRequest& r,
                                                           OccluderGeometryTimings* timings) {
@@ -163,15 +200,23 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   geometry->normals = estimate_normals(r.distance_m, *r.camera, *r.pose);
   throw_if_cancelled(r.cancel, what);
   TriangleMesh mesh;
+  // The surface may be traced in the image (render/shadow_traversal/depth_image_surface.h;
+  // chosen below): the mesh keeps its pixel layout for it.
+  MeshOptions mesh_options = r.mesh_options;
+  mesh_options.pixel_layout =
+      r.shadow_traversal == ShadowTraversal::embree && r.surface_traversal != SurfaceTraversal::bvh;
+  OccluderSceneOptions scene_options;
   if (r.mesh_step > 1) {
     const DownsampledDistance coarse =
         downsample_distance_nearest(r.distance_m, *r.camera, r.mesh_step);
     mesh =
-        reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, *r.pose, r.mesh_options);
+        reconstruct_occluder_mesh(coarse.distance_m.view(), coarse.camera, *r.pose, mesh_options);
+    scene_options.depth_image = OccluderSceneOptions::DepthImageView{coarse.camera, *r.pose};
   } else {
+    scene_options.depth_image = OccluderSceneOptions::DepthImageView{*r.camera, *r.pose};
     // Normals as estimate_normals computed them above (the same discontinuity ratio).
     mesh = reconstruct_occluder_mesh(
-        r.distance_m, *r.camera, *r.pose, r.mesh_options,
+        r.distance_m, *r.camera, *r.pose, mesh_options,
         r.mesh_options.discontinuity_ratio == MeshOptions{}.discontinuity_ratio
             ? ConstImageView(geometry->normals.view())
             : ConstImageView{});
@@ -179,10 +224,14 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   geometry->completed_blockers =
       append_blockers(mesh, r.distance_m, geometry->normals.view(), *r.camera, *r.pose, *r.blockers)
           .completed;
+  if (!trace_surface_in_image(r, mesh)) {
+    scene_options.depth_image.reset();
+    mesh.layout.reset();  // only the image's walk reads it
+  }
   t.mesh_s = seconds_since(start);
   throw_if_cancelled(r.cancel, what);
   start = Clock::now();
-  if (mesh.triangle_count() > 0) geometry->occluders.emplace(std::move(mesh));
+  if (mesh.triangle_count() > 0) geometry->occluders.emplace(std::move(mesh), scene_options);
   if (geometry->occluders && r.shadow_traversal == ShadowTraversal::multi_index)
     geometry->occluders->set_shadow_query(
         std::make_shared<MultiIndexShadowQuery>(geometry->occluders->mesh()));
@@ -205,6 +254,7 @@ std::shared_ptr<const OccluderGeometry> occluder_geometry(const OccluderGeometry
   entry->mesh_step = r.mesh_step;
   entry->mesh_options = r.mesh_options;
   entry->shadow_traversal = r.shadow_traversal;
+  entry->surface_traversal = r.surface_traversal;
   entry->geometry = geometry;
   {
     const std::lock_guard lock(cache_mutex);

@@ -32,6 +32,16 @@ struct OccluderGeometry {
   SurfaceQuerySlot surface_queries;
 };
 
+/// How the Embree scene traces the mesh's surface (issue 12): automatic (the default) chooses by
+/// the surface's share of slivers (render/occluder_cache.cpp), bvh and image force Embree's BVH
+/// or the walk in the image (render/shadow_traversal/depth_image_surface.h). Only with
+/// ShadowTraversal::embree.
+enum class SurfaceTraversal { automatic, bvh, image };
+
+/// MR_SURFACE_TRAVERSAL=bvh|image forces one (benchmarks, A/B); unset or anything else:
+/// automatic. Read once per process.
+SurfaceTraversal surface_traversal_from_environment();
+
 struct OccluderGeometryRequest {
   ConstImageView distance_m;  ///< full resolution, 1 channel, the camera's size
   const Camera* camera = nullptr;
@@ -44,11 +54,12 @@ struct OccluderGeometryRequest {
   /// multi_index: the scene's shadow queries go to the multi-index kd-tree (issue 17), built
   /// with the BVH (its time is in bvh_s) and attached with OccluderScene::set_shadow_query.
   ShadowTraversal shadow_traversal = ShadowTraversal::embree;
+  SurfaceTraversal surface_traversal = SurfaceTraversal::automatic;
 };
 
 struct OccluderGeometryTimings {
   double mesh_s = 0;  ///< normals, mesh and blockers (0 when reused)
-  double bvh_s = 0;   ///< the Embree build (0 when reused)
+  double bvh_s = 0;   ///< the Embree build or the image's pyramid (0 when reused)
   bool reused = false;
 };
 

@@ -2,11 +2,13 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -255,6 +257,7 @@ inline bool continuous(const Sample& p, const Plane& pp, const Sample& q, const 
 constexpr std::uint8_t kValid = 1, kRightContinuous = 2, kDownContinuous = 4, kFan = 8;
 constexpr std::uint8_t kGridEligible = SurfacePixelLayout::kGridEligible;
 static_assert(kValid == SurfacePixelLayout::kSurface);
+static_assert(kFan == SurfacePixelLayout::kFanned);
 static_assert((kGridEligible & (kValid | kRightContinuous | kDownContinuous | kFan)) == 0);
 
 /// How the up-to-four pixels around a corner share it. Slots: 0 = top-left, 1 = top-right,
@@ -830,6 +833,32 @@ TriangleMesh reconstruct_occluder_mesh(ConstImageView distance_m, const Camera& 
                                                              std::move(corner_base));
   }
   return mesh;
+}
+
+double surface_sliver_share(const TriangleMesh& mesh, const Vec3& camera_position_m,
+                            double pixel_angle_rad) {
+  constexpr std::size_t kStride = 4;
+  const std::size_t sampled = (mesh.surface_triangle_count + kStride - 1) / kStride;
+  if (sampled == 0) return 0;
+  const V3 camera{camera_position_m.x, camera_position_m.y, camera_position_m.z};
+  auto vertex = [&](std::uint32_t index) {
+    const float* p = &mesh.positions[3 * std::size_t(index)];
+    return V3{p[0], p[1], p[2]};
+  };
+  const std::size_t slivers = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, sampled), std::size_t(0),
+      [&](const tbb::blocked_range<std::size_t>& range, std::size_t count) {
+        for (std::size_t s = range.begin(); s < range.end(); ++s) {
+          const std::uint32_t* t = &mesh.indices[3 * kStride * s];
+          const V3 a = vertex(t[0]), b = vertex(t[1]), c = vertex(t[2]);
+          const double longest = std::max({length(b - a), length(c - b), length(a - c)});
+          const double footprint = length(a - camera) * pixel_angle_rad;
+          count += longest > kSliverFootprints * footprint;
+        }
+        return count;
+      },
+      std::plus<>());
+  return double(slivers) / double(sampled);
 }
 
 }  // namespace mr::render

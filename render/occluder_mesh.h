@@ -33,8 +33,9 @@ struct SurfacePixelLayout {
   /// pixel[] bits: the pixel has a surface (its two triangles are the surface's next pair, see
   /// TriangleMesh), and it is grid-eligible: it has a surface, is not fanned, and each of its
   /// four corners has exactly one vertex (no discontinuity splits it), so its triangles are
-  /// (c00, c11, c01), (c00, c10, c11) over corner_vertex[] of its corners. Other bits: private.
-  static constexpr std::uint8_t kSurface = 1, kGridEligible = 16;
+  /// (c00, c11, c01), (c00, c10, c11) over corner_vertex[] of its corners; fanned: it has a
+  /// surface and four triangles (MeshOptions::centre_tolerance). Other bits: private.
+  static constexpr std::uint8_t kSurface = 1, kFanned = 8, kGridEligible = 16;
   SurfacePixelLayout(int width_px, int height_px, HugePageArray<std::uint8_t> pixels,
                      HugePageArray<std::uint32_t> corners)
       : width(width_px),
@@ -136,6 +137,17 @@ struct MeshOptions {
 /// both sizes).
 Image estimate_normals(ConstImageView distance_m, const Camera& camera, const CameraPose& pose,
                        double discontinuity_ratio = MeshOptions{}.discontinuity_ratio);
+
+/// Issue 12: the share of the surface's triangles that are slivers, i.e. whose longest edge is
+/// more than kSliverFootprints pixel footprints (their distance from the camera times
+/// `pixel_angle_rad`, the angle one mesh pixel subtends) long. Jagged estimated depth (foliage,
+/// rough ground) makes a fur of such slivers along the view rays, in which a shadow ray crosses
+/// tens of their bounding boxes before its hit (render/occluder_cache.cpp chooses how to trace
+/// the surface by it). Every fourth surface triangle is counted (deterministic); 0 for a mesh
+/// without surface triangles. Parallel (TBB).
+inline constexpr double kSliverFootprints = 16;
+double surface_sliver_share(const TriangleMesh& mesh, const Vec3& camera_position_m,
+                            double pixel_angle_rad);
 
 /// Reconstructs the occluder mesh of a distance map (seed 000, Algorithm 4, see the file comment).
 ///

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <numbers>
 #include <random>
 #include <string>
 #include <thread>
@@ -19,6 +20,7 @@
 #include "mr/image.h"
 #include "mr/scene.h"
 #include "render/embree_scene.h"
+#include "render/math.h"
 #include "render/occluder_mesh.h"
 
 namespace mr::render {
@@ -815,6 +817,56 @@ TEST(OccluderMesh, KnownNormalsWithARowStrideGiveTheSameMesh) {
   EXPECT_EQ(own.positions, given.positions);
   EXPECT_EQ(own.indices, given.indices);
   EXPECT_EQ(own.surface_triangle_count, given.surface_triangle_count);
+}
+
+// Issue 12: the share of sliver triangles (surface_sliver_share), against every triangle
+// measured here. A wall facing the camera at 10 m has none; the same wall with its pixels
+// alternately 4 % farther (a checkerboard: every neighbour within the mesh's 5 % continuity) is
+// a fur: each pixel is fanned round its own vertex, its triangles reach halfway to its
+// neighbours' depth, 0.2 m along the view rays, 20 pixel footprints of 1 cm.
+TEST(SliverShare, CountsTheFurOfJaggedDepth) {
+  const Camera camera =
+      Camera::from_horizontal_fov(200, 150, 2 * std::atan(100.0 / 1000) * 180 / std::numbers::pi);
+  ASSERT_NEAR(camera.focal_px, 1000, 1e-6);
+  const CameraPose pose;
+  const Vec3d eye{pose.position_m.x, pose.position_m.y, pose.position_m.z};
+  auto wall = [&](double jitter) {
+    Image depth(camera.width, camera.height, 1);
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x) {
+        const double forward = pose.ray_direction(camera, x, y).z;  // the pose looks along +z
+        depth.at(x, y, 0) = float(10.0 / forward * ((x + y) % 2 ? 1 + jitter : 1));
+      }
+    return reconstruct_occluder_mesh(depth.view(), camera, pose, MeshOptions{});
+  };
+  // Every triangle, measured as the share defines it (the function counts every fourth).
+  auto all_triangles = [&](const TriangleMesh& mesh) {
+    std::size_t slivers = 0;
+    for (std::size_t t = 0; t < mesh.surface_triangle_count; ++t) {
+      Vec3d v[3];
+      for (int k = 0; k < 3; ++k) {
+        const float* p = &mesh.positions[3 * std::size_t(mesh.indices[3 * t + std::size_t(k)])];
+        v[k] = Vec3d{p[0], p[1], p[2]};
+      }
+      const double longest =
+          std::max({length(v[1] - v[0]), length(v[2] - v[1]), length(v[0] - v[2])});
+      slivers += longest > kSliverFootprints * length(v[0] - eye) / camera.focal_px;
+    }
+    return double(slivers) / double(mesh.surface_triangle_count);
+  };
+  const TriangleMesh flat = wall(0.0), fur = wall(0.04);
+  ASSERT_EQ(flat.surface_triangle_count, 2u * 200 * 150);
+  ASSERT_GE(fur.surface_triangle_count, 2u * 200 * 150);  // continuous: no pixel dropped
+  EXPECT_EQ(surface_sliver_share(flat, pose.position_m, 1 / camera.focal_px), 0.0);
+  EXPECT_EQ(all_triangles(flat), 0.0);
+  const double share = surface_sliver_share(fur, pose.position_m, 1 / camera.focal_px);
+  EXPECT_GT(share, 0.5);
+  EXPECT_NEAR(share, all_triangles(fur), 0.02);
+  // Half the steps (2 %): the fans' triangles about 10 footprints long, few of them slivers.
+  const double half = surface_sliver_share(wall(0.02), pose.position_m, 1 / camera.focal_px);
+  EXPECT_LT(half, share / 10);
+  EXPECT_NEAR(half, all_triangles(wall(0.02)), 0.02);
+  EXPECT_EQ(surface_sliver_share(TriangleMesh{}, pose.position_m, 0.002), 0.0);
 }
 
 }  // namespace

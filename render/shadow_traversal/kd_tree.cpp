@@ -11,18 +11,8 @@
 #include <utility>
 
 #include "mr/error.h"
-
-#if defined(__x86_64__) && defined(__GNUC__)
-#include <immintrin.h>
-// The packet traversal is compiled for AVX2 (8 floats per register; GCC lowers 8-wide vector
-// comparisons lane by lane with scalar code on plain x86-64) and runs where the CPU has it;
-// elsewhere occluded8 answers ray by ray. AVX2 does not include FMA: no fused operations.
-#define MR_PACKET_TARGET __attribute__((target("avx2")))
-#define MR_PACKET_ISA_PRESENT() __builtin_cpu_supports("avx2")
-#else
-#define MR_PACKET_TARGET
-#define MR_PACKET_ISA_PRESENT() true
-#endif
+#include "render/shadow_traversal/simd8.h"
+#include "render/shadow_traversal/triangle_test.h"
 
 namespace mr::render::shadow {
 
@@ -51,60 +41,8 @@ Box clip(const Box& a, const Box& b) {
   return c;
 }
 
-/// The ray, prepared for the watertight test (Woop et al. 2013, section 3).
-struct WoopRay {
-  float o[3], d[3], inv[3];
-  int kx, ky, kz;
-  float sx, sy, sz;
-  float t_near, t_far;
-  bool valid;
-};
-
 WoopRay prepare(const Ray& r) {
-  WoopRay w{};
-  for (int k = 0; k < 3; ++k) {
-    w.o[k] = r.origin[k];
-    w.d[k] = r.direction[k];
-    w.inv[k] = 1.0f / r.direction[k];
-  }
-  w.t_near = r.t_near;
-  w.t_far = r.t_far;
-  const float ax = std::fabs(w.d[0]), ay = std::fabs(w.d[1]), az = std::fabs(w.d[2]);
-  w.kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
-  w.kx = (w.kz + 1) % 3;
-  w.ky = (w.kx + 1) % 3;
-  if (w.d[w.kz] < 0.0f) std::swap(w.kx, w.ky);  // keep the winding
-  w.valid = w.d[w.kz] != 0.0f && std::isfinite(w.d[w.kz]) && r.t_far > r.t_near;
-  if (w.valid) {
-    w.sx = w.d[w.kx] / w.d[w.kz];
-    w.sy = w.d[w.ky] / w.d[w.kz];
-    w.sz = 1.0f / w.d[w.kz];
-  }
-  return w;
-}
-
-/// Watertight ray-triangle test: edges and vertices hit (closed triangle), t_near < t <= t_far.
-bool hit_triangle(const WoopRay& r, const float* v) {
-  const float a[3] = {v[0] - r.o[0], v[1] - r.o[1], v[2] - r.o[2]};
-  const float b[3] = {v[3] - r.o[0], v[4] - r.o[1], v[5] - r.o[2]};
-  const float c[3] = {v[6] - r.o[0], v[7] - r.o[1], v[8] - r.o[2]};
-  const float ax = a[r.kx] - r.sx * a[r.kz], ay = a[r.ky] - r.sy * a[r.kz];
-  const float bx = b[r.kx] - r.sx * b[r.kz], by = b[r.ky] - r.sy * b[r.kz];
-  const float cx = c[r.kx] - r.sx * c[r.kz], cy = c[r.ky] - r.sy * c[r.kz];
-  float u = cx * by - cy * bx;
-  float vv = ax * cy - ay * cx;
-  float w = bx * ay - by * ax;
-  if (u == 0.0f || vv == 0.0f || w == 0.0f) {  // the paper's fallback: exact in double
-    u = float(double(cx) * double(by) - double(cy) * double(bx));
-    vv = float(double(ax) * double(cy) - double(ay) * double(cx));
-    w = float(double(bx) * double(ay) - double(by) * double(ax));
-  }
-  if ((u < 0.0f || vv < 0.0f || w < 0.0f) && (u > 0.0f || vv > 0.0f || w > 0.0f)) return false;
-  const float det = u + vv + w;
-  if (det == 0.0f) return false;
-  const float az = r.sz * a[r.kz], bz = r.sz * b[r.kz], cz = r.sz * c[r.kz];
-  const float t = (u * az + vv * bz + w * cz) / det;
-  return t > r.t_near && t <= r.t_far;
+  return prepare_woop_ray(r.origin.data(), r.direction.data(), r.t_near, r.t_far);
 }
 
 /// The ray's parameter interval inside box b (slab test), or empty (lo > hi).
@@ -947,42 +885,13 @@ bool KdTree::occluded_multi_index(const Ray& ray, bool predict_occluded,
 
 namespace {
 
-// GCC/Clang vector extensions: one AVX2 op per 8 lanes (MR_PACKET_TARGET). The operations
-// below are the scalar traversal's, lane by lane, in the same order and rounding (kd_tree.cpp is
-// compiled with -ffp-contract=off: no fused multiply-adds on either side), so each lane's answer
-// is the single-ray answer bit for bit.
-using F8 = float __attribute__((vector_size(32)));
-using I8 = std::int32_t __attribute__((vector_size(32)));
-
-MR_PACKET_TARGET inline unsigned bits(const I8& m) {
-#if defined(__x86_64__) && defined(__GNUC__)
-  return unsigned(_mm256_movemask_ps(reinterpret_cast<__m256>(m)));
-#else
-  unsigned r = 0;
-  for (int k = 0; k < 8; ++k) r |= unsigned(m[k] < 0) << k;
-  return r;
-#endif
-}
-
-// Lane-wise choices as bit operations (and a vector ?: is lowered lane by lane with branches
-// wherever the vectors are wider than the target's).
-MR_PACKET_TARGET inline void blend(const I8& m, const F8& a, const F8& b, F8& out) {  // m ? a : b
-  out = reinterpret_cast<F8>((m & reinterpret_cast<I8>(a)) | (~m & reinterpret_cast<I8>(b)));
-}
-MR_PACKET_TARGET inline void blend(const I8& m, const I8& a, const I8& b, I8& out) {
-  out = (m & a) | (~m & b);
-}
+// The 8-wide helpers (F8, I8, bits, blend, vmax, vmin) are render/shadow_traversal/simd8.h's.
+// The operations below are the scalar traversal's, lane by lane, in the same order and
+// rounding (kd_tree.cpp is compiled with -ffp-contract=off: no fused multiply-adds on either
+// side), so each lane's answer is the single-ray answer bit for bit.
 MR_PACKET_TARGET inline void vabs(const F8& a, F8& out) {  // std::fabs
   out = reinterpret_cast<F8>(reinterpret_cast<I8>(a) & 0x7fffffff);
 }
-// std::max(a, b) and std::min(a, b) lane by lane, NaNs included.
-MR_PACKET_TARGET inline void vmax(const F8& a, const F8& b, F8& out) {
-  blend(a < b, b, a, out);
-}
-MR_PACKET_TARGET inline void vmin(const F8& a, const F8& b, F8& out) {
-  blend(b < a, b, a, out);
-}
-
 // a[k] for k given per lane by the masks (k == 0: is0, k == 1: is1, else k == 2).
 MR_PACKET_TARGET inline void select3(const I8& is0, const I8& is1, const F8& a0, const F8& a1,
                                      const F8& a2, F8& out) {
