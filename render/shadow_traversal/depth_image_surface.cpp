@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -666,7 +665,7 @@ MR_PACKET_TARGET void DepthImageSurface::occluded8_walk(const RayPacket8& rays,
 }
 
 void DepthImageSurface::occluded8(const RayPacket8& rays, bool occluded_out[8]) const {
-  static const bool packet_isa = MR_PACKET_ISA_PRESENT() && !std::getenv("MR_DIS_SINGLE");
+  static const bool packet_isa = MR_PACKET_ISA_PRESENT();
   if (packet_isa) return occluded8_walk(rays, occluded_out);
   for (int k = 0; k < 8; ++k)
     occluded_out[k] = rays.valid[k] != 0 &&
