@@ -1,11 +1,12 @@
 // Private to libmr: the CPU backend's occluder geometry (normals, occluder mesh, its Embree
-// BVH) of the latest render, reused by the next render of the same depth map, camera, pose and
-// blockers (issue 12 item 4: mr-studio re-renders one photo for every fog or sun slider change,
-// and the geometry depends on neither). Process-wide, up to three entries: a new geometry is
-// built only after every entry that is not small against it (a quarter of its memory, all kept
-// entries together) is dropped, so the next photo of a batch replaces the last (peak memory
-// does not grow) while mr-studio's small draft geometry stays beside its view-sized one (each
-// edit renders both). A render still using an entry keeps it alive (shared ownership).
+// scene: a BVH, or for jagged depth the surface's walk in the image) of the latest render, reused
+// by the next render of the same depth map, camera, pose and blockers (issue 12 item 4: mr-studio
+// re-renders one photo for every fog or sun slider change, and the geometry depends on neither).
+// Process-wide, up to three entries: a new geometry is built only after every entry that is not
+// small against it (a quarter of its memory, all kept entries together) is dropped, so the next
+// photo of a batch replaces the last (peak memory does not grow) while mr-studio's small draft
+// geometry stays beside its view-sized one (each edit renders both). A render still using an entry
+// keeps it alive (shared ownership).
 #pragma once
 
 #include <cstddef>
