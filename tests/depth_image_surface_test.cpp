@@ -14,6 +14,7 @@
 #include <random>
 #include <vector>
 
+#include "ground_and_boxes.h"
 #include "mr/camera.h"
 #include "mr/error.h"
 #include "mr/image.h"
@@ -29,32 +30,7 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-struct Box {
-  Vec3 min_m, max_m;
-};
-
-// Distance along unit ray w from o to the ground y = 0 or the nearest box (inf: sky).
-double trace(const std::vector<Box>& boxes, const Vec3& o, const Vec3& w) {
-  double best = w.y < 0 ? -o.y / w.y : kInf;
-  for (const Box& b : boxes) {
-    const double lo[3] = {b.min_m.x, b.min_m.y, b.min_m.z},
-                 hi[3] = {b.max_m.x, b.max_m.y, b.max_m.z};
-    const double oo[3] = {o.x, o.y, o.z}, ww[3] = {w.x, w.y, w.z};
-    double t_enter = -kInf, t_exit = kInf;
-    for (int a = 0; a < 3; ++a) {
-      if (ww[a] == 0) {
-        if (oo[a] < lo[a] || oo[a] > hi[a]) t_enter = kInf;
-        continue;
-      }
-      double t0 = (lo[a] - oo[a]) / ww[a], t1 = (hi[a] - oo[a]) / ww[a];
-      if (t0 > t1) std::swap(t0, t1);
-      t_enter = std::max(t_enter, t0);
-      t_exit = std::min(t_exit, t1);
-    }
-    if (t_enter <= t_exit && t_enter > 0) best = std::min(best, t_enter);
-  }
-  return best;
-}
+using test::Box;
 
 // A street of boxes on a noisy ground under a sky (discontinuities, fanned creases and noise,
 // sky pixels), seen by a camera that is yawed, pitched and rolled, with an odd size (the
@@ -77,7 +53,8 @@ struct Street {
     std::uniform_real_distribution<double> u(-1, 1);
     for (int y = 0; y < camera.height; ++y)
       for (int x = 0; x < camera.width; ++x) {
-        const double d = trace(boxes, pose.position_m, pose.ray_direction(camera, x, y));
+        const double d =
+            test::trace_ground_and_boxes(boxes, pose.position_m, pose.ray_direction(camera, x, y));
         distance_m.at(x, y, 0) = float(std::isfinite(d) ? d * (1 + noise * u(rng)) : kInf);
       }
     MeshOptions options;
