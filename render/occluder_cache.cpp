@@ -132,7 +132,9 @@ bool matches(const Entry& e, const OccluderGeometryRequest& r) {
 // README issue 12: dragonfly 45 -> 16 s, bridge 14 -> 9 s). Chosen by the share of slivers
 // (surface_sliver_share), for the geometry's every render: the tuning photos put the break-even
 // between 5 % (the street: the BVH faster) and 9 % (valendas: the walk faster). Small surfaces
-// keep the BVH: it builds fast, and the choice hardly matters there.
+// keep the BVH: it builds fast, and the choice hardly matters there. It errs on a flat ground
+// reaching the horizon, whose grazing triangles are long too (the walk: 25 % more CPU there;
+// README issue 12 says what was tried instead).
 constexpr double kImageSliverShare = 0.07;
 constexpr std::size_t kImageMinTriangles = 100000;
 
