@@ -126,16 +126,18 @@ bool matches(const Entry& e, const OccluderGeometryRequest& r) {
 // Whether the render traces the mesh's surface in the image (a walk over a depth pyramid, no
 // BVH to build) instead of through Embree's BVH. Both give the same answers (but for rays that
 // graze a vertex or an edge, where each test's rounding decides). Embree's BVH is the faster on
-// a smooth surface (the bench's street at 1080p: its build included, ~15 % less wall); on
-// jagged estimated depth, a fur of slivers along the view rays, a shadow ray crosses tens of
-// the slivers' boxes before its hit while its walk in the image stays short (gallery sun bank,
-// README issue 12: dragonfly 45 -> 16 s, bridge 14 -> 9 s). Chosen by the share of slivers
-// (surface_sliver_share), for the geometry's every render: the tuning photos put the break-even
-// between 5 % (the street: the BVH faster) and 9 % (valendas: the walk faster). Small surfaces
-// keep the BVH: it builds fast, and the choice hardly matters there. It errs on a flat ground
-// reaching the horizon, whose grazing triangles are long too (the walk: 25 % more CPU there;
-// README issue 12 says what was tried instead).
+// a smooth surface (the bench's street at 1080p: its build included, ~15 % less wall; a flat
+// ground to the horizon: 20 % less CPU); on jagged estimated depth, a fur of slivers along the
+// view rays, a shadow ray crosses tens of the slivers' boxes before its hit while its walk in
+// the image stays short (gallery sun bank, README issue 12: dragonfly 46 -> 14 s). A fur has
+// both: many long triangles (surface_sliver_share; the tuning photos put the break-even between
+// 5 %, the street, and 9 %, valendas) and a zig-zagging depth (depth_fur_share: 0 on every
+// tuning photo where the BVH was faster, 0.45 % and more where the walk was). Long triangles
+// alone are a surface seen at a grazing angle (the flat ground: 19.5 %), a zig-zag alone can be
+// a staircase of nearest-upsampled depth (the bench's street). Small surfaces keep the BVH: it
+// builds fast, and the choice hardly matters there.
 constexpr double kImageSliverShare = 0.07;
+constexpr double kImageFurShare = 0.002;
 constexpr std::size_t kImageMinTriangles = 100000;
 
 bool trace_surface_in_image(const OccluderGeometryRequest& r, const TriangleMesh& mesh) {
@@ -144,7 +146,10 @@ bool trace_surface_in_image(const OccluderGeometryRequest& r, const TriangleMesh
     return r.surface_traversal == SurfaceTraversal::image;
   if (mesh.surface_triangle_count < kImageMinTriangles) return false;
   const double pixel_angle_rad = double(r.mesh_step) / r.camera->focal_px;
-  return surface_sliver_share(mesh, r.pose->position_m, pixel_angle_rad) >= kImageSliverShare;
+  if (surface_sliver_share(mesh, r.pose->position_m, pixel_angle_rad) < kImageSliverShare)
+    return false;
+  return depth_fur_share(r.distance_m, *r.camera, r.mesh_options.discontinuity_ratio).share >=
+         kImageFurShare;
 }
 
 }  // namespace

@@ -34,8 +34,8 @@ struct OccluderGeometry {
 };
 
 /// How the Embree scene traces the mesh's surface (issue 12): automatic (the default) chooses by
-/// the surface's share of slivers (render/occluder_cache.cpp), bvh and image force Embree's BVH
-/// or the walk in the image (render/shadow_traversal/depth_image_surface.h). Only with
+/// its slivers and the depth's zig-zag (render/occluder_cache.cpp), bvh and image force Embree's
+/// BVH or the walk in the image (render/shadow_traversal/depth_image_surface.h). Only with
 /// ShadowTraversal::embree.
 enum class SurfaceTraversal { automatic, bvh, image };
 

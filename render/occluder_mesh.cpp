@@ -861,4 +861,71 @@ double surface_sliver_share(const TriangleMesh& mesh, const Vec3& camera_positio
   return double(slivers) / double(sampled);
 }
 
+DepthFur depth_fur_share(ConstImageView distance_m, const Camera& camera,
+                         double discontinuity_ratio) {
+  const int width = distance_m.width, height = distance_m.height;
+  if (width < 3 || height < 3) return {};
+  // Inverse camera depth of pixel (x, y): 1 / (distance * cos) = |(u, v, 1)| / distance; -1
+  // where there is no surface.
+  auto inverse_z = [&](int x, int y) {
+    if (x < 0 || y < 0 || x >= width || y >= height) return -1.0;
+    const double d = distance_m.at(x, y, 0);
+    if (!(d > 0 && d < kInf)) return -1.0;
+    const double u = (x + 0.5 - camera.cx) / camera.focal_px;
+    const double v = (y + 0.5 - camera.cy) / camera.focal_px;
+    return std::sqrt(u * u + v * v + 1) / d;
+  };
+  // Continuous in the mesh's plain sense: |d1 - d2| <= ratio * min(d1, d2), on 1 / d.
+  auto close = [&](double w1, double w2) {
+    return w1 > 0 && w2 > 0 && std::abs(w1 - w2) <= discontinuity_ratio * std::min(w1, w2);
+  };
+  // The signed second difference at the middle of three continuous pixels, in footprints; NaN
+  // where they are not.
+  auto bend = [&](double a, double b, double c) {
+    if (!close(a, b) || !close(b, c)) return std::numeric_limits<double>::quiet_NaN();
+    return (a - 2 * b + c) / b * camera.focal_px;
+  };
+  // A zig-zag: the pixel bends by more than kFurFootprints one way and a neighbour along the
+  // same line the other way (a crease bends one pixel, one way: not counted).
+  auto zig_zag = [&](double before, double here, double after) {
+    auto opposite = [&](double other) {
+      return std::abs(other) > kFurFootprints && (other > 0) != (here > 0);
+    };
+    return std::abs(here) > kFurFootprints && (opposite(before) || opposite(after));
+  };
+  struct Counts {
+    std::size_t fur = 0, seen = 0;
+  };
+  const int rows = (height - 2 + 1) / 2;  // y = 1, 3, 5, ... < height - 1
+  const Counts total = tbb::parallel_reduce(
+      tbb::blocked_range<int>(0, rows), Counts{},
+      [&](const tbb::blocked_range<int>& range, Counts counts) {
+        for (int r = range.begin(); r < range.end(); ++r) {
+          const int y = 1 + 2 * r;
+          for (int x = 1; x + 1 < width; ++x) {
+            const double w = inverse_z(x, y);
+            if (w < 0) continue;
+            const double wl = inverse_z(x - 1, y), wr = inverse_z(x + 1, y);
+            const double wu = inverse_z(x, y - 1), wd = inverse_z(x, y + 1);
+            const double along_x = bend(wl, w, wr), along_y = bend(wu, w, wd);
+            if (std::isnan(along_x) && std::isnan(along_y)) continue;
+            ++counts.seen;
+            const bool fur = zig_zag(bend(inverse_z(x - 2, y), wl, w), along_x,
+                                     bend(w, wr, inverse_z(x + 2, y))) ||
+                             zig_zag(bend(inverse_z(x, y - 2), wu, w), along_y,
+                                     bend(w, wd, inverse_z(x, y + 2)));
+            counts.fur += fur;
+          }
+        }
+        return counts;
+      },
+      [](Counts a, const Counts& b) {
+        a.fur += b.fur;
+        a.seen += b.seen;
+        return a;
+      });
+  if (total.seen == 0) return {};
+  return {double(total.fur) / double(total.seen), total.seen};
+}
+
 }  // namespace mr::render

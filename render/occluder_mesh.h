@@ -149,6 +149,23 @@ inline constexpr double kSliverFootprints = 16;
 double surface_sliver_share(const TriangleMesh& mesh, const Vec3& camera_position_m,
                             double pixel_angle_rad);
 
+/// Issue 12: the share of a depth map's surface pixels where the surface zig-zags: along a row
+/// or a column it bends by more than kFurFootprints pixel footprints one way and at a neighbour
+/// the other way. The bend is the second difference of inverse camera depth across the pixel
+/// (zero on any plane, however slanted), relative to the pixel's and times the focal length in
+/// pixels, over continuous pixels (relative gap at most `discontinuity_ratio`). Jagged estimated
+/// depth (foliage, rock) zig-zags so, and its mesh is a fur of slivers along the view rays; a
+/// smooth surface seen at a grazing angle has long triangles but no bend, and a crease (a wall's
+/// foot) bends one pixel one way. Every second row is counted (deterministic); 0 for a map
+/// without surface pixels that have continuous neighbours. Parallel (TBB).
+inline constexpr double kFurFootprints = 16;
+struct DepthFur {
+  double share = 0;        ///< of the pixels counted, those that zig-zag
+  std::size_t pixels = 0;  ///< surface pixels counted (with continuous neighbours)
+};
+DepthFur depth_fur_share(ConstImageView distance_m, const Camera& camera,
+                         double discontinuity_ratio = MeshOptions{}.discontinuity_ratio);
+
 /// Reconstructs the occluder mesh of a distance map (seed 000, Algorithm 4, see the file comment).
 ///
 /// `distance_m` as for estimate_normals. Each pixel with a surface contributes two triangles over

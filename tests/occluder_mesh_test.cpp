@@ -27,6 +27,7 @@ namespace mr::render {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr float kInfF = std::numeric_limits<float>::infinity();
 
 struct Box {
   Vec3 min_m, max_m;
@@ -867,6 +868,87 @@ TEST(SliverShare, CountsTheFurOfJaggedDepth) {
   EXPECT_LT(half, share / 10);
   EXPECT_NEAR(half, all_triangles(wall(0.02)), 0.02);
   EXPECT_EQ(surface_sliver_share(TriangleMesh{}, pose.position_m, 0.002), 0.0);
+}
+
+// Issue 12: the share of pixels where the depth zig-zags (depth_fur_share), against its
+// definition evaluated here. A wall facing the camera and a ground plane reaching the horizon
+// have none (on any plane the inverse camera depth is affine in the image, however slanted); the
+// wall with its pixels alternately 4 % farther (a checkerboard: every neighbour within the mesh's
+// 5 % continuity) zig-zags by 7.7 % of the depth, 77 pixel footprints at a 1000 px focal length;
+// a 0.4 % checkerboard by 7.7 footprints, under the 16 that count. A crease (one pixel bent one
+// way), a box in front of the wall (a discontinuity) and the sky are not counted.
+double depth_fur_share_of(ConstImageView distance_m, const Camera& camera) {
+  return depth_fur_share(distance_m, camera).share;
+}
+
+TEST(FurShare, CountsTheZigZagOfJaggedDepthOnly) {
+  const Camera camera =
+      Camera::from_horizontal_fov(200, 150, 2 * std::atan(100.0 / 1000) * 180 / std::numbers::pi);
+  ASSERT_NEAR(camera.focal_px, 1000, 1e-6);
+  CameraPose pose;
+  auto forward = [&](int x, int y) { return pose.ray_direction(camera, x, y).z; };
+  auto wall = [&](double jitter, int box_columns) {
+    Image depth(camera.width, camera.height, 1);
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x) {
+        const double z = x < box_columns ? 5.0 : 10.0;  // a box's face in front, then the wall
+        depth.at(x, y, 0) = float(z / forward(x, y) * ((x + y) % 2 ? 1 + jitter : 1));
+      }
+    return depth;
+  };
+  EXPECT_EQ(depth_fur_share_of(wall(0, 0).view(), camera), 0.0);
+  // Every second row's inner pixels are counted: rows 1, 3, ..., 147, columns 1..198.
+  EXPECT_EQ(depth_fur_share(wall(0, 0).view(), camera).pixels, 74u * 198u);
+  EXPECT_NEAR(depth_fur_share_of(wall(0.04, 0).view(), camera), 1.0, 1e-12);
+  EXPECT_EQ(depth_fur_share_of(wall(0.004, 0).view(), camera), 0.0);
+  // The box's face zig-zags too; its edge (a discontinuity) adds no pixel of its own.
+  EXPECT_NEAR(depth_fur_share_of(wall(0.04, 50).view(), camera), 1.0, 1e-12);
+  const double half_smooth = [&] {
+    Image depth = wall(0, 100);
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < 100; ++x)
+        if ((x + y) % 2) depth.at(x, y, 0) *= 1.04f;
+    return depth_fur_share_of(depth.view(), camera);
+  }();
+  // The left half zig-zags (and the column at its edge, whose neighbour does): about half.
+  EXPECT_NEAR(half_smooth, 0.5, 0.01);
+  // A crease: a wall facing the camera, and from column 100 on a plane turning away from it
+  // (inverse depth falling 2 % a pixel, continuous): the column at the fold bends by 20
+  // footprints, one way only.
+  Image crease(camera.width, camera.height, 1);
+  for (int y = 0; y < camera.height; ++y)
+    for (int x = 0; x < camera.width; ++x) {
+      const double inverse_z = 0.1 - (x > 100 ? 0.002 * (x - 100) : 0.0);
+      crease.at(x, y, 0) = float(1 / (inverse_z * forward(x, y)));
+    }
+  EXPECT_EQ(depth_fur_share_of(crease.view(), camera), 0.0);
+  // The same fold every other column is a zig-zag.
+  for (int y = 0; y < camera.height; ++y)
+    for (int x = 0; x < camera.width; ++x) {
+      const double inverse_z = 0.1 - (x % 2 ? 0.002 : 0.0);
+      crease.at(x, y, 0) = float(1 / (inverse_z * forward(x, y)));
+    }
+  EXPECT_GT(depth_fur_share_of(crease.view(), camera), 0.95);
+  // A ground plane seen from eye height, sky above the horizon, pitched down: long grazing
+  // triangles, but no zig-zag.
+  pose.pitch_deg = -3;
+  Image ground(camera.width, camera.height, 1);
+  int sky = 0;
+  for (int y = 0; y < camera.height; ++y)
+    for (int x = 0; x < camera.width; ++x) {
+      const Vec3 w = pose.ray_direction(camera, x, y);
+      ground.at(x, y, 0) = w.y < 0 ? float(-pose.position_m.y / w.y) : kInfF;
+      sky += w.y >= 0;
+    }
+  ASSERT_GT(sky, 0);
+  ASSERT_LT(sky, camera.width * camera.height);
+  EXPECT_EQ(depth_fur_share_of(ground.view(), camera), 0.0);
+  // Too small to have a middle pixel; all sky.
+  EXPECT_EQ(depth_fur_share_of(Image(2, 2, 1).view(), Camera::from_horizontal_fov(2, 2, 60)), 0.0);
+  Image all_sky(camera.width, camera.height, 1);
+  for (float& v : all_sky.pixels()) v = kInfF;
+  EXPECT_EQ(depth_fur_share_of(all_sky.view(), camera), 0.0);
+  EXPECT_EQ(depth_fur_share(all_sky.view(), camera).pixels, 0u);
 }
 
 }  // namespace
